@@ -1,0 +1,46 @@
+# Talk2PC. Two set-up commands for a fresh machine: `make run` and `make test`.
+# Both create .venv from the pinned requirements.lock on first use.
+
+PYTHON ?= python3
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed-lock
+ARGS ?=
+
+.PHONY: install run test test-fast lint format bench lock clean
+
+$(STAMP): requirements.lock
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --disable-pip-version-check -r requirements.lock
+	touch $(STAMP)
+
+install: $(STAMP)
+
+run: install  ## serve the app on the bundled defaults (http://127.0.0.1:8080)
+	$(PY) launch.py $(ARGS)
+
+test: install  ## the whole test suite, real-browser test included
+	$(PY) -m pytest $(ARGS)
+
+test-fast: install  ## everything but the slow and browser tests
+	$(PY) -m pytest -m "not slow and not browser" $(ARGS)
+
+lint: install
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+
+format: install
+	$(VENV)/bin/ruff check --fix .
+	$(VENV)/bin/ruff format .
+
+bench: install  ## regenerate docs/PERFORMANCE.md
+	$(PY) -m bench.run_all
+
+lock:  ## re-pin the whole tree after editing requirements.txt
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet -r requirements.txt
+	( echo '# Whole dependency tree, pinned (regenerate with `make lock` after changing requirements.txt).'; \
+	  $(PY) -m pip freeze --exclude-editable ) > requirements.lock
+
+clean:
+	rm -rf $(VENV) .pytest_cache .ruff_cache

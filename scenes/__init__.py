@@ -1,0 +1,36 @@
+"""The data domain: frames, boxes, calibration, Talk2Radar / VoD IO, the synthetic world, prompts.
+
+``scenes`` imports neither ``model``, ``annotate`` nor ``app``.
+"""
+
+from scenes.actors import CLASSES, Actor
+from scenes.calib import Calibration, read_calib, vod_lidar_calibration, vod_radar_calibration
+from scenes.kitti import ObjectLabel, read_label_file, write_label_file
+from scenes.root import (
+    RootError,
+    Sample,
+    SampleMeta,
+    SensorFiles,
+    Talk2RadarRoot,
+    Talk2RadarWriter,
+    format_id,
+)
+
+__all__ = [
+    "CLASSES",
+    "Actor",
+    "Calibration",
+    "ObjectLabel",
+    "RootError",
+    "Sample",
+    "SampleMeta",
+    "SensorFiles",
+    "Talk2RadarRoot",
+    "Talk2RadarWriter",
+    "format_id",
+    "read_calib",
+    "read_label_file",
+    "vod_lidar_calibration",
+    "vod_radar_calibration",
+    "write_label_file",
+]
