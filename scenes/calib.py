@@ -265,7 +265,7 @@ box reaching behind the camera still gives a finite (if wide) 2D box rather than
 def project_to_image(points_cam: np.ndarray, calib: Calibration) -> np.ndarray:
     """Project rectified-camera points ``(..., 3)`` with P2 -> pixels ``(..., 2)``."""
     pts = np.asarray(points_cam, dtype=np.float64)
-    homo = np.concatenate([pts, np.ones(pts.shape[:-1] + (1,))], axis=-1)
+    homo = np.concatenate([pts, np.ones((*pts.shape[:-1], 1))], axis=-1)
     uvw = homo @ calib.P2.T
     depth = np.maximum(uvw[..., 2:3], _MIN_DEPTH)
     return uvw[..., :2] / depth
