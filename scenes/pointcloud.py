@@ -5,6 +5,7 @@ infinite coordinate, is an error naming the file (and the first bad point)."""
 from __future__ import annotations
 
 import os
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -53,7 +54,7 @@ def write_points(path: str | Path, points: np.ndarray) -> None:
     pts = np.ascontiguousarray(points, dtype="<f4")
     validate_points(pts, pts.shape[1] if pts.ndim == 2 else -1, source=str(path))
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
     try:
         with open(tmp, "wb") as handle:
             handle.write(pts.tobytes())

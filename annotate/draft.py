@@ -1,0 +1,527 @@
+"""The draft of one prompt-to-box pair and its undo / redo history.
+
+A :class:`Draft` is an immutable snapshot (frozen dataclasses, tuples of floats): the prompt text,
+the boxes it refers to (LiDAR frame, ``x, y, z, l, w, h, yaw`` with ``z`` at the geometric centre,
+as everywhere in the project) with their classes, and an explicit "refers to nothing" flag for
+prompts that describe no object of the scene. Every editing operation is a method returning a new
+snapshot, so a GUI can keep the previous one and diff (boxes carry a stable ``box_id`` that survives
+moves and deletions of other boxes).
+
+The draft holds what the person typed, even when it is not yet valid (an empty prompt, a negative
+size, a class outside the metric classes): :mod:`annotate.validation` reports such problems, and the
+store refuses to write an invalid draft. Only values that can never be meant (NaN, infinity, a box
+without seven numbers) are refused at once with :class:`DraftError`.
+
+:class:`History` keeps the snapshots for undo / redo (bounded; a new edit after undos drops the
+redo branch; an edit that changes nothing is not recorded). Consecutive edits with the same
+``merge_key`` (e.g. the many updates of one gizmo drag) form one undo step. :class:`DraftEditor`
+bundles a history with the editing operations: what a per-client GUI panel holds.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import threading
+from collections.abc import Callable, Hashable, Sequence
+from dataclasses import dataclass, replace
+from typing import Any, TypeVar
+
+import numpy as np
+
+from scenes.boxes import wrap_yaw
+from scenes.calib import LIDAR_HEIGHT
+
+DEFAULT_SIZES: dict[str, tuple[float, float, float]] = {
+    "Car": (4.2, 1.8, 1.5),
+    "Pedestrian": (0.7, 0.7, 1.75),
+    "Cyclist": (1.8, 0.7, 1.7),
+}
+"""Typical ``(l, w, h)`` in metres of a new box of each class (about VoD's mean sizes)."""
+
+
+class DraftError(ValueError):
+    """An editing operation got an impossible value or an unknown box id."""
+
+
+def _finite(values: Sequence[float], what: str) -> tuple[float, ...]:
+    try:
+        out = tuple(float(v) for v in values)
+    except (TypeError, ValueError) as exc:
+        raise DraftError(f"{what}: expected numbers, got {values!r}") from exc
+    if not all(math.isfinite(v) for v in out):
+        raise DraftError(f"{what}: values must be finite, got {out}")
+    return out
+
+
+def _as_box(box: Sequence[float] | np.ndarray, what: str = "box") -> tuple[float, ...]:
+    values = np.asarray(box, dtype=np.float64).reshape(-1)
+    if values.shape != (7,):
+        raise DraftError(f"{what}: expected 7 values x, y, z, l, w, h, yaw, got {values.size}")
+    out = _finite(values, what)
+    return (*out[:6], _wrap(out[6]))
+
+
+def _wrap(yaw: float) -> float:
+    """``yaw`` in ``[-pi, pi)``; a value already inside is kept bit for bit (typed 0.4 stays 0.4)."""
+    return yaw if -math.pi <= yaw < math.pi else float(wrap_yaw(yaw))
+
+
+def default_box(
+    cls: str, x: float, y: float, ground_z: float = -LIDAR_HEIGHT, yaw: float = 0.0
+) -> tuple[float, float, float, float, float, float, float]:
+    """A box of the class's typical size standing on the ground at ``(x, y)`` (a ground click).
+
+    ``ground_z`` defaults to the ground of a LiDAR mounted :data:`scenes.calib.LIDAR_HEIGHT` above
+    it; classes without a typical size get the pedestrian's.
+    """
+    length, width, height = DEFAULT_SIZES.get(cls, DEFAULT_SIZES["Pedestrian"])
+    x, y, ground_z, yaw = _finite((x, y, ground_z, yaw), "default box")
+    return (x, y, ground_z + height / 2.0, length, width, height, _wrap(yaw))
+
+
+@dataclass(frozen=True)
+class DraftBox:
+    """One box of a draft.
+
+    Attributes:
+        box_id: Stable id within the draft (not the position in the list).
+        box: ``(x, y, z, l, w, h, yaw)`` LiDAR frame, metres / radians, yaw in ``[-pi, pi)``.
+        cls: Class name (validation requires one of ``scenes.CLASSES``).
+    """
+
+    box_id: int
+    box: tuple[float, float, float, float, float, float, float]
+    cls: str
+
+    @property
+    def array(self) -> np.ndarray:
+        """The box as a fresh ``(7,)`` float64 array."""
+        return np.array(self.box, dtype=np.float64)
+
+
+@dataclass(frozen=True)
+class Draft:
+    """One prompt-to-box pair being edited (an immutable snapshot).
+
+    Attributes:
+        prompt: The sentence as typed.
+        boxes: The referred boxes, in list order (the order written to ``label_2``).
+        refers_to_nothing: The person states that the prompt refers to no object.
+        next_box_id: The id the next added box gets.
+        sample_id: The saved pair this draft edits (5-digit id), or None for a new pair.
+        base_version: The manifest version of that pair when it was opened (0 for a sample that
+            was never annotated here); the store refuses an edit when the pair changed since.
+    """
+
+    prompt: str = ""
+    boxes: tuple[DraftBox, ...] = ()
+    refers_to_nothing: bool = False
+    next_box_id: int = 0
+    sample_id: str | None = None
+    base_version: int = 0
+
+    # ---------------------------------------------------------------- construction and views
+
+    @staticmethod
+    def from_boxes(
+        boxes: np.ndarray | Sequence[Sequence[float]],
+        classes: Sequence[str],
+        prompt: str = "",
+        *,
+        refers_to_nothing: bool = False,
+        sample_id: str | None = None,
+        base_version: int = 0,
+    ) -> Draft:
+        """A draft holding ``boxes (K, 7)`` with ``classes`` (ids 0..K-1)."""
+        arr = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
+        if len(arr) != len(classes):
+            raise DraftError(f"{len(arr)} boxes but {len(classes)} class names")
+        items = tuple(
+            DraftBox(i, _as_box(b, f"box {i + 1}"), str(c))
+            for i, (b, c) in enumerate(zip(arr, classes, strict=True))
+        )
+        return Draft(
+            prompt=str(prompt),
+            boxes=items,
+            refers_to_nothing=refers_to_nothing,
+            next_box_id=len(items),
+            sample_id=sample_id,
+            base_version=int(base_version),
+        )
+
+    @property
+    def box_array(self) -> np.ndarray:
+        """All boxes as ``(K, 7)`` float64, LiDAR frame (``(0, 7)`` when empty)."""
+        if not self.boxes:
+            return np.zeros((0, 7))
+        return np.array([b.box for b in self.boxes], dtype=np.float64)
+
+    @property
+    def classes(self) -> tuple[str, ...]:
+        """Class names in box order."""
+        return tuple(b.cls for b in self.boxes)
+
+    @property
+    def box_ids(self) -> tuple[int, ...]:
+        """Box ids in list order."""
+        return tuple(b.box_id for b in self.boxes)
+
+    def index_of(self, box_id: int) -> int:
+        """Position of the box with ``box_id``; :class:`DraftError` when there is none."""
+        for i, b in enumerate(self.boxes):
+            if b.box_id == box_id:
+                return i
+        raise DraftError(f"no box with id {box_id} in the draft (ids: {list(self.box_ids)})")
+
+    def get(self, box_id: int) -> DraftBox:
+        """The box with ``box_id``."""
+        return self.boxes[self.index_of(box_id)]
+
+    # ---------------------------------------------------------------- editing operations
+
+    def set_prompt(self, text: str) -> Draft:
+        """The prompt replaced by ``text`` (kept as typed; validation and the store strip it)."""
+        if not isinstance(text, str):
+            raise DraftError(f"prompt: expected text, got {type(text).__name__}")
+        return replace(self, prompt=text)
+
+    def set_refers_to_nothing(self, flag: bool) -> Draft:
+        """Mark (or unmark) the prompt as referring to no object."""
+        return replace(self, refers_to_nothing=bool(flag))
+
+    def add_box(self, box: Sequence[float] | np.ndarray, cls: str) -> Draft:
+        """A new box appended (id :attr:`next_box_id`); clears the "refers to nothing" flag."""
+        return self.add_boxes(np.asarray(box, dtype=np.float64).reshape(1, -1), [cls])
+
+    def add_boxes(
+        self, boxes: np.ndarray | Sequence[Sequence[float]], classes: Sequence[str]
+    ) -> Draft:
+        """Several boxes ``(K, 7)`` appended at once (e.g. the model's predictions), one edit."""
+        arr = np.asarray(boxes, dtype=np.float64)
+        arr = arr.reshape(0, 7) if arr.size == 0 else arr.reshape(-1, arr.shape[-1])
+        if len(arr) != len(classes):
+            raise DraftError(f"{len(arr)} boxes but {len(classes)} class names")
+        if not len(arr):
+            return self
+        added = tuple(
+            DraftBox(self.next_box_id + i, _as_box(b, "new box"), str(c))
+            for i, (b, c) in enumerate(zip(arr, classes, strict=True))
+        )
+        return replace(
+            self,
+            boxes=self.boxes + added,
+            next_box_id=self.next_box_id + len(added),
+            refers_to_nothing=False,
+        )
+
+    def _with_box(self, box_id: int, new: DraftBox) -> Draft:
+        i = self.index_of(box_id)
+        return replace(self, boxes=(*self.boxes[:i], new, *self.boxes[i + 1 :]))
+
+    def set_box(self, box_id: int, box: Sequence[float] | np.ndarray) -> Draft:
+        """All seven values of a box replaced (e.g. by a fitted box)."""
+        old = self.get(box_id)
+        return self._with_box(box_id, replace(old, box=_as_box(box, f"box id {box_id}")))
+
+    def move_box(self, box_id: int, x: float, y: float, z: float | None = None) -> Draft:
+        """The box centre moved to ``(x, y)`` (and ``z`` when given), LiDAR frame."""
+        old = self.get(box_id)
+        zz = old.box[2] if z is None else z
+        xyz = _finite((x, y, zz), f"box id {box_id} position")
+        return self._with_box(box_id, replace(old, box=(*xyz, *old.box[3:])))
+
+    def rotate_box(self, box_id: int, yaw: float) -> Draft:
+        """The box's yaw set to ``yaw`` (radians, wrapped to ``[-pi, pi)``)."""
+        old = self.get(box_id)
+        (value,) = _finite((yaw,), f"box id {box_id} yaw")
+        return self._with_box(box_id, replace(old, box=(*old.box[:6], _wrap(value))))
+
+    def resize_box(
+        self, box_id: int, length: float, width: float, height: float, *, keep_bottom: bool = True
+    ) -> Draft:
+        """The box's size set to ``(l, w, h)``.
+
+        With ``keep_bottom`` the bottom face stays where it is (the object keeps standing on the
+        ground) and the centre's z moves by half the height change; otherwise the centre stays.
+        """
+        old = self.get(box_id)
+        lwh = _finite((length, width, height), f"box id {box_id} size")
+        x, y, z = old.box[:3]
+        if keep_bottom:
+            z = z - old.box[5] / 2.0 + lwh[2] / 2.0
+        return self._with_box(box_id, replace(old, box=(x, y, z, *lwh, old.box[6])))
+
+    def set_class(self, box_id: int, cls: str) -> Draft:
+        """The box's class set to ``cls``."""
+        old = self.get(box_id)
+        return self._with_box(box_id, replace(old, cls=str(cls)))
+
+    def delete_box(self, box_id: int) -> Draft:
+        """The box removed (the ids of the others do not change)."""
+        i = self.index_of(box_id)
+        return replace(self, boxes=self.boxes[:i] + self.boxes[i + 1 :])
+
+    def clear(self) -> Draft:
+        """An empty draft (no prompt, no boxes) that still edits the same saved pair."""
+        return Draft(
+            next_box_id=self.next_box_id,
+            sample_id=self.sample_id,
+            base_version=self.base_version,
+        )
+
+    # ---------------------------------------------------------------- serialisation
+
+    def to_json(self) -> dict:
+        """A JSON-serialisable dict (for per-client persistence)."""
+        return {
+            "prompt": self.prompt,
+            "boxes": [{"id": b.box_id, "box": list(b.box), "cls": b.cls} for b in self.boxes],
+            "refers_to_nothing": self.refers_to_nothing,
+            "next_box_id": self.next_box_id,
+            "sample_id": self.sample_id,
+            "base_version": self.base_version,
+        }
+
+    @staticmethod
+    def from_json(data: dict) -> Draft:
+        """Inverse of :meth:`to_json`."""
+        try:
+            boxes = tuple(
+                DraftBox(int(b["id"]), _as_box(b["box"], f"box id {b['id']}"), str(b["cls"]))
+                for b in data.get("boxes", ())
+            )
+            next_id = int(data.get("next_box_id", 0))
+            sample_id = data.get("sample_id")
+            return Draft(
+                prompt=str(data.get("prompt", "")),
+                boxes=boxes,
+                refers_to_nothing=bool(data.get("refers_to_nothing", False)),
+                next_box_id=max([next_id, *(b.box_id + 1 for b in boxes)]),
+                sample_id=None if sample_id is None else str(sample_id),
+                base_version=int(data.get("base_version", 0)),
+            )
+        except (KeyError, TypeError) as exc:
+            raise DraftError(f"malformed draft JSON: {exc!r}") from exc
+
+
+@dataclass(frozen=True)
+class _Entry:
+    draft: Draft
+    label: str
+    merge_key: Hashable | None = None
+
+
+class History:
+    """Undo / redo over :class:`Draft` snapshots.
+
+    Args:
+        initial: The snapshot to start from.
+        max_steps: How many undo steps are kept (the oldest are dropped beyond it).
+    """
+
+    def __init__(self, initial: Draft | None = None, max_steps: int = 200) -> None:
+        if max_steps < 1:
+            raise ValueError(f"History.max_steps must be >= 1, got {max_steps}")
+        self.max_steps = int(max_steps)
+        self._undo: list[_Entry] = []
+        self._redo: list[_Entry] = []
+        self._present = _Entry(initial if initial is not None else Draft(), "open")
+
+    def __len__(self) -> int:
+        """Number of undo steps available."""
+        return len(self._undo)
+
+    @property
+    def present(self) -> Draft:
+        """The current snapshot."""
+        return self._present.draft
+
+    @property
+    def can_undo(self) -> bool:
+        return bool(self._undo)
+
+    @property
+    def can_redo(self) -> bool:
+        return bool(self._redo)
+
+    @property
+    def undo_label(self) -> str | None:
+        """What :meth:`undo` would take back (e.g. ``"move box 2"``), or None."""
+        return self._present.label if self._undo else None
+
+    @property
+    def redo_label(self) -> str | None:
+        """What :meth:`redo` would re-apply, or None."""
+        return self._redo[-1].label if self._redo else None
+
+    def apply(self, draft: Draft, label: str = "edit", merge_key: Hashable | None = None) -> Draft:
+        """Record ``draft`` as the new present snapshot and return it.
+
+        An unchanged draft records nothing. When ``merge_key`` is not None and equals the key of
+        the edit that made the present snapshot (and there is nothing to redo), the new snapshot
+        replaces the present one: both edits are undone together.
+        """
+        if draft == self._present.draft:
+            return draft
+        entry = _Entry(draft, label, merge_key)
+        merging = (
+            merge_key is not None
+            and self._present.merge_key == merge_key
+            and self._undo
+            and not self._redo
+        )
+        if not merging:
+            self._undo.append(self._present)
+            del self._undo[: max(0, len(self._undo) - self.max_steps)]
+        self._redo.clear()
+        self._present = entry
+        return draft
+
+    def undo(self) -> Draft:
+        """Step back one edit (no-op when there is none); returns the present snapshot."""
+        if self._undo:
+            self._redo.append(self._present)
+            self._present = replace(self._undo.pop(), merge_key=None)
+        return self.present
+
+    def redo(self) -> Draft:
+        """Re-apply the last undone edit (no-op when there is none)."""
+        if self._redo:
+            self._undo.append(self._present)
+            self._present = replace(self._redo.pop(), merge_key=None)
+        return self.present
+
+    def reset(self, draft: Draft) -> Draft:
+        """Forget the history and start from ``draft`` (after a save or when opening a pair)."""
+        self._undo.clear()
+        self._redo.clear()
+        self._present = _Entry(draft, "open")
+        return draft
+
+
+_F = TypeVar("_F", bound=Callable[..., Any])
+
+
+def _serialised(method: _F) -> _F:
+    """Run an editor method under the editor's lock (GUI callbacks may arrive on several threads)."""
+
+    @functools.wraps(method)
+    def wrapper(self: DraftEditor, *args: Any, **kwargs: Any) -> Any:
+        with self._lock:
+            return method(self, *args, **kwargs)
+
+    return wrapper  # type: ignore[return-value]
+
+
+class DraftEditor:
+    """A draft with its history: the state of one client's annotation panel.
+
+    Every method applies one undoable edit and returns the new snapshot (``add_box`` returns the
+    new box's id). ``merge_key`` lets a caller fold a stream of updates (a gizmo drag) into one
+    undo step: pass the same hashable key for the whole drag. Methods are serialised by a lock, so
+    callbacks of one client arriving on different threads cannot interleave an edit.
+    """
+
+    def __init__(self, draft: Draft | None = None, max_steps: int = 200) -> None:
+        self.history = History(draft if draft is not None else Draft(), max_steps=max_steps)
+        self._lock = threading.RLock()
+
+    @property
+    def draft(self) -> Draft:
+        """The current snapshot."""
+        return self.history.present
+
+    def _apply(self, draft: Draft, label: str, merge_key: Hashable | None = None) -> Draft:
+        return self.history.apply(draft, label, merge_key)
+
+    def _name(self, box_id: int) -> str:
+        return f"box {self.draft.index_of(box_id) + 1}"
+
+    @_serialised
+    def set_prompt(self, text: str, merge_key: Hashable | None = "prompt") -> Draft:
+        """Set the prompt; consecutive prompt edits merge into one undo step by default."""
+        return self._apply(self.draft.set_prompt(text), "edit prompt", merge_key)
+
+    @_serialised
+    def set_refers_to_nothing(self, flag: bool) -> Draft:
+        label = "mark as referring to nothing" if flag else "unmark 'refers to nothing'"
+        return self._apply(self.draft.set_refers_to_nothing(flag), label)
+
+    @_serialised
+    def add_box(self, box: Sequence[float] | np.ndarray, cls: str) -> int:
+        """Add one box; returns its id."""
+        new = self.draft.add_box(box, cls)
+        self._apply(new, f"add {cls} box")
+        return new.boxes[-1].box_id
+
+    @_serialised
+    def add_boxes(self, boxes: np.ndarray, classes: Sequence[str]) -> tuple[int, ...]:
+        """Add several boxes in one undo step; returns their ids."""
+        before = len(self.draft.boxes)
+        new = self.draft.add_boxes(boxes, classes)
+        self._apply(new, f"add {len(new.boxes) - before} boxes")
+        return new.box_ids[before:]
+
+    @_serialised
+    def set_box(self, box_id: int, box: Sequence[float] | np.ndarray, label: str = "") -> Draft:
+        return self._apply(self.draft.set_box(box_id, box), label or f"set {self._name(box_id)}")
+
+    @_serialised
+    def move_box(
+        self,
+        box_id: int,
+        x: float,
+        y: float,
+        z: float | None = None,
+        merge_key: Hashable | None = None,
+    ) -> Draft:
+        return self._apply(
+            self.draft.move_box(box_id, x, y, z), f"move {self._name(box_id)}", merge_key
+        )
+
+    @_serialised
+    def rotate_box(self, box_id: int, yaw: float, merge_key: Hashable | None = None) -> Draft:
+        return self._apply(
+            self.draft.rotate_box(box_id, yaw), f"rotate {self._name(box_id)}", merge_key
+        )
+
+    @_serialised
+    def resize_box(
+        self,
+        box_id: int,
+        length: float,
+        width: float,
+        height: float,
+        merge_key: Hashable | None = None,
+    ) -> Draft:
+        return self._apply(
+            self.draft.resize_box(box_id, length, width, height),
+            f"resize {self._name(box_id)}",
+            merge_key,
+        )
+
+    @_serialised
+    def set_class(self, box_id: int, cls: str) -> Draft:
+        return self._apply(self.draft.set_class(box_id, cls), f"{self._name(box_id)} -> {cls}")
+
+    @_serialised
+    def delete_box(self, box_id: int) -> Draft:
+        return self._apply(self.draft.delete_box(box_id), f"delete {self._name(box_id)}")
+
+    @_serialised
+    def clear(self) -> Draft:
+        return self._apply(self.draft.clear(), "clear")
+
+    @_serialised
+    def undo(self) -> Draft:
+        return self.history.undo()
+
+    @_serialised
+    def redo(self) -> Draft:
+        return self.history.redo()
+
+    @_serialised
+    def reset(self, draft: Draft | None = None) -> Draft:
+        """Start over from ``draft`` (default: an empty draft) with an empty history."""
+        return self.history.reset(draft if draft is not None else Draft())

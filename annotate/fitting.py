@@ -1,0 +1,339 @@
+"""Fit a box's centre, size and yaw to the LiDAR points of a selected region.
+
+Steps of :func:`fit_box` (all in the LiDAR frame):
+
+1. Selection: the points whose bird's-eye-view position lies in the region, a rough box (a vertical
+   prism, its ``z`` extent ignored, grown by ``margin``) or a disk (centre + radius). The box's own
+   height is ignored on purpose: a box placed by a ground click has a default height that may cut
+   the object's top.
+2. Ground: ``ground_z`` when given, else the ``ground_percentile`` percentile of the point heights
+   in the region grown by ``ground_margin`` (the ground around an object is almost always seen,
+   even where the object hides the ground beneath it). Points at most ``ground_clearance`` above
+   the ground, or more than ``max_height`` above it, are left out.
+3. Clustering (``cluster_gap``): the points are split into groups whose BEV gaps exceed the gap
+   (connected components of a grid of ``cluster_gap`` cells, 8-neighbourhood); the largest group is
+   kept, so a kerb or a neighbour's edge caught by a generous region does not inflate the box.
+4. Rectangle: the minimum-area rectangle enclosing the BEV convex hull (Andrew's monotone chain).
+   One side of a minimum-area enclosing rectangle is collinear with a hull edge, so trying each
+   hull edge's direction (the rotating-calipers candidates, evaluated at once with NumPy) finds it.
+   Near-ties (an L-shaped scan of two sides) go to the rectangle whose edges the points hug.
+5. Orientation: the length runs along the longer side; of the two headings along it, the one
+   nearer ``prior_yaw`` is kept (default: the rough box's yaw, or 0 = facing away from the ego
+   vehicle for a disk). Points cannot tell an object's front from its back.
+6. Height: from the ground (``extend_to_ground``, objects stand on the ground; else from the lowest
+   kept point) to the highest kept point. Sizes are at least ``min_size``.
+
+Too few points after these steps raise :class:`FitError` with the count and what to change.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from scenes.boxes import points_in_boxes, wrap_yaw
+
+
+class FitError(ValueError):
+    """The region holds too few usable points to fit a box; the message says how many."""
+
+
+@dataclass(frozen=True)
+class BoxRegion:
+    """A rough box ``(7,)`` (LiDAR frame); its BEV footprint grown by ``margin`` metres per side."""
+
+    box: tuple[float, ...]
+    margin: float = 0.3
+
+    def __post_init__(self) -> None:
+        b = np.asarray(self.box, dtype=np.float64).reshape(-1)
+        if b.shape != (7,) or not np.all(np.isfinite(b)):
+            raise ValueError(f"BoxRegion: expected 7 finite values, got {self.box!r}")
+        if np.any(b[3:5] <= 0):
+            raise ValueError(f"BoxRegion: length and width must be positive, got {b[3:5]}")
+        if self.margin < 0:
+            raise ValueError(f"BoxRegion: margin must be >= 0, got {self.margin}")
+        object.__setattr__(self, "box", tuple(float(v) for v in b))
+
+
+@dataclass(frozen=True)
+class DiskRegion:
+    """A vertical cylinder: BEV ``centre (x, y)`` and ``radius`` in metres, LiDAR frame."""
+
+    centre: tuple[float, float]
+    radius: float
+
+    def __post_init__(self) -> None:
+        c = tuple(float(v) for v in self.centre)
+        if len(c) != 2 or not all(np.isfinite(c)):
+            raise ValueError(f"DiskRegion: centre must be two finite numbers, got {self.centre!r}")
+        if not self.radius > 0:
+            raise ValueError(f"DiskRegion: radius must be positive, got {self.radius}")
+        object.__setattr__(self, "centre", c)
+
+
+Region = BoxRegion | DiskRegion
+
+
+@dataclass(frozen=True)
+class FitConfig:
+    """Parameters of :func:`fit_box` (see the module docstring).
+
+    Attributes:
+        ground_percentile: Percentile of heights taken as the ground when no ``ground_z`` is given.
+        ground_margin: BEV growth of the region (m) for the ground estimate.
+        ground_clearance: Points up to this height above the ground (m) count as ground.
+        max_height: Points higher than this above the ground (m) are left out (branches, signs).
+        cluster_gap: BEV gap (m) that separates two objects; None keeps every point.
+        min_points: Fewest points a fit needs.
+        min_size: Smallest length, width and height of a fitted box (m).
+        extend_to_ground: Let the box reach down to the ground.
+    """
+
+    ground_percentile: float = 5.0
+    ground_margin: float = 2.0
+    ground_clearance: float = 0.2
+    max_height: float = 4.0
+    cluster_gap: float | None = 0.5
+    min_points: int = 5
+    min_size: float = 0.1
+    extend_to_ground: bool = True
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.ground_percentile <= 100.0:
+            raise ValueError(
+                f"FitConfig: ground_percentile {self.ground_percentile} not in [0, 100]"
+            )
+        if self.cluster_gap is not None and self.cluster_gap <= 0:
+            raise ValueError(f"FitConfig: cluster_gap must be positive, got {self.cluster_gap}")
+        if self.min_points < 1 or self.min_size <= 0 or self.max_height <= 0:
+            raise ValueError("FitConfig: min_points, min_size and max_height must be positive")
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """A fitted box.
+
+    Attributes:
+        box: ``(7,)`` float64 ``x, y, z, l, w, h, yaw``, LiDAR frame.
+        num_points: Points the rectangle was fitted to.
+        ground_z: Ground height used (m).
+        used: ``(N,)`` bool mask over the input points: the points the box was fitted to.
+    """
+
+    box: np.ndarray
+    num_points: int
+    ground_z: float
+    used: np.ndarray
+
+
+@dataclass(frozen=True)
+class Rectangle:
+    """A BEV rectangle: ``centre (2,)``, ``length >= width`` and ``yaw`` of the length axis."""
+
+    centre: np.ndarray
+    length: float
+    width: float
+    yaw: float
+
+
+def convex_hull(xy: np.ndarray) -> np.ndarray:
+    """Convex hull of ``(N, 2)`` points, counter-clockwise, without repeated or collinear points.
+
+    Returns ``(H, 2)``; ``H`` is 1 or 2 for coincident or collinear input.
+    """
+    pts = np.unique(np.asarray(xy, dtype=np.float64).reshape(-1, 2), axis=0)  # sorted by x, y
+    if len(pts) <= 2:
+        return pts
+
+    def half(points: np.ndarray) -> list[np.ndarray]:
+        chain: list[np.ndarray] = []
+        for p in points:
+            while len(chain) >= 2:
+                o, a = chain[-2], chain[-1]
+                cross = (a[0] - o[0]) * (p[1] - o[1]) - (a[1] - o[1]) * (p[0] - o[0])
+                if cross > 1e-12:
+                    break
+                chain.pop()
+            chain.append(p)
+        return chain
+
+    lower = half(pts)
+    upper = half(pts[::-1])
+    hull = np.array(lower[:-1] + upper[:-1])
+    return hull
+
+
+def min_area_rectangle(
+    xy: np.ndarray, min_size: float = 0.0, tie_tolerance: float = 0.05
+) -> Rectangle:
+    """The minimum-area rectangle enclosing ``(N, 2)`` points (N >= 1), BEV.
+
+    Candidate directions are the hull edges'. Among the candidates whose area is within
+    ``tie_tolerance`` (relative) of the smallest, the one whose edges the points hug most closely
+    (mean distance of every point to its nearest edge) wins: an L-shaped scan (two sides of a car
+    seen from a corner) has a leg-aligned and a hypotenuse-aligned rectangle of the same area, and
+    only the first has the points on its edges.
+
+    The length is the longer side; ``yaw`` is the direction of the length axis in
+    ``[-pi/2, pi/2)`` (either heading along it encloses the same points). Sides shorter than
+    ``min_size`` are widened to it about the centre.
+    """
+    pts = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    hull = convex_hull(pts)
+    if len(hull) == 0:
+        raise FitError("no points to fit a rectangle to")
+    if len(hull) == 1:
+        angles = np.zeros(1)
+    else:
+        edges = np.roll(hull, -1, axis=0) - hull
+        if len(hull) == 2:
+            edges = edges[:1]
+        angles = np.arctan2(edges[:, 1], edges[:, 0])
+    cos, sin = np.cos(angles), np.sin(angles)
+    # Coordinates of every hull point along (u) and across (v) every candidate direction: (E, H).
+    u = hull[None, :, 0] * cos[:, None] + hull[None, :, 1] * sin[:, None]
+    v = -hull[None, :, 0] * sin[:, None] + hull[None, :, 1] * cos[:, None]
+    u_min, u_max, v_min, v_max = u.min(1), u.max(1), v.min(1), v.max(1)
+    area = (u_max - u_min) * (v_max - v_min)
+    near = np.nonzero(area <= area.min() * (1.0 + tie_tolerance) + 1e-12)[0]
+    if len(near) > 1:
+        pu = pts[None, :, 0] * cos[near, None] + pts[None, :, 1] * sin[near, None]
+        pv = -pts[None, :, 0] * sin[near, None] + pts[None, :, 1] * cos[near, None]
+        gap = np.minimum(
+            np.minimum(pu - u_min[near, None], u_max[near, None] - pu),
+            np.minimum(pv - v_min[near, None], v_max[near, None] - pv),
+        )
+        best = int(near[np.argmin(gap.mean(axis=1))])
+    else:
+        best = int(near[0])
+    mid_u = 0.5 * (u_max[best] + u_min[best])
+    mid_v = 0.5 * (v_max[best] + v_min[best])
+    c, s = cos[best], sin[best]
+    centre = np.array([mid_u * c - mid_v * s, mid_u * s + mid_v * c])
+    length = float(u_max[best] - u_min[best])
+    width = float(v_max[best] - v_min[best])
+    yaw = float(angles[best])
+    if width > length:
+        length, width, yaw = width, length, yaw + np.pi / 2.0
+    yaw = float(wrap_yaw(yaw))
+    if yaw >= np.pi / 2.0 - 1e-12:
+        yaw -= np.pi
+    elif yaw < -np.pi / 2.0:
+        yaw += np.pi
+    return Rectangle(centre, max(length, min_size), max(width, min_size), yaw)
+
+
+def _in_region(xy: np.ndarray, region: Region, grow: float = 0.0) -> np.ndarray:
+    if isinstance(region, DiskRegion):
+        d = xy - np.asarray(region.centre)
+        return np.hypot(d[:, 0], d[:, 1]) <= region.radius + grow
+    b = np.array(region.box, dtype=np.float64)
+    b[3:5] += 2.0 * (region.margin + grow)
+    b[2], b[5] = 0.0, 1.0
+    flat = np.c_[xy, np.zeros(len(xy))]
+    return points_in_boxes(flat, b[None])[:, 0]
+
+
+def _largest_cluster(xy: np.ndarray, gap: float) -> np.ndarray:
+    """Mask ``(N,)`` of the largest group of points connected through BEV cells of size ``gap``."""
+    cells = np.floor(xy / gap).astype(np.int64)
+    uniq, inverse = np.unique(cells, axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    index = {(int(a), int(b)): i for i, (a, b) in enumerate(uniq)}
+    parent = list(range(len(uniq)))
+
+    def find(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for i, (a, b) in enumerate(uniq):
+        for da in (-1, 0, 1):
+            for db in (-1, 0, 1):
+                j = index.get((int(a) + da, int(b) + db))
+                if j is not None:
+                    ri, rj = find(i), find(j)
+                    if ri != rj:
+                        parent[rj] = ri
+    roots = np.array([find(i) for i in range(len(uniq))])
+    point_root = roots[inverse]
+    labels, counts = np.unique(point_root, return_counts=True)
+    return point_root == labels[int(np.argmax(counts))]
+
+
+def fit_box(
+    points: np.ndarray,
+    region: Region,
+    *,
+    ground_z: float | None = None,
+    prior_yaw: float | None = None,
+    config: FitConfig | None = None,
+) -> FitResult:
+    """Fit a box to the LiDAR points in ``region`` (see the module docstring).
+
+    Args:
+        points: ``(N, >=3)`` LiDAR frame (intensity and other columns ignored).
+        region: Where the object is: a rough :class:`BoxRegion` or a :class:`DiskRegion`.
+        ground_z: Ground height (m) when known; else estimated.
+        prior_yaw: Heading to stay close to; default the rough box's yaw, or 0 for a disk.
+        config: Parameters (default :class:`FitConfig()`).
+
+    Raises:
+        FitError: Fewer than ``config.min_points`` points remain; the message gives the count.
+    """
+    cfg = config if config is not None else FitConfig()
+    pts = np.asarray(points, dtype=np.float64)
+    if pts.ndim != 2 or pts.shape[1] < 3:
+        raise ValueError(f"fit_box: points must have shape (N, >=3), got {pts.shape}")
+    finite = np.all(np.isfinite(pts[:, :3]), axis=1)
+    xy, z = pts[:, :2], pts[:, 2]
+    selected = _in_region(xy, region) & finite
+    where = "the selected region"
+    if not selected.any():
+        raise FitError(f"no LiDAR points in {where}: move or enlarge it")
+    if ground_z is None:
+        around = _in_region(xy, region, grow=cfg.ground_margin) & finite
+        ground_z = float(np.percentile(z[around], cfg.ground_percentile))
+    ground_z = float(ground_z)
+    above = selected & (z > ground_z + cfg.ground_clearance) & (z <= ground_z + cfg.max_height)
+    n_above = int(above.sum())
+    if n_above < cfg.min_points:
+        raise FitError(
+            f"only {n_above} LiDAR point(s) above the ground (z > {ground_z + cfg.ground_clearance:.2f}"
+            f" m) in {where} ({int(selected.sum())} in total); a fit needs at least "
+            f"{cfg.min_points}: move or enlarge the region, or place the box by hand"
+        )
+    used = above.copy()
+    if cfg.cluster_gap is not None:
+        idx = np.nonzero(above)[0]
+        keep = _largest_cluster(xy[idx], cfg.cluster_gap)
+        used[idx[~keep]] = False
+        if int(used.sum()) < cfg.min_points:
+            raise FitError(
+                f"the largest group of points in {where} has only {int(used.sum())} point(s); "
+                f"a fit needs at least {cfg.min_points}"
+            )
+    rect = min_area_rectangle(xy[used], cfg.min_size)
+    if prior_yaw is None:
+        prior_yaw = region.box[6] if isinstance(region, BoxRegion) else 0.0
+    yaw = rect.yaw
+    if abs(wrap_yaw(yaw + np.pi - prior_yaw)) < abs(wrap_yaw(yaw - prior_yaw)):
+        yaw = yaw + np.pi
+    top = float(z[used].max())
+    bottom = ground_z if cfg.extend_to_ground else float(z[used].min())
+    height = max(top - bottom, cfg.min_size)
+    box = np.array(
+        [
+            rect.centre[0],
+            rect.centre[1],
+            bottom + height / 2.0,
+            rect.length,
+            rect.width,
+            height,
+            wrap_yaw(yaw),
+        ]
+    )
+    return FitResult(box=box, num_points=int(used.sum()), ground_z=ground_z, used=used)
