@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import json
 import os
-import threading
 import shutil
+import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
