@@ -1,0 +1,1096 @@
+"""The synthetic driving world: a road with kerbs, buildings and street clutter, plus actors, as
+triangle meshes in the LiDAR frame, and first-hit ray casting against it with embree.
+
+Frame and time
+    Everything is in the LiDAR frame at the frame's time stamp ``t = 0`` (x forward, y left, z up,
+    metres, origin at the LiDAR). The ground plane is ``z = -lidar_height``. The ego vehicle drives
+    along +x at ``ego_speed`` without yaw rate, so at time ``t`` the ego (and every sensor on it) sits
+    ``ego_speed * t`` further along x, and an actor's mesh is translated by ``velocity * t``: that is
+    how older radar scans are simulated (:meth:`World.actor_mesh_at`).
+
+Road
+    A centreline ``y = offset + curvature * u**2 / 2`` (``u`` = x; gently curved, radius >= 300 m,
+    or straight), with a lateral profile of bands (lanes, markings, parking, kerb, verge, bike path,
+    sidewalk, yard) extruded along it: the carriageway is at ground level, everything beyond the
+    kerbs is raised by ``kerb_height``. Right-hand traffic: the ego's lanes lie right of the
+    centreline (``s < 0``), oncoming lanes left of it. Buildings, walls and hedges line the road
+    beyond the yards; street lights, signs, bollards and trees stand in the verges.
+
+Actors
+    Cars (body + cabin + wheels), pedestrians (legs, torso, arms, head) and cyclists (bicycle +
+    rider) are built in their own box frame and scaled so that their axis-aligned bounds are exactly
+    the sampled ``l, w, h``: the :class:`~scenes.actors.Actor` box is the tight box of the mesh, with
+    ``z`` at its geometric centre (a pedestrian on a sidewalk stands ``kerb_height`` higher).
+    Velocities are ground velocities along the heading (cars 0..15 m/s in lanes, both directions, or
+    parked; pedestrians 0..2 m/s along sidewalks or crossing; cyclists 2..7 m/s). Actor boxes never
+    overlap each other, the ego vehicle, or the trunks and poles.
+
+Materials
+    Each face carries a :class:`Mat` (LiDAR reflectivity, radar behaviour of static surfaces) and
+    an owner (actor index, or -1 for static geometry). The sensors read both from :class:`RayHits`.
+
+Determinism: :func:`generate_world` draws everything from the generator it is given; the same seed
+gives the same world, bit for bit.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from functools import cache
+
+import numpy as np
+import trimesh
+from trimesh.ray.ray_pyembree import RayMeshIntersector
+
+from scenes.actors import CLASSES, Actor
+from scenes.calib import LIDAR_HEIGHT
+
+# --------------------------------------------------------------------------------------------------
+# Materials
+
+
+class Mat(enum.IntEnum):
+    """Surface materials (the integer is the index into :data:`MATERIALS`)."""
+
+    ASPHALT = 0
+    MARKING = 1
+    BIKE_PATH = 2
+    PAVING = 3
+    GRASS = 4
+    SOIL = 5
+    BRICK = 6
+    CONCRETE = 7
+    GLASS_FACADE = 8
+    METAL = 9
+    SIGN = 10
+    BARK = 11
+    FOLIAGE = 12
+    PAINT_DARK = 13
+    PAINT_LIGHT = 14
+    CAR_GLASS = 15
+    RUBBER = 16
+    CLOTHING = 17
+    SKIN = 18
+    BIKE_FRAME = 19
+
+
+@dataclass(frozen=True)
+class Material:
+    """Sensor-facing properties of a surface.
+
+    Attributes:
+        reflectivity: LiDAR diffuse reflectivity in ``[0, 1]`` (retro-reflective signs near 1).
+        lidar_dropout: Extra probability that a LiDAR return is lost (glass, foliage).
+        lidar_depth_jitter: Extra range spread in metres (penetration into foliage).
+        radar_rcs: RCS in dBsm of one radar detection on this surface (static clutter).
+        radar_prob: Probability that one ray of the radar's visibility grid (0.4 x 1.5 degrees)
+            hitting this static surface becomes a detection, before the SNR factor.
+    """
+
+    reflectivity: float
+    lidar_dropout: float = 0.0
+    lidar_depth_jitter: float = 0.0
+    radar_rcs: float = -10.0
+    radar_prob: float = 0.0
+
+
+MATERIALS: tuple[Material, ...] = (
+    Material(0.08, radar_rcs=-20.0, radar_prob=0.004),  # ASPHALT
+    Material(0.55, radar_rcs=-20.0, radar_prob=0.004),  # MARKING
+    Material(0.12, radar_rcs=-20.0, radar_prob=0.004),  # BIKE_PATH (red asphalt)
+    Material(0.22, radar_rcs=-18.0, radar_prob=0.006),  # PAVING
+    Material(0.30, radar_rcs=-18.0, radar_prob=0.006),  # GRASS
+    Material(0.18, radar_rcs=-20.0, radar_prob=0.001),  # SOIL
+    Material(0.28, radar_rcs=0.0, radar_prob=0.08),  # BRICK
+    Material(0.35, radar_rcs=2.0, radar_prob=0.08),  # CONCRETE
+    Material(0.10, lidar_dropout=0.3, radar_rcs=5.0, radar_prob=0.1),  # GLASS_FACADE
+    Material(0.45, radar_rcs=8.0, radar_prob=0.5),  # METAL (poles)
+    Material(0.95, radar_rcs=10.0, radar_prob=0.6),  # SIGN (retro-reflective)
+    Material(0.25, radar_rcs=-5.0, radar_prob=0.1),  # BARK
+    Material(0.35, 0.25, 0.6, radar_rcs=-12.0, radar_prob=0.02),  # FOLIAGE
+    Material(0.12),  # PAINT_DARK
+    Material(0.55),  # PAINT_LIGHT
+    Material(0.05, lidar_dropout=0.4),  # CAR_GLASS
+    Material(0.06),  # RUBBER
+    Material(0.25),  # CLOTHING
+    Material(0.40),  # SKIN
+    Material(0.35),  # BIKE_FRAME
+)
+"""Material properties indexed by :class:`Mat`."""
+
+REFLECTIVITY = np.array([m.reflectivity for m in MATERIALS])
+LIDAR_DROPOUT = np.array([m.lidar_dropout for m in MATERIALS])
+LIDAR_DEPTH_JITTER = np.array([m.lidar_depth_jitter for m in MATERIALS])
+RADAR_RCS = np.array([m.radar_rcs for m in MATERIALS])
+RADAR_PROB = np.array([m.radar_prob for m in MATERIALS])
+
+
+# --------------------------------------------------------------------------------------------------
+# Meshes with per-face tags
+
+
+@dataclass(frozen=True)
+class TaggedMesh:
+    """A triangle soup whose faces carry a material and an owner.
+
+    Attributes:
+        vertices: ``(V, 3)`` float64.
+        faces: ``(F, 3)`` int64 vertex indices.
+        material: ``(F,)`` int16 :class:`Mat` values.
+        owner: ``(F,)`` int32: index into :attr:`World.actors`, or -1 for static geometry.
+    """
+
+    vertices: np.ndarray = field(repr=False)
+    faces: np.ndarray = field(repr=False)
+    material: np.ndarray = field(repr=False)
+    owner: np.ndarray = field(repr=False)
+
+    @staticmethod
+    def empty() -> TaggedMesh:
+        return TaggedMesh(
+            np.zeros((0, 3)),
+            np.zeros((0, 3), np.int64),
+            np.zeros(0, np.int16),
+            np.zeros(0, np.int32),
+        )
+
+    @staticmethod
+    def concatenate(parts: Sequence[TaggedMesh]) -> TaggedMesh:
+        """One mesh from several (vertex indices shifted)."""
+        if not parts:
+            return TaggedMesh.empty()
+        offsets = np.cumsum([0] + [len(p.vertices) for p in parts[:-1]])
+        return TaggedMesh(
+            np.concatenate([p.vertices for p in parts]),
+            np.concatenate([p.faces + o for p, o in zip(parts, offsets, strict=True)]),
+            np.concatenate([p.material for p in parts]).astype(np.int16),
+            np.concatenate([p.owner for p in parts]).astype(np.int32),
+        )
+
+    def with_owner(self, owner: int) -> TaggedMesh:
+        return TaggedMesh(
+            self.vertices, self.faces, self.material, np.full(len(self.faces), owner, np.int32)
+        )
+
+    def transformed(self, rotation: np.ndarray, translation: np.ndarray) -> TaggedMesh:
+        """Vertices mapped by ``rotation (3, 3) @ v + translation (3,)``."""
+        return TaggedMesh(
+            self.vertices @ np.asarray(rotation).T + np.asarray(translation),
+            self.faces,
+            self.material,
+            self.owner,
+        )
+
+    def to_trimesh(self) -> trimesh.Trimesh:
+        """A :class:`trimesh.Trimesh` (unprocessed: vertices and faces kept as they are)."""
+        return trimesh.Trimesh(self.vertices, self.faces, process=False)
+
+
+@cache
+def _unit_box() -> tuple[np.ndarray, np.ndarray]:
+    """Corners of ``[-0.5, 0.5]^3`` (index bits: x, y, z = 4, 2, 1) and their 12 triangles."""
+    box = trimesh.creation.box()
+    return np.asarray(box.vertices), np.asarray(box.faces, dtype=np.int64)
+
+
+@cache
+def _unit_cylinder(sections: int) -> tuple[np.ndarray, np.ndarray]:
+    """Radius 1, axis z from 0 to 1."""
+    cyl = trimesh.creation.cylinder(radius=1.0, height=1.0, sections=sections)
+    return np.asarray(cyl.vertices) + np.array([0.0, 0.0, 0.5]), np.asarray(cyl.faces, np.int64)
+
+
+@cache
+def _unit_sphere() -> tuple[np.ndarray, np.ndarray]:
+    sph = trimesh.creation.icosphere(subdivisions=1)
+    return np.asarray(sph.vertices), np.asarray(sph.faces, dtype=np.int64)
+
+
+def _part(vertices: np.ndarray, faces: np.ndarray, mat: Mat) -> TaggedMesh:
+    return TaggedMesh(
+        np.asarray(vertices, dtype=np.float64),
+        faces,
+        np.full(len(faces), int(mat), np.int16),
+        np.full(len(faces), -1, np.int32),
+    )
+
+
+def box_part(lo: Sequence[float], hi: Sequence[float], mat: Mat) -> TaggedMesh:
+    """Axis-aligned box from corner ``lo`` to ``hi``."""
+    verts, faces = _unit_box()
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    return _part((verts + 0.5) * (hi - lo) + lo, faces, mat)
+
+
+def hexahedron_part(corners: np.ndarray, mat: Mat, top_mat: Mat | None = None) -> TaggedMesh:
+    """A convex hexahedron with the unit box's topology.
+
+    Args:
+        corners: ``(8, 3)`` in the unit box's vertex order (index bits x, y, z = 4, 2, 1, i.e.
+            corner ``i`` is at the ``-``/``+`` side of x when bit 4 is 0/1, etc.).
+        top_mat: Material of the two upward faces (e.g. a car roof), default ``mat``.
+    """
+    _, faces = _unit_box()
+    part = _part(corners, faces, mat)
+    if top_mat is not None:
+        tri = part.vertices[faces]
+        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+        part.material[normal[:, 2] > 0.7] = int(top_mat)
+    return part
+
+
+def _frame_for(direction: Sequence[float]) -> np.ndarray:
+    """A rotation whose third column is the unit ``direction`` (scalar maths: called per part)."""
+    dx, dy, dz = (float(v) for v in direction)
+    n = math.sqrt(dx * dx + dy * dy + dz * dz)
+    dx, dy, dz = dx / n, dy / n, dz / n
+    if abs(dx) < 0.9:  # u = x_axis x d
+        ux, uy, uz = 0.0, -dz, dy
+    else:  # u = y_axis x d
+        ux, uy, uz = dz, 0.0, -dx
+    m = math.sqrt(ux * ux + uy * uy + uz * uz)
+    ux, uy, uz = ux / m, uy / m, uz / m
+    vx, vy, vz = dy * uz - dz * uy, dz * ux - dx * uz, dx * uy - dy * ux
+    return np.array([[ux, vx, dx], [uy, vy, dy], [uz, vz, dz]])
+
+
+def cylinder_part(p0: Sequence[float], p1: Sequence[float], radius: float, mat: Mat) -> TaggedMesh:
+    """A cylinder from ``p0`` to ``p1``: 10-sided, 6-sided when thinner than 0.1 m in radius (limbs,
+    tubes, thin poles: fewer faces make the per-scan embree scenes cheaper)."""
+    verts, faces = _unit_cylinder(10 if radius >= 0.1 else 6)
+    axis = [float(b) - float(a) for a, b in zip(p0, p1, strict=True)]
+    length = math.sqrt(axis[0] ** 2 + axis[1] ** 2 + axis[2] ** 2)
+    frame = _frame_for(axis) * np.array([radius, radius, length])
+    return _part(verts @ frame.T + np.asarray(p0, float), faces, mat)
+
+
+def ellipsoid_part(centre: Sequence[float], radii: Sequence[float], mat: Mat) -> TaggedMesh:
+    """An axis-aligned ellipsoid (80-face icosphere, scaled)."""
+    verts, faces = _unit_sphere()
+    return _part(verts * np.asarray(radii, float) + np.asarray(centre, float), faces, mat)
+
+
+def _fit_to_box(mesh: TaggedMesh, size: np.ndarray) -> TaggedMesh:
+    """Scale and shift ``mesh`` so that its axis-aligned bounds are ``[-size/2, size/2]``."""
+    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    verts = (mesh.vertices - (lo + hi) / 2.0) * (np.asarray(size) / (hi - lo))
+    return TaggedMesh(verts, mesh.faces, mesh.material, mesh.owner)
+
+
+# --------------------------------------------------------------------------------------------------
+# Actor meshes, in the actor's box frame (centre at the origin, heading +x, z up)
+
+CAR_SIZE = ((3.5, 5.0), (1.6, 2.0), (1.4, 1.8))
+PEDESTRIAN_SIZE = ((0.5, 0.9), (0.5, 0.9), (1.5, 1.9))
+CYCLIST_SIZE = ((1.6, 1.9), (0.5, 0.8), (1.5, 1.9))
+"""``(l, w, h)`` ranges in metres per class."""
+
+
+def car_mesh(size: np.ndarray, rng: np.random.Generator) -> TaggedMesh:
+    """A car: bevelled body, glass cabin with a painted roof, four wheels. Bounds = ``size``."""
+    l, w, h = size
+    zb = -h / 2.0
+    paint = Mat.PAINT_DARK if rng.random() < 0.5 else Mat.PAINT_LIGHT
+    clearance, r_wheel = 0.17, rng.uniform(0.30, 0.35)
+    body_top = zb + h * rng.uniform(0.52, 0.60)
+    hl, hw = l / 2.0, w / 2.0
+    nose, tail = rng.uniform(0.10, 0.25), rng.uniform(0.05, 0.15)
+    body = hexahedron_part(
+        _corners(
+            x_bottom=(-hl, hl),
+            x_top=(-hl + tail, hl - nose),
+            y_bottom=hw,
+            y_top=hw * 0.97,
+            z=(zb + clearance, body_top),
+        ),
+        paint,
+    )
+    rear = -hl + l * rng.uniform(0.08, 0.22)
+    front = hl - l * rng.uniform(0.30, 0.38)
+    cabin = hexahedron_part(
+        _corners(
+            x_bottom=(rear, front),
+            x_top=(rear + 0.15, front - rng.uniform(0.35, 0.6)),
+            y_bottom=hw * 0.94,
+            y_top=hw * 0.80,
+            z=(body_top, zb + h),
+        ),
+        Mat.CAR_GLASS,
+        top_mat=paint,
+    )
+    parts = [body, cabin]
+    axle = hl - rng.uniform(0.65, 0.90)
+    for x in (-axle, axle):
+        for side in (-1.0, 1.0):
+            y_out, y_in = side * (hw - 0.02), side * (hw - 0.24)
+            parts.append(
+                cylinder_part(
+                    [x, y_in, zb + r_wheel], [x, y_out, zb + r_wheel], r_wheel, Mat.RUBBER
+                )
+            )
+    return _fit_to_box(TaggedMesh.concatenate(parts), size)
+
+
+def _corners(
+    x_bottom: tuple[float, float],
+    x_top: tuple[float, float],
+    y_bottom: float,
+    y_top: float,
+    z: tuple[float, float],
+) -> np.ndarray:
+    """Hexahedron corners (unit-box order) of a prism symmetric in y, tapering from bottom to top."""
+    out = np.zeros((8, 3))
+    for i in range(8):
+        bx, by, bz = (i >> 2) & 1, (i >> 1) & 1, i & 1
+        xs = x_top if bz else x_bottom
+        half = y_top if bz else y_bottom
+        out[i] = (xs[bx], half if by else -half, z[bz])
+    return out
+
+
+def pedestrian_mesh(size: np.ndarray, walking: bool, rng: np.random.Generator) -> TaggedMesh:
+    """A pedestrian: two legs (in stride when walking), torso, two arms, head. Bounds = ``size``."""
+    h = 1.75
+    stride = rng.uniform(0.22, 0.32) if walking else rng.uniform(0.0, 0.05)
+    hip, shoulder = 0.48 * h, 0.82 * h
+    parts = []
+    for side, phase in ((-1.0, 1.0), (1.0, -1.0)):
+        foot = [phase * stride, side * 0.09, 0.05]
+        parts.append(cylinder_part([0.0, side * 0.09, hip], foot, 0.07, Mat.CLOTHING))
+        hand = [-phase * stride * 0.8, side * 0.24, 0.47 * h]
+        parts.append(cylinder_part([0.0, side * 0.2, shoulder], hand, 0.045, Mat.CLOTHING))
+    parts.append(
+        ellipsoid_part([0.0, 0.0, (hip + shoulder) / 2 + 0.03], [0.12, 0.2, 0.24], Mat.CLOTHING)
+    )
+    parts.append(ellipsoid_part([0.02, 0.0, h - 0.11], [0.1, 0.085, 0.11], Mat.SKIN))
+    mesh = TaggedMesh.concatenate(parts)
+    return _fit_to_box(mesh, size)
+
+
+def cyclist_mesh(size: np.ndarray, rng: np.random.Generator) -> TaggedMesh:
+    """A cyclist: a bicycle (wheels, frame, handlebar) and a rider. Bounds = ``size``."""
+    r = 0.34
+    rear, front = [-0.52, 0.0, r], [0.52, 0.0, r]
+    bracket, seat, stem = [-0.05, 0.0, 0.30], [-0.22, 0.0, 0.88], [0.38, 0.0, 0.98]
+    parts = [cylinder_part([x, -0.02, r], [x, 0.02, r], r, Mat.RUBBER) for x in (rear[0], front[0])]
+    for a, b in ((rear, bracket), (bracket, seat), (seat, stem), (stem, front), (rear, seat)):
+        parts.append(cylinder_part(a, b, 0.025, Mat.BIKE_FRAME))
+    parts.append(cylinder_part([0.38, -0.3, 1.0], [0.38, 0.3, 1.0], 0.02, Mat.BIKE_FRAME))
+    lean = rng.uniform(0.25, 0.4)
+    shoulders = [-0.2 + lean, 0.0, 1.42]
+    parts.append(cylinder_part([-0.22, 0.0, 0.9], shoulders, 0.15, Mat.CLOTHING))
+    parts.append(ellipsoid_part([shoulders[0] + 0.06, 0.0, 1.61], [0.1, 0.085, 0.11], Mat.SKIN))
+    crank = rng.uniform(0, 2 * np.pi)
+    for side, phase in ((-1.0, 0.0), (1.0, np.pi)):
+        pedal = [
+            -0.05 + 0.17 * np.cos(crank + phase),
+            side * 0.1,
+            0.3 + 0.17 * np.sin(crank + phase),
+        ]
+        parts.append(cylinder_part([-0.2, side * 0.1, 0.92], pedal, 0.065, Mat.CLOTHING))
+        parts.append(
+            cylinder_part(
+                [shoulders[0], side * 0.18, 1.4], [0.36, side * 0.27, 1.0], 0.04, Mat.CLOTHING
+            )
+        )
+    return _fit_to_box(TaggedMesh.concatenate(parts), size)
+
+
+# --------------------------------------------------------------------------------------------------
+# Road
+
+
+@dataclass(frozen=True)
+class Band:
+    """One lateral strip of the road profile, from ``s0`` to ``s1`` (m, left of the centreline).
+
+    Attributes:
+        z: Height of its surface above the ground (0 or the kerb height).
+        dashed: A marking drawn as 3 m dashes with 6 m gaps (asphalt in between).
+    """
+
+    s0: float
+    s1: float
+    mat: Mat
+    z: float = 0.0
+    dashed: bool = False
+
+
+@dataclass(frozen=True)
+class Side:
+    """Lateral layout of one side of the road (``s`` signed: negative right, positive left).
+
+    Each ``(a, b)`` interval has ``a < b``; ``None`` where the side has no such strip.
+    """
+
+    sign: float
+    lane_centres: tuple[float, ...]
+    parking: tuple[float, float] | None
+    carriageway_edge: float
+    verge: tuple[float, float]
+    bike_path: tuple[float, float] | None
+    sidewalk: tuple[float, float]
+    building_line: float
+
+
+@dataclass(frozen=True)
+class Road:
+    """A road along +x: centreline ``y = offset + curvature * u**2 / 2`` and its lateral profile.
+
+    Attributes:
+        curvature: 1/m (0 = straight).
+        offset: Centreline y at x = 0 (the ego drives in a right-hand lane at y = 0).
+        lane_width: m.
+        ego_lane: Index of the ego's lane, counted from the centreline (0 = innermost).
+        kerb_height: m, height of everything beyond the carriageway.
+        right, left: The two sides' layouts.
+        bands: The whole profile from right to left.
+    """
+
+    curvature: float
+    offset: float
+    lane_width: float
+    ego_lane: int
+    kerb_height: float
+    right: Side
+    left: Side
+    bands: tuple[Band, ...]
+
+    def centre(self, u: np.ndarray) -> np.ndarray:
+        """Centreline points ``(..., 2)`` at abscissa ``u``."""
+        u = np.asarray(u, float)
+        return np.stack([u, self.offset + 0.5 * self.curvature * u**2], axis=-1)
+
+    def heading(self, u: np.ndarray | float) -> np.ndarray | float:
+        """Centreline heading (rad, from +x) at ``u``."""
+        return np.arctan(self.curvature * np.asarray(u, float))
+
+    def to_xy(self, u: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """LiDAR-frame ``(..., 2)`` of the point at abscissa ``u``, lateral offset ``s`` (left +)."""
+        if np.ndim(u) == 0 and np.ndim(s) == 0:  # scalar fast path (placement)
+            u, s = float(u), float(s)
+            theta = math.atan(self.curvature * u)
+            y = self.offset + 0.5 * self.curvature * u * u
+            return np.array([u - s * math.sin(theta), y + s * math.cos(theta)])
+        u, s = np.broadcast_arrays(np.asarray(u, float), np.asarray(s, float))
+        theta = np.arctan(self.curvature * u)
+        normal = np.stack([-np.sin(theta), np.cos(theta)], axis=-1)
+        return self.centre(u) + s[..., None] * normal
+
+    def surface_height(self, s: float) -> float:
+        """Height above the ground of the profile at lateral offset ``s``."""
+        for band in self.bands:
+            if band.s0 <= s <= band.s1:
+                return band.z
+        return 0.0
+
+
+def _make_side(
+    sign: float, lanes: int, lane_width: float, kerb: float, rng: np.random.Generator
+) -> tuple[Side, list[Band]]:
+    """One side's layout and bands, walking outwards from the centreline."""
+    bands: list[Band] = []
+
+    def strip(width: float, mat: Mat, z: float = 0.0, dashed: bool = False) -> tuple[float, float]:
+        nonlocal edge
+        a, b = sorted((sign * edge, sign * (edge + width)))
+        bands.append(Band(a, b, mat, z, dashed))
+        edge += width
+        return a, b
+
+    edge = 0.06  # half the centre line (drawn by the caller)
+    centres = []
+    for lane in range(lanes):
+        a, b = strip(lane_width - 0.12, Mat.ASPHALT)
+        centres.append((a + b) / 2)
+        strip(0.12, Mat.MARKING, dashed=lane < lanes - 1)
+    parking = strip(rng.uniform(2.0, 2.4), Mat.ASPHALT) if rng.random() < 0.55 else None
+    carriageway = sign * edge
+    verge = strip(rng.uniform(0.8, 2.5), Mat.GRASS, kerb)
+    bike = strip(rng.uniform(1.8, 2.4), Mat.BIKE_PATH, kerb) if rng.random() < 0.6 else None
+    sidewalk = strip(rng.uniform(1.8, 3.5), Mat.PAVING, kerb)
+    strip(rng.uniform(0.0, 4.0) + 0.01, Mat.GRASS, kerb)
+    side = Side(
+        sign=sign,
+        lane_centres=tuple(centres),
+        parking=parking,
+        carriageway_edge=carriageway,
+        verge=verge,
+        bike_path=bike,
+        sidewalk=sidewalk,
+        building_line=sign * edge,
+    )
+    return side, bands
+
+
+def make_road(rng: np.random.Generator) -> Road:
+    """A random road layout (see the module docstring)."""
+    curvature = 0.0 if rng.random() < 0.5 else rng.uniform(-1.0, 1.0) / 300.0
+    lane_width = rng.uniform(3.0, 3.6)
+    lanes_same, lanes_opp = int(rng.integers(1, 3)), int(rng.integers(1, 3))
+    kerb = rng.uniform(0.10, 0.16)
+    right, right_bands = _make_side(-1.0, lanes_same, lane_width, kerb, rng)
+    left, left_bands = _make_side(1.0, lanes_opp, lane_width, kerb, rng)
+    centre_line = Band(-0.06, 0.06, Mat.MARKING, 0.0, lanes_same + lanes_opp == 2)
+    bands = tuple(sorted([*right_bands, centre_line, *left_bands], key=lambda b: b.s0))
+    ego_lane = int(rng.integers(0, lanes_same))
+    return Road(
+        curvature=curvature,
+        offset=-right.lane_centres[ego_lane],
+        lane_width=lane_width,
+        ego_lane=ego_lane,
+        kerb_height=kerb,
+        right=right,
+        left=left,
+        bands=bands,
+    )
+
+
+U_RANGE = (-30.0, 150.0)
+"""Abscissa range of the modelled road (m); the LiDAR looks forward, so little is behind."""
+
+_SEGMENT = 1.5  # m, tessellation of dashed markings: dashes are 2 segments on, 4 off
+_COARSE = 7.5  # m, tessellation of everything else on a curved road (chord sag ~2 cm)
+
+
+def _strip(
+    road: Road, u: np.ndarray, s: tuple[float, float], z: tuple[float, float], mats: np.ndarray
+) -> TaggedMesh:
+    """A ruled strip between the curves ``(u, s[0], z[0])`` and ``(u, s[1], z[1])``; ``mats`` per
+    segment."""
+    n = len(u)
+    j = np.arange(n - 1)
+    faces = np.stack([np.stack([j, j + n, j + 1], 1), np.stack([j + 1, j + n, j + n + 1], 1)], 1)
+    verts = np.concatenate(
+        [
+            np.hstack([road.to_xy(u, np.full(n, s_k)), np.full((n, 1), z_k)])
+            for s_k, z_k in zip(s, z, strict=True)
+        ]
+    )
+    return TaggedMesh(
+        verts,
+        faces.reshape(-1, 3),
+        np.repeat(np.asarray(mats, np.int16), 2),
+        np.full(2 * (n - 1), -1, np.int32),
+    )
+
+
+def road_mesh(road: Road, ground_z: float) -> TaggedMesh:
+    """The extruded profile (band tops + kerb faces) and a large soil plane just below it."""
+    fine = np.arange(U_RANGE[0], U_RANGE[1] + 1e-9, _SEGMENT)
+    coarse = fine[:: int(round(_COARSE / _SEGMENT))] if road.curvature != 0 else fine[[0, -1]]
+    dash_on = (np.arange(len(fine) - 1) % 6) < 2
+    parts = []
+    for band in road.bands:
+        z = ground_z + band.z
+        if band.dashed:
+            mats = np.where(dash_on, int(band.mat), int(Mat.ASPHALT))
+            parts.append(_strip(road, fine, (band.s0, band.s1), (z, z), mats))
+        else:
+            mats = np.full(len(coarse) - 1, int(band.mat))
+            parts.append(_strip(road, coarse, (band.s0, band.s1), (z, z), mats))
+    for lower, upper in zip(road.bands[:-1], road.bands[1:], strict=True):
+        if abs(lower.z - upper.z) > 1e-6:  # a kerb face
+            mats = np.full(len(coarse) - 1, int(Mat.CONCRETE))
+            zs = (ground_z + lower.z, ground_z + upper.z)
+            parts.append(_strip(road, coarse, (lower.s1, lower.s1), zs, mats))
+    lo, hi = U_RANGE[0] - 20, U_RANGE[1] + 60
+    parts.append(box_part([lo, -200.0, ground_z - 0.05], [hi, 200.0, ground_z - 0.02], Mat.SOIL))
+    return TaggedMesh.concatenate(parts)
+
+
+# --------------------------------------------------------------------------------------------------
+# Static clutter
+
+
+@dataclass(frozen=True)
+class Obstacle:
+    """A static footprint actors must not overlap: a BEV box ``(x, y, l, w, yaw)``."""
+
+    x: float
+    y: float
+    l: float
+    w: float
+    yaw: float
+
+
+def _curved_block(
+    road: Road, u0: float, u1: float, s0: float, s1: float, z0: float, z1: float, mat: Mat
+) -> TaggedMesh:
+    """A block following the road between abscissae ``u0..u1`` and lateral offsets ``s0..s1``."""
+    corners = np.zeros((8, 3))
+    for i in range(8):
+        bx, by, bz = (i >> 2) & 1, (i >> 1) & 1, i & 1
+        corners[i, :2] = road.to_xy((u0, u1)[bx], (s0, s1)[by])
+        corners[i, 2] = (z0, z1)[bz]
+    return hexahedron_part(corners, mat)
+
+
+def _frontage(
+    road: Road, side: Side, ground_z: float, rng: np.random.Generator
+) -> list[TaggedMesh]:
+    """Buildings, walls and hedges along one side, beyond its building line."""
+    parts = []
+    u = U_RANGE[0] + rng.uniform(0, 10)
+    kerb = road.kerb_height
+    while u < U_RANGE[1]:
+        kind = rng.random()
+        length = rng.uniform(8.0, 30.0)
+        front = side.building_line + side.sign * rng.uniform(0.0, 1.5)
+        if kind < 0.7:
+            depth, height = rng.uniform(6.0, 14.0), rng.uniform(3.5, 16.0)
+            mat = (Mat.BRICK, Mat.CONCRETE, Mat.GLASS_FACADE)[int(rng.integers(0, 3))]
+            s0, s1 = sorted((front, front + side.sign * depth))
+            parts.append(
+                _curved_block(road, u, u + length, s0, s1, ground_z, ground_z + height, mat)
+            )
+        elif kind < 0.85:
+            thick, height = rng.uniform(0.2, 0.35), rng.uniform(0.8, 2.2)
+            s0, s1 = sorted((front, front + side.sign * thick))
+            mat = Mat.BRICK if rng.random() < 0.5 else Mat.CONCRETE
+            z0 = ground_z + kerb
+            parts.append(_curved_block(road, u, u + length, s0, s1, z0, z0 + height, mat))
+        else:
+            thick, height = rng.uniform(0.7, 1.2), rng.uniform(0.9, 1.8)
+            s0, s1 = sorted((front, front + side.sign * thick))
+            z0 = ground_z + kerb
+            parts.append(_curved_block(road, u, u + length, s0, s1, z0, z0 + height, Mat.FOLIAGE))
+        u += length + (rng.uniform(1.0, 8.0) if rng.random() < 0.5 else 0.0)
+    return parts
+
+
+def _furniture(
+    road: Road, side: Side, ground_z: float, rng: np.random.Generator
+) -> tuple[list[TaggedMesh], list[Obstacle]]:
+    """Street lights, signs, bollards and trees in one side's verge."""
+    parts, obstacles = [], []
+    z0 = ground_z + road.kerb_height
+    v0, v1 = side.verge
+    s_mid = (v0 + v1) / 2
+
+    def place(u: float, s: float, radius: float) -> tuple[float, float]:
+        x, y = road.to_xy(u, s)
+        obstacles.append(Obstacle(float(x), float(y), 2 * radius, 2 * radius, 0.0))
+        return float(x), float(y)
+
+    u = U_RANGE[0] + rng.uniform(0, 30)
+    while u < U_RANGE[1]:  # street lights with an arm over the road
+        r, height = rng.uniform(0.08, 0.12), rng.uniform(6.0, 9.0)
+        x, y = place(u, s_mid, r)
+        parts.append(cylinder_part([x, y, z0], [x, y, z0 + height], r, Mat.METAL))
+        arm = road.to_xy(u, s_mid - side.sign * rng.uniform(1.2, 2.0))
+        top = z0 + height
+        parts.append(cylinder_part([x, y, top], [arm[0], arm[1], top], 0.05, Mat.METAL))
+        parts.append(
+            box_part(
+                [arm[0] - 0.3, arm[1] - 0.15, top - 0.2],
+                [arm[0] + 0.3, arm[1] + 0.15, top],
+                Mat.METAL,
+            )
+        )
+        u += rng.uniform(20.0, 35.0)
+    u = U_RANGE[0] + rng.uniform(0, 15)
+    while u < U_RANGE[1]:  # signs and bollards
+        s = rng.uniform(v0 + 0.2, v1 - 0.2)
+        if rng.random() < 0.5:
+            x, y = place(u, s, 0.05)
+            parts.append(cylinder_part([x, y, z0], [x, y, z0 + 2.6], 0.04, Mat.METAL))
+            half = rng.uniform(0.3, 0.45)
+            ux, uy = math.cos(road.heading(u)), math.sin(road.heading(u))
+            parts.append(
+                box_part(
+                    [x - 0.03, y - half, z0 + 2.2],
+                    [x + 0.03, y + half, z0 + 2.2 + 2 * half],
+                    Mat.SIGN,
+                ).transformed(np.eye(3), [0.05 * ux, 0.05 * uy, 0.0])
+            )
+        else:
+            for k in range(int(rng.integers(2, 5))):
+                x, y = place(u + 1.5 * k, s, 0.08)
+                parts.append(cylinder_part([x, y, z0], [x, y, z0 + 0.9], 0.08, Mat.METAL))
+        u += rng.uniform(15.0, 40.0)
+    if rng.random() < 0.7:  # a row of trees
+        u = U_RANGE[0] + rng.uniform(0, 10)
+        spacing = rng.uniform(8.0, 15.0)
+        while u < U_RANGE[1]:
+            if rng.random() < 0.85:
+                r, trunk = rng.uniform(0.12, 0.25), rng.uniform(2.5, 4.0)
+                x, y = place(u, s_mid, r)
+                parts.append(cylinder_part([x, y, z0], [x, y, z0 + trunk], r, Mat.BARK))
+                crown = rng.uniform([1.5, 1.5, 1.5], [3.0, 3.0, 2.5])
+                parts.append(
+                    ellipsoid_part([x, y, z0 + trunk + 0.9 * crown[2]], crown, Mat.FOLIAGE)
+                )
+            u += spacing * rng.uniform(0.8, 1.2)
+    return parts, obstacles
+
+
+# --------------------------------------------------------------------------------------------------
+# Actor placement
+
+
+def _bev_overlap(a: np.ndarray, b: np.ndarray, margin: float) -> bool:
+    """Separating-axis test of two BEV boxes ``(x, y, l, w, yaw)``, each grown by ``margin / 2``."""
+    axes, halves = [], []
+    for box in (a, b):
+        c, s = math.cos(box[4]), math.sin(box[4])
+        axes.append((np.array([c, s]), np.array([-s, c])))
+        halves.append(((box[2] + margin) / 2, (box[3] + margin) / 2))
+    d = np.array([b[0] - a[0], b[1] - a[1]])
+    for ax_pair in axes:
+        for axis in ax_pair:
+            reach = 0.0
+            for (ua, va), (hl, hw) in zip(axes, halves, strict=True):
+                reach += hl * abs(axis @ ua) + hw * abs(axis @ va)
+            if abs(axis @ d) > reach:
+                return False
+    return True
+
+
+def _overlaps_any(
+    bev: np.ndarray, margin: float, taken: list[np.ndarray], taken_margin: list[float]
+) -> bool:
+    """Whether ``bev`` overlaps any taken box (bounding circles first, then the exact test)."""
+    others = np.asarray(taken)
+    margins = np.maximum(margin, np.asarray(taken_margin))
+    reach = 0.5 * (np.hypot(bev[2], bev[3]) + np.hypot(others[:, 2], others[:, 3])) + margins
+    near = np.hypot(others[:, 0] - bev[0], others[:, 1] - bev[1]) < reach
+    return any(_bev_overlap(bev, others[k], margins[k]) for k in np.flatnonzero(near))
+
+
+EGO_FOOTPRINT = np.array([-0.6, 0.0, 4.6, 1.9, 0.0])
+"""The ego vehicle's BEV box ``(x, y, l, w, yaw)`` around the LiDAR (kept free of actors)."""
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """Ranges of the random world.
+
+    Attributes:
+        cars, pedestrians, cyclists: Inclusive ranges of actor counts (placement may drop a few).
+        ego_speed: Range of the ego speed along +x (m/s); ``ego_stopped`` is the chance it is 0.
+        near_u: Abscissa range where most actors are placed (the annotated area and the camera
+            view); ``far_fraction`` of them go to ``far_u`` instead.
+        lidar_height: Ground plane at ``z = -lidar_height``.
+    """
+
+    cars: tuple[int, int] = (4, 12)
+    pedestrians: tuple[int, int] = (2, 8)
+    cyclists: tuple[int, int] = (1, 5)
+    ego_speed: tuple[float, float] = (0.0, 12.0)
+    ego_stopped: float = 0.1
+    near_u: tuple[float, float] = (4.0, 50.0)
+    far_u: tuple[float, float] = (50.0, 85.0)
+    far_fraction: float = 0.15
+    lidar_height: float = LIDAR_HEIGHT
+
+
+@dataclass(frozen=True)
+class _Candidate:
+    cls: str
+    u: float
+    s: float
+    yaw_offset: float  # relative to the road heading at u
+    speed: float
+    walking: bool = False
+
+
+def _car_candidate(road: Road, u: float, rng: np.random.Generator) -> _Candidate:
+    r = rng.random()
+    parking = [side for side in (road.right, road.left) if side.parking is not None]
+    if parking and r < 0.3:
+        side = parking[int(rng.integers(0, len(parking)))]
+        s = sum(side.parking) / 2 + rng.normal(0, 0.1)
+        flip = np.pi if (side.sign > 0) != (rng.random() < 0.15) else 0.0
+        return _Candidate("Car", u, s, flip + rng.normal(0, 0.03), 0.0)
+    if r < 0.65:
+        lane = int(rng.integers(0, len(road.right.lane_centres)))
+        if lane == road.ego_lane:
+            u = max(u, 8.0)
+        speed = 0.0 if rng.random() < 0.1 else rng.uniform(2.0, 15.0)
+        s = road.right.lane_centres[lane] + rng.normal(0, 0.15)
+        return _Candidate("Car", u, s, rng.normal(0, 0.02), speed)
+    lane = int(rng.integers(0, len(road.left.lane_centres)))
+    s = road.left.lane_centres[lane] + rng.normal(0, 0.15)
+    speed = 0.0 if rng.random() < 0.05 else rng.uniform(2.0, 15.0)
+    return _Candidate("Car", u, s, np.pi + rng.normal(0, 0.02), speed)
+
+
+def _pedestrian_candidate(road: Road, u: float, rng: np.random.Generator) -> _Candidate:
+    r = rng.random()
+    side = road.right if rng.random() < 0.5 else road.left
+    if r < 0.25:  # crossing the carriageway
+        s = rng.uniform(road.right.carriageway_edge + 0.5, road.left.carriageway_edge - 0.5)
+        yaw = (np.pi / 2 if rng.random() < 0.5 else -np.pi / 2) + rng.normal(0, 0.15)
+        return _Candidate("Pedestrian", u, s, yaw, rng.uniform(0.8, 2.0), walking=True)
+    s = rng.uniform(side.sidewalk[0] + 0.4, side.sidewalk[1] - 0.4)
+    if r < 0.65:  # walking along
+        yaw = (0.0 if rng.random() < 0.5 else np.pi) + rng.normal(0, 0.1)
+        return _Candidate("Pedestrian", u, s, yaw, rng.uniform(0.6, 2.0), walking=True)
+    return _Candidate("Pedestrian", u, s, rng.uniform(-np.pi, np.pi), 0.0)
+
+
+def _cyclist_candidate(road: Road, u: float, rng: np.random.Generator) -> _Candidate:
+    r = rng.random()
+    speed = rng.uniform(2.0, 7.0)
+    if r < 0.1:  # crossing
+        s = rng.uniform(road.right.carriageway_edge + 1.0, road.left.carriageway_edge - 1.0)
+        yaw = (np.pi / 2 if rng.random() < 0.5 else -np.pi / 2) + rng.normal(0, 0.1)
+        return _Candidate("Cyclist", u, s, yaw, min(speed, 5.0))
+    side = road.right if rng.random() < 0.6 else road.left
+    with_traffic = 0.0 if side.sign < 0 else np.pi
+    if side.bike_path is not None:
+        a, b = side.bike_path
+        s = rng.uniform(a + 0.4, b - 0.4)
+        yaw = with_traffic if rng.random() < 0.75 else np.pi - with_traffic
+    else:  # on the road next to the kerb or the parked cars
+        edge = (
+            side.carriageway_edge
+            if side.parking is None
+            else side.parking[1 if side.sign < 0 else 0]
+        )
+        s = edge - side.sign * rng.uniform(0.7, 1.1)
+        yaw = with_traffic
+    return _Candidate("Cyclist", u, s, yaw + rng.normal(0, 0.05), speed)
+
+
+_CANDIDATES = {
+    "Car": _car_candidate,
+    "Pedestrian": _pedestrian_candidate,
+    "Cyclist": _cyclist_candidate,
+}
+_SIZES = {"Car": CAR_SIZE, "Pedestrian": PEDESTRIAN_SIZE, "Cyclist": CYCLIST_SIZE}
+_MARGIN = {"Car": 0.8, "Pedestrian": 0.2, "Cyclist": 0.4}
+
+
+def _actor_mesh(cand: _Candidate, size: np.ndarray, rng: np.random.Generator) -> TaggedMesh:
+    if cand.cls == "Car":
+        return car_mesh(size, rng)
+    if cand.cls == "Pedestrian":
+        return pedestrian_mesh(size, cand.walking, rng)
+    return cyclist_mesh(size, rng)
+
+
+def _rotation_z(yaw: float) -> np.ndarray:
+    c, s = math.cos(yaw), math.sin(yaw)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+# --------------------------------------------------------------------------------------------------
+# The world
+
+
+@dataclass(frozen=True)
+class World:
+    """A static scene plus moving actors, in the LiDAR frame at ``t = 0``.
+
+    Attributes:
+        world_id: Index of the world within a generated set.
+        road: The road layout.
+        lidar_height: Ground at ``z = -lidar_height``.
+        ego_speed: Ego speed along +x (m/s).
+        actors: The actors (``actor_id`` = index).
+        static_mesh: Road, kerbs, buildings and clutter (owner -1).
+        actor_meshes: One mesh per actor in its own box frame (centre at the origin, heading +x).
+    """
+
+    world_id: int
+    road: Road | None
+    lidar_height: float
+    ego_speed: float
+    actors: tuple[Actor, ...]
+    static_mesh: TaggedMesh = field(repr=False)
+    actor_meshes: tuple[TaggedMesh, ...] = field(repr=False)
+
+    def __post_init__(self) -> None:
+        if len(self.actors) != len(self.actor_meshes):
+            raise ValueError("World: one mesh per actor is required")
+
+    def actor_mesh_at(self, time: float = 0.0) -> TaggedMesh:
+        """All actors at ``time`` seconds (negative = earlier), each translated by ``velocity *
+        time``, in the LiDAR frame of ``t = 0``; ``owner`` = actor index."""
+        parts = []
+        for i, (actor, mesh) in enumerate(zip(self.actors, self.actor_meshes, strict=True)):
+            centre = actor.box[:3].copy()
+            centre[:2] += actor.velocity * time
+            parts.append(mesh.with_owner(i).transformed(_rotation_z(actor.box[6]), centre))
+        return TaggedMesh.concatenate(parts)
+
+    def ego_position(self, time: float = 0.0) -> np.ndarray:
+        """``(3,)`` offset of the ego vehicle (and its sensors) at ``time`` from its ``t = 0`` pose."""
+        return np.array([self.ego_speed * time, 0.0, 0.0])
+
+    def boxes(self) -> np.ndarray:
+        """``(K, 7)`` boxes of all actors (LiDAR frame)."""
+        return np.array([a.box for a in self.actors]).reshape(-1, 7)
+
+
+def generate_world(
+    rng: np.random.Generator, world_id: int = 0, config: WorldConfig = WorldConfig()
+) -> World:
+    """A random world (see the module docstring); all randomness comes from ``rng``."""
+    ground_z = -config.lidar_height
+    road = make_road(rng)
+    static_parts = [road_mesh(road, ground_z)]
+    obstacles: list[Obstacle] = []
+    for side in (road.right, road.left):
+        static_parts += _frontage(road, side, ground_z, rng)
+        parts, obs = _furniture(road, side, ground_z, rng)
+        static_parts += parts
+        obstacles += obs
+
+    taken = [EGO_FOOTPRINT] + [np.array([o.x, o.y, o.l, o.w, o.yaw]) for o in obstacles]
+    taken_margin = [0.5] + [0.1] * len(obstacles)
+    counts = {
+        "Car": int(rng.integers(config.cars[0], config.cars[1] + 1)),
+        "Pedestrian": int(rng.integers(config.pedestrians[0], config.pedestrians[1] + 1)),
+        "Cyclist": int(rng.integers(config.cyclists[0], config.cyclists[1] + 1)),
+    }
+    actors: list[Actor] = []
+    meshes: list[TaggedMesh] = []
+    for cls in CLASSES:
+        for _ in range(counts[cls]):
+            for _attempt in range(25):
+                far = rng.random() < config.far_fraction
+                u = rng.uniform(*(config.far_u if far else config.near_u))
+                cand = _CANDIDATES[cls](road, u, rng)
+                size = np.array([rng.uniform(*r) for r in _SIZES[cls]])
+                xy = road.to_xy(cand.u, cand.s)
+                yaw = float(road.heading(cand.u)) + cand.yaw_offset
+                bev = np.array([xy[0], xy[1], size[0], size[1], yaw])
+                margin = _MARGIN[cls]
+                if _overlaps_any(bev, margin, taken, taken_margin):
+                    continue
+                z = ground_z + road.surface_height(cand.s) + size[2] / 2
+                yaw = float(np.mod(yaw + np.pi, 2 * np.pi) - np.pi)
+                velocity = cand.speed * np.array([math.cos(yaw), math.sin(yaw)])
+                box = np.array([xy[0], xy[1], z, *size, yaw])
+                actors.append(Actor(len(actors), cls, box, velocity))
+                meshes.append(_actor_mesh(cand, size, rng))
+                taken.append(bev)
+                taken_margin.append(margin)
+                break
+    ego_speed = 0.0 if rng.random() < config.ego_stopped else rng.uniform(*config.ego_speed)
+    return World(
+        world_id=world_id,
+        road=road,
+        lidar_height=config.lidar_height,
+        ego_speed=float(ego_speed),
+        actors=tuple(actors),
+        static_mesh=TaggedMesh.concatenate(static_parts),
+        actor_meshes=tuple(meshes),
+    )
+
+
+# --------------------------------------------------------------------------------------------------
+# Ray casting
+
+
+@dataclass(frozen=True)
+class RayHits:
+    """First hits of a batch of ``R`` rays.
+
+    Attributes:
+        hit: ``(R,)`` bool.
+        distance: ``(R,)`` metres along the unit direction (inf where no hit).
+        points: ``(R, 3)`` hit points, LiDAR frame (NaN where no hit).
+        cos_incidence: ``(R,)`` ``|cos|`` of the angle between the ray and the face normal.
+        material: ``(R,)`` :class:`Mat` value (-1 where no hit).
+        owner: ``(R,)`` actor index, -1 for static geometry (and where no hit).
+    """
+
+    hit: np.ndarray
+    distance: np.ndarray
+    points: np.ndarray
+    cos_incidence: np.ndarray
+    material: np.ndarray
+    owner: np.ndarray
+
+
+class _MeshCaster:
+    """First-hit queries on one :class:`TaggedMesh` through trimesh's embree intersector."""
+
+    def __init__(self, mesh: TaggedMesh) -> None:
+        self.mesh = mesh
+        self.empty = len(mesh.faces) == 0
+        if self.empty:
+            return
+        self.intersector = RayMeshIntersector(mesh.to_trimesh())
+        tri = mesh.vertices[mesh.faces]
+        normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        norm = np.linalg.norm(normal, axis=1, keepdims=True)
+        self.normal = normal / np.where(norm > 0, norm, 1.0)
+        self.anchor = tri[:, 0]
+
+    def cast(self, origins: np.ndarray, dirs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(R,)`` triangle index (-1 = miss) and distance (inf = miss)."""
+        r = len(origins)
+        if self.empty or r == 0:
+            return np.full(r, -1), np.full(r, np.inf)
+        tri = np.asarray(self.intersector.intersects_first(origins, dirs), dtype=np.int64)
+        dist = np.full(r, np.inf)
+        ok = tri >= 0
+        n = self.normal[tri[ok]]
+        denom = np.einsum("ij,ij->i", dirs[ok], n)
+        num = np.einsum("ij,ij->i", self.anchor[tri[ok]] - origins[ok], n)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = num / denom
+        t[~np.isfinite(t) | (np.abs(denom) < 1e-12) | (t < 0)] = np.inf
+        dist[ok] = t
+        tri[~np.isfinite(dist)] = -1
+        return tri, dist
+
+
+class RayCaster:
+    """First-hit ray casting against a :class:`World` at a time offset.
+
+    The static geometry's embree scene is built once; the actors' scene once per queried time
+    (actors move, the static world does not).
+    """
+
+    def __init__(self, world: World) -> None:
+        self.world = world
+        self._static = _MeshCaster(world.static_mesh)
+        self._actors: dict[float, _MeshCaster] = {}
+
+    @property
+    def uses_embree(self) -> bool:
+        """True when the intersector is trimesh's embree one (it always is: no fallback)."""
+        return self._static.empty or isinstance(self._static.intersector, RayMeshIntersector)
+
+    def _actor_caster(self, time: float) -> _MeshCaster:
+        key = round(float(time), 6)
+        if key not in self._actors:
+            self._actors[key] = _MeshCaster(self.world.actor_mesh_at(key))
+        return self._actors[key]
+
+    def cast(self, origins: np.ndarray, dirs: np.ndarray, time: float = 0.0) -> RayHits:
+        """Cast rays ``origins (R, 3)`` along unit ``dirs (R, 3)`` (LiDAR frame of ``t = 0``) at
+        ``time`` (the actors' positions; the caller places the origins)."""
+        origins = np.ascontiguousarray(origins, dtype=np.float64)
+        dirs = np.ascontiguousarray(dirs, dtype=np.float64)
+        s_tri, s_dist = self._static.cast(origins, dirs)
+        dyn = self._actor_caster(time)
+        a_tri, a_dist = dyn.cast(origins, dirs)
+        use_actor = a_dist < s_dist
+        dist = np.where(use_actor, a_dist, s_dist)
+        hit = np.isfinite(dist)
+        r = len(origins)
+        material = np.full(r, -1, np.int64)
+        owner = np.full(r, -1, np.int64)
+        cos_inc = np.zeros(r)
+        sel = hit & ~use_actor
+        if sel.any():
+            material[sel] = self._static.mesh.material[s_tri[sel]]
+            cos_inc[sel] = np.abs(np.einsum("ij,ij->i", dirs[sel], self._static.normal[s_tri[sel]]))
+        sel = hit & use_actor
+        if sel.any():
+            material[sel] = dyn.mesh.material[a_tri[sel]]
+            owner[sel] = dyn.mesh.owner[a_tri[sel]]
+            cos_inc[sel] = np.abs(np.einsum("ij,ij->i", dirs[sel], dyn.normal[a_tri[sel]]))
+        points = origins + dirs * np.where(hit, dist, np.nan)[:, None]
+        return RayHits(hit, dist, points, cos_inc, material, owner)
