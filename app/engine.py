@@ -1,0 +1,279 @@
+"""The model behind the app: a worker pool, a model lock and the scene-feature cache.
+
+- Model calls never run on viser's event loop nor in its callback threads: callbacks hand them to
+  :meth:`GroundingEngine.submit` (a small pool of daemon worker threads) and return at once, so a
+  slow prompt of one browser never freezes another browser's GUI. The workers are daemons so that
+  Ctrl-C stops the app at once even while a scene is being encoded (a standard
+  ``ThreadPoolExecutor`` would hold the interpreter's exit until the model call ends).
+- One lock guards the model (the module and its text cache are not meant for concurrent calls;
+  on a 2-core machine running two forward passes at once gains nothing).
+- ``encode_scene`` runs once per (sample, modality): the features stay in an LRU cache, so each
+  prompt runs only ``ground``. :meth:`GroundingEngine.prefetch` encodes a frame as soon as it is
+  shown, before anyone types.
+- Modality: ``"lidar"`` and ``"radar"`` re-encode the scene with the other sensor's points emptied
+  (a ``(0, F)`` array), which a model trained on both sensors accepts. A single-sensor model only
+  offers its own sensor.
+"""
+
+from __future__ import annotations
+
+import logging
+import queue
+import threading
+import time
+from collections import OrderedDict
+from collections.abc import Callable
+from concurrent.futures import Future
+from dataclasses import dataclass
+from typing import Any, Literal, Protocol
+
+import numpy as np
+
+from scenes.root import Sample
+
+log = logging.getLogger(__name__)
+
+Modality = Literal["both", "lidar", "radar"]
+
+MODALITY_LABELS: dict[str, Modality] = {
+    "LiDAR + radar": "both",
+    "LiDAR": "lidar",
+    "Radar": "radar",
+}
+"""GUI label -> modality."""
+
+
+class GroundingModel(Protocol):
+    """What the app needs of a model (:class:`model.tpcnet.TPCNet` satisfies it)."""
+
+    def encode_scene(self, lidar: np.ndarray | None, radar: np.ndarray | None) -> Any: ...
+
+    def ground(self, features: Any, prompt: str, score_threshold: float | None = None) -> Any: ...
+
+
+def model_modalities(model: object) -> tuple[Modality, ...]:
+    """The modalities a model can answer with: all three for a two-sensor model, otherwise its
+    own sensor (read from ``model.cfg.modalities``; a model without a config counts as both)."""
+    built = getattr(getattr(model, "cfg", None), "modalities", "both")
+    if built == "lidar":
+        return ("lidar",)
+    if built == "radar":
+        return ("radar",)
+    return ("both", "lidar", "radar")
+
+
+def sensor_inputs(sample: Sample, modality: Modality) -> tuple[np.ndarray, np.ndarray]:
+    """The ``(lidar (N, 4), radar (M, 7))`` arrays to encode for a modality: the sensor left out
+    becomes an empty array (zero points)."""
+    lidar = np.asarray(sample.lidar, dtype=np.float32).reshape(-1, 4)
+    radar = np.asarray(sample.radar, dtype=np.float32).reshape(-1, 7)
+    if modality == "lidar":
+        radar = np.zeros((0, 7), np.float32)
+    elif modality == "radar":
+        lidar = np.zeros((0, 4), np.float32)
+    elif modality != "both":
+        raise ValueError(f"unknown modality {modality!r}; use one of both, lidar, radar")
+    return lidar, radar
+
+
+@dataclass(frozen=True)
+class Answer:
+    """The model's answer to one prompt on one frame.
+
+    Attributes:
+        predictions: What ``model.ground`` returned (boxes, scores, classes, heatmaps, grid).
+        sample_id: The frame's sample id.
+        modality: Sensors used.
+        prompt: The prompt as sent.
+        score_threshold: Threshold applied by the decoder.
+        encode_ms: Time spent encoding the scene for this answer (0 when cached).
+        ground_ms: Time of ``ground``.
+        waited_ms: Time spent waiting for the model lock (other browsers' work).
+    """
+
+    predictions: Any
+    sample_id: str
+    modality: Modality
+    prompt: str
+    score_threshold: float
+    encode_ms: float
+    ground_ms: float
+    waited_ms: float
+
+    @property
+    def cached(self) -> bool:
+        """Whether the scene features came from the cache."""
+        return self.encode_ms == 0.0
+
+
+class DaemonWorkers:
+    """A minimal thread pool of daemon threads: ``submit(fn, *args) -> Future``.
+
+    Args:
+        workers: Number of threads.
+        name: Thread name prefix.
+    """
+
+    def __init__(self, workers: int, name: str) -> None:
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._closed = False
+        self._threads = [
+            threading.Thread(target=self._run, name=f"{name}_{i}", daemon=True)
+            for i in range(max(1, workers))
+        ]
+        for thread in self._threads:
+            thread.start()
+
+    def submit(self, fn: Callable[..., Any], *args: Any) -> Future:
+        """Queue ``fn(*args)``; its result or exception ends up in the returned future."""
+        if self._closed:
+            raise RuntimeError("the worker pool is shut down")
+        future: Future = Future()
+        self._queue.put((future, fn, args))
+        return future
+
+    def _run(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is None:
+                return
+            future, fn, args = item
+            if not future.set_running_or_notify_cancel():
+                continue
+            try:
+                result = fn(*args)
+            except BaseException as exc:
+                future.set_exception(exc)
+            else:
+                future.set_result(result)
+
+    def shutdown(self) -> None:
+        """Cancel queued jobs and let the threads end (a running job finishes in the background)."""
+        self._closed = True
+        while True:
+            try:
+                item = self._queue.get_nowait()
+            except queue.Empty:
+                break
+            if item is not None:
+                item[0].cancel()
+        for _ in self._threads:
+            self._queue.put(None)
+
+
+class GroundingEngine:
+    """Runs a model for the app: thread pool, model lock, scene-feature cache.
+
+    Args:
+        model: The model (in eval mode).
+        feature_cache_size: Encoded (sample, modality) pairs kept.
+        workers: Worker threads.
+    """
+
+    def __init__(self, model: GroundingModel, feature_cache_size: int = 8, workers: int = 2):
+        self.model = model
+        self.modalities = model_modalities(model)
+        self.feature_cache_size = max(1, feature_cache_size)
+        self.workers = DaemonWorkers(workers, "talk2pc-model")
+        self._model_lock = threading.Lock()
+        self._cache_lock = threading.Lock()
+        self._features: OrderedDict[tuple[str, Modality], Any] = OrderedDict()
+        self.encode_calls = 0
+        self.ground_calls = 0
+
+    def submit(self, fn: Callable[..., Any], *args: Any) -> Future:
+        """Run ``fn(*args)`` in the worker pool; exceptions are logged (and kept in the future)."""
+        future = self.workers.submit(fn, *args)
+        future.add_done_callback(_log_failure)
+        return future
+
+    def cached(self, sample_id: str, modality: Modality) -> bool:
+        """Whether the features of (sample, modality) are cached."""
+        with self._cache_lock:
+            return (sample_id, modality) in self._features
+
+    def _check_modality(self, modality: Modality) -> None:
+        if modality not in self.modalities:
+            raise ValueError(
+                f"this model answers with {', '.join(self.modalities)} only, not {modality!r}"
+            )
+
+    def _encode_locked(self, sample: Sample, modality: Modality) -> tuple[Any, float]:
+        """Features of (sample, modality) and the encoding time (0 when cached); hold the lock."""
+        key = (sample.sample_id, modality)
+        with self._cache_lock:
+            if key in self._features:
+                self._features.move_to_end(key)
+                return self._features[key], 0.0
+        lidar, radar = sensor_inputs(sample, modality)
+        start = time.perf_counter()
+        features = self.model.encode_scene(lidar, radar)
+        elapsed = (time.perf_counter() - start) * 1000.0
+        self.encode_calls += 1
+        with self._cache_lock:
+            self._features[key] = features
+            while len(self._features) > self.feature_cache_size:
+                self._features.popitem(last=False)
+        return features, max(elapsed, 1e-3)
+
+    def encode(self, sample: Sample, modality: Modality) -> tuple[Any, float]:
+        """Encode (or fetch from the cache) one scene; returns ``(features, encode_ms)``."""
+        self._check_modality(modality)
+        with self._model_lock:
+            return self._encode_locked(sample, modality)
+
+    def prefetch(self, sample: Sample, modality: Modality) -> Future:
+        """Encode a scene in the background (no-op when cached)."""
+        return self.submit(self.encode, sample, modality)
+
+    def answer(
+        self, sample: Sample, modality: Modality, prompt: str, score_threshold: float
+    ) -> Answer:
+        """Answer ``prompt`` on ``sample`` (blocking; call it through :meth:`submit`)."""
+        self._check_modality(modality)
+        queued = time.perf_counter()
+        with self._model_lock:
+            waited = (time.perf_counter() - queued) * 1000.0
+            features, encode_ms = self._encode_locked(sample, modality)
+            start = time.perf_counter()
+            predictions = self.model.ground(features, prompt, score_threshold=score_threshold)
+            ground_ms = (time.perf_counter() - start) * 1000.0
+            self.ground_calls += 1
+        return Answer(
+            predictions=predictions,
+            sample_id=sample.sample_id,
+            modality=modality,
+            prompt=prompt,
+            score_threshold=score_threshold,
+            encode_ms=encode_ms,
+            ground_ms=ground_ms,
+            waited_ms=waited,
+        )
+
+    def warm_up(self, prompt: str = "the car ahead") -> Future:
+        """Run one tiny encode + ground in the background (loads the text encoder's weights)."""
+
+        def run() -> None:
+            start = time.perf_counter()
+            with self._model_lock:
+                empty_lidar, empty_radar = (
+                    np.zeros((0, 4), np.float32),
+                    np.zeros((0, 7), np.float32),
+                )
+                features = self.model.encode_scene(empty_lidar, empty_radar)
+                self.model.ground(features, prompt)
+            log.info("model warmed up in %.1f s", time.perf_counter() - start)
+
+        return self.submit(run)
+
+    def close(self) -> None:
+        """Stop the worker pool (pending jobs are cancelled, running ones finish)."""
+        self.workers.shutdown()
+
+
+def _log_failure(future: Future) -> None:
+    if future.cancelled():
+        return
+    exc = future.exception()
+    if exc is not None:
+        log.error("background job failed", exc_info=exc)

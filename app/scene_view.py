@@ -1,0 +1,363 @@
+"""The scene in the viewer: LiDAR and radar points, ego marker, range rings, camera presets, and the
+"View" panel that controls them.
+
+World frame = LiDAR frame (x forward, y left, z up, metres); viser's default up direction is +z.
+Points are sent as float32 (viser's float16 default quantises 3 cm beyond 32 m).
+
+- LiDAR ``(N, 4)``: coloured by height above the ground estimate (0..3 m) or by intensity.
+- Radar ``(M, 7)``: coloured by ``v_r_compensated`` on the diverging map of :mod:`app.colors`,
+  drawn as larger round points; the legend gives the m/s scale and which colour approaches.
+- The ground height is estimated per frame (:func:`estimate_ground_z`); rings, the ego marker
+  and the heatmap sit on it.
+- Camera presets (per browser): ``BEV`` looks straight down from 70 m over the model's range with
+  forward (+x) pointing up the screen; ``Chase`` looks forward from 14 m behind and 8 m above.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from typing import Literal
+
+import numpy as np
+import viser
+
+from app.boxes_view import BOX_EDGES
+from app.colors import (
+    height_colors,
+    height_legend,
+    intensity_colors,
+    intensity_legend,
+    velocity_colors,
+    velocity_legend,
+)
+from scenes.boxes import box_corners
+from scenes.calib import LIDAR_HEIGHT
+
+LidarColoring = Literal["height", "intensity"]
+HEIGHT_RANGE = (0.0, 3.0)
+"""Heights above the ground estimate (m) mapped to the ends of the LiDAR height ramp."""
+
+RING_STEP = 10.0
+"""Range-ring spacing in metres."""
+
+RING_MAX = 50.0
+"""Largest range ring in metres."""
+
+EGO_SIZE = (4.4, 1.8, 1.5)
+"""Ego vehicle marker size ``(l, w, h)`` in metres."""
+
+EGO_CENTRE_X = -0.8
+"""x of the ego marker's centre (the LiDAR sits on the roof, slightly ahead of the middle)."""
+
+
+def estimate_ground_z(lidar: np.ndarray, default: float = -LIDAR_HEIGHT) -> float:
+    """Height of the ground plane (m, LiDAR frame) under the ego vehicle.
+
+    The 10th percentile of the ``z`` of LiDAR points between 3 and 30 m horizontal range (in a
+    driving scene most of them are road), clipped to ``[-4, 0.5]``; ``default`` (the synthetic
+    sensor height) when fewer than 20 such points exist.
+
+    Args:
+        lidar: ``(N, >=3)`` points, LiDAR frame.
+    """
+    pts = np.asarray(lidar, dtype=np.float64)
+    if pts.ndim != 2 or len(pts) == 0:
+        return float(default)
+    rng = np.hypot(pts[:, 0], pts[:, 1])
+    near = pts[(rng > 3.0) & (rng < 30.0), 2]
+    near = near[np.isfinite(near)]
+    if len(near) < 20:
+        return float(default)
+    return float(np.clip(np.percentile(near, 10), -4.0, 0.5))
+
+
+def ring_segments(
+    ground_z: float, step: float = RING_STEP, max_range: float = RING_MAX, sides: int = 96
+) -> np.ndarray:
+    """Circles of radius ``step, 2 step, ... <= max_range`` around the sensor on the ground.
+
+    Returns:
+        ``(R * sides, 2, 3)`` float32 segments, LiDAR frame, at height ``ground_z + 0.02``.
+    """
+    radii = np.arange(step, max_range + 1e-9, step)
+    angles = np.linspace(0.0, 2.0 * np.pi, sides + 1)
+    circle = np.stack([np.cos(angles), np.sin(angles)], axis=-1)  # (sides + 1, 2)
+    pts = radii[:, None, None] * circle[None]  # (R, sides + 1, 2)
+    segs = np.stack([pts[:, :-1], pts[:, 1:]], axis=2).reshape(-1, 2, 2)
+    z = np.full((*segs.shape[:2], 1), ground_z + 0.02)
+    return np.concatenate([segs, z], axis=-1).astype(np.float32)
+
+
+def ego_segments(ground_z: float) -> np.ndarray:
+    """The ego marker: the outline of an :data:`EGO_SIZE` box standing on the ground around the
+    sensor, and a 3 m arrow on the ground ahead of its nose.
+
+    Returns:
+        ``(15, 2, 3)`` float32 segments, LiDAR frame (12 box edges, the arrow shaft, two barbs).
+    """
+    l, w, h = EGO_SIZE
+    box = np.array([[EGO_CENTRE_X, 0.0, ground_z + h / 2.0, l, w, h, 0.0]])
+    edges = box_corners(box)[0][np.asarray(BOX_EDGES)]
+    nose, z = EGO_CENTRE_X + l / 2.0, ground_z + 0.05
+    tip = np.array([nose + 3.0, 0.0, z])
+    arrow = np.array(
+        [
+            [[nose, 0.0, z], tip],
+            [tip, [nose + 2.2, 0.5, z]],
+            [tip, [nose + 2.2, -0.5, z]],
+        ]
+    )
+    return np.concatenate([edges, arrow]).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class CameraPose:
+    """A camera placement in the LiDAR frame."""
+
+    position: tuple[float, float, float]
+    look_at: tuple[float, float, float]
+    up: tuple[float, float, float] = (0.0, 0.0, 1.0)
+
+
+def bev_pose(ground_z: float, centre_x: float = 25.6, height: float = 70.0) -> CameraPose:
+    """Bird's-eye view over ``x in [0, 51.2]``: forward (+x) points up the screen.
+
+    The camera sits 1 m behind the point it looks at, so the orbit controls' +z up direction is
+    not parallel to the view direction (a degenerate case for them).
+    """
+    return CameraPose((centre_x - 1.0, 0.0, ground_z + height), (centre_x, 0.0, ground_z))
+
+
+def chase_pose(ground_z: float) -> CameraPose:
+    """Behind and above the ego vehicle, looking forward down the road."""
+    return CameraPose((-14.0, 0.0, ground_z + 9.0), (18.0, 0.0, ground_z))
+
+
+def apply_pose(camera: viser.CameraHandle, pose: CameraPose) -> None:
+    """Move one browser's camera (``look_at`` last: setting ``position`` drags it along)."""
+    camera.up_direction = pose.up
+    camera.position = pose.position
+    camera.look_at = pose.look_at
+
+
+@dataclass(frozen=True)
+class ViewSettings:
+    """Per-browser display settings.
+
+    Attributes:
+        lidar_coloring: ``"height"`` or ``"intensity"``.
+        show_lidar, show_radar, show_rings: Layer toggles.
+        lidar_point_size, radar_point_size: Point sizes in metres (perspective-attenuated).
+        velocity_range: m/s at which the radar map saturates (``+-``).
+    """
+
+    lidar_coloring: LidarColoring = "height"
+    show_lidar: bool = True
+    show_radar: bool = True
+    show_rings: bool = True
+    lidar_point_size: float = 0.1
+    radar_point_size: float = 0.2
+    velocity_range: float = 10.0
+
+
+def lidar_colors(lidar: np.ndarray, ground_z: float, coloring: LidarColoring) -> np.ndarray:
+    """``(N, 3)`` uint8 colours of LiDAR points ``(N, 4)`` for a colouring mode."""
+    pts = np.asarray(lidar).reshape(-1, 4)
+    if coloring == "intensity":
+        return intensity_colors(pts[:, 3])
+    return height_colors(pts[:, 2] - ground_z, *HEIGHT_RANGE)
+
+
+def radar_colors(radar: np.ndarray, velocity_range: float) -> np.ndarray:
+    """``(M, 3)`` uint8 colours of radar points ``(M, 7)`` by ``v_r_compensated``."""
+    return velocity_colors(np.asarray(radar).reshape(-1, 7)[:, 5], velocity_range)
+
+
+class SceneView:
+    """Points, rings and ego marker of one browser (``client.scene``), under ``/scene``.
+
+    Nodes: ``/scene/lidar``, ``/scene/radar`` (point clouds), ``/scene/rings`` (line segments),
+    ``/scene/ring_labels/<r>``, ``/scene/ego`` (outline and heading arrow).
+    """
+
+    def __init__(self, scene: viser.SceneApi, settings: ViewSettings | None = None) -> None:
+        self.scene = scene
+        self.settings = settings or ViewSettings()
+        self.ground_z = -LIDAR_HEIGHT
+        self._lidar_pts = np.zeros((0, 4), np.float32)
+        self._radar_pts = np.zeros((0, 7), np.float32)
+        self._lidar: viser.PointCloudHandle | None = None
+        self._radar: viser.PointCloudHandle | None = None
+        self._rings: list[viser.SceneNodeHandle] = []
+        self._ego: list[viser.SceneNodeHandle] = []
+
+    def show(self, lidar: np.ndarray, radar: np.ndarray, ground_z: float) -> None:
+        """Draw a frame: ``lidar (N, 4)``, ``radar (M, 7)`` (LiDAR frame), ground at ``ground_z``."""
+        self._lidar_pts = np.asarray(lidar, dtype=np.float32).reshape(-1, 4)
+        self._radar_pts = np.asarray(radar, dtype=np.float32).reshape(-1, 7)
+        s = self.settings
+        self._lidar = self.scene.add_point_cloud(
+            "/scene/lidar",
+            self._lidar_pts[:, :3],
+            lidar_colors(self._lidar_pts, ground_z, s.lidar_coloring),
+            point_size=s.lidar_point_size,
+            point_shape="square",
+            precision="float32",
+            visible=s.show_lidar,
+        )
+        self._radar = self.scene.add_point_cloud(
+            "/scene/radar",
+            self._radar_pts[:, :3],
+            radar_colors(self._radar_pts, s.velocity_range),
+            point_size=s.radar_point_size,
+            point_shape="circle",
+            precision="float32",
+            visible=s.show_radar,
+        )
+        if not self._rings or abs(ground_z - self.ground_z) > 1e-3:
+            self.ground_z = ground_z
+            self._draw_rings()
+
+    def _draw_rings(self) -> None:
+        for node in self._rings + self._ego:
+            node.remove()
+        gz = self.ground_z
+        visible = self.settings.show_rings
+        rings = self.scene.add_line_segments(
+            "/scene/rings",
+            ring_segments(gz),
+            (120, 120, 130),
+            thickness=1.0,
+            thickness_units="screen",
+            visible=visible,
+        )
+        self._rings = [rings]
+        angle = np.deg2rad(35.0)
+        for r in np.arange(RING_STEP, RING_MAX + 1e-9, RING_STEP):
+            self._rings.append(
+                self.scene.add_label(
+                    f"/scene/ring_labels/{int(r)}",
+                    f"{int(r)} m",
+                    position=(r * np.cos(angle), r * np.sin(angle), gz + 0.05),
+                    font_screen_scale=0.7,
+                    anchor="center-center",
+                    visible=visible,
+                )
+            )
+        self._ego = [
+            self.scene.add_line_segments(
+                "/scene/ego",
+                ego_segments(gz),
+                (235, 235, 235),
+                thickness=2.0,
+                thickness_units="screen",
+            )
+        ]
+
+    def apply(self, settings: ViewSettings) -> None:
+        """Change display settings in place (colours, sizes, toggles)."""
+        old, self.settings = self.settings, settings
+        if self._lidar is not None:
+            if settings.lidar_coloring != old.lidar_coloring:
+                self._lidar.colors = lidar_colors(
+                    self._lidar_pts, self.ground_z, settings.lidar_coloring
+                )
+            self._lidar.point_size = settings.lidar_point_size
+            self._lidar.visible = settings.show_lidar
+        if self._radar is not None:
+            if settings.velocity_range != old.velocity_range:
+                self._radar.colors = radar_colors(self._radar_pts, settings.velocity_range)
+            self._radar.point_size = settings.radar_point_size
+            self._radar.visible = settings.show_radar
+        if settings.show_rings != old.show_rings:
+            for node in self._rings:
+                node.visible = settings.show_rings
+
+
+LIDAR_COLORING_LABELS: dict[str, LidarColoring] = {"Height": "height", "Intensity": "intensity"}
+"""Dropdown label -> LiDAR colouring."""
+
+
+@dataclass(frozen=True)
+class ViewPanel:
+    """Handles of the "View" tab (built by :func:`build_view_panel`)."""
+
+    lidar_coloring: viser.GuiDropdownHandle
+    show_lidar: viser.GuiCheckboxHandle
+    show_radar: viser.GuiCheckboxHandle
+    show_rings: viser.GuiCheckboxHandle
+    lidar_size: viser.GuiSliderHandle
+    radar_size: viser.GuiSliderHandle
+    velocity_range: viser.GuiSliderHandle
+    radar_legend: viser.GuiImageHandle
+    lidar_legend: viser.GuiImageHandle
+    camera: viser.GuiButtonGroupHandle
+
+    def settings(self) -> ViewSettings:
+        """The settings the widgets currently hold."""
+        return replace(
+            ViewSettings(),
+            lidar_coloring=LIDAR_COLORING_LABELS.get(self.lidar_coloring.value, "height"),
+            show_lidar=bool(self.show_lidar.value),
+            show_radar=bool(self.show_radar.value),
+            show_rings=bool(self.show_rings.value),
+            lidar_point_size=float(self.lidar_size.value),
+            radar_point_size=float(self.radar_size.value),
+            velocity_range=float(self.velocity_range.value),
+        )
+
+    def inputs(self) -> tuple[viser.GuiInputHandle, ...]:
+        """Every input whose change alters :meth:`settings`."""
+        return (
+            self.lidar_coloring,
+            self.show_lidar,
+            self.show_radar,
+            self.show_rings,
+            self.lidar_size,
+            self.radar_size,
+            self.velocity_range,
+        )
+
+    def update_legends(self, settings: ViewSettings) -> None:
+        """Redraw the legends for ``settings``."""
+        self.radar_legend.image = velocity_legend(settings.velocity_range)
+        self.lidar_legend.image = lidar_legend(settings.lidar_coloring)
+
+
+def lidar_legend(coloring: LidarColoring) -> np.ndarray:
+    """The legend image of a LiDAR colouring mode."""
+    return intensity_legend() if coloring == "intensity" else height_legend(*HEIGHT_RANGE)
+
+
+def build_view_panel(gui: viser.GuiApi, settings: ViewSettings | None = None) -> ViewPanel:
+    """Add the View widgets to ``gui`` (in the current container) and return their handles."""
+    s = settings or ViewSettings()
+    coloring_label = next(k for k, v in LIDAR_COLORING_LABELS.items() if v == s.lidar_coloring)
+    camera = gui.add_button_group("Camera", ("BEV", "Chase"), hint="Camera presets")
+    lidar_coloring = gui.add_dropdown(
+        "LiDAR colour", tuple(LIDAR_COLORING_LABELS), initial_value=coloring_label
+    )
+    show_lidar = gui.add_checkbox("Show LiDAR", s.show_lidar)
+    show_radar = gui.add_checkbox("Show radar", s.show_radar)
+    show_rings = gui.add_checkbox("Range rings", s.show_rings, hint="Every 10 m")
+    lidar_size = gui.add_slider("LiDAR size", 0.01, 0.3, 0.01, s.lidar_point_size)
+    radar_size = gui.add_slider("Radar size", 0.05, 1.5, 0.05, s.radar_point_size)
+    velocity_range = gui.add_slider(
+        "Radar v scale", 1.0, 20.0, 1.0, s.velocity_range, hint="m/s at which colours saturate"
+    )
+    radar_legend = gui.add_image(
+        velocity_legend(s.velocity_range), label="Radar colours: compensated radial velocity"
+    )
+    lidar_legend_handle = gui.add_image(lidar_legend(s.lidar_coloring), label="LiDAR colours")
+    return ViewPanel(
+        lidar_coloring=lidar_coloring,
+        show_lidar=show_lidar,
+        show_radar=show_radar,
+        show_rings=show_rings,
+        lidar_size=lidar_size,
+        radar_size=radar_size,
+        velocity_range=velocity_range,
+        radar_legend=radar_legend,
+        lidar_legend=lidar_legend_handle,
+        camera=camera,
+    )
