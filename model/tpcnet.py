@@ -1,0 +1,403 @@
+"""TPCNet (fig. 3, section III-A): LiDAR and radar pillar branches, BACA fusion, text encoder,
+DGGF, SECOND-FPN and the C3D-RECHead, assembled from a :class:`model.config.ModelConfig`.
+
+Data flow per sample (LiDAR frame throughout)::
+
+    lidar (N, 4) -> PillarEncoder -> SecondBackbone -> f^l_1..3 --+
+                                                                   +-> fusion_i -> lr_i  (no text)
+    radar (M, 7) -> PillarEncoder -> SecondBackbone -> f^r_1..3 --+
+    prompt -> text encoder -> tokens (L, D), mask
+    (lr_i, tokens) -> DGGF_i -> lc_i ;  FPN(lc_1..3) -> f ;  head(f) -> heatmap (3, H, W), regression
+
+The sensor branches and the LiDAR-radar fusion do not depend on the text, so the model splits in
+two calls for the app: :meth:`TPCNet.encode_scene` (once per scene) and :meth:`TPCNet.ground`
+(once per prompt, from the cached :class:`SceneFeatures`). :meth:`TPCNet.forward` runs both on a
+batch for training; in eval mode ``ground(encode_scene(l, r), p)`` gives the same head outputs as
+``forward([l], [r], [p])`` (every normalisation is per sample or in running-statistics mode).
+
+Input rules: points are numpy arrays or tensors ``(N, 4)`` (x, y, z, intensity) and ``(M, 7)``
+(x, y, z, rcs, v_r, v_r_compensated, time), radar already in the LiDAR frame. NaN or inf raise
+:class:`NonFiniteInputError` naming the sensor and row *before* anything reaches the network. An
+empty array (a sensor that returned nothing) is fine. A single-modality model ignores the other
+sensor (it may be ``None``); a missing required sensor (``None``) raises :class:`MissingSensorError`
+that says which sensor the model was built for.
+
+``encode_scene``/``ground`` run under ``torch.no_grad`` and do not switch the mode: call
+``model.eval()`` first for inference.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from model.baca import build_fusion
+from model.backbone import SecondBackbone
+from model.config import LIDAR_FEATURES, RADAR_FEATURES, ModelConfig
+from model.decode import decode
+from model.dggf import DynamicGatedGraphFusion, GatedGraphFusion
+from model.fpn import SecondFpn
+from model.grid import BevGrid
+from model.head import C3DRecHead, HeadOutput
+from model.pillars import PillarEncoder
+from model.text import TextFeatures, build_text_encoder, validate_prompt
+
+PointsLike = np.ndarray | Tensor
+
+
+class NonFiniteInputError(ValueError):
+    """A point cloud holds NaN or inf values."""
+
+
+class MissingSensorError(ValueError):
+    """The model needs a sensor's points that were not given."""
+
+
+@dataclass(frozen=True)
+class SceneTimings:
+    """Milliseconds spent in :meth:`TPCNet.encode_scene`, per stage."""
+
+    pillars: float
+    backbone: float
+    fusion: float
+
+    @property
+    def total(self) -> float:
+        return self.pillars + self.backbone + self.fusion
+
+
+@dataclass(frozen=True)
+class GroundTimings:
+    """Milliseconds spent in :meth:`TPCNet.ground`, per stage."""
+
+    text: float
+    dggf: float
+    neck: float
+    head: float
+    decode: float
+
+    @property
+    def total(self) -> float:
+        return self.text + self.dggf + self.neck + self.head + self.decode
+
+
+@dataclass(frozen=True)
+class SceneFeatures:
+    """Text-independent features of one scene.
+
+    Attributes:
+        stages: ``(lr_1, lr_2, lr_3)``, each ``(1, C_i, H_i, W_i)`` on the model's device.
+        num_lidar: LiDAR points given (before range filtering); 0 when unused.
+        num_radar: Radar points given; 0 when unused.
+        timings: Time per stage of the encoding.
+    """
+
+    stages: tuple[Tensor, ...]
+    num_lidar: int
+    num_radar: int
+    timings: SceneTimings
+
+
+@dataclass(frozen=True)
+class Predictions:
+    """The answer to one prompt.
+
+    Attributes:
+        boxes: ``(K, 7)`` float64 ``x, y, z, l, w, h, yaw``, LiDAR frame, sorted by score.
+        scores: ``(K,)`` float64 in ``[0, 1]``.
+        labels: ``(K,)`` int64 indices into ``scenes.actors.CLASSES``.
+        classes: ``K`` class names.
+        heatmaps: ``(3, H, W)`` float32 sigmoid heatmaps (Car, Pedestrian, Cyclist) on ``grid``,
+            ``heatmaps[c, iy, ix]``.
+        grid: The head's BEV grid.
+        prompt: The prompt as encoded (stripped).
+        truncated: Whether the prompt exceeded the text encoder's token limit.
+        timings: Time per stage of the grounding.
+    """
+
+    boxes: np.ndarray
+    scores: np.ndarray
+    labels: np.ndarray
+    classes: tuple[str, ...]
+    heatmaps: np.ndarray
+    grid: BevGrid
+    prompt: str
+    truncated: bool
+    timings: GroundTimings
+
+
+def as_points(points: PointsLike, num_features: int, name: str) -> Tensor:
+    """Validate one cloud and return it as a float32 CPU-or-device tensor ``(N, F)``.
+
+    Raises:
+        TypeError: not an array or tensor.
+        ValueError: wrong shape.
+        NonFiniteInputError: NaN or inf values (names the first bad row).
+    """
+    if isinstance(points, np.ndarray):
+        tensor = torch.from_numpy(np.ascontiguousarray(points, dtype=np.float32))
+    elif isinstance(points, Tensor):
+        tensor = points.detach().to(torch.float32)
+    else:
+        raise TypeError(f"{name} must be a numpy array or a torch tensor, got {type(points)}")
+    if tensor.numel() == 0:
+        return tensor.reshape(0, num_features)
+    if tensor.dim() != 2 or tensor.shape[1] != num_features:
+        raise ValueError(f"{name} must have shape (N, {num_features}), got {tuple(tensor.shape)}")
+    finite = torch.isfinite(tensor).all(dim=1)
+    if not bool(finite.all()):
+        row = int(torch.nonzero(~finite)[0, 0])
+        raise NonFiniteInputError(
+            f"{name} has NaN or inf values (first at row {row}: {tensor[row].tolist()}); "
+            "remove or fix those points before running the model"
+        )
+    return tensor
+
+
+class SensorBranch(nn.Module):
+    """Pillar encoder + three-stage backbone of one sensor."""
+
+    def __init__(self, cfg: ModelConfig, sensor: str) -> None:
+        super().__init__()
+        p = cfg.pillars
+        if sensor == "lidar":
+            self.pillars = PillarEncoder(p, LIDAR_FEATURES, p.lidar_max_points, p.lidar_scale)
+        else:
+            self.pillars = PillarEncoder(p, RADAR_FEATURES, p.radar_max_points, p.radar_scale)
+        self.backbone = SecondBackbone(p.channels, cfg.backbone)
+
+
+def _sync(device: torch.device) -> None:
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+class _Clock:
+    """Wall-clock lap timer in milliseconds (synchronising CUDA before each reading).
+
+    Disabled (``enabled=False``, as in training) it returns 0 and never synchronises.
+    """
+
+    def __init__(self, device: torch.device, enabled: bool = True) -> None:
+        self.device = device
+        self.enabled = enabled
+        if enabled:
+            _sync(device)
+        self.last = time.perf_counter()
+
+    def lap(self) -> float:
+        if not self.enabled:
+            return 0.0
+        _sync(self.device)
+        now = time.perf_counter()
+        ms, self.last = (now - self.last) * 1000.0, now
+        return ms
+
+
+class TPCNet(nn.Module):
+    """The TPCNet model. Build it with :func:`model.build_model` or ``TPCNet(ModelConfig(...))``."""
+
+    def __init__(self, cfg: ModelConfig) -> None:
+        super().__init__()
+        self.cfg = cfg
+        self.grid = cfg.pillars.grid
+        self.head_grid = cfg.head_grid
+        self.lidar = SensorBranch(cfg, "lidar") if cfg.uses_lidar else None
+        self.radar = SensorBranch(cfg, "radar") if cfg.uses_radar else None
+        channels = cfg.backbone.channels
+        self.fusion = (
+            nn.ModuleList(build_fusion(cfg.fusion, c) for c in channels)
+            if cfg.modalities == "both"
+            else None
+        )
+        self.text_encoder = build_text_encoder(cfg.text)
+        text_dim = self.text_encoder.out_dim
+        if cfg.text_fusion.kind == "dggf":
+            self.text_fusion = nn.ModuleList(
+                DynamicGatedGraphFusion(c, text_dim, k, cfg.text_fusion.ffn_ratio)
+                for c, k in zip(channels, cfg.text_fusion.graph_k, strict=True)
+            )
+        else:
+            self.text_fusion = nn.ModuleList(
+                GatedGraphFusion(c, text_dim, cfg.text_fusion.ggf_k) for c in channels
+            )
+        self.neck = SecondFpn(channels, cfg.backbone.cumulative_strides, cfg.fpn)
+        self.head = C3DRecHead(cfg.head, self.neck.out_channels)
+        self.checkpoint_metadata: dict = {}
+        """Metadata of the checkpoint this model was loaded from (see :mod:`model.checkpoint`)."""
+
+    @property
+    def device(self) -> torch.device:
+        return next(self.parameters()).device
+
+    # ------------------------------------------------------------------ input handling
+
+    def _clouds(
+        self,
+        clouds: Sequence[PointsLike | None] | None,
+        batch: int,
+        sensor: str,
+        num_features: int,
+        used: bool,
+    ) -> list[Tensor] | None:
+        if not used:
+            return None
+        label = "LiDAR" if sensor == "lidar" else "radar"
+        if clouds is None or any(c is None for c in clouds):
+            raise MissingSensorError(
+                f"this model was built with modalities={self.cfg.modalities!r} and needs {label} "
+                f"points, but none were given; pass an empty (0, {num_features}) array for a "
+                f"{label} that returned nothing"
+            )
+        if len(clouds) != batch:
+            raise ValueError(f"{len(clouds)} {label} clouds for a batch of {batch}")
+        return [
+            as_points(c, num_features, f"{label} cloud {i}").to(self.device)
+            for i, c in enumerate(clouds)
+        ]
+
+    # ------------------------------------------------------------------ the two halves
+
+    def _encode(
+        self, lidar: list[Tensor] | None, radar: list[Tensor] | None, timed: bool = False
+    ) -> tuple[tuple[Tensor, ...], SceneTimings]:
+        clock = _Clock(self.device, timed)
+        canvases: dict[str, Tensor] = {}
+        for name, branch, clouds in (("l", self.lidar, lidar), ("r", self.radar, radar)):
+            if branch is not None and clouds is not None:
+                canvases[name] = branch.pillars(clouds)
+        t_pillars = clock.lap()
+        stages: dict[str, tuple[Tensor, ...]] = {}
+        for name, branch in (("l", self.lidar), ("r", self.radar)):
+            if branch is not None:
+                stages[name] = branch.backbone(canvases[name])
+        t_backbone = clock.lap()
+        if self.fusion is not None:
+            fused = tuple(
+                fuse(f_l, f_r)
+                for fuse, f_l, f_r in zip(self.fusion, stages["l"], stages["r"], strict=True)
+            )
+        else:
+            fused = stages["l"] if "l" in stages else stages["r"]
+        return fused, SceneTimings(t_pillars, t_backbone, clock.lap())
+
+    def _ground(
+        self, stages: Sequence[Tensor], text: TextFeatures, timed: bool = False
+    ) -> tuple[HeadOutput, tuple[float, float, float]]:
+        clock = _Clock(self.device, timed)
+        conditioned = [
+            fuse(lr, text.tokens, text.padding_mask)
+            for fuse, lr in zip(self.text_fusion, stages, strict=True)
+        ]
+        t_dggf = clock.lap()
+        neck = self.neck(conditioned)
+        t_neck = clock.lap()
+        out = self.head(neck)
+        return out, (t_dggf, t_neck, clock.lap())
+
+    # ------------------------------------------------------------------ public API
+
+    def encode_scene(
+        self, lidar: PointsLike | None = None, radar: PointsLike | None = None
+    ) -> SceneFeatures:
+        """Text-independent features of one scene (sensor branches + LiDAR-radar fusion).
+
+        Args:
+            lidar: ``(N, 4)`` LiDAR points (x, y, z, intensity), LiDAR frame; ignored (may be
+                ``None``) by a radar-only model.
+            radar: ``(M, 7)`` radar points in the LiDAR frame; ignored by a LiDAR-only model.
+
+        Returns:
+            :class:`SceneFeatures` with ``lr_i`` of shape ``(1, C_i, H_i, W_i)``.
+        """
+        lidar_t = self._clouds(
+            None if lidar is None else [lidar], 1, "lidar", LIDAR_FEATURES, self.cfg.uses_lidar
+        )
+        radar_t = self._clouds(
+            None if radar is None else [radar], 1, "radar", RADAR_FEATURES, self.cfg.uses_radar
+        )
+        with torch.no_grad():
+            stages, timings = self._encode(lidar_t, radar_t, timed=True)
+        return SceneFeatures(
+            stages=tuple(stages),
+            num_lidar=0 if lidar_t is None else int(lidar_t[0].shape[0]),
+            num_radar=0 if radar_t is None else int(radar_t[0].shape[0]),
+            timings=timings,
+        )
+
+    def ground(
+        self, features: SceneFeatures, prompt: str, score_threshold: float | None = None
+    ) -> Predictions:
+        """Answer one prompt on an encoded scene.
+
+        Args:
+            features: From :meth:`encode_scene` of this model.
+            prompt: The referring sentence (non-empty; longer than the token limit is truncated
+                and reported in :attr:`Predictions.truncated`).
+            score_threshold: Overrides ``cfg.head.score_threshold`` for the decoded boxes.
+
+        Returns:
+            :class:`Predictions` (boxes, scores, class names, sigmoid heatmaps, grid, timings).
+        """
+        text_prompt = validate_prompt(prompt)
+        expected = tuple(self.cfg.backbone.channels)
+        got = tuple(int(s.shape[1]) for s in features.stages)
+        if got != expected or any(s.shape[0] != 1 for s in features.stages):
+            raise ValueError(
+                f"scene features with stage widths {got} do not come from this model "
+                f"(expects {expected}, batch 1)"
+            )
+        clock = _Clock(self.device)
+        with torch.no_grad():
+            text = self.text_encoder([text_prompt])
+            t_text = clock.lap()
+            out, (t_dggf, t_neck, t_head) = self._ground(features.stages, text, timed=True)
+            clock.lap()
+            detections = decode(out, self.head_grid, self.cfg.head, score_threshold)[0]
+            heatmaps = torch.sigmoid(out.heatmap[0]).float().cpu().numpy()
+            t_decode = clock.lap()
+        return Predictions(
+            boxes=detections.boxes,
+            scores=detections.scores,
+            labels=detections.labels,
+            classes=detections.classes,
+            heatmaps=heatmaps,
+            grid=self.head_grid,
+            prompt=text_prompt,
+            truncated=text.truncated[0],
+            timings=GroundTimings(t_text, t_dggf, t_neck, t_head, t_decode),
+        )
+
+    def forward(
+        self,
+        lidar: Sequence[PointsLike | None] | None,
+        radar: Sequence[PointsLike | None] | None,
+        prompts: Sequence[str],
+    ) -> HeadOutput:
+        """Batched training/evaluation pass.
+
+        Args:
+            lidar: ``B`` LiDAR clouds ``(N_b, 4)`` (``None`` for a radar-only model).
+            radar: ``B`` radar clouds ``(M_b, 7)`` in the LiDAR frame (``None`` for LiDAR-only).
+            prompts: ``B`` prompts.
+
+        Returns:
+            :class:`model.head.HeadOutput` with ``heatmap (B, 3, H, W)`` logits and
+            ``regression (B, 8, H, W)`` on :attr:`head_grid`; train it with
+            :func:`model.losses.grounding_loss`.
+        """
+        batch = len(prompts)
+        if batch == 0:
+            raise ValueError("forward needs at least one sample")
+        prompts = [validate_prompt(p) for p in prompts]  # fail before any network work
+        lidar_t = self._clouds(lidar, batch, "lidar", LIDAR_FEATURES, self.cfg.uses_lidar)
+        radar_t = self._clouds(radar, batch, "radar", RADAR_FEATURES, self.cfg.uses_radar)
+        stages, _ = self._encode(lidar_t, radar_t)
+        text = self.text_encoder(prompts)
+        out, _ = self._ground(stages, text)
+        return out

@@ -1,0 +1,377 @@
+"""Train TPCNet: ``python -m model.train --data ROOT --out runs/NAME [options]``.
+
+The paper's Talk2Radar settings (section IV-A): AdamW, learning rate 1e-3, weight decay 5e-4, a
+cosine schedule (here per step, after a short linear warm-up), batch size 4. Gradients are clipped
+at max-norm 35 (Talk2Radar's value). On CUDA the forward pass runs under bfloat16 autocast (AMP).
+
+Several processes: ``torchrun --nproc_per_node N -m model.train ...`` trains with
+DistributedDataParallel (``gloo`` on CPU, ``nccl`` on GPUs); each rank sees a disjoint shard of every
+epoch's permutation, and only rank 0 writes checkpoints and logs.
+
+Outputs in ``--out``: ``last.pt`` and ``best.pt`` (model checkpoints, :mod:`model.checkpoint`),
+``train_state.pt`` (optimizer, schedule, step, epoch, best metric: what ``--resume`` needs) and
+``log.jsonl`` (one line per logged step and per validation). Resuming restarts at the exact step:
+the data order of epoch ``e`` is a permutation seeded by ``(seed, e)``, augmentations are seeded
+per item, and a resumed epoch skips the batches already done.
+
+A non-finite loss stops training with a message; the last good checkpoint is kept as it was.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.distributed as dist
+from torch.nn.parallel import DistributedDataParallel
+from tqdm import tqdm
+
+from model import build_model
+from model.checkpoint import load_checkpoint, save_checkpoint
+from model.losses import grounding_loss
+from model.targets import collate_targets, draw_targets
+from scenes.dataset import AugmentConfig, GroundingBatch, GroundingDataset, collate
+from scenes.root import Talk2RadarRoot
+
+
+class TrainingError(RuntimeError):
+    """Training cannot go on (bad data, non-finite loss); the message says why."""
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Everything that defines a training run (stored in the checkpoints)."""
+
+    data: str
+    out: str
+    preset: str = "small"
+    epochs: int = 20
+    batch_size: int = 4
+    lr: float = 1e-3
+    weight_decay: float = 5e-4
+    warmup_steps: int = 50
+    grad_clip: float = 35.0
+    modalities: str | None = None
+    fusion: str | None = None
+    text_fusion: str | None = None
+    anchor: str | None = None
+    text_encoder: str | None = None
+    radar_folder: str = "auto"
+    train_split: str = "train"
+    val_split: str = "val"
+    val_every: int = 1
+    val_limit: int = 0
+    seed: int = 0
+    device: str = "cpu"
+    amp: bool = True
+    max_steps: int = 0
+    log_every: int = 10
+    flip_probability: float = 0.5
+
+    def model_overrides(self) -> dict[str, str]:
+        """The ``build_model`` overrides given on the command line."""
+        names = ("modalities", "fusion", "text_fusion", "anchor", "text_encoder")
+        return {n: getattr(self, n) for n in names if getattr(self, n) is not None}
+
+
+@dataclass
+class TrainState:
+    """The mutable progress of a run (saved in ``train_state.pt``)."""
+
+    epoch: int = 0
+    step: int = 0
+    step_in_epoch: int = 0
+    best_map: float = -1.0
+    last_map: float | None = None
+
+
+def _rank() -> int:
+    return dist.get_rank() if dist.is_available() and dist.is_initialized() else 0
+
+
+def _world() -> int:
+    return dist.get_world_size() if dist.is_available() and dist.is_initialized() else 1
+
+
+def cosine_lr(step: int, total: int, base: float, warmup: int) -> float:
+    """Learning rate at ``step``: linear warm-up to ``base``, then cosine decay to ``base / 100``."""
+    if warmup > 0 and step < warmup:
+        return base * (step + 1) / warmup
+    progress = min(1.0, (step - warmup) / max(1, total - warmup))
+    floor = base * 0.01
+    return floor + 0.5 * (base - floor) * (1.0 + math.cos(math.pi * progress))
+
+
+def epoch_batches(n: int, batch_size: int, epoch: int, seed: int, rank: int, world: int) -> list:
+    """This rank's batches (lists of dataset indices) of ``epoch``; the same on every resume.
+
+    The epoch's permutation is seeded by ``(seed, epoch)``; it is truncated to a multiple of
+    ``world * batch_size`` items (at least one batch per rank) and dealt out rank by rank.
+    """
+    order = np.random.default_rng((seed, epoch)).permutation(n)
+    per_step = world * batch_size
+    usable = max(per_step, (n // per_step) * per_step)
+    order = np.resize(order, usable)  # repeats items only when n < one global batch
+    mine = order[rank::world]
+    return [mine[i : i + batch_size].tolist() for i in range(0, len(mine), batch_size)]
+
+
+def _targets(batch: GroundingBatch, model: torch.nn.Module, device: torch.device):
+    cfg = model.cfg
+    grid = model.head_grid
+    return collate_targets(
+        [
+            draw_targets(b, c, grid, cfg.head)
+            for b, c in zip(batch.boxes, batch.classes, strict=True)
+        ]
+    ).to(device)
+
+
+def _log(out: Path, record: dict) -> None:
+    with open(out / "log.jsonl", "a") as handle:
+        handle.write(json.dumps(record) + "\n")
+
+
+def validate(model: torch.nn.Module, cfg: TrainConfig, root: Talk2RadarRoot) -> dict:
+    """3D mAP (entire area, 11-point) of ``model`` on the validation split."""
+    from model.report import evaluate_predictions  # late: only rank 0 validates
+
+    ids = root.ids(cfg.val_split)
+    if cfg.val_limit:
+        ids = ids[: cfg.val_limit]
+    report = evaluate_predictions(model, root, ids, progress=False)
+    return {
+        "mAP_3d": report.result.entire_area.map_3d,
+        "mAP_bev": report.result.entire_area.map_bev,
+        "roi_mAP_3d": report.result.roi.map_3d,
+        "frames": len(ids),
+    }
+
+
+def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
+    """Run (or resume) a training run; returns the final state."""
+    out = Path(cfg.out)
+    rank, world = _rank(), _world()
+    device = torch.device(cfg.device)
+    if device.type == "cuda" and world > 1:
+        device = torch.device("cuda", int(os.environ.get("LOCAL_RANK", 0)))
+        torch.cuda.set_device(device)
+    torch.manual_seed(cfg.seed + rank)
+    root = Talk2RadarRoot(cfg.data, radar=None if cfg.radar_folder == "none" else cfg.radar_folder)
+    augment = AugmentConfig(flip_probability=cfg.flip_probability)
+    dataset = GroundingDataset(root, cfg.train_split, augment=augment, seed=cfg.seed)
+
+    state = TrainState()
+    if resume and (out / "last.pt").is_file():
+        model = load_checkpoint(out / "last.pt", device=str(device))
+        saved = torch.load(out / "train_state.pt", map_location="cpu", weights_only=False)
+        free = {"epochs", "max_steps", "val_every", "val_limit", "log_every", "device", "amp"}
+        now = asdict(cfg)
+        changed = sorted(k for k, v in saved["config"].items() if k not in free and now.get(k) != v)
+        if changed:
+            raise TrainingError(f"{out}: --resume with different settings: {changed}")
+        state = TrainState(**saved["state"])
+    else:
+        if resume:
+            print(f"{out}: nothing to resume, starting a new run", file=sys.stderr)
+        model = build_model(cfg.preset, **cfg.model_overrides())
+        saved = None
+    model.to(device)
+    params = [p for p in model.parameters() if p.requires_grad]
+    optimizer = torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay)
+    if saved is not None:
+        optimizer.load_state_dict(saved["optimizer"])
+    wrapped: torch.nn.Module = model
+    if world > 1:
+        ids = [device.index] if device.type == "cuda" else None
+        wrapped = DistributedDataParallel(model, device_ids=ids, find_unused_parameters=True)
+
+    steps_per_epoch = len(epoch_batches(len(dataset), cfg.batch_size, 0, cfg.seed, rank, world))
+    total_steps = cfg.epochs * steps_per_epoch
+    if cfg.max_steps:
+        total_steps = min(total_steps, cfg.max_steps)
+    use_amp = cfg.amp and device.type == "cuda"
+    if rank == 0:
+        out.mkdir(parents=True, exist_ok=True)
+    metadata = {
+        "train_config": asdict(cfg),
+        "data": {"root": str(Path(cfg.data).resolve()), "train_samples": len(dataset)},
+    }
+
+    def checkpoint(best: bool) -> None:
+        if rank != 0:
+            return
+        meta = dict(metadata, step=state.step, epoch=state.epoch, val_mAP_3d=state.last_map)
+        save_checkpoint(out / "last.pt", model, **meta)
+        tmp = out / ".train_state.pt.tmp"
+        torch.save(
+            {"config": asdict(cfg), "state": asdict(state), "optimizer": optimizer.state_dict()},
+            tmp,
+        )
+        os.replace(tmp, out / "train_state.pt")
+        if best:
+            save_checkpoint(out / "best.pt", model, **meta)
+
+    bar = tqdm(
+        total=total_steps,
+        initial=state.step,
+        desc="train",
+        unit="step",
+        disable=rank != 0,
+        dynamic_ncols=True,
+    )
+    start_time, seen = time.perf_counter(), 0
+    while state.step < total_steps and state.epoch < cfg.epochs:
+        dataset.set_epoch(state.epoch)
+        batches = epoch_batches(len(dataset), cfg.batch_size, state.epoch, cfg.seed, rank, world)
+        model.train()
+        for indices in batches[state.step_in_epoch :]:
+            if state.step >= total_steps:
+                break
+            batch = collate([dataset[i] for i in indices])
+            for group in optimizer.param_groups:
+                group["lr"] = cosine_lr(state.step, total_steps, cfg.lr, cfg.warmup_steps)
+            targets = _targets(batch, model, device)
+            lidar = [t.to(device) for t in batch.lidar]
+            radar = [t.to(device) for t in batch.radar]
+            with torch.autocast(device_type=device.type, dtype=torch.bfloat16, enabled=use_amp):
+                output = wrapped(lidar, radar, list(batch.prompts))
+            terms = grounding_loss(output, targets)
+            if not torch.isfinite(terms.total):
+                raise TrainingError(
+                    f"non-finite loss at step {state.step} (heatmap {terms.heatmap.item()}, "
+                    f"regression {terms.regression.item()}); the last good checkpoint in {out} "
+                    "is kept"
+                )
+            optimizer.zero_grad(set_to_none=True)
+            terms.total.backward()
+            torch.nn.utils.clip_grad_norm_(params, cfg.grad_clip)
+            optimizer.step()
+            state.step += 1
+            state.step_in_epoch += 1
+            seen += len(indices) * world
+            rate = seen / max(time.perf_counter() - start_time, 1e-9)
+            bar.update(1)
+            bar.set_postfix(
+                loss=f"{terms.total.item():.3f}", samples_s=f"{rate:.1f}", ep=state.epoch
+            )
+            if rank == 0 and state.step % cfg.log_every == 0:
+                _log(
+                    out,
+                    {
+                        "step": state.step,
+                        "epoch": state.epoch,
+                        "loss": terms.total.item(),
+                        "heatmap": terms.heatmap.item(),
+                        "regression": terms.regression.item(),
+                        "lr": optimizer.param_groups[0]["lr"],
+                        "samples_per_s": rate,
+                    },
+                )
+        else:
+            state.epoch += 1
+            state.step_in_epoch = 0
+            best = False
+            if rank == 0 and cfg.val_every and state.epoch % cfg.val_every == 0:
+                metrics = validate(model, cfg, root)
+                state.last_map = metrics["mAP_3d"]
+                best = state.last_map > state.best_map
+                state.best_map = max(state.best_map, state.last_map)
+                _log(out, {"step": state.step, "epoch": state.epoch, "val": metrics})
+                bar.write(f"epoch {state.epoch}: val 3D mAP {metrics['mAP_3d']:.2f}")
+            checkpoint(best=best)
+            if world > 1:
+                dist.barrier()
+            continue
+        break  # max_steps reached inside an epoch
+    checkpoint(best=state.best_map < 0)
+    bar.close()
+    return state
+
+
+def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
+    """Parse the command line into a :class:`TrainConfig` and the resume flag."""
+    p = argparse.ArgumentParser(prog="python -m model.train", description=__doc__.split("\n")[0])
+    p.add_argument("--data", required=True, help="Talk2Radar root")
+    p.add_argument("--out", required=True, help="run folder, e.g. runs/NAME")
+    p.add_argument("--preset", default="small", choices=["small", "paper"])
+    p.add_argument("--epochs", type=int, default=20)
+    p.add_argument("--batch-size", type=int, default=4)
+    p.add_argument("--lr", type=float, default=1e-3)
+    p.add_argument("--weight-decay", type=float, default=5e-4)
+    p.add_argument("--warmup-steps", type=int, default=50)
+    p.add_argument("--modalities", choices=["lidar", "radar", "both"])
+    p.add_argument(
+        "--fusion", choices=["baca", "bi_mhca", "lidar_query", "radar_query", "conv_gate"]
+    )
+    p.add_argument("--text-fusion", choices=["dggf", "ggf"])
+    p.add_argument("--anchor", choices=["corner", "edge", "center"])
+    p.add_argument("--text-encoder", choices=["minilm", "gru"])
+    p.add_argument("--radar-folder", default="auto", help="radar tree, 'auto' or 'none'")
+    p.add_argument("--val-every", type=int, default=1, help="validate every N epochs (0: never)")
+    p.add_argument("--val-limit", type=int, default=0, help="validate on the first N frames only")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
+    p.add_argument("--no-amp", action="store_true", help="disable bfloat16 autocast on CUDA")
+    p.add_argument("--max-steps", type=int, default=0, help="stop after N steps (0: all epochs)")
+    p.add_argument("--log-every", type=int, default=10)
+    p.add_argument("--flip-probability", type=float, default=0.5)
+    p.add_argument("--resume", action="store_true", help="continue the run in --out")
+    a = p.parse_args(argv)
+    cfg = TrainConfig(
+        data=a.data,
+        out=a.out,
+        preset=a.preset,
+        epochs=a.epochs,
+        batch_size=a.batch_size,
+        lr=a.lr,
+        weight_decay=a.weight_decay,
+        warmup_steps=a.warmup_steps,
+        modalities=a.modalities,
+        fusion=a.fusion,
+        text_fusion=a.text_fusion,
+        anchor=a.anchor,
+        text_encoder=a.text_encoder,
+        radar_folder=a.radar_folder,
+        val_every=a.val_every,
+        val_limit=a.val_limit,
+        seed=a.seed,
+        device=a.device,
+        amp=not a.no_amp,
+        max_steps=a.max_steps,
+        log_every=a.log_every,
+        flip_probability=a.flip_probability,
+    )
+    return cfg, a.resume
+
+
+def main(argv: list[str] | None = None) -> int:
+    cfg, resume = parse_args(argv)
+    distributed = int(os.environ.get("WORLD_SIZE", "1")) > 1
+    if distributed:
+        dist.init_process_group("nccl" if cfg.device.startswith("cuda") else "gloo")
+    try:
+        state = train(cfg, resume=resume)
+    except (TrainingError, ValueError, FileNotFoundError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        if distributed:
+            dist.destroy_process_group()
+    if _rank() == 0:
+        print(
+            f"done: {state.step} steps, {state.epoch} epochs, best val 3D mAP {state.best_map:.2f}"
+        )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,131 @@
+"""Checkpoints: round trip, small size, atomic writes, and clear errors."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import torch
+
+from model import build_model
+from model.checkpoint import (
+    FORMAT_VERSION,
+    CheckpointError,
+    load_checkpoint,
+    load_metadata,
+    save_checkpoint,
+)
+from model.grid import BevGrid
+from model.tpcnet import TPCNet
+
+COARSE = BevGrid(0.0, 51.2, -25.6, 25.6, 1.28)
+META = {"data": "synthetic v1, 64 frames, seed 0", "metric": {"mAP_3d_R11": 0.123}, "epoch": 3}
+
+
+def _inputs() -> tuple[list[np.ndarray], list[np.ndarray], list[str]]:
+    rng = np.random.default_rng(0)
+    lidar = np.column_stack(
+        [
+            rng.uniform(0, 51, 500),
+            rng.uniform(-25, 25, 500),
+            rng.uniform(-2, 1, 500),
+            rng.uniform(0, 255, 500),
+        ]
+    ).astype(np.float32)
+    radar = np.column_stack(
+        [rng.uniform(0, 51, 50), rng.uniform(-25, 25, 50), rng.uniform(-2, 1, (50, 5))]
+    ).astype(np.float32)
+    return [lidar], [radar], ["the car ahead"]
+
+
+@pytest.fixture(scope="module")
+def trained() -> TPCNet:
+    torch.manual_seed(0)
+    model = build_model("small", pillars__grid=COARSE, text_encoder="gru")
+    with torch.no_grad():  # non-default BatchNorm statistics, so that buffers must round-trip
+        model.train()(*_inputs())
+    return model.eval()
+
+
+def test_round_trip(trained: TPCNet, tmp_path: Path) -> None:
+    path = save_checkpoint(tmp_path / "sub" / "model.pt", trained, **META)
+    assert path.is_file()
+    assert [p.name for p in path.parent.iterdir()] == ["model.pt"]  # no temp file left behind
+    loaded = load_checkpoint(path)
+    assert loaded.cfg == trained.cfg and not loaded.training
+    assert loaded.checkpoint_metadata == META and load_metadata(path) == META
+    with torch.no_grad():
+        a, b = trained(*_inputs()), loaded(*_inputs())
+    torch.testing.assert_close(a.heatmap, b.heatmap)
+    torch.testing.assert_close(a.regression, b.regression)
+    # Overwriting keeps one file.
+    save_checkpoint(path, loaded, **{**META, "epoch": 4})
+    assert load_metadata(path)["epoch"] == 4
+    assert [p.name for p in path.parent.iterdir()] == ["model.pt"]
+
+
+def test_frozen_text_encoder_is_not_stored(tmp_path: Path) -> None:
+    model = build_model("small")
+    path = save_checkpoint(tmp_path / "m.pt", model)
+    payload = torch.load(path, weights_only=True)
+    assert payload["format_version"] == FORMAT_VERSION
+    assert not any(k.startswith("text_encoder.") for k in payload["state_dict"])
+    trainable = sum(p.numel() for p in model.parameters())
+    assert path.stat().st_size < 4 * trainable * 1.5 + 200_000  # float32 weights + buffers only
+    assert path.stat().st_size < 10_000_000  # MiniLM alone would be ~90 MB
+
+
+def _rewrite(path: Path, change: Any) -> None:
+    payload = torch.load(path, weights_only=True)
+    change(payload)
+    torch.save(payload, path)
+
+
+@pytest.mark.parametrize(
+    ("change", "message"),
+    [
+        (lambda p: p["config"]["fusion"].update(window=3), "fusion.window"),
+        (lambda p: p["config"]["text_fusion"].pop("graph_k"), "text_fusion.graph_k"),
+        (lambda p: p["config"]["fusion"].update(kind="concat"), "fusion.kind"),
+        (lambda p: p["config"]["backbone"].update(channels=[32, 48]), "backbone.channels"),
+        (lambda p: p.update(format_version=99), "format_version 99"),
+        (lambda p: p["state_dict"].pop("head.shared.0.weight"), "head.shared.0.weight"),
+        (lambda p: p["state_dict"].update(extra=torch.zeros(1)), "'extra'"),
+        (
+            lambda p: p["state_dict"].update({"head.shared.0.weight": torch.zeros(1, 1, 3, 3)}),
+            "head.shared.0.weight",
+        ),
+    ],
+)
+def test_mismatch_errors_name_the_field(
+    trained: TPCNet, tmp_path: Path, change: Any, message: str
+) -> None:
+    path = save_checkpoint(tmp_path / "m.pt", trained)
+    _rewrite(path, change)
+    with pytest.raises(CheckpointError) as info:
+        load_checkpoint(path)
+    assert message in str(info.value) and str(path) in str(info.value)
+
+
+def test_missing_and_corrupt_files(tmp_path: Path) -> None:
+    missing = tmp_path / "nope.pt"
+    with pytest.raises(CheckpointError, match="does not exist") as info:
+        load_checkpoint(missing)
+    assert str(missing) in str(info.value)
+    corrupt = tmp_path / "corrupt.pt"
+    corrupt.write_bytes(b"\x00not a checkpoint" * 10)
+    with pytest.raises(CheckpointError, match="corrupt") as info:
+        load_checkpoint(corrupt)
+    assert str(corrupt) in str(info.value)
+    other = tmp_path / "other.pt"
+    torch.save({"weights": torch.zeros(2)}, other)
+    with pytest.raises(CheckpointError, match="not a talk2pc-tpcnet checkpoint"):
+        load_checkpoint(other)
+
+
+def test_metadata_must_be_plain_data(trained: TPCNet, tmp_path: Path) -> None:
+    with pytest.raises(CheckpointError, match="metadata"):
+        save_checkpoint(tmp_path / "m.pt", trained, when=object())
+    assert not list(tmp_path.iterdir())
