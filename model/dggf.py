@@ -149,7 +149,54 @@ def dynamic_axial_graph(x: Tensor, k: int) -> AxialGraph:
 
 
 def dynamic_max_relative(x: Tensor, k: int) -> Tensor:
-    """Algorithm 1, lines 1-19: ``X_final = max(0, max over edges of (X_rolled - x))``."""
+    """Algorithm 1, lines 1-19: ``X_final = max(0, max over edges of (X_rolled - x))``.
+
+    Uses the grouped form (:func:`_grouped_axis_max`) when ``K`` divides both axes and the
+    pairwise tensor stays small, else the roll loop; both give the same values.
+    """
+    _, c, height, width = x.shape
+    pairs = x.shape[0] * c * height * width * max(height, width) // max(k, 1)
+    if k >= 1 and height % k == 0 and width % k == 0 and pairs <= _GROUPED_MAX_ELEMENTS:
+        with torch.no_grad():
+            mu, sigma = graph_statistics(x.detach())
+            threshold = (mu - sigma).view(-1, 1, 1, 1, 1)
+            limit = torch.where(threshold > 0, threshold.square(), torch.zeros_like(threshold))
+        rows = _grouped_axis_max(x, k, limit)
+        cols = _grouped_axis_max(x.transpose(-1, -2), k, limit).transpose(-1, -2)
+        return torch.maximum(rows, cols)
+    return dynamic_max_relative_loop(x, k)
+
+
+_GROUPED_MAX_ELEMENTS = 64 * 1024 * 1024
+"""Largest pairwise tensor (elements) the grouped form builds; beyond it the roll loop runs."""
+
+
+def _grouped_axis_max(x: Tensor, k: int, limit: Tensor) -> Tensor:
+    """Masked max-relative over the row rolls ``m K`` (``m = 1 .. H/K - 1``) in one pass.
+
+    With ``H = n K``, ``roll_down(x, m K)`` brings row ``i = a K + r`` the row ``(a - m) K + r``
+    (mod ``H``): over all ``m`` these are exactly the other rows of the same residue ``r``. So the
+    result is, per row, the masked maximum of ``x[a'] - x[a]`` over the ``n`` rows ``a'`` of its
+    residue class; the term ``a' = a`` is 0, which the running maximum's start value 0 already is.
+
+    Args:
+        x: ``(B, C, H, W)`` with ``H % k == 0``.
+        limit: ``(B, 1, 1, 1, 1)`` squared distance threshold ``(mu - sigma)^2`` (0: no edges).
+
+    Returns:
+        ``(B, C, H, W)``.
+    """
+    b, c, height, width = x.shape
+    n = height // k
+    grouped = x.reshape(b, c, n, k, width)
+    diff = grouped.unsqueeze(2) - grouped.unsqueeze(3)  # (B, C, n[a], n[a'], K, W): x[a'] - x[a]
+    with torch.no_grad():
+        mask = diff.detach().square().sum(dim=1) < limit.view(b, 1, 1, 1, 1)
+    return (diff * mask.unsqueeze(1).to(x.dtype)).amax(dim=3).reshape(b, c, height, width)
+
+
+def dynamic_max_relative_loop(x: Tensor, k: int) -> Tensor:
+    """Algorithm 1 as written: one roll, mask and running maximum per shift (the reference)."""
     out = torch.zeros_like(x)
     _, _, passes = _axial_passes(x, k)
     for _, _, mask, diff in passes:
