@@ -15,9 +15,12 @@ Every option the paper's ablations compare is a field here, not a fork of the co
 
 Two presets (:func:`preset`):
 
-- ``small``: 0.32 m pillars, 160 x 160 over x in [0, 51.2], y in [-25.6, 25.6], z in [-3, 2]; narrow
-  channels so that it trains on a 2-core CPU and answers a prompt in tens of milliseconds. The
-  neck brings all stages to stage-1 resolution (80 x 80, 0.64 m cells).
+- ``small``: 0.32 m pillars, 160 x 160 over x in [0, 51.2], y in [-25.6, 25.6], z in [-3, 2]; PFN
+  32, backbone 32/48/64 with 1/2/2 extra layers, neck 3 x 24, head 24, one attention head: about
+  0.6 M parameters and 2.7 GFLOP per scene + prompt. The neck brings all stages to stage-1
+  resolution (80 x 80, 0.64 m cells). Measured on the 2-core development CPU (idle, 60 k LiDAR +
+  800 radar points): ``encode_scene`` about 45 ms, ``ground`` about 23 ms on a cached prompt and
+  31 ms on a new one; a training step at batch 4 about 0.8 s.
 - ``paper``: 0.16 m pillars, 320 x 320 over the same range, PFN 64, SECOND backbone widths
   64/128/256 with 3/5/5 layers, SECOND-FPN 128/128/128 with upsample strides 0.5/1/2 as in
   Talk2Radar's CenterPoint configuration (80 x 80 head grid, 0.64 m cells).
@@ -168,7 +171,7 @@ class FusionConfig:
     kind: FusionKind = "baca"
     agent_size: tuple[int, ...] = (12, 12)
     heads: int = 1
-    mhca_chunk: int = 4096
+    mhca_chunk: int = 1024
 
     def __post_init__(self) -> None:
         _choice("FusionConfig", "kind", self.kind, typing.get_args(FusionKind))

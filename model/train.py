@@ -192,7 +192,7 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
     wrapped: torch.nn.Module = model
     if world > 1:
         ids = [device.index] if device.type == "cuda" else None
-        wrapped = DistributedDataParallel(model, device_ids=ids, find_unused_parameters=True)
+        wrapped = DistributedDataParallel(model, device_ids=ids, find_unused_parameters=False)
 
     steps_per_epoch = len(epoch_batches(len(dataset), cfg.batch_size, 0, cfg.seed, rank, world))
     total_steps = cfg.epochs * steps_per_epoch
@@ -325,7 +325,15 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     p.add_argument("--log-every", type=int, default=10)
     p.add_argument("--flip-probability", type=float, default=0.5)
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
+    p.add_argument(
+        "--threads",
+        type=int,
+        default=0,
+        help="torch CPU threads (0: torch's default); use 1 when other jobs share the cores",
+    )
     a = p.parse_args(argv)
+    if a.threads:
+        torch.set_num_threads(a.threads)
     cfg = TrainConfig(
         data=a.data,
         out=a.out,
@@ -358,6 +366,7 @@ def main(argv: list[str] | None = None) -> int:
     distributed = int(os.environ.get("WORLD_SIZE", "1")) > 1
     if distributed:
         dist.init_process_group("nccl" if cfg.device.startswith("cuda") else "gloo")
+    rank = int(os.environ.get("RANK", "0"))
     try:
         state = train(cfg, resume=resume)
     except (TrainingError, ValueError, FileNotFoundError) as exc:

@@ -20,7 +20,6 @@ from model.text import EmptyPromptError
 from model.tpcnet import MissingSensorError, NonFiniteInputError, TPCNet
 
 COARSE = BevGrid(0.0, 51.2, -25.6, 25.6, 1.28)  # 40 x 40 pillars: fast option tests
-MEDIUM = BevGrid(0.0, 51.2, -25.6, 25.6, 0.64)  # 80 x 80 pillars
 LONG_PROMPT = " ".join(["the red car parked on the left side of the road near the kerb"] * 6)
 
 
@@ -166,7 +165,7 @@ def _threshold_in_a_gap(heatmap: np.ndarray, rank: int = 10) -> float:
 @pytest.mark.parametrize("overrides", [{}, {"text_encoder": "gru", "text_fusion": "ggf"}])
 def test_encode_scene_and_ground_equal_forward(overrides: dict[str, Any]) -> None:
     torch.manual_seed(0)
-    model = build_model("small", head__top_k=50, pillars__grid=MEDIUM, **overrides)
+    model = build_model("small", head__top_k=50, pillars__grid=COARSE, **overrides)
     lidar, radar, prompts = _batch(model)
     with torch.no_grad():  # move the BatchNorm running statistics away from their init
         model.train()
@@ -263,7 +262,8 @@ def test_wrong_shapes_and_missing_sensors() -> None:
     pred = radar_only.ground(radar_only.encode_scene(radar=radar), "a car", score_threshold=0.5)
     assert pred.heatmaps.shape == (3, 20, 20)
     with pytest.raises(ValueError, match="do not come from this model"):
-        model.ground(build_model("paper", pillars__grid=COARSE).encode_scene(lidar, radar), "a car")
+        other = build_model("small", pillars__grid=COARSE, backbone__channels=(16, 24, 32))
+        model.ground(other.encode_scene(lidar, radar), "a car")
 
 
 def test_prompt_errors_and_truncation(small_model: TPCNet) -> None:

@@ -1,0 +1,160 @@
+"""Training: the loss falls, checkpoints resume at the same step, DDP with 2 gloo processes,
+and the evaluate command writes prediction files that the label reader parses."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+from model.checkpoint import load_checkpoint
+from model.train import TrainConfig, TrainingError, cosine_lr, epoch_batches, train
+from scenes.kitti import read_label_file
+from scenes.synth import SynthSettings, generate_root
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def tiny_root(tmp_path_factory):
+    root = tmp_path_factory.mktemp("tiny") / "root"
+    generate_root(root, 8, SynthSettings(seed=3), split_fractions=(0.5, 0.25, 0.25))
+    return root
+
+
+def _config(root: Path, out: Path, **kw) -> TrainConfig:
+    base = dict(
+        data=str(root),
+        out=str(out),
+        epochs=50,
+        batch_size=2,
+        val_every=0,
+        warmup_steps=0,
+        log_every=1,
+        flip_probability=0.0,
+        lr=2e-3,
+    )
+    base.update(kw)
+    return TrainConfig(**base)
+
+
+def _losses(out: Path) -> list[float]:
+    lines = (out / "log.jsonl").read_text().splitlines()
+    return [json.loads(line)["loss"] for line in lines if "loss" in json.loads(line)]
+
+
+def test_schedule_and_sharding():
+    assert cosine_lr(0, 100, 1e-3, 10) == pytest.approx(1e-4)
+    assert cosine_lr(10, 100, 1e-3, 10) == pytest.approx(1e-3)
+    assert cosine_lr(100, 100, 1e-3, 10) == pytest.approx(1e-5)
+    a = epoch_batches(10, 2, epoch=3, seed=0, rank=0, world=2)
+    b = epoch_batches(10, 2, epoch=3, seed=0, rank=1, world=2)
+    assert len(a) == len(b) == 2
+    assert not set(sum(a, [])) & set(sum(b, []))  # ranks see disjoint samples
+    assert a == epoch_batches(10, 2, epoch=3, seed=0, rank=0, world=2)  # the same on resume
+
+
+def test_loss_falls_and_resume_continues(tiny_root, tmp_path):
+    torch.manual_seed(0)
+    out = tmp_path / "run"
+    state = train(_config(tiny_root, out, max_steps=8))
+    assert state.step == 8 and (out / "last.pt").is_file() and (out / "train_state.pt").is_file()
+    losses = _losses(out)
+    assert len(losses) == 8
+    assert sum(losses[-2:]) < sum(losses[:2])
+    resumed = train(_config(tiny_root, out, max_steps=10), resume=True)
+    assert resumed.step == 10
+    assert len(_losses(out)) == 10
+    model = load_checkpoint(out / "last.pt")
+    assert model.checkpoint_metadata["step"] == 10
+    with pytest.raises(TrainingError, match="different settings.*lr"):
+        train(_config(tiny_root, out, max_steps=12, lr=5e-3), resume=True)
+
+
+@pytest.mark.slow
+def test_torchrun_two_gloo_processes(tiny_root, tmp_path):
+    out = tmp_path / "ddp"
+    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(REPO))
+    cmd = [
+        sys.executable,
+        "-m",
+        "torch.distributed.run",
+        "--nproc_per_node",
+        "2",
+        "--master_port",
+        "0",
+        "-m",
+        "model.train",
+        "--data",
+        str(tiny_root),
+        "--out",
+        str(out),
+        "--max-steps",
+        "2",
+        "--batch-size",
+        "1",
+        "--val-every",
+        "0",
+        "--device",
+        "cpu",
+    ]
+    done = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert (out / "last.pt").is_file()
+    assert load_checkpoint(out / "last.pt").checkpoint_metadata["step"] == 2
+
+
+def test_evaluate_command_writes_parsable_files(tiny_root, tmp_path):
+    out = tmp_path / "run"
+    train(_config(tiny_root, out, max_steps=1))
+    preds = tmp_path / "preds"
+    report = tmp_path / "report.json"
+    cmd = [
+        sys.executable,
+        "-m",
+        "model.evaluate",
+        "--data",
+        str(tiny_root),
+        "--split",
+        "test",
+        "--checkpoint",
+        str(out / "last.pt"),
+        "--out",
+        str(preds),
+        "--json",
+        str(report),
+    ]
+    done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "mAP by prompt type" in done.stdout and "Entire annotated area" in done.stdout
+    test_ids = (tiny_root / "lidar" / "ImageSets" / "test.txt").read_text().split()
+    files = sorted(p.stem for p in preds.glob("*.txt"))
+    assert files == sorted(test_ids)  # one file per frame, empty ones included
+    for f in preds.glob("*.txt"):
+        for label in read_label_file(f):
+            assert label.score is not None and label.name in ("Car", "Pedestrian", "Cyclist")
+    data = json.loads(report.read_text())
+    assert {"entire_area", "roi", "by_prompt_type", "by_depth"} <= set(data)
+    assert "Car_3d_all" in data["entire_area"] and "mAP_3d" in data["roi"]
+
+
+def test_evaluate_rejects_an_empty_split(tiny_root, tmp_path):
+    (tiny_root / "lidar" / "ImageSets" / "empty.txt").write_text("")
+    cmd = [
+        sys.executable,
+        "-m",
+        "model.evaluate",
+        "--data",
+        str(tiny_root),
+        "--split",
+        "empty",
+        "--checkpoint",
+        str(tmp_path / "missing.pt"),
+        "--out",
+        str(tmp_path / "p"),
+    ]
+    done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 2 and "no samples" in done.stderr
