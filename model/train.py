@@ -375,7 +375,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         if distributed:
             dist.destroy_process_group()
-    if _rank() == 0:
+    if rank == 0:
         print(
             f"done: {state.step} steps, {state.epoch} epochs, best val 3D mAP {state.best_map:.2f}"
         )

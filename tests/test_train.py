@@ -3,6 +3,8 @@ and the evaluate command writes prediction files that the label reader parses.""
 
 import json
 import os
+import signal
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -53,7 +55,9 @@ def test_schedule_and_sharding():
     a = epoch_batches(10, 2, epoch=3, seed=0, rank=0, world=2)
     b = epoch_batches(10, 2, epoch=3, seed=0, rank=1, world=2)
     assert len(a) == len(b) == 2
-    assert not set(sum(a, [])) & set(sum(b, []))  # ranks see disjoint samples
+    assert not {i for batch in a for i in batch} & {
+        i for batch in b for i in batch
+    }  # ranks see disjoint samples
     assert a == epoch_batches(10, 2, epoch=3, seed=0, rank=0, world=2)  # the same on resume
 
 
@@ -70,8 +74,14 @@ def test_loss_falls_and_resume_continues(tiny_root, tmp_path):
     assert len(_losses(out)) == 10
     model = load_checkpoint(out / "last.pt")
     assert model.checkpoint_metadata["step"] == 10
-    with pytest.raises(TrainingError, match="different settings.*lr"):
+    with pytest.raises(TrainingError, match=r"different settings.*lr"):
         train(_config(tiny_root, out, max_steps=12, lr=5e-3), resume=True)
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
 
 
 @pytest.mark.slow
@@ -82,10 +92,14 @@ def test_torchrun_two_gloo_processes(tiny_root, tmp_path):
         sys.executable,
         "-m",
         "torch.distributed.run",
+        "--nnodes",
+        "1",
         "--nproc_per_node",
         "2",
+        "--master_addr",
+        "127.0.0.1",
         "--master_port",
-        "0",
+        str(_free_port()),
         "-m",
         "model.train",
         "--data",
@@ -101,10 +115,26 @@ def test_torchrun_two_gloo_processes(tiny_root, tmp_path):
         "--device",
         "cpu",
     ]
-    done = subprocess.run(cmd, cwd=REPO, env=env, capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0, done.stderr[-3000:]
+    log = tmp_path / "torchrun.log"
+    with open(log, "w") as handle:  # a file, not pipes: two ranks write progress bars at once
+        proc = subprocess.Popen(
+            cmd,
+            cwd=REPO,
+            env=env,
+            stdout=handle,
+            stderr=handle,
+            stdin=subprocess.DEVNULL,
+            start_new_session=True,
+        )
+        try:
+            code = proc.wait(timeout=300)
+        finally:
+            if proc.poll() is None:  # never leave the workers behind
+                os.killpg(proc.pid, signal.SIGKILL)
+    assert code == 0, log.read_text()[-3000:]
     assert (out / "last.pt").is_file()
     assert load_checkpoint(out / "last.pt").checkpoint_metadata["step"] == 2
+    assert log.read_text().count("done: 2 steps") == 1  # only rank 0 reports
 
 
 def test_evaluate_command_writes_parsable_files(tiny_root, tmp_path):
