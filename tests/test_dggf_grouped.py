@@ -27,3 +27,9 @@ def test_grouped_equals_loop(shape, k):
 def test_indivisible_axis_falls_back_to_the_loop():
     x = torch.randn(1, 4, 10, 12)
     torch.testing.assert_close(dynamic_max_relative(x, 3), dynamic_max_relative_loop(x, 3))
+
+
+def test_inference_uses_the_loop_and_agrees():
+    x = torch.randn(1, 8, 16, 16)
+    with torch.no_grad():
+        torch.testing.assert_close(dynamic_max_relative(x, 4), dynamic_max_relative_loop(x, 4))

@@ -1,0 +1,312 @@
+"""Run every benchmark and regenerate ``docs/PERFORMANCE.md``: ``python -m bench.run_all``
+(what ``make bench`` runs).
+
+Each benchmark runs in its own process (``python -m bench.<name>``, so that one benchmark's
+allocations do not disturb the next one's timings and each table's command can be repeated as
+is) and writes ``bench/results/<name>.json``; scene generation speed comes from
+``bench/bench_synth.py`` (``bench/results/synth.json``). ``docs/PERFORMANCE.md`` is then written
+from those JSON files alone: a summary of the targets, then one section per benchmark headed by
+the machine and the exact command that made it.
+
+Options: ``--quick`` (smoke run: fewer repetitions, the largest quadratic cases skipped),
+``--threads N`` (torch threads of every benchmark; default 1, as the app),
+``--only NAME ...`` (run some benchmarks, keep the others' previous results), ``--no-run``
+(only regenerate the document from the existing results).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shlex
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+from bench.common import (
+    PERFORMANCE_DOC,
+    REPO,
+    RESULTS_DIR,
+    BenchResult,
+    BenchResultError,
+    Table,
+    Target,
+    machine_info,
+    read_result,
+)
+
+BENCHMARKS = ("latency", "fusion_cost", "graph_cost", "model_size", "train_throughput")
+"""Benchmarks of this package, in the order of the document (``bench/<name>.py``)."""
+
+SYNTH = "synth"
+SYNTH_SCRIPT = REPO / "bench" / "bench_synth.py"
+SYNTH_ARGS = {False: ("--worlds", "10", "--frames", "20"), True: ("--worlds", "2", "--frames", "4")}
+
+MISS_NOTES: dict[str, str] = {
+    "`ground` median": (
+        "**`ground` on a cached scene.** The latency section's stage table, its check from "
+        "outside the model and its cProfile say where the time goes: the frozen MiniLM pass "
+        "for a prompt never seen before (nothing once the prompt is cached), DGGF (mostly its "
+        "axial graph; the graph section compares the model's default grouped form with the "
+        "roll loop of the same graph without gradients: where the loop is faster, "
+        "`dynamic_max_relative` should use it when no gradient is needed), the head (the largest FLOP count of the `small` model: 3x3 convs on the "
+        "80 x 80 head grid), and decoding. Decoding depends on the weights: an untrained head "
+        "is ~0.1 everywhere, so hundreds of peaks pass the 0.1 threshold and rotated NMS (a "
+        "Python loop with exact polygon IoU per nearby pair) dominates; the 'without decoding' "
+        "finding is what remains with a trained checkpoint that leaves a handful of peaks. "
+        "What would fix the rest: a cheaper head (1x1 convs in the regression branches after "
+        "the shared 3x3 conv, or fewer head channels), a cap on the peaks sent to NMS (e.g. the "
+        "top 50 instead of `top_k` = 500), and keeping the text cache warm for the prompt "
+        "history."
+    ),
+    "`encode_scene` + `ground` median": (
+        "**`encode_scene` + `ground`.** The scene half adds the pillar encoders, both "
+        "backbones and BACA at three stages to `ground` (stage table); BACA's time at 80 x 80 "
+        "is its softmax attentions between 6400 queries and 144 agents and its four linear "
+        "projections per direction (cProfile). Fixes: a trained checkpoint (decoding), DGGF's "
+        "roll loop for inference (see the graph note), fusing the Q/K/V projections of each "
+        "direction into one linear layer."
+    ),
+    "bi_mhca / BACA 12x12 latency": (
+        "**Fusion latency ratio.** bi_mhca's time is its `L x L` attention; the ratio to BACA "
+        "shrinks where BACA's projections dominate (small maps)."
+    ),
+    "bi_mhca / BACA 12x12 peak memory": (
+        "**Fusion memory ratio.** The model's bi_mhca splits its queries into chunks "
+        "(`FusionConfig.mhca_chunk`), which bounds its memory by design: its peak is a chunk's "
+        "raw and scaled `heads x chunk x L` scores, while BACA's is its `(heads, L, agents)` "
+        "attention maps. The paper's Bi-MHCA is unchunked: the fusion section's 'unchunked' "
+        "column and finding give that ratio (at 160 x 160 the two `4 x 25600 x 25600` float32 "
+        "score tensors alone are 19.5 GiB, more than this machine can hold), which is the "
+        "quadratic cost the FLOP ratio shows. Fix, if the measured ratio matters more than "
+        "bounded memory: a larger `mhca_chunk`."
+    ),
+    "KNN / DGGF": (
+        "**Graph cost.** The model's default form of DGGF's graph (`dynamic_max_relative`, "
+        "a grouped pairwise maximum, chosen for the speed of the training step) is slower "
+        "without gradients than the roll loop of the same graph (`dynamic_max_relative_loop`, "
+        "same values): the graph section's finding gives both ratios to KNN. Fix in "
+        "model/dggf.py: use the roll loop when no gradient is needed "
+        "(`not torch.is_grad_enabled()`), which also speeds up `ground`."
+    ),
+}
+"""Explanations added under the target summary for each missed target (by name prefix)."""
+
+
+def _run(cmd: Sequence[str]) -> tuple[int, float]:
+    print(f"\n$ {shlex.join(cmd)}", flush=True)
+    t0 = time.perf_counter()
+    code = subprocess.call(list(cmd), cwd=REPO)
+    return code, time.perf_counter() - t0
+
+
+def run_benchmarks(names: Sequence[str], quick: bool, threads: int | None = None) -> dict[str, str]:
+    """Run the named benchmarks (and ``synth``) one process each; returns failures by name.
+
+    ``threads`` is passed on as ``--threads`` (None: each benchmark's default)."""
+    failures = {}
+    for name in names:
+        if name == SYNTH:
+            if not SYNTH_SCRIPT.is_file():
+                failures[name] = f"{SYNTH_SCRIPT.relative_to(REPO)} does not exist"
+                continue
+            cmd = [sys.executable, str(SYNTH_SCRIPT.relative_to(REPO)), *SYNTH_ARGS[quick]]
+        else:
+            cmd = [sys.executable, "-m", f"bench.{name}"]
+            cmd += ["--quick"] if quick else []
+            cmd += ["--threads", str(threads)] if threads is not None else []
+        code, seconds = _run(cmd)
+        print(f"[{name}: exit {code} after {seconds:.0f} s]", flush=True)
+        if code != 0:
+            failures[name] = f"exit code {code} after {seconds:.0f} s (see the console output)"
+    return failures
+
+
+# --------------------------------------------------------------------------- the document
+
+
+def _rel(path: Path) -> str:
+    try:
+        return str(path.relative_to(REPO))
+    except ValueError:
+        return str(path)
+
+
+def _synth_section(path: Path, failure: str | None) -> str:
+    """The scene generation section from ``bench_synth.py``'s own JSON (its own format)."""
+    lines = ["## Scene generation speed", ""]
+    if failure is not None and not path.is_file():
+        return "\n".join([*lines, f"*Not measured:* {failure}.", ""])
+    if not path.is_file():
+        return "\n".join(
+            [
+                *lines,
+                f"*Not measured:* `{_rel(path)}` is missing (HOOK: run "
+                "`python bench/bench_synth.py`).",
+                "",
+            ]
+        )
+    try:
+        data = json.loads(path.read_text())
+        command, table = data["command"], data["markdown"]
+        machine = data.get("machine", {})
+    except (json.JSONDecodeError, KeyError, TypeError) as exc:
+        return "\n".join([*lines, f"*Unreadable results* `{_rel(path)}`: {exc}.", ""])
+    here = machine_info(command)
+    load = machine.get("load_average_before")
+    load_text = f"; load average {load:.2f} at the start" if isinstance(load, int | float) else ""
+    lines += [
+        f"*Machine:* {here.hardware()}; Python {here.python}, {here.platform}{load_text}; "
+        f"{here.date}.  ",
+        f"*Command:* `{command}` (script by the scenes/ owner; its JSON is `{_rel(path)}`).",
+    ]
+    if failure is not None:
+        lines.append(f"*This run failed ({failure}); the table is from the previous run.*")
+    lines += ["", table, ""]
+    return "\n".join(lines)
+
+
+def _targets(results: dict[str, BenchResult]) -> list[tuple[str, Target]]:
+    out = []
+    for name, result in results.items():
+        for t in result.data.get("targets", []):
+            try:
+                out.append((name, Target(**t)))
+            except TypeError as exc:
+                raise BenchResultError(f"{name}: bad target entry {t!r}: {exc}") from exc
+    return out
+
+
+def render(
+    results: dict[str, BenchResult],
+    failures: dict[str, str],
+    synth_path: Path,
+    command: str,
+    seconds: float | None,
+) -> str:
+    """The whole ``docs/PERFORMANCE.md``."""
+    targets = _targets(results)
+    rows = []
+    for name, t in targets:
+        sign = ">=" if t.higher_is_better else "<="
+        rows.append(
+            (
+                t.name,
+                f"{t.value:,.1f} {t.unit}",
+                f"{sign} {t.limit:g} {t.unit}",
+                "met" if t.met else "**MISSED**",
+                f"[{name}](#{_anchor(results[name].title)})",
+            )
+        )
+    summary = Table(
+        title="",
+        columns=("target", "measured", "target", "verdict", "section"),
+        rows=tuple(rows),
+        align=("l", "r", "r", "l", "l"),
+    )
+    if seconds is not None:
+        made = f"Generated by `{command}` in {seconds / 60:.1f} min."
+    else:
+        made = f"Rebuilt by `{command}` from the stored results."
+    parts = [
+        "# Performance",
+        "",
+        "<!-- Generated by `python -m bench.run_all` (`make bench`) from bench/results/*.json; "
+        "do not edit by hand. -->",
+        "",
+        f"{made} Every section below says on which machine and with "
+        "which command its tables were made; repeat one with that command (it rewrites its "
+        "`bench/results/<name>.json`), then `python -m bench.run_all --no-run` rebuilds this "
+        "page. Timings are wall-clock medians; on a machine whose cores are shared with other "
+        "jobs (see each section's load average) they are noisy and pessimistic.",
+        "",
+        "## Targets",
+        "",
+        summary.to_markdown() if rows else "*No results yet.*",
+    ]
+    missed = [
+        note
+        for _, t in targets
+        if not t.met
+        for prefix, note in MISS_NOTES.items()
+        if t.name.startswith(prefix)
+    ]
+    if missed:
+        parts += ["", "### Notes on the misses", ""]
+        parts += [f"- {note}" for note in dict.fromkeys(missed)]
+    if failures:
+        parts += ["", "### Failed in this run", ""]
+        parts += [f"- `{name}`: {why}" for name, why in failures.items()]
+    parts.append("")
+    for name in BENCHMARKS:
+        if name in results:
+            section = results[name].to_markdown()
+            if name in failures:
+                section = section.replace(
+                    "\n", f"\n\n*This run failed ({failures[name]}); below: the previous run.*\n", 1
+                )
+            parts.append(section)
+        elif name in failures:
+            parts += [f"## {name}", "", f"*Not measured:* {failures[name]}.", ""]
+    parts.append(_synth_section(synth_path, failures.get(SYNTH)))
+    return "\n".join(parts).rstrip() + "\n"
+
+
+def _anchor(title: str) -> str:
+    """GitHub's heading anchor of ``title``."""
+    kept = "".join(ch for ch in title.lower() if ch.isalnum() or ch in " -_")
+    return kept.replace(" ", "-")
+
+
+def load_results(directory: Path = RESULTS_DIR) -> dict[str, BenchResult]:
+    """The results of :data:`BENCHMARKS` present in ``directory``."""
+    out = {}
+    for name in BENCHMARKS:
+        path = directory / f"{name}.json"
+        if path.is_file():
+            out[name] = read_result(path)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = argparse.ArgumentParser(
+        prog="python -m bench.run_all", description=__doc__.splitlines()[0]
+    )
+    parser.add_argument("--quick", action="store_true", help="smoke run (fewer repetitions)")
+    parser.add_argument(
+        "--only",
+        nargs="+",
+        choices=[*BENCHMARKS, SYNTH],
+        help="run only these; the document keeps the others' previous results",
+    )
+    parser.add_argument(
+        "--threads", type=int, help="torch threads of every benchmark (default: theirs, 1)"
+    )
+    parser.add_argument(
+        "--no-run", action="store_true", help="only rebuild docs/PERFORMANCE.md from the results"
+    )
+    parser.add_argument("--doc", type=Path, default=PERFORMANCE_DOC, help="document to write")
+    args = parser.parse_args(argv)
+    start = time.perf_counter()
+    failures: dict[str, str] = {}
+    if not args.no_run:
+        failures = run_benchmarks(args.only or [*BENCHMARKS, SYNTH], args.quick, args.threads)
+    seconds = None if args.no_run else time.perf_counter() - start
+    results = load_results()
+    command = shlex.join(["python", "-m", "bench.run_all", *argv])
+    text = render(results, failures, RESULTS_DIR / f"{SYNTH}.json", command, seconds)
+    args.doc.parent.mkdir(parents=True, exist_ok=True)
+    args.doc.write_text(text)
+    print(f"\nwrote {args.doc} ({len(results)} benchmark results", end="")
+    print(f", {seconds / 60:.1f} min)" if seconds is not None else ")")
+    if failures:
+        print("failed: " + ", ".join(f"{k} ({v})" for k, v in failures.items()), file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
