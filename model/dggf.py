@@ -113,21 +113,31 @@ def _axial_passes(x: Tensor, k: int) -> tuple[Tensor, Tensor, Iterator[_Pass]]:
     if k < 1:
         raise ValueError(f"graph step K must be >= 1, got {k}")
     b, _, height, width = x.shape
-    with torch.no_grad():
-        mu, sigma = graph_statistics(x.detach())
-        threshold = (mu - sigma).view(b, 1, 1)
-        positive = threshold > 0
-        threshold_sq = threshold.clamp(min=0).square()
+    mu, sigma, limit = _edge_limit(x)
+    limit = limit.view(b, 1, 1)
 
     def passes() -> Iterator[_Pass]:
         for dim, size in ((-2, height), (-1, width)):
             for shift in range(k, size, k):
                 diff = torch.roll(x, shift, dims=dim) - x
                 with torch.no_grad():
-                    mask = (diff.detach().square().sum(dim=1) < threshold_sq) & positive
+                    mask = diff.detach().square().sum(dim=1) < limit
                 yield dim, shift, mask, diff
 
     return mu, sigma, passes()
+
+
+def _edge_limit(x: Tensor) -> tuple[Tensor, Tensor, Tensor]:
+    """``mu, sigma`` and the squared edge threshold ``(mu - sigma)^2``, each ``(B,)``.
+
+    The limit is 0 where ``mu - sigma <= 0``, so the strict test ``distance^2 < limit`` then links
+    nothing. Computed without gradients: the statistics only decide the edges.
+    """
+    with torch.no_grad():
+        mu, sigma = graph_statistics(x.detach())
+        threshold = mu - sigma
+        limit = torch.where(threshold > 0, threshold.square(), torch.zeros_like(threshold))
+    return mu, sigma, limit
 
 
 def dynamic_axial_graph(x: Tensor, k: int) -> AxialGraph:
@@ -161,10 +171,7 @@ def dynamic_max_relative(x: Tensor, k: int) -> Tensor:
     pairs = x.shape[0] * c * height * width * max(height, width) // max(k, 1)
     grouped_ok = k >= 1 and height % k == 0 and width % k == 0 and pairs <= _GROUPED_MAX_ELEMENTS
     if grouped_ok and torch.is_grad_enabled() and x.requires_grad:
-        with torch.no_grad():
-            mu, sigma = graph_statistics(x.detach())
-            threshold = (mu - sigma).view(-1, 1, 1, 1, 1)
-            limit = torch.where(threshold > 0, threshold.square(), torch.zeros_like(threshold))
+        _, _, limit = _edge_limit(x)
         rows = _grouped_axis_max(x, k, limit)
         cols = _grouped_axis_max(x.transpose(-1, -2), k, limit).transpose(-1, -2)
         return torch.maximum(rows, cols)
@@ -185,7 +192,7 @@ def _grouped_axis_max(x: Tensor, k: int, limit: Tensor) -> Tensor:
 
     Args:
         x: ``(B, C, H, W)`` with ``H % k == 0``.
-        limit: ``(B, 1, 1, 1, 1)`` squared distance threshold ``(mu - sigma)^2`` (0: no edges).
+        limit: ``(B,)`` squared distance threshold ``(mu - sigma)^2`` (0: no edges).
 
     Returns:
         ``(B, C, H, W)``.

@@ -24,8 +24,12 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from model.metrics import VodResult, evaluate_frames
+
+if TYPE_CHECKING:
+    from model.report import GroundingReport
 from scenes.kitti import LabelError, ObjectLabel, parse_label_line, read_label_file
 
 
@@ -138,8 +142,8 @@ def score_directories(
     )
 
 
-def write_json(path: str | Path, result: VodResult) -> None:
-    """Write :meth:`VodResult.to_dict` as indented JSON (parent folders created)."""
+def write_json(path: str | Path, result: VodResult | GroundingReport) -> None:
+    """Write the result's ``to_dict()`` as indented JSON (parent folders created)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(result.to_dict(), indent=2) + "\n")
@@ -226,8 +230,7 @@ def _run_model_mode(args: argparse.Namespace) -> int:
     print(f"predictions written to {out}")
     print(report.format_tables(), end="")
     if args.json is not None:
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(report.to_dict(), indent=2) + "\n")
+        write_json(args.json, report)
         print(f"wrote {args.json}")
     return 0
 
