@@ -49,9 +49,9 @@ MISS_NOTES: dict[str, str] = {
         "**`ground` on a cached scene.** The latency section's stage table, its check from "
         "outside the model and its cProfile say where the time goes: the frozen MiniLM pass "
         "for a prompt never seen before (nothing once the prompt is cached), DGGF (mostly its "
-        "axial graph; the graph section compares the model's default grouped form with the "
-        "roll loop of the same graph without gradients: where the loop is faster, "
-        "`dynamic_max_relative` should use it when no gradient is needed), the head (the largest FLOP count of the `small` model: 3x3 convs on the "
+        "axial graph, which already runs as the gradient-free roll loop at inference; the "
+        "graph section compares both forms), the head (the largest FLOP count of the `small` "
+        "model: 3x3 convs on the "
         "80 x 80 head grid), and decoding. Decoding depends on the weights: an untrained head "
         "is ~0.1 everywhere, so hundreds of peaks pass the 0.1 threshold and rotated NMS (a "
         "Python loop with exact polygon IoU per nearby pair) dominates; the 'without decoding' "
@@ -65,8 +65,7 @@ MISS_NOTES: dict[str, str] = {
         "**`encode_scene` + `ground`.** The scene half adds the pillar encoders, both "
         "backbones and BACA at three stages to `ground` (stage table); BACA's time at 80 x 80 "
         "is its softmax attentions between 6400 queries and 144 agents and its four linear "
-        "projections per direction (cProfile). Fixes: a trained checkpoint (decoding), DGGF's "
-        "roll loop for inference (see the graph note), fusing the Q/K/V projections of each "
+        "projections per direction (cProfile). Fix: fusing the Q/K/V projections of each "
         "direction into one linear layer."
     ),
     "bi_mhca / BACA 12x12 latency": (
@@ -87,9 +86,9 @@ MISS_NOTES: dict[str, str] = {
         "**Graph cost.** The model's default form of DGGF's graph (`dynamic_max_relative`, "
         "a grouped pairwise maximum, chosen for the speed of the training step) is slower "
         "without gradients than the roll loop of the same graph (`dynamic_max_relative_loop`, "
-        "same values): the graph section's finding gives both ratios to KNN. Fix in "
-        "model/dggf.py: use the roll loop when no gradient is needed "
-        "(`not torch.is_grad_enabled()`), which also speeds up `ground`."
+        "same values): the graph section's finding gives both ratios to KNN. The model "
+        "already switches to the roll loop when no gradient is recorded "
+        "(`model/dggf.py`), so `ground` runs the faster form."
     ),
 }
 """Explanations added under the target summary for each missed target (by name prefix)."""

@@ -23,7 +23,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from scenes.calib import IMAGE_SIZE, Calibration
+from scenes.calib import IMAGE_SIZE, Calibration, bottom_centres
 from scenes.kitti import ObjectLabel, boxes_to_labels, write_label_file
 from scenes.root import Sample, Talk2RadarRoot
 
@@ -63,10 +63,8 @@ def prediction_labels(
     )
     width, height = image_size
     lo, hi = np.array(PCD_LIMIT_RANGE[:3]), np.array(PCD_LIMIT_RANGE[3:])
-    bottom = b[:, :3].copy()
-    bottom[:, 2] -= b[:, 5] / 2.0
     kept = []
-    for label, centre in zip(labels, bottom, strict=True):
+    for label, centre in zip(labels, bottom_centres(b), strict=True):
         x1, y1, x2, y2 = label.bbox
         in_image = x1 < width and y1 < height and x2 > 0 and y2 > 0
         in_range = bool(np.all(centre > lo) and np.all(centre < hi))

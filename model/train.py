@@ -73,6 +73,7 @@ class TrainConfig:
     device: str = "cpu"
     amp: bool = True
     max_steps: int = 0
+    stop_epoch: int = 0
     log_every: int = 10
     flip_probability: float = 0.5
 
@@ -173,7 +174,16 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
     if resume and (out / "last.pt").is_file():
         model = load_checkpoint(out / "last.pt", device=str(device))
         saved = torch.load(out / "train_state.pt", map_location="cpu", weights_only=False)
-        free = {"epochs", "max_steps", "val_every", "val_limit", "log_every", "device", "amp"}
+        free = {
+            "epochs",
+            "max_steps",
+            "stop_epoch",
+            "val_every",
+            "val_limit",
+            "log_every",
+            "device",
+            "amp",
+        }
         now = asdict(cfg)
         changed = sorted(k for k, v in saved["config"].items() if k not in free and now.get(k) != v)
         if changed:
@@ -229,7 +239,8 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
         dynamic_ncols=True,
     )
     start_time, seen = time.perf_counter(), 0
-    while state.step < total_steps and state.epoch < cfg.epochs:
+    last_epoch = min(cfg.epochs, cfg.stop_epoch) if cfg.stop_epoch else cfg.epochs
+    while state.step < total_steps and state.epoch < last_epoch:
         dataset.set_epoch(state.epoch)
         batches = epoch_batches(len(dataset), cfg.batch_size, state.epoch, cfg.seed, rank, world)
         model.train()
@@ -322,6 +333,13 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     p.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
     p.add_argument("--no-amp", action="store_true", help="disable bfloat16 autocast on CUDA")
     p.add_argument("--max-steps", type=int, default=0, help="stop after N steps (0: all epochs)")
+    p.add_argument(
+        "--stop-epoch",
+        type=int,
+        default=0,
+        help="stop after this many epochs but keep the --epochs learning-rate schedule "
+        "(a budget cut; --resume without it goes on)",
+    )
     p.add_argument("--log-every", type=int, default=10)
     p.add_argument("--flip-probability", type=float, default=0.5)
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
@@ -355,6 +373,7 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
         device=a.device,
         amp=not a.no_amp,
         max_steps=a.max_steps,
+        stop_epoch=a.stop_epoch,
         log_every=a.log_every,
         flip_probability=a.flip_probability,
     )

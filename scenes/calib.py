@@ -217,12 +217,19 @@ class CameraBoxes:
     rotation_y: np.ndarray
 
 
-def boxes_lidar_to_camera(boxes: np.ndarray, calib: Calibration) -> CameraBoxes:
-    """Sensor-frame boxes ``(K, 7)`` -> camera labels (spec §1.7, "sensor-frame prediction")."""
+def bottom_centres(boxes: np.ndarray) -> np.ndarray:
+    """Bottom-face centres ``(K, 3)`` of sensor-frame boxes ``(K, 7)`` (z at the geometric centre,
+    z up), in the same frame."""
     b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
     bottom = b[:, :3].copy()
     bottom[:, 2] -= b[:, 5] / 2.0
-    loc = transform_points(bottom, calib.velo_to_cam)
+    return bottom
+
+
+def boxes_lidar_to_camera(boxes: np.ndarray, calib: Calibration) -> CameraBoxes:
+    """Sensor-frame boxes ``(K, 7)`` -> camera labels (spec §1.7, "sensor-frame prediction")."""
+    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
+    loc = transform_points(bottom_centres(b), calib.velo_to_cam)
     hwl = b[:, [5, 4, 3]]
     ry = np.asarray(wrap_yaw(-b[:, 6] - np.pi / 2.0)).reshape(-1)
     return CameraBoxes(loc, hwl, ry)

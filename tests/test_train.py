@@ -15,6 +15,7 @@ import torch
 from model.checkpoint import load_checkpoint
 from model.train import TrainConfig, TrainingError, cosine_lr, epoch_batches, train
 from scenes.kitti import read_label_file
+from scenes.root import Talk2RadarRoot
 from scenes.synth import SynthSettings, generate_root
 
 REPO = Path(__file__).resolve().parents[1]
@@ -76,6 +77,23 @@ def test_loss_falls_and_resume_continues(tiny_root, tmp_path):
     assert model.checkpoint_metadata["step"] == 10
     with pytest.raises(TrainingError, match=r"different settings.*lr"):
         train(_config(tiny_root, out, max_steps=12, lr=5e-3), resume=True)
+
+
+def test_stop_epoch_keeps_the_planned_schedule(tiny_root, tmp_path):
+    """``--stop-epoch`` cuts the budget without shortening the cosine schedule; a resume
+    without it finishes the planned epochs."""
+    out = tmp_path / "cut"
+    samples = len(Talk2RadarRoot(tiny_root).ids("train"))
+    steps_per_epoch = len(epoch_batches(samples, 2, epoch=0, seed=0, rank=0, world=1))
+    cut = train(_config(tiny_root, out, epochs=3, stop_epoch=1, lr=1e-3))
+    assert cut.epoch == 1 and cut.step == steps_per_epoch
+    logged = [json.loads(line) for line in (out / "log.jsonl").read_text().splitlines()]
+    total = 3 * steps_per_epoch
+    last_lr = logged[-1]["lr"]
+    assert last_lr == pytest.approx(cosine_lr(steps_per_epoch - 1, total, 1e-3, 0))
+    assert last_lr > cosine_lr(steps_per_epoch - 1, steps_per_epoch, 1e-3, 0) * 1.5
+    finished = train(_config(tiny_root, out, epochs=3, lr=1e-3), resume=True)
+    assert finished.epoch == 3 and finished.step == total
 
 
 def _free_port() -> int:
