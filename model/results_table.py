@@ -1,0 +1,116 @@
+"""Markdown tables in the shape of the paper's tables I and III from ``model.evaluate`` JSON files.
+
+``python -m model.results_table NAME=PATH.json [NAME=PATH.json ...] [--by-type]`` prints one row per
+file: the overall table (3D AP per class and mAP/mAOS at 11 recall points, entire annotated area and
+driving corridor, the 40-point mAP beside it) or, with ``--by-type``, the 3D mAP per prompt type.
+docs/RESULTS.md's comparison tables are made with it, so each figure there is one command away from
+the JSON it came from.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+CLASSES = ("Car", "Pedestrian", "Cyclist")
+PROMPT_TYPES = ("depth", "velocity", "motion", "position")
+
+
+class ResultsTableError(ValueError):
+    """A results file that is missing, unreadable or lacks a field (the message names it)."""
+
+
+@dataclass(frozen=True)
+class Row:
+    """One table row: a label and the parsed ``model.evaluate --json`` file."""
+
+    name: str
+    result: Mapping[str, object]
+    source: str
+
+
+def _field(mapping: Mapping[str, object], key: str, source: str) -> object:
+    if not isinstance(mapping, Mapping) or key not in mapping:
+        raise ResultsTableError(f"{source}: missing field {key!r}")
+    return mapping[key]
+
+
+def _num(mapping: Mapping[str, object], key: str, source: str) -> float:
+    value = _field(mapping, key, source)
+    if not isinstance(value, int | float):
+        raise ResultsTableError(f"{source}: field {key!r} is not a number ({value!r})")
+    return float(value)
+
+
+def load_row(spec: str) -> Row:
+    """Parse ``NAME=PATH`` and read the JSON file it names."""
+    name, sep, path = spec.partition("=")
+    if not sep or not name or not path:
+        raise ResultsTableError(f"{spec!r}: expected NAME=PATH.json")
+    try:
+        result = json.loads(Path(path).read_text())
+    except FileNotFoundError:
+        raise ResultsTableError(f"{path}: no such results file") from None
+    except json.JSONDecodeError as exc:
+        raise ResultsTableError(f"{path}: not JSON (line {exc.lineno}: {exc.msg})") from None
+    if not isinstance(result, Mapping):
+        raise ResultsTableError(f"{path}: expected a JSON object")
+    return Row(name, result, path)
+
+
+def overall_table(rows: Sequence[Row]) -> str:
+    """Table I's shape: per-class 3D AP, mAP and mAOS (11 points) for both areas, R40 mAP."""
+    head = ["model", "frames"]
+    head += [f"EAA {c[:3]}" for c in CLASSES] + ["**EAA mAP**", "EAA mAOS", "EAA mAP R40"]
+    head += [f"DCA {c[:3]}" for c in CLASSES] + ["DCA mAP", "DCA mAOS"]
+    lines = ["| " + " | ".join(head) + " |", "| --- |" + " ---: |" * (len(head) - 1)]
+    for row in rows:
+        cells = [row.name, str(int(_num(row.result, "num_frames", row.source)))]
+        for area in ("entire_area", "roi"):
+            scores = _field(row.result, area, row.source)
+            where = f"{row.source} [{area}]"
+            cells += [f"{_num(scores, f'{c}_3d_all', where):.2f}" for c in CLASSES]
+            m = f"{_num(scores, 'mAP_3d', where):.2f}"
+            cells += [f"**{m}**" if area == "entire_area" else m]
+            cells += [f"{_num(scores, 'mAOS', where):.2f}"]
+            if area == "entire_area":
+                cells += [f"{_num(scores, 'mAP_3d_R40', where):.2f}"]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def by_type_table(rows: Sequence[Row]) -> str:
+    """Table III's shape: entire-area 3D mAP (11 points) per prompt type, frames per type."""
+    head = ["model", *(f"{t}" for t in PROMPT_TYPES)]
+    lines = ["| " + " | ".join(head) + " |", "| --- |" + " ---: |" * len(PROMPT_TYPES)]
+    for row in rows:
+        types = _field(row.result, "by_prompt_type", row.source)
+        cells = [row.name]
+        for t in PROMPT_TYPES:
+            entry = _field(types, t, f"{row.source} [by_prompt_type]")
+            scores = _field(entry, "entire_area", f"{row.source} [by_prompt_type.{t}]")
+            cells.append(f"{_num(scores, 'mAP_3d', f'{row.source} [by_prompt_type.{t}]'):.2f}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m model.results_table", description=__doc__)
+    parser.add_argument("rows", nargs="+", metavar="NAME=PATH.json")
+    parser.add_argument("--by-type", action="store_true", help="3D mAP per prompt type")
+    args = parser.parse_args(argv)
+    try:
+        rows = [load_row(spec) for spec in args.rows]
+        print(by_type_table(rows) if args.by_type else overall_table(rows))
+    except ResultsTableError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
