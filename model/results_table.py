@@ -1,8 +1,9 @@
 """Markdown tables in the shape of the paper's tables I and III from ``model.evaluate`` JSON files.
 
-``python -m model.results_table NAME=PATH.json [NAME=PATH.json ...] [--by-type]`` prints one row per
+``python -m model.results_table NAME=PATH.json [NAME=PATH.json ...] [--by-type | --by-depth]`` prints one row per
 file: the overall table (3D AP per class and mAP/mAOS at 11 recall points, entire annotated area and
-driving corridor, the 40-point mAP beside it) or, with ``--by-type``, the 3D mAP per prompt type.
+driving corridor, the 40-point mAP beside it), or with ``--by-type`` the 3D mAP per prompt type
+(table III), or with ``--by-depth`` the 3D mAP per 10 m depth bin (table IV).
 docs/RESULTS.md's comparison tables are made with it, so each figure there is one command away from
 the JSON it came from.
 """
@@ -98,14 +99,43 @@ def by_type_table(rows: Sequence[Row]) -> str:
     return "\n".join(lines)
 
 
+def by_depth_table(rows: Sequence[Row]) -> str:
+    """Table IV's shape: entire-area 3D mAP (11 points) per 10 m depth bin (bins without ground
+    truth objects show ``-``); the bins are those of the first row's file."""
+    if not rows:
+        return ""
+    bins = list(_field(rows[0].result, "by_depth", rows[0].source))
+    lines = ["| model | " + " | ".join(f"{b} m" for b in bins) + " |"]
+    lines.append("| --- |" + " ---: |" * len(bins))
+    for row in rows:
+        depth = _field(row.result, "by_depth", row.source)
+        cells = [row.name]
+        for b in bins:
+            where = f"{row.source} [by_depth.{b}]"
+            entry = _field(depth, b, where)
+            if _num(entry, "gt_objects", where) == 0:
+                cells.append("-")
+                continue
+            cells.append(f"{_num(_field(entry, 'entire_area', where), 'mAP_3d', where):.2f}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m model.results_table", description=__doc__)
     parser.add_argument("rows", nargs="+", metavar="NAME=PATH.json")
-    parser.add_argument("--by-type", action="store_true", help="3D mAP per prompt type")
+    table = parser.add_mutually_exclusive_group()
+    table.add_argument("--by-type", action="store_true", help="3D mAP per prompt type")
+    table.add_argument("--by-depth", action="store_true", help="3D mAP per 10 m depth bin")
     args = parser.parse_args(argv)
     try:
         rows = [load_row(spec) for spec in args.rows]
-        print(by_type_table(rows) if args.by_type else overall_table(rows))
+        if args.by_type:
+            print(by_type_table(rows))
+        elif args.by_depth:
+            print(by_depth_table(rows))
+        else:
+            print(overall_table(rows))
     except ResultsTableError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

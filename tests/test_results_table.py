@@ -8,6 +8,7 @@ from model.results_table import (
     CLASSES,
     PROMPT_TYPES,
     ResultsTableError,
+    by_depth_table,
     by_type_table,
     load_row,
     main,
@@ -27,7 +28,12 @@ def _result(base: float) -> dict:
     types = {
         t: {"frames": 3, "entire_area": _scores(base + 10 * k)} for k, t in enumerate(PROMPT_TYPES)
     }
+    depth = {
+        "0-10": {"gt_objects": 4, "entire_area": _scores(base + 5)},
+        "50-60": {"gt_objects": 0, "entire_area": _scores(0.0)},
+    }
     return {
+        "by_depth": depth,
         "num_frames": 7,
         "entire_area": _scores(base),
         "roi": _scores(base + 20),
@@ -47,6 +53,9 @@ def test_rows_carry_the_json_values(tmp_path):
     assert cells == ["fusion", "7", *ea, *roi]
     by_type = [c.strip() for c in by_type_table([row]).splitlines()[2].strip("|").split("|")]
     assert by_type == ["fusion", "41.00", "51.00", "61.00", "71.00"]
+    depth = by_depth_table([row]).splitlines()
+    assert depth[0] == "| model | 0-10 m | 50-60 m |"
+    assert [c.strip() for c in depth[2].strip("|").split("|")] == ["fusion", "46.00", "-"]
 
 
 def test_bad_files_are_named(tmp_path, capsys):
