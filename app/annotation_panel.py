@@ -98,6 +98,7 @@ SPLITS = ("train", "val", "test")
 """Splits offered when saving (the store's default, ``train``, is selected)."""
 
 NO_BOX = "(none)"
+_UNSET = object()
 """The *Box* dropdown's entry for "no box selected"."""
 
 NO_PAIRS = "(no saved pairs)"
@@ -539,6 +540,8 @@ class AnnotationPanel:
         self._drag = 0
         self._suggestions = 0
         self._pair_ids: tuple[str, ...] = ()
+        self._shown: dict[int, object] = {}
+        """The value the server last wrote into each edit widget (by ``id``), see :meth:`_show`."""
         self._wire()
         self._register_hotkeys()
         shared.register(self)
@@ -612,7 +615,8 @@ class AnnotationPanel:
             handle.disabled = selected is None
         if selected is not None:
             length, width, height, yaw = selected.box[3:]
-            w.cls.value = selected.cls if selected.cls in CLASSES else w.cls.value
+            if selected.cls in CLASSES and w.cls is not skip:
+                self._show(w.cls, selected.cls)
             for handle, value in (
                 (w.length, length),
                 (w.width, width),
@@ -620,20 +624,31 @@ class AnnotationPanel:
                 (w.yaw, float(np.degrees(yaw))),
             ):
                 if handle is not skip:
-                    handle.value = round(float(value), 4)
+                    self._show(handle, round(float(value), 4))
         answer = self.session.answer
         w.use_predictions.disabled = not (
             visible and answer is not None and len(answer.predictions.boxes) > 0
         )
         w.evidence.content = evidence_markdown(draft, evidence, self.selected)
         if w.prompt is not skip:
-            w.prompt.value = draft.prompt
+            self._show(w.prompt, draft.prompt)
         w.nothing.value = draft.refers_to_nothing
         calib = self.frame.sample.calib if self.frame is not None else None
         config = self.store.validation if self.store is not None else ValidationConfig()
         w.checks.content = checks_markdown(validate(draft, config, calib))
         w.save.disabled = self.store is None or self.frame is None
         w.split.disabled = draft.sample_id is not None
+
+    def _show(self, handle: viser.GuiInputHandle, value: object) -> None:
+        """Write the draft's ``value`` into an edit widget, unless the browser has changed the widget
+        since the server last wrote it: that edit's callback is still queued behind the one running
+        now (viser runs callbacks on worker threads, and they read the widget's value when they
+        run), and writing the draft's older value would silently undo what the user typed."""
+        last = self._shown.get(id(handle), _UNSET)
+        if last is not _UNSET and handle.value != last:
+            return
+        handle.value = value
+        self._shown[id(handle)] = handle.value
 
     def _status_markdown(self, draft: Draft, visible: bool) -> str:
         lines = []
@@ -699,7 +714,11 @@ class AnnotationPanel:
         def on_user(handle: viser.GuiInputHandle, fn: Callable[[], None]) -> None:
             def callback(event: viser.GuiEvent) -> None:
                 if _from_browser(event):
-                    self._guarded(fn)
+                    with self.session.lock:  # reentrant; fn takes it too
+                        # From here on no other callback can write the widget, and fn reads
+                        # and applies this value: it is no longer a pending edit (see _show).
+                        self._shown[id(handle)] = handle.value
+                        self._guarded(fn)
 
             handle.on_update(callback)
 

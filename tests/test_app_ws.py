@@ -10,6 +10,7 @@ TPCNet with its default MiniLM text encoder, untrained.
 from __future__ import annotations
 
 import contextlib
+import os
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -25,6 +26,8 @@ from scenes.calib import vod_lidar_calibration, vod_radar_calibration
 from scenes.root import Talk2RadarWriter
 
 GT_BOX = np.array([15.0, 2.0, -0.95, 4.2, 1.8, 1.5, 0.1])
+TIMEOUT_SCALE = float(os.environ.get("TALK2PC_TEST_TIMEOUT_SCALE", "4"))
+"""Multiplies every wait's timeout (``pump_until``); waits end as soon as their condition holds."""
 
 
 def write_tiny_root(path: Path, frames: int = 3, seed: int = 0) -> Path:
@@ -125,7 +128,10 @@ class BrowserLikeClient:
             self.markdown[m["uuid"]] = m["updates"]["_markdown"]
 
     def pump_until(self, condition: Callable[[], bool], timeout: float, what: str) -> None:
-        """Read messages until ``condition()`` holds; fail after ``timeout`` seconds."""
+        """Read messages until ``condition()`` holds; fail after ``timeout`` seconds, scaled by
+        ``TIMEOUT_SCALE`` (a bound for a stalled server, not a speed check: a machine whose cores
+        are busy with other jobs can be many times slower than an idle one)."""
+        timeout *= TIMEOUT_SCALE
         deadline = time.monotonic() + timeout
         while not condition():
             left = deadline - time.monotonic()
