@@ -98,7 +98,6 @@ SPLITS = ("train", "val", "test")
 """Splits offered when saving (the store's default, ``train``, is selected)."""
 
 NO_BOX = "(none)"
-_UNSET = object()
 """The *Box* dropdown's entry for "no box selected"."""
 
 NO_PAIRS = "(no saved pairs)"
@@ -644,11 +643,11 @@ class AnnotationPanel:
         since the server last wrote it: that edit's callback is still queued behind the one running
         now (viser runs callbacks on worker threads, and they read the widget's value when they
         run), and writing the draft's older value would silently undo what the user typed."""
-        last = self._shown.get(id(handle), _UNSET)
-        if last is not _UNSET and handle.value != last:
+        key = id(handle)
+        if key in self._shown and handle.value != self._shown[key]:
             return
         handle.value = value
-        self._shown[id(handle)] = handle.value
+        self._shown[key] = handle.value
 
     def _status_markdown(self, draft: Draft, visible: bool) -> str:
         lines = []

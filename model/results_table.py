@@ -17,8 +17,11 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-CLASSES = ("Car", "Pedestrian", "Cyclist")
-PROMPT_TYPES = ("depth", "velocity", "motion", "position")
+from model.metrics import AREAS, MIN_OVERLAPS
+from model.report import PROMPT_TYPES
+
+CLASSES: tuple[str, ...] = tuple(MIN_OVERLAPS)
+"""The classes the mAP averages, in the official order."""
 
 
 class ResultsTableError(ValueError):
@@ -63,15 +66,22 @@ def load_row(spec: str) -> Row:
     return Row(name, result, path)
 
 
+def _markdown(head: Sequence[str], body: Sequence[Sequence[str]]) -> str:
+    """A markdown table: the first column left-aligned, the others (numbers) right-aligned."""
+    lines = ["| " + " | ".join(head) + " |", "| --- |" + " ---: |" * (len(head) - 1)]
+    lines += ["| " + " | ".join(cells) + " |" for cells in body]
+    return "\n".join(lines)
+
+
 def overall_table(rows: Sequence[Row]) -> str:
     """Table I's shape: per-class 3D AP, mAP and mAOS (11 points) for both areas, R40 mAP."""
     head = ["model", "frames"]
     head += [f"EAA {c[:3]}" for c in CLASSES] + ["**EAA mAP**", "EAA mAOS", "EAA mAP R40"]
     head += [f"DCA {c[:3]}" for c in CLASSES] + ["DCA mAP", "DCA mAOS"]
-    lines = ["| " + " | ".join(head) + " |", "| --- |" + " ---: |" * (len(head) - 1)]
+    body = []
     for row in rows:
         cells = [row.name, str(int(_num(row.result, "num_frames", row.source)))]
-        for area in ("entire_area", "roi"):
+        for area in AREAS:
             scores = _field(row.result, area, row.source)
             where = f"{row.source} [{area}]"
             cells += [f"{_num(scores, f'{c}_3d_all', where):.2f}" for c in CLASSES]
@@ -80,23 +90,22 @@ def overall_table(rows: Sequence[Row]) -> str:
             cells += [f"{_num(scores, 'mAOS', where):.2f}"]
             if area == "entire_area":
                 cells += [f"{_num(scores, 'mAP_3d_R40', where):.2f}"]
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+        body.append(cells)
+    return _markdown(head, body)
 
 
 def by_type_table(rows: Sequence[Row]) -> str:
-    """Table III's shape: entire-area 3D mAP (11 points) per prompt type, frames per type."""
-    head = ["model", *(f"{t}" for t in PROMPT_TYPES)]
-    lines = ["| " + " | ".join(head) + " |", "| --- |" + " ---: |" * len(PROMPT_TYPES)]
+    """Table III's shape: entire-area 3D mAP (11 points) per prompt type."""
+    body = []
     for row in rows:
         types = _field(row.result, "by_prompt_type", row.source)
         cells = [row.name]
         for t in PROMPT_TYPES:
             entry = _field(types, t, f"{row.source} [by_prompt_type]")
-            scores = _field(entry, "entire_area", f"{row.source} [by_prompt_type.{t}]")
-            cells.append(f"{_num(scores, 'mAP_3d', f'{row.source} [by_prompt_type.{t}]'):.2f}")
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+            where = f"{row.source} [by_prompt_type.{t}]"
+            cells.append(f"{_num(_field(entry, 'entire_area', where), 'mAP_3d', where):.2f}")
+        body.append(cells)
+    return _markdown(["model", *PROMPT_TYPES], body)
 
 
 def by_depth_table(rows: Sequence[Row]) -> str:
@@ -105,8 +114,7 @@ def by_depth_table(rows: Sequence[Row]) -> str:
     if not rows:
         return ""
     bins = list(_field(rows[0].result, "by_depth", rows[0].source))
-    lines = ["| model | " + " | ".join(f"{b} m" for b in bins) + " |"]
-    lines.append("| --- |" + " ---: |" * len(bins))
+    body = []
     for row in rows:
         depth = _field(row.result, "by_depth", row.source)
         cells = [row.name]
@@ -117,8 +125,8 @@ def by_depth_table(rows: Sequence[Row]) -> str:
                 cells.append("-")
                 continue
             cells.append(f"{_num(_field(entry, 'entire_area', where), 'mAP_3d', where):.2f}")
-        lines.append("| " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+        body.append(cells)
+    return _markdown(["model", *(f"{b} m" for b in bins)], body)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
