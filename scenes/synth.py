@@ -4,7 +4,8 @@ Each *world* (:func:`scenes.world.generate_world`) is sensed once, LiDAR
 (:mod:`scenes.lidar_sim`) and accumulated radar (:mod:`scenes.radar_sim`), and yields up to
 ``--prompts-per-world`` prompts (:func:`scenes.prompts.generate_prompts`); every prompt becomes one
 sample (Talk2Radar: one prompt per frame id) whose ``label_2`` holds the boxes of its referents and
-whose sidecar ``meta/<id>.json`` keeps every actor. The samples of a world share their sensor files
+whose sidecar ``meta/<id>.json`` keeps every actor (and, in ``extra["clutter"]``, the parked
+bicycles, bicycle racks and mopeds, which are never referents and never in ``label_2``). The samples of a world share their sensor files
 (hard links to ``sources/w<world>/``). ``--frames N`` is the number of samples; ids run
 ``00000..N-1`` in world order.
 
@@ -249,6 +250,7 @@ def write_frame(
                 "generator": "scenes.synth",
                 "seed": settings.seed,
                 "unsensed_actor_ids": unseen,
+                "clutter": [c.to_json() for c in world.clutter],
             },
         )
         ids.append(

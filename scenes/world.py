@@ -8,6 +8,15 @@ Frame and time
     ``ego_speed * t`` further along x, and an actor's mesh is translated by ``velocity * t``: that is
     how older radar scans are simulated (:meth:`World.actor_mesh_at`).
 
+Streets
+    Delft-like city streets (calibrated to View-of-Delft, issue 14): mostly one narrow lane each
+    way, raised cycle paths or red cycle lanes on most sides, few cars and many cyclists and
+    pedestrians (6-11 referable road users per frame, about 80 % of them cyclists and
+    pedestrians), and parked bicycles, bicycle racks and mopeds on verges and sidewalks.
+    Those are :class:`Clutter`: static geometry that both sensors see but that is never an
+    :class:`~scenes.actors.Actor`, so never a referent nor in ``label_2``; :attr:`World.clutter`
+    records their VoD class and box.
+
 Road
     A centreline ``y = offset + curvature * u**2 / 2`` (``u`` = x; gently curved, radius >= 300 m,
     or straight), with a lateral profile of bands (lanes, markings, parking, kerb, verge, bike path,
@@ -98,26 +107,26 @@ class Material:
 
 
 MATERIALS: tuple[Material, ...] = (
-    Material(0.08, radar_rcs=-20.0, radar_prob=0.004),  # ASPHALT
-    Material(0.55, radar_rcs=-20.0, radar_prob=0.004),  # MARKING
-    Material(0.12, radar_rcs=-20.0, radar_prob=0.004),  # BIKE_PATH (red asphalt)
-    Material(0.22, radar_rcs=-18.0, radar_prob=0.006),  # PAVING
-    Material(0.30, radar_rcs=-18.0, radar_prob=0.006),  # GRASS
-    Material(0.18, radar_rcs=-20.0, radar_prob=0.001),  # SOIL
-    Material(0.28, radar_rcs=0.0, radar_prob=0.08),  # BRICK
-    Material(0.35, radar_rcs=2.0, radar_prob=0.08),  # CONCRETE
-    Material(0.10, lidar_dropout=0.3, radar_rcs=5.0, radar_prob=0.1),  # GLASS_FACADE
-    Material(0.45, radar_rcs=8.0, radar_prob=0.5),  # METAL (poles)
+    Material(0.25, 0.1, radar_rcs=-20.0, radar_prob=0.004),  # ASPHALT (dark or wet: drops)
+    Material(0.80, radar_rcs=-20.0, radar_prob=0.004),  # MARKING
+    Material(0.30, radar_rcs=-20.0, radar_prob=0.004),  # BIKE_PATH (red asphalt)
+    Material(0.35, radar_rcs=-18.0, radar_prob=0.006),  # PAVING
+    Material(0.55, radar_rcs=-18.0, radar_prob=0.006),  # GRASS
+    Material(0.30, radar_rcs=-20.0, radar_prob=0.001),  # SOIL
+    Material(0.40, radar_rcs=0.0, radar_prob=0.08),  # BRICK
+    Material(0.45, radar_rcs=2.0, radar_prob=0.08),  # CONCRETE
+    Material(0.15, lidar_dropout=0.3, radar_rcs=5.0, radar_prob=0.1),  # GLASS_FACADE
+    Material(0.50, radar_rcs=8.0, radar_prob=0.5),  # METAL (poles)
     Material(0.95, radar_rcs=10.0, radar_prob=0.6),  # SIGN (retro-reflective)
-    Material(0.25, radar_rcs=-5.0, radar_prob=0.1),  # BARK
-    Material(0.35, 0.25, 0.6, radar_rcs=-12.0, radar_prob=0.02),  # FOLIAGE
-    Material(0.12),  # PAINT_DARK
-    Material(0.55),  # PAINT_LIGHT
-    Material(0.05, lidar_dropout=0.4),  # CAR_GLASS
-    Material(0.06),  # RUBBER
-    Material(0.25),  # CLOTHING
-    Material(0.40),  # SKIN
-    Material(0.35),  # BIKE_FRAME
+    Material(0.35, radar_rcs=-5.0, radar_prob=0.1),  # BARK
+    Material(0.60, 0.25, 0.6, radar_rcs=-12.0, radar_prob=0.02),  # FOLIAGE
+    Material(0.20),  # PAINT_DARK
+    Material(0.80),  # PAINT_LIGHT
+    Material(0.06, lidar_dropout=0.4),  # CAR_GLASS
+    Material(0.08),  # RUBBER
+    Material(0.40),  # CLOTHING
+    Material(0.50),  # SKIN
+    Material(0.45),  # BIKE_FRAME
 )
 """Material properties indexed by :class:`Mat`."""
 
@@ -353,48 +362,72 @@ def _corners(
 
 
 def pedestrian_mesh(size: np.ndarray, walking: bool, rng: np.random.Generator) -> TaggedMesh:
-    """A pedestrian: two legs (in stride when walking), torso, two arms, head. Bounds = ``size``."""
+    """A pedestrian in outdoor clothes: two legs (in stride when walking), hips, coat-clad torso,
+    two arms, head, and sometimes a shoulder bag or backpack. Bounds = ``size``."""
     h = 1.75
     stride = rng.uniform(0.22, 0.32) if walking else rng.uniform(0.0, 0.05)
     hip, shoulder = 0.48 * h, 0.82 * h
     parts = []
     for side, phase in ((-1.0, 1.0), (1.0, -1.0)):
-        foot = [phase * stride, side * 0.09, 0.05]
-        parts.append(cylinder_part([0.0, side * 0.09, hip], foot, 0.07, Mat.CLOTHING))
-        hand = [-phase * stride * 0.8, side * 0.24, 0.47 * h]
-        parts.append(cylinder_part([0.0, side * 0.2, shoulder], hand, 0.045, Mat.CLOTHING))
+        foot = [phase * stride, side * 0.1, 0.05]
+        parts.append(cylinder_part([0.0, side * 0.1, hip], foot, 0.085, Mat.CLOTHING))
+        hand = [-phase * stride * 0.8, side * 0.25, 0.47 * h]
+        parts.append(cylinder_part([0.0, side * 0.21, shoulder], hand, 0.055, Mat.CLOTHING))
+    parts.append(ellipsoid_part([0.0, 0.0, hip + 0.02], [0.13, 0.19, 0.13], Mat.CLOTHING))
     parts.append(
-        ellipsoid_part([0.0, 0.0, (hip + shoulder) / 2 + 0.03], [0.12, 0.2, 0.24], Mat.CLOTHING)
+        ellipsoid_part([0.0, 0.0, (hip + shoulder) / 2 + 0.03], [0.15, 0.22, 0.3], Mat.CLOTHING)
     )
+    if rng.random() < 0.4:
+        parts.append(ellipsoid_part([-0.2, 0.0, 0.7 * h], [0.1, 0.16, 0.2], Mat.CLOTHING))
     parts.append(ellipsoid_part([0.02, 0.0, h - 0.11], [0.1, 0.085, 0.11], Mat.SKIN))
     mesh = TaggedMesh.concatenate(parts)
     return _fit_to_box(mesh, size)
 
 
-def cyclist_mesh(size: np.ndarray, rng: np.random.Generator) -> TaggedMesh:
-    """A cyclist: a bicycle (wheels, frame, handlebar) and a rider. Bounds = ``size``."""
+def bicycle_parts(rng: np.random.Generator) -> list[TaggedMesh]:
+    """A Dutch city bicycle (wheels with mudguards, frame, chain guard, handlebar, often a crate or
+    panniers) in its own frame: wheels at ``x = +-0.52``, ground at ``z = 0``, heading +x."""
     r = 0.34
     rear, front = [-0.52, 0.0, r], [0.52, 0.0, r]
     bracket, seat, stem = [-0.05, 0.0, 0.30], [-0.22, 0.0, 0.88], [0.38, 0.0, 0.98]
-    parts = [cylinder_part([x, -0.02, r], [x, 0.02, r], r, Mat.RUBBER) for x in (rear[0], front[0])]
+    parts = [cylinder_part([x, -0.03, r], [x, 0.03, r], r, Mat.RUBBER) for x in (rear[0], front[0])]
+    for x in (rear[0], front[0]):  # mudguards over the upper half of the wheels
+        parts.append(box_part([x - 0.3, -0.05, r + 0.12], [x + 0.3, 0.05, r + 0.4], Mat.BIKE_FRAME))
     for a, b in ((rear, bracket), (bracket, seat), (seat, stem), (stem, front), (rear, seat)):
-        parts.append(cylinder_part(a, b, 0.025, Mat.BIKE_FRAME))
-    parts.append(cylinder_part([0.38, -0.3, 1.0], [0.38, 0.3, 1.0], 0.02, Mat.BIKE_FRAME))
+        parts.append(cylinder_part(a, b, 0.03, Mat.BIKE_FRAME))
+    parts.append(box_part([-0.55, -0.06, 0.22], [0.0, 0.06, 0.42], Mat.BIKE_FRAME))  # chain guard
+    parts.append(cylinder_part([0.38, -0.3, 1.0], [0.38, 0.3, 1.0], 0.025, Mat.BIKE_FRAME))
+    load = rng.random()
+    if load < 0.35:  # front crate
+        parts.append(box_part([0.45, -0.2, 0.72], [0.85, 0.2, 1.0], Mat.BIKE_FRAME))
+    elif load < 0.7:  # rear rack with panniers
+        parts.append(box_part([-0.75, -0.24, 0.45], [-0.3, 0.24, 0.8], Mat.CLOTHING))
+    return parts
+
+
+def cyclist_mesh(size: np.ndarray, rng: np.random.Generator) -> TaggedMesh:
+    """A cyclist: a city bicycle (:func:`bicycle_parts`) and a rider in a jacket (a backpack
+    sometimes). Bounds = ``size``."""
+    parts = bicycle_parts(rng)
     lean = rng.uniform(0.25, 0.4)
     shoulders = [-0.2 + lean, 0.0, 1.42]
-    parts.append(cylinder_part([-0.22, 0.0, 0.9], shoulders, 0.15, Mat.CLOTHING))
-    parts.append(ellipsoid_part([shoulders[0] + 0.06, 0.0, 1.61], [0.1, 0.085, 0.11], Mat.SKIN))
+    parts.append(cylinder_part([-0.22, 0.0, 0.85], shoulders, 0.22, Mat.CLOTHING))
+    if rng.random() < 0.3:  # backpack
+        parts.append(
+            ellipsoid_part([shoulders[0] - 0.3, 0.0, 1.2], [0.12, 0.16, 0.22], Mat.CLOTHING)
+        )
+    parts.append(ellipsoid_part([shoulders[0] + 0.06, 0.0, 1.61], [0.11, 0.1, 0.12], Mat.SKIN))
     crank = rng.uniform(0, 2 * np.pi)
     for side, phase in ((-1.0, 0.0), (1.0, np.pi)):
         pedal = [
             -0.05 + 0.17 * np.cos(crank + phase),
-            side * 0.1,
+            side * 0.12,
             0.3 + 0.17 * np.sin(crank + phase),
         ]
-        parts.append(cylinder_part([-0.2, side * 0.1, 0.92], pedal, 0.065, Mat.CLOTHING))
+        parts.append(cylinder_part([-0.2, side * 0.12, 0.92], pedal, 0.09, Mat.CLOTHING))
         parts.append(
             cylinder_part(
-                [shoulders[0], side * 0.18, 1.4], [0.36, side * 0.27, 1.0], 0.04, Mat.CLOTHING
+                [shoulders[0], side * 0.22, 1.4], [0.36, side * 0.27, 1.0], 0.06, Mat.CLOTHING
             )
         )
     return _fit_to_box(TaggedMesh.concatenate(parts), size)
@@ -435,6 +468,7 @@ class Side:
     bike_path: tuple[float, float] | None
     sidewalk: tuple[float, float]
     building_line: float
+    cycle_lane: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -508,12 +542,16 @@ def _make_side(
         a, b = strip(lane_width - 0.12, Mat.ASPHALT)
         centres.append((a + b) / 2)
         strip(0.12, Mat.MARKING, dashed=lane < lanes - 1)
-    parking = strip(rng.uniform(2.0, 2.4), Mat.ASPHALT) if rng.random() < 0.55 else None
+    separate_path = rng.random() < 0.65  # a raised cycle path, else often a red cycle lane
+    cycle_lane = None
+    if not separate_path and rng.random() < 0.75:
+        cycle_lane = strip(rng.uniform(1.5, 1.9), Mat.BIKE_PATH)
+    parking = strip(rng.uniform(2.0, 2.3), Mat.ASPHALT) if rng.random() < 0.45 else None
     carriageway = sign * edge
-    verge = strip(rng.uniform(0.8, 2.5), Mat.GRASS, kerb)
-    bike = strip(rng.uniform(1.8, 2.4), Mat.BIKE_PATH, kerb) if rng.random() < 0.6 else None
+    verge = strip(rng.uniform(1.0, 2.5), Mat.PAVING if rng.random() < 0.5 else Mat.GRASS, kerb)
+    bike = strip(rng.uniform(1.8, 2.6), Mat.BIKE_PATH, kerb) if separate_path else None
     sidewalk = strip(rng.uniform(1.8, 3.5), Mat.PAVING, kerb)
-    strip(rng.uniform(0.0, 4.0) + 0.01, Mat.GRASS, kerb)
+    strip(rng.uniform(0.0, 2.5) + 0.01, Mat.PAVING if rng.random() < 0.6 else Mat.GRASS, kerb)
     side = Side(
         sign=sign,
         lane_centres=tuple(centres),
@@ -523,6 +561,7 @@ def _make_side(
         bike_path=bike,
         sidewalk=sidewalk,
         building_line=sign * edge,
+        cycle_lane=cycle_lane,
     )
     return side, bands
 
@@ -530,8 +569,9 @@ def _make_side(
 def make_road(rng: np.random.Generator) -> Road:
     """A random road layout (see the module docstring)."""
     curvature = 0.0 if rng.random() < 0.5 else rng.uniform(-1.0, 1.0) / 300.0
-    lane_width = rng.uniform(3.0, 3.6)
-    lanes_same, lanes_opp = int(rng.integers(1, 3)), int(rng.integers(1, 3))
+    lane_width = rng.uniform(2.8, 3.4)  # Delft city streets: mostly one lane each way
+    lanes_same = 1 if rng.random() < 0.8 else 2
+    lanes_opp = 1 if rng.random() < 0.85 else 2
     kerb = rng.uniform(0.10, 0.16)
     right, right_bands = _make_side(-1.0, lanes_same, lane_width, kerb, rng)
     left, left_bands = _make_side(1.0, lanes_opp, lane_width, kerb, rng)
@@ -730,6 +770,137 @@ def _furniture(
 
 
 # --------------------------------------------------------------------------------------------------
+# Parked bicycles, bicycle racks and mopeds: street clutter, never a referent
+
+BICYCLE_SIZE = ((1.7, 1.9), (0.5, 0.65), (1.0, 1.15))
+MOPED_SIZE = ((1.65, 1.9), (0.62, 0.75), (1.1, 1.25))
+RACK_SLOT = 0.7
+"""Spacing (m) of a bicycle rack's hoops along the road."""
+
+
+@dataclass(frozen=True)
+class Clutter:
+    """A static object both sensors see but no prompt refers to (not an :class:`Actor`).
+
+    Attributes:
+        cls: Its View-of-Delft label: ``bicycle``, ``bicycle_rack`` or ``moped_scooter``.
+        box: ``(7,)`` ``x, y, z, l, w, h, yaw`` in the LiDAR frame, z at the geometric centre.
+    """
+
+    cls: str
+    box: np.ndarray = field(repr=False)
+
+    def to_json(self) -> dict:
+        """A JSON-serialisable dict (recorded in the sample sidecar's ``extra``)."""
+        return {"cls": self.cls, "box": [round(float(v), 4) for v in self.box]}
+
+
+def moped_mesh(size: np.ndarray) -> TaggedMesh:
+    """A parked moped / scooter: two small wheels, body, seat, leg shield, handlebar."""
+    parts = [
+        cylinder_part([x, -0.05, 0.22], [x, 0.05, 0.22], 0.22, Mat.RUBBER) for x in (-0.6, 0.6)
+    ]
+    parts.append(box_part([-0.75, -0.2, 0.3], [0.25, 0.2, 0.75], Mat.PAINT_LIGHT))
+    parts.append(box_part([-0.65, -0.17, 0.75], [0.0, 0.17, 0.86], Mat.RUBBER))
+    parts.append(box_part([0.25, -0.25, 0.25], [0.42, 0.25, 1.0], Mat.PAINT_LIGHT))
+    parts.append(cylinder_part([0.45, 0.0, 0.4], [0.45, 0.0, 1.15], 0.04, Mat.METAL))
+    parts.append(cylinder_part([0.45, -0.36, 1.15], [0.45, 0.36, 1.15], 0.025, Mat.METAL))
+    return _fit_to_box(TaggedMesh.concatenate(parts), size)
+
+
+def _rack_mesh(slots: int) -> tuple[TaggedMesh, np.ndarray]:
+    """Inverted-U hoops ``RACK_SLOT`` apart along x, 0.8 m wide in y and tall; the mesh (ground at
+    z = 0, centred in x and y) and its ``(l, w, h)``."""
+    parts = []
+    half = (slots - 1) * RACK_SLOT / 2
+    for j in range(slots):
+        x = j * RACK_SLOT - half
+        for y in (-0.4, 0.4):
+            parts.append(cylinder_part([x, y, 0.0], [x, y, 0.8], 0.03, Mat.METAL))
+        parts.append(cylinder_part([x, -0.4, 0.8], [x, 0.4, 0.8], 0.03, Mat.METAL))
+    mesh = TaggedMesh.concatenate(parts)
+    lo, hi = mesh.vertices.min(axis=0), mesh.vertices.max(axis=0)
+    return mesh, hi - lo
+
+
+def _street_clutter(
+    road: Road, side: Side, ground_z: float, obstacles: list[Obstacle], rng: np.random.Generator
+) -> tuple[list[TaggedMesh], list[Clutter]]:
+    """Bicycle racks with parked bicycles, loose parked bicycles and mopeds on one side's verge or
+    sidewalk, in front (u in 1..90 m); appended to ``obstacles`` so that actors keep clear."""
+    parts: list[TaggedMesh] = []
+    items: list[Clutter] = []
+    z0 = ground_z + road.kerb_height
+    taken = [np.array([o.x, o.y, o.l, o.w, o.yaw]) for o in obstacles]
+
+    def put(u: float, s: float, size: np.ndarray, yaw_offset: float) -> np.ndarray | None:
+        """The LiDAR-frame box at ``(u, s)`` when it is free (and mark it taken), else None."""
+        x, y = road.to_xy(u, s)
+        yaw = float(np.mod(float(road.heading(u)) + yaw_offset + np.pi, 2 * np.pi) - np.pi)
+        bev = np.array([x, y, size[0], size[1], yaw])
+        if taken and _overlaps_any(bev, 0.1, taken, [0.1] * len(taken)):
+            return None
+        taken.append(bev)
+        obstacles.append(Obstacle(float(x), float(y), float(size[0]), float(size[1]), yaw))
+        return np.array([x, y, z0 + size[2] / 2, *size, yaw])
+
+    def add(cls: str, mesh: TaggedMesh, box: np.ndarray) -> None:
+        centre = np.array([box[0], box[1], box[2] - box[5] / 2])
+        parts.append(mesh.transformed(_rotation_z(box[6]), centre))
+        items.append(Clutter(cls, box))
+
+    def bicycle(size: np.ndarray) -> TaggedMesh:
+        mesh = _fit_to_box(TaggedMesh.concatenate(bicycle_parts(rng)), size)
+        return mesh.transformed(np.eye(3), [0.0, 0.0, size[2] / 2])
+
+    strips = [side.verge, side.sidewalk]
+    u = rng.uniform(1.0, 8.0)
+    while u < 90.0:
+        a, b = strips[0] if rng.random() < 0.5 else strips[1]
+        width = b - a
+        kind = rng.random()
+        if kind < 0.4 and width >= 1.9:  # a rack, bicycles across the strip in most slots
+            slots = int(rng.integers(3, 9))
+            mesh, rsize = _rack_mesh(slots)
+            s = (a + b) / 2
+            group = np.array([rsize[0] + 0.6, 1.9, 1.2])
+            if put(u + rsize[0] / 2, s, group, 0.0) is not None:
+                x, y = road.to_xy(u + rsize[0] / 2, s)
+                yaw = float(road.heading(u))
+                rack_box = np.array([x, y, z0 + rsize[2] / 2, *rsize, yaw])
+                add("bicycle_rack", mesh.transformed(np.eye(3), [0, 0, rsize[2] / 2]), rack_box)
+                for j in range(slots):
+                    if rng.random() < 0.75:
+                        size = np.array([rng.uniform(*r) for r in BICYCLE_SIZE])
+                        su = u + j * RACK_SLOT + 0.2
+                        bx, by = road.to_xy(su, s + rng.normal(0.0, 0.1))
+                        turn = np.pi / 2 if rng.random() < 0.5 else -np.pi / 2
+                        byaw = float(np.mod(yaw + turn + rng.normal(0, 0.1) + np.pi, 2 * np.pi))
+                        bbox = np.array([bx, by, z0 + size[2] / 2, *size, byaw - np.pi])
+                        add("bicycle", bicycle(size), bbox)
+            u += rsize[0] + rng.uniform(4.0, 15.0)
+        elif kind < 0.8:  # loose bicycles parked along the road
+            for _ in range(int(rng.integers(1, 4))):
+                size = np.array([rng.uniform(*r) for r in BICYCLE_SIZE])
+                s = rng.uniform(a + size[1] / 2, max(a + size[1] / 2, b - size[1] / 2))
+                flip = np.pi if rng.random() < 0.5 else 0.0
+                box = put(u, s, size, flip + rng.normal(0.0, 0.15))
+                if box is not None:
+                    add("bicycle", bicycle(size), box)
+                u += size[0] + rng.uniform(0.1, 0.6)
+            u += rng.uniform(4.0, 15.0)
+        else:  # a parked moped or scooter
+            size = np.array([rng.uniform(*r) for r in MOPED_SIZE])
+            s = rng.uniform(a + size[1] / 2, max(a + size[1] / 2, b - size[1] / 2))
+            box = put(u, s, size, (np.pi if rng.random() < 0.5 else 0.0) + rng.normal(0.0, 0.3))
+            if box is not None:
+                mesh = moped_mesh(size).transformed(np.eye(3), [0.0, 0.0, size[2] / 2])
+                add("moped_scooter", mesh, box)
+            u += size[0] + rng.uniform(4.0, 15.0)
+    return parts, items
+
+
+# --------------------------------------------------------------------------------------------------
 # Actor placement
 
 
@@ -778,9 +949,9 @@ class WorldConfig:
         lidar_height: Ground plane at ``z = -lidar_height``.
     """
 
-    cars: tuple[int, int] = (4, 12)
-    pedestrians: tuple[int, int] = (2, 8)
-    cyclists: tuple[int, int] = (1, 5)
+    cars: tuple[int, int] = (1, 5)
+    pedestrians: tuple[int, int] = (3, 9)
+    cyclists: tuple[int, int] = (3, 9)
     ego_speed: tuple[float, float] = (0.0, 12.0)
     ego_stopped: float = 0.1
     near_u: tuple[float, float] = (4.0, 50.0)
@@ -837,7 +1008,7 @@ def _pedestrian_candidate(road: Road, u: float, rng: np.random.Generator) -> _Ca
 def _cyclist_candidate(road: Road, u: float, rng: np.random.Generator) -> _Candidate:
     r = rng.random()
     speed = rng.uniform(2.0, 7.0)
-    if r < 0.1:  # crossing
+    if r < 0.2:  # crossing (junctions, exits)
         s = rng.uniform(road.right.carriageway_edge + 1.0, road.left.carriageway_edge - 1.0)
         yaw = (np.pi / 2 if rng.random() < 0.5 else -np.pi / 2) + rng.normal(0, 0.1)
         return _Candidate("Cyclist", u, s, yaw, min(speed, 5.0))
@@ -847,6 +1018,10 @@ def _cyclist_candidate(road: Road, u: float, rng: np.random.Generator) -> _Candi
         a, b = side.bike_path
         s = rng.uniform(a + 0.4, b - 0.4)
         yaw = with_traffic if rng.random() < 0.75 else np.pi - with_traffic
+    elif side.cycle_lane is not None:  # on the red cycle lane
+        a, b = side.cycle_lane
+        s = rng.uniform(a + 0.35, b - 0.35)
+        yaw = with_traffic
     else:  # on the road next to the kerb or the parked cars
         edge = (
             side.carriageway_edge
@@ -896,6 +1071,8 @@ class World:
         actors: The actors (``actor_id`` = index).
         static_mesh: Road, kerbs, buildings and clutter (owner -1).
         actor_meshes: One mesh per actor in its own box frame (centre at the origin, heading +x).
+        clutter: Parked bicycles, bicycle racks and mopeds (their meshes are in ``static_mesh``);
+            never referents.
     """
 
     world_id: int
@@ -905,6 +1082,7 @@ class World:
     actors: tuple[Actor, ...]
     static_mesh: TaggedMesh = field(repr=False)
     actor_meshes: tuple[TaggedMesh, ...] = field(repr=False)
+    clutter: tuple[Clutter, ...] = ()
 
     def __post_init__(self) -> None:
         if len(self.actors) != len(self.actor_meshes):
@@ -937,11 +1115,16 @@ def generate_world(
     road = make_road(rng)
     static_parts = [road_mesh(road, ground_z)]
     obstacles: list[Obstacle] = []
+    clutter: list[Clutter] = []
     for side in (road.right, road.left):
         static_parts += _frontage(road, side, ground_z, rng)
         parts, obs = _furniture(road, side, ground_z, rng)
         static_parts += parts
         obstacles += obs
+    for side in (road.right, road.left):
+        parts, items = _street_clutter(road, side, ground_z, obstacles, rng)
+        static_parts += parts
+        clutter += items
 
     taken = [EGO_FOOTPRINT] + [np.array([o.x, o.y, o.l, o.w, o.yaw]) for o in obstacles]
     taken_margin = [0.5] + [0.1] * len(obstacles)
@@ -983,6 +1166,7 @@ def generate_world(
         actors=tuple(actors),
         static_mesh=TaggedMesh.concatenate(static_parts),
         actor_meshes=tuple(meshes),
+        clutter=tuple(clutter),
     )
 
 

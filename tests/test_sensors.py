@@ -10,10 +10,24 @@ import pytest
 
 from scenes.actors import Actor
 from scenes.calib import LIDAR_HEIGHT, sensor_to_lidar, vod_lidar_calibration, vod_radar_calibration
-from scenes.lidar_sim import LidarConfig, beam_elevations, ray_directions, simulate_lidar
+from scenes.lidar_sim import (
+    LidarConfig,
+    beam_elevations,
+    intensity_response,
+    ray_directions,
+    simulate_lidar,
+)
 from scenes.radar_sim import CLUTTER, GHOST, RadarConfig, simulate_radar
 from scenes.weather import CLEAR, FOG, RAIN, weather_named
-from scenes.world import Mat, RayCaster, TaggedMesh, World, box_part, generate_world
+from scenes.world import (
+    REFLECTIVITY,
+    Mat,
+    RayCaster,
+    TaggedMesh,
+    World,
+    box_part,
+    generate_world,
+)
 
 RADAR_TO_LIDAR = sensor_to_lidar(vod_lidar_calibration(), vod_radar_calibration())
 RADAR_ORIGIN = RADAR_TO_LIDAR[:3, 3]
@@ -50,13 +64,15 @@ def _surface_distance(points: np.ndarray, box: np.ndarray) -> np.ndarray:
 def test_beam_layout_is_hdl64_like():
     el = beam_elevations()
     assert el.shape == (64,)
-    assert el[0] == pytest.approx(2.0) and el[-1] == pytest.approx(-24.8)
+    assert el[0] == pytest.approx(2.0) and el[-1] == pytest.approx(-24.9)  # HDL-64: +2 .. -24.9
     assert np.all(np.diff(el) < 0)
+    np.testing.assert_allclose(np.diff(el[:32]), -1 / 3, atol=2e-3)  # upper block: 1/3 degree
+    np.testing.assert_allclose(np.diff(el[32:]), -0.5, atol=0.02)  # lower block: ~1/2 degree
     dirs = ray_directions()
     np.testing.assert_allclose(np.linalg.norm(dirs, axis=1), 1.0)
     azimuth = np.degrees(np.arctan2(dirs[:, 1], dirs[:, 0]))
     assert np.abs(azimuth).max() <= 45.0 + 1e-9
-    assert len(dirs) == 64 * len(np.arange(-45.0, 45.0 + 1e-9, 0.17))
+    assert len(dirs) == 64 * len(np.arange(-45.0, 45.0 + 1e-9, 0.09))
 
 
 def test_lidar_points_of_an_isolated_box_lie_on_its_surface():
@@ -84,16 +100,24 @@ def test_lidar_intensity_follows_reflectivity_and_incidence():
         Actor(1, "Car", [10.0, -3.0, -0.9, 2.0, 2.0, 1.5, 0.0], [0, 0]),
     )
     world = World(0, None, LIDAR_HEIGHT, 0.0, actors, TaggedMesh.empty(), (bright, dark))
-    cfg = replace(EXACT_LIDAR, intensity_noise=0.0)
+    # Unit gain so that nothing saturates: 255 * (rho * (floor + (1 - floor) cos)) ** gamma.
+    cfg = replace(EXACT_LIDAR, intensity_noise=0.0, intensity_gain=1.0)
     scan = simulate_lidar(RayCaster(world), np.random.default_rng(0), cfg)
     front = scan.points[:, 0] < 9.0 + 1e-4  # the faces at x = 9
     i_bright = scan.points[front & (scan.owner == 0), 3]
     i_dark = scan.points[front & (scan.owner == 1), 3]
-    # 255 * rho * (0.3 + 0.7 cos) with cos = direction . (-1, 0, 0); rho 0.55 vs 0.12.
+    rho_bright, rho_dark = REFLECTIVITY[Mat.PAINT_LIGHT], REFLECTIVITY[Mat.PAINT_DARK]
     dirs = scan.points[front & (scan.owner == 0), :3]
-    cos = dirs[:, 0] / np.linalg.norm(dirs, axis=1)
-    np.testing.assert_allclose(i_bright, 255 * 0.55 * (0.3 + 0.7 * cos), rtol=1e-5)
-    assert i_bright.mean() / i_dark.mean() == pytest.approx(0.55 / 0.12, rel=0.02)
+    cos = dirs[:, 0] / np.linalg.norm(dirs, axis=1)  # direction . (-1, 0, 0) of the face at x = 9
+    floor, gamma = cfg.intensity_floor, cfg.intensity_gamma
+    expected = 255 * (rho_bright * (floor + (1 - floor) * cos)) ** gamma
+    np.testing.assert_allclose(i_bright, expected, rtol=1e-5)
+    ratio = (rho_bright / rho_dark) ** gamma
+    assert i_bright.mean() / i_dark.mean() == pytest.approx(ratio, rel=0.02)
+    # The default gain saturates bright paint at normal incidence, as the HDL-64 does.
+    assert intensity_response(np.array([rho_bright]), np.array([1.0]), LidarConfig())[0] == 1.0
+    grazing = intensity_response(np.array([rho_dark] * 2), np.array([1.0, 0.1]), LidarConfig())
+    assert grazing[0] > grazing[1] > 0
 
 
 def test_lidar_is_deterministic_for_a_seed():
