@@ -12,6 +12,11 @@ Every option the paper's ablations compare is a field here, not a fork of the co
   fusion, table IX); ``text_fusion.graph_k``: the roll step ``K`` per stage (default 8, 4, 2).
 - ``head.anchor``: ``"corner"``, ``"edge"`` or ``"center"`` (table VII), see :mod:`model.head`.
 - ``text.encoder``: ``"minilm"`` (frozen, pretrained) or ``"gru"`` (Bi-GRU from scratch, table IX).
+- ``grounding``: ``"tpcnet"`` (the paper: DGGF conditions the BEV on the sentence and the C3D-RECHead
+  heatmap ranks the referred boxes) or ``"referent"`` (Talk2PC: a text-agnostic C3D-RECHead proposes
+  every object and :mod:`model.referent` scores each candidate against the prompt's tokens;
+  ``referent`` holds its sizes). ``ModelConfig()`` keeps the paper's path; the training command
+  line defaults to ``referent``, the product's path.
 
 Two presets (:func:`preset`):
 
@@ -48,6 +53,7 @@ Modalities = Literal["lidar", "radar", "both"]
 FusionKind = Literal["baca", "bi_mhca", "lidar_query", "radar_query", "conv_gate"]
 TextFusionKind = Literal["dggf", "ggf"]
 TextEncoderKind = Literal["minilm", "gru"]
+GroundingKind = Literal["tpcnet", "referent"]
 
 LIDAR_FEATURES = 4
 """LiDAR point features: x, y, z, intensity."""
@@ -269,6 +275,50 @@ class FpnConfig:
 
 
 @dataclass(frozen=True)
+class ReferentConfig:
+    """The referent stage (:mod:`model.referent`), used when ``ModelConfig.grounding`` is
+    ``"referent"``.
+
+    Attributes:
+        dim: Width of the candidate and text tokens.
+        layers: Decoder blocks (candidate self-attention, cross-attention to the text, FFN).
+        heads: Attention heads.
+        ffn_ratio: Feed-forward width as a multiple of ``dim``.
+        dropout: Dropout inside the attention blocks (training only).
+        max_candidates: Detections kept as candidates per scene (highest detection scores).
+        candidate_threshold: Smallest detection score of a candidate.
+        min_score: Smallest referent probability :meth:`TPCNet.ground` returns when no threshold
+            is given (the operating threshold that decides the returned *set* is stored in the
+            checkpoint, see :func:`model.predict.operating_threshold`).
+    """
+
+    dim: int = 128
+    layers: int = 3
+    heads: int = 4
+    ffn_ratio: int = 2
+    dropout: float = 0.1
+    max_candidates: int = 40
+    candidate_threshold: float = 0.05
+    min_score: float = 0.01
+
+    def __post_init__(self) -> None:
+        for name in ("dim", "layers", "heads", "ffn_ratio", "max_candidates"):
+            if getattr(self, name) < 1:
+                raise ConfigError(
+                    f"ReferentConfig.{name} must be >= 1, got {getattr(self, name)}", name
+                )
+        if self.dim % self.heads:
+            raise ConfigError(
+                f"ReferentConfig.heads {self.heads} does not divide dim {self.dim}", "heads"
+            )
+        for name in ("dropout", "candidate_threshold", "min_score"):
+            if not 0.0 <= getattr(self, name) < 1.0:
+                raise ConfigError(
+                    f"ReferentConfig.{name} must be in [0, 1), got {getattr(self, name)}", name
+                )
+
+
+@dataclass(frozen=True)
 class ModelConfig:
     """The whole TPCNet configuration."""
 
@@ -280,9 +330,12 @@ class ModelConfig:
     text_fusion: TextFusionConfig = field(default_factory=TextFusionConfig)
     fpn: FpnConfig = field(default_factory=FpnConfig)
     head: HeadConfig = field(default_factory=lambda: HeadConfig(head_channels=24))
+    grounding: GroundingKind = "tpcnet"
+    referent: ReferentConfig = field(default_factory=ReferentConfig)
 
     def __post_init__(self) -> None:
         _choice("ModelConfig", "modalities", self.modalities, typing.get_args(Modalities))
+        _choice("ModelConfig", "grounding", self.grounding, typing.get_args(GroundingKind))
         strides = self.backbone.cumulative_strides
         if self.fpn.output_stride not in strides:
             raise ConfigError(

@@ -33,11 +33,13 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
+import numpy as np
 import torch
 from torch import Tensor, nn
 from torch.nn.utils.rnn import pack_padded_sequence, pad_packed_sequence
 
 from model.config import TextConfig
+from model.numerals import NUMERIC_FEATURES, token_numeric_features
 
 LOG = logging.getLogger(__name__)
 
@@ -62,11 +64,14 @@ class TextFeatures:
         tokens: ``(B, L, D)`` float32 token features (zero at padding).
         padding_mask: ``(B, L)`` bool, True where position ``j`` of prompt ``b`` is padding.
         truncated: Per prompt, whether it exceeded the token limit and was cut.
+        numbers: ``(B, L, NUMERIC_FEATURES)`` float32 value of the number each token belongs to
+            (:mod:`model.numerals`; zero for other tokens and at padding).
     """
 
     tokens: Tensor
     padding_mask: Tensor
     truncated: tuple[bool, ...]
+    numbers: Tensor | None = None
 
 
 def validate_prompt(prompt: object) -> str:
@@ -130,13 +135,23 @@ def load_minilm() -> nn.Module:
 def tokenize(prompt: str, max_tokens: int) -> tuple[list[int], bool]:
     """Token ids of one validated prompt with [CLS]/[SEP], at most ``max_tokens``; and whether it
     was truncated (logged as a warning)."""
+    ids, _, truncated = tokenize_with_numbers(prompt, max_tokens)
+    return ids, truncated
+
+
+def tokenize_with_numbers(prompt: str, max_tokens: int) -> tuple[list[int], np.ndarray, bool]:
+    """:func:`tokenize` plus the ``(len(ids), NUMERIC_FEATURES)`` numeric features of each token
+    (:func:`model.numerals.token_numeric_features`; zero for [CLS] and [SEP])."""
     tokenizer = load_tokenizer()
-    ids = list(tokenizer(prompt, add_special_tokens=True)["input_ids"])
+    enc = tokenizer(prompt, add_special_tokens=True, return_offsets_mapping=True)
+    ids = list(enc["input_ids"])
+    offsets = [tuple(o) for o in enc["offset_mapping"]]
     truncated = len(ids) > max_tokens
     if truncated:
         LOG.warning("prompt has %d tokens, truncated to %d: %r", len(ids), max_tokens, prompt[:200])
         ids = [*ids[: max_tokens - 1], ids[-1]]
-    return ids, truncated
+        offsets = [*offsets[: max_tokens - 1], (0, 0)]
+    return ids, token_numeric_features(prompt, offsets), truncated
 
 
 def _pad(features: Sequence[Tensor], device: torch.device) -> tuple[Tensor, Tensor]:
@@ -165,38 +180,74 @@ class MiniLMTextEncoder(nn.Module):
         super().__init__()
         self.max_tokens = max_tokens
         self.cache_size = cache_size
-        self._cache: OrderedDict[str, tuple[Tensor, bool]] = OrderedDict()
+        self._cache: OrderedDict[str, tuple[Tensor, Tensor, bool]] = OrderedDict()
         self.cache_hits = 0
         self.cache_misses = 0
         # Follows .to(device) so that outputs land on the model's device; not in the state_dict.
         self.register_buffer("_device_probe", torch.empty(0), persistent=False)
 
-    def _encode_one(self, prompt: str) -> tuple[Tensor, bool]:
+    def _encode_one(self, prompt: str) -> tuple[Tensor, Tensor, bool]:
         cached = self._cache.get(prompt)
         if cached is not None:
             self._cache.move_to_end(prompt)
             self.cache_hits += 1
             return cached
         self.cache_misses += 1
-        ids, truncated = tokenize(prompt, self.max_tokens)
+        ids, numbers, truncated = tokenize_with_numbers(prompt, self.max_tokens)
         model = load_minilm()
         with torch.inference_mode():
             input_ids = torch.tensor([ids], dtype=torch.long)
             out = model(input_ids=input_ids, attention_mask=torch.ones_like(input_ids))
-        entry = (out.last_hidden_state[0].detach().clone().float(), truncated)
+        entry = (
+            out.last_hidden_state[0].detach().clone().float(),
+            torch.from_numpy(numbers),
+            truncated,
+        )
         if self.cache_size > 0:
             self._cache[prompt] = entry
             if len(self._cache) > self.cache_size:
                 self._cache.popitem(last=False)
         return entry
 
+    def prefetch(self, prompts: Sequence[str], chunk: int = 64) -> None:
+        """Encode the uncached ``prompts`` in padded batches of ``chunk`` (one MiniLM call per
+        chunk instead of one per prompt: about 4x less time in training, where every prompt is
+        new) and cache them. The features equal the one-at-a-time ones to float rounding
+        (padding is masked out of the attention), not bit for bit."""
+        todo = list(dict.fromkeys(validate_prompt(p) for p in prompts if p not in self._cache))
+        model = load_minilm()
+        for start in range(0, len(todo), chunk):
+            part = todo[start : start + chunk]
+            encoded = [tokenize_with_numbers(p, self.max_tokens) for p in part]
+            length = max(len(ids) for ids, _, _ in encoded)
+            input_ids = torch.zeros(len(part), length, dtype=torch.long)
+            attention = torch.zeros(len(part), length, dtype=torch.long)
+            for b, (ids, _, _) in enumerate(encoded):
+                input_ids[b, : len(ids)] = torch.tensor(ids)
+                attention[b, : len(ids)] = 1
+            with torch.inference_mode():
+                hidden = model(input_ids=input_ids, attention_mask=attention).last_hidden_state
+            for b, (prompt, (ids, numbers, truncated)) in enumerate(zip(part, encoded, strict=True)):
+                self.cache_misses += 1
+                entry = (
+                    hidden[b, : len(ids)].detach().clone().float(),
+                    torch.from_numpy(numbers),
+                    truncated,
+                )
+                if self.cache_size > 0:
+                    self._cache[prompt] = entry
+                    if len(self._cache) > self.cache_size:
+                        self._cache.popitem(last=False)
+
     def forward(self, prompts: Sequence[str]) -> TextFeatures:
         """Encode ``B`` prompts -> :class:`TextFeatures` with ``D = 384``."""
         if len(prompts) == 0:
             raise ValueError("no prompts to encode")
         entries = [self._encode_one(validate_prompt(p)) for p in prompts]
-        tokens, mask = _pad([e[0] for e in entries], self._device_probe.device)
-        return TextFeatures(tokens, mask, tuple(e[1] for e in entries))
+        device = self._device_probe.device
+        tokens, mask = _pad([e[0] for e in entries], device)
+        numbers, _ = _pad([e[1] for e in entries], device)
+        return TextFeatures(tokens, mask, tuple(e[2] for e in entries), numbers)
 
 
 class BiGRUTextEncoder(nn.Module):
@@ -219,11 +270,11 @@ class BiGRUTextEncoder(nn.Module):
         """Encode ``B`` prompts -> :class:`TextFeatures` with ``D = 2 * hidden``."""
         if len(prompts) == 0:
             raise ValueError("no prompts to encode")
-        encoded = [tokenize(validate_prompt(p), self.max_tokens) for p in prompts]
+        encoded = [tokenize_with_numbers(validate_prompt(p), self.max_tokens) for p in prompts]
         device = self.embed.weight.device
-        lengths = torch.tensor([len(ids) for ids, _ in encoded])
+        lengths = torch.tensor([len(ids) for ids, _, _ in encoded])
         ids = torch.zeros(len(encoded), int(lengths.max()), dtype=torch.long)
-        for b, (seq, _) in enumerate(encoded):
+        for b, (seq, _, _) in enumerate(encoded):
             if max(seq) >= MINILM_VOCAB:
                 raise ValueError(f"token id {max(seq)} outside the vocabulary of {MINILM_VOCAB}")
             ids[b, : len(seq)] = torch.tensor(seq)
@@ -233,7 +284,8 @@ class BiGRUTextEncoder(nn.Module):
         out, _ = self.gru(packed)
         tokens, _ = pad_packed_sequence(out, batch_first=True, total_length=ids.shape[1])
         mask = torch.arange(ids.shape[1])[None, :] >= lengths[:, None]
-        return TextFeatures(tokens, mask.to(device), tuple(t for _, t in encoded))
+        numbers, _ = _pad([torch.from_numpy(n) for _, n, _ in encoded], device)
+        return TextFeatures(tokens, mask.to(device), tuple(t for _, _, t in encoded), numbers)
 
 
 def build_text_encoder(cfg: TextConfig) -> MiniLMTextEncoder | BiGRUTextEncoder:

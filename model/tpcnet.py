@@ -28,6 +28,7 @@ that says which sensor the model was built for.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -43,9 +44,18 @@ from model.decode import decode
 from model.dggf import DynamicGatedGraphFusion, GatedGraphFusion
 from model.fpn import SecondFpn
 from model.grid import BevGrid
+from model.grounder import (
+    SceneCandidates,
+    SceneMaps,
+    describe_candidates,
+    referent_heatmap,
+    stack_candidates,
+)
 from model.head import C3DRecHead, HeadOutput
 from model.pillars import PillarEncoder
+from model.referent import ReferentStage
 from model.text import TextFeatures, build_text_encoder, validate_prompt
+from scenes.actors import CLASSES
 
 PointsLike = np.ndarray | Tensor
 
@@ -65,10 +75,12 @@ class SceneTimings:
     pillars: float
     backbone: float
     fusion: float
+    detect: float = 0.0
+    """``grounding="referent"``: neck, head, decoding and candidate description."""
 
     @property
     def total(self) -> float:
-        return self.pillars + self.backbone + self.fusion
+        return self.pillars + self.backbone + self.fusion + self.detect
 
 
 @dataclass(frozen=True)
@@ -80,10 +92,12 @@ class GroundTimings:
     neck: float
     head: float
     decode: float
+    referent: float = 0.0
+    """``grounding="referent"``: the referent stage (then ``dggf``, ``neck``, ``head`` are 0)."""
 
     @property
     def total(self) -> float:
-        return self.text + self.dggf + self.neck + self.head + self.decode
+        return self.text + self.dggf + self.neck + self.head + self.decode + self.referent
 
 
 @dataclass(frozen=True)
@@ -95,12 +109,16 @@ class SceneFeatures:
         num_lidar: LiDAR points given (before range filtering); 0 when unused.
         num_radar: Radar points given; 0 when unused.
         timings: Time per stage of the encoding.
+        objects: ``grounding="referent"`` only: the text-agnostic detections of the scene as
+            referent-stage candidates, and the detector's ``(3, H, W)`` sigmoid heatmaps.
     """
 
     stages: tuple[Tensor, ...]
     num_lidar: int
     num_radar: int
     timings: SceneTimings
+    objects: SceneCandidates | None = None
+    detection_heatmaps: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -217,17 +235,28 @@ class TPCNet(nn.Module):
         )
         self.text_encoder = build_text_encoder(cfg.text)
         text_dim = self.text_encoder.out_dim
-        if cfg.text_fusion.kind == "dggf":
+        self.text_fusion: nn.ModuleList | None = None
+        if cfg.grounding == "tpcnet" and cfg.text_fusion.kind == "dggf":
             self.text_fusion = nn.ModuleList(
                 DynamicGatedGraphFusion(c, text_dim, k, cfg.text_fusion.ffn_ratio)
                 for c, k in zip(channels, cfg.text_fusion.graph_k, strict=True)
             )
-        else:
+        elif cfg.grounding == "tpcnet":
             self.text_fusion = nn.ModuleList(
                 GatedGraphFusion(c, text_dim, cfg.text_fusion.ggf_k) for c in channels
             )
         self.neck = SecondFpn(channels, cfg.backbone.cumulative_strides, cfg.fpn)
         self.head = C3DRecHead(cfg.head, self.neck.out_channels)
+        self.referent: ReferentStage | None = None
+        if cfg.grounding == "referent":
+            # Candidate maps are pooled at two points (centre, anchor): see model.grounder.
+            self.referent = ReferentStage(
+                cfg.referent,
+                text_dim,
+                2 * self.neck.out_channels,
+                2 * channels[0] if cfg.uses_lidar else None,
+                2 * channels[0] if cfg.uses_radar else None,
+            )
         self.checkpoint_metadata: dict = {}
         """Metadata of the checkpoint this model was loaded from (see :mod:`model.checkpoint`)."""
 
@@ -265,7 +294,8 @@ class TPCNet(nn.Module):
 
     def _encode(
         self, lidar: list[Tensor] | None, radar: list[Tensor] | None, timed: bool = False
-    ) -> tuple[tuple[Tensor, ...], SceneTimings]:
+    ) -> tuple[tuple[Tensor, ...], dict[str, tuple[Tensor, ...]], SceneTimings]:
+        """Fused stages ``lr_1..3``, each sensor's own stages (``"l"``, ``"r"``) and timings."""
         clock = _Clock(self.device, timed)
         canvases: dict[str, Tensor] = {}
         for name, branch, clouds in (("l", self.lidar, lidar), ("r", self.radar, radar)):
@@ -284,7 +314,61 @@ class TPCNet(nn.Module):
             )
         else:
             fused = stages["l"] if "l" in stages else stages["r"]
-        return fused, SceneTimings(t_pillars, t_backbone, clock.lap())
+        return fused, stages, SceneTimings(t_pillars, t_backbone, clock.lap())
+
+    def detect(
+        self, lidar: list[Tensor] | None, radar: list[Tensor] | None
+    ) -> tuple[HeadOutput, list[SceneMaps]]:
+        """``grounding="referent"``: the text-agnostic detector on a batch of validated clouds.
+
+        Returns:
+            The head output (``heatmap (B, 3, H, W)`` logits, ``regression (B, 8, H, W)``) and,
+            per item, the BEV maps the referent stage pools from (:class:`SceneMaps`).
+        """
+        fused, stages, _ = self._encode(lidar, radar)
+        neck = self.neck(list(fused))
+        out = self.head(neck)
+        maps = [
+            SceneMaps(
+                fused=neck[b],
+                lidar=stages["l"][0][b] if "l" in stages else None,
+                radar=stages["r"][0][b] if "r" in stages else None,
+            )
+            for b in range(neck.shape[0])
+        ]
+        return out, maps
+
+    def candidates(
+        self,
+        boxes: np.ndarray,
+        labels: np.ndarray,
+        scores: np.ndarray,
+        maps: SceneMaps,
+        lidar: np.ndarray | None,
+        radar: np.ndarray | None,
+    ) -> SceneCandidates:
+        """:func:`model.grounder.describe_candidates` with this model's grid and anchor."""
+        return describe_candidates(
+            boxes,
+            labels,
+            scores,
+            maps,
+            self.head_grid,
+            self.cfg.head.anchor,
+            lidar if self.cfg.uses_lidar else None,
+            radar if self.cfg.uses_radar else None,
+        )
+
+    def refer(self, cands: SceneCandidates | list[SceneCandidates], text: TextFeatures) -> Tensor:
+        """Referent logits ``(N, K)`` of ``N`` prompts; ``cands`` is one scene shared by all the
+        prompts, or one scene per prompt."""
+        assert self.referent is not None
+        scenes = [cands] if isinstance(cands, SceneCandidates) else list(cands)
+        batch = stack_candidates(scenes)
+        n = text.tokens.shape[0]
+        if len(scenes) == 1 and n > 1:
+            batch = batch.index(torch.zeros(n, dtype=torch.long, device=batch.padding.device))
+        return self.referent(batch, text.tokens, text.numbers, text.padding_mask)
 
     def _ground(
         self, stages: Sequence[Tensor], text: TextFeatures, timed: bool = False
@@ -305,7 +389,8 @@ class TPCNet(nn.Module):
     def encode_scene(
         self, lidar: PointsLike | None = None, radar: PointsLike | None = None
     ) -> SceneFeatures:
-        """Text-independent features of one scene (sensor branches + LiDAR-radar fusion).
+        """Text-independent features of one scene (sensor branches + LiDAR-radar fusion; with
+        ``grounding="referent"`` also the text-agnostic detections as candidates).
 
         Args:
             lidar: ``(N, 4)`` LiDAR points (x, y, z, intensity), LiDAR frame; ignored (may be
@@ -321,13 +406,39 @@ class TPCNet(nn.Module):
         radar_t = self._clouds(
             None if radar is None else [radar], 1, "radar", RADAR_FEATURES, self.cfg.uses_radar
         )
+        objects, heat = None, None
         with torch.no_grad():
-            stages, timings = self._encode(lidar_t, radar_t, timed=True)
+            stages, per_sensor, timings = self._encode(lidar_t, radar_t, timed=True)
+            if self.referent is not None:
+                clock = _Clock(self.device)
+                neck = self.neck(list(stages))
+                out = self.head(neck)
+                dets = decode(
+                    out, self.head_grid, self.cfg.head, self.cfg.referent.candidate_threshold
+                )[0]
+                keep = slice(0, self.cfg.referent.max_candidates)
+                maps = SceneMaps(
+                    neck[0],
+                    per_sensor["l"][0][0] if "l" in per_sensor else None,
+                    per_sensor["r"][0][0] if "r" in per_sensor else None,
+                )
+                objects = self.candidates(
+                    dets.boxes[keep],
+                    dets.labels[keep],
+                    dets.scores[keep],
+                    maps,
+                    None if lidar_t is None else lidar_t[0].cpu().numpy(),
+                    None if radar_t is None else radar_t[0].cpu().numpy(),
+                )
+                heat = torch.sigmoid(out.heatmap[0]).float().cpu().numpy()
+                timings = dataclasses.replace(timings, detect=clock.lap())
         return SceneFeatures(
             stages=tuple(stages),
             num_lidar=0 if lidar_t is None else int(lidar_t[0].shape[0]),
             num_radar=0 if radar_t is None else int(radar_t[0].shape[0]),
             timings=timings,
+            objects=objects,
+            detection_heatmaps=heat,
         )
 
     def ground(
@@ -339,7 +450,10 @@ class TPCNet(nn.Module):
             features: From :meth:`encode_scene` of this model.
             prompt: The referring sentence (non-empty; longer than the token limit is truncated
                 and reported in :attr:`Predictions.truncated`).
-            score_threshold: Overrides ``cfg.head.score_threshold`` for the decoded boxes.
+            score_threshold: Smallest score returned. Default: ``cfg.head.score_threshold`` for
+                the paper's path (a decoded heatmap peak), ``cfg.referent.min_score`` for the
+                referent stage (a referent probability); the returned *set* at the checkpoint's
+                operating threshold is :func:`model.predict.operating_threshold`'s business.
 
         Returns:
             :class:`Predictions` (boxes, scores, class names, sigmoid heatmaps, grid, timings).
@@ -352,6 +466,8 @@ class TPCNet(nn.Module):
                 f"scene features with stage widths {got} do not come from this model "
                 f"(expects {expected}, batch 1)"
             )
+        if self.referent is not None:
+            return self._ground_referent(features, text_prompt, score_threshold)
         clock = _Clock(self.device)
         with torch.no_grad():
             text = self.text_encoder([text_prompt])
@@ -373,13 +489,51 @@ class TPCNet(nn.Module):
             timings=GroundTimings(t_text, t_dggf, t_neck, t_head, t_decode),
         )
 
+    def _ground_referent(
+        self, features: SceneFeatures, prompt: str, score_threshold: float | None
+    ) -> Predictions:
+        objects, heat = features.objects, features.detection_heatmaps
+        if objects is None or heat is None:
+            raise ValueError(
+                "scene features without candidates: encode the scene with this model "
+                "(grounding='referent')"
+            )
+        threshold = self.cfg.referent.min_score if score_threshold is None else score_threshold
+        clock = _Clock(self.device)
+        with torch.no_grad():
+            text = self.text_encoder([prompt])
+            t_text = clock.lap()
+            if len(objects):
+                probs = torch.sigmoid(self.refer(objects, text)[0]).float().cpu().numpy()
+            else:
+                probs = np.zeros(0, dtype=np.float32)
+            t_ref = clock.lap()
+        probs = probs.astype(np.float64)
+        order = np.argsort(-probs, kind="stable")
+        order = order[probs[order] >= threshold]
+        heatmaps = referent_heatmap(
+            heat, objects.boxes, objects.labels, probs, self.head_grid, self.cfg.head.anchor
+        )
+        labels = objects.labels[order]
+        return Predictions(
+            boxes=objects.boxes[order],
+            scores=probs[order],
+            labels=labels,
+            classes=tuple(CLASSES[i] for i in labels),
+            heatmaps=heatmaps,
+            grid=self.head_grid,
+            prompt=prompt,
+            truncated=text.truncated[0],
+            timings=GroundTimings(t_text, 0.0, 0.0, 0.0, clock.lap(), referent=t_ref),
+        )
+
     def forward(
         self,
         lidar: Sequence[PointsLike | None] | None,
         radar: Sequence[PointsLike | None] | None,
         prompts: Sequence[str],
     ) -> HeadOutput:
-        """Batched training/evaluation pass.
+        """Batched training/evaluation pass of the paper's path (``grounding="tpcnet"``).
 
         Args:
             lidar: ``B`` LiDAR clouds ``(N_b, 4)`` (``None`` for a radar-only model).
@@ -389,15 +543,21 @@ class TPCNet(nn.Module):
         Returns:
             :class:`model.head.HeadOutput` with ``heatmap (B, 3, H, W)`` logits and
             ``regression (B, 8, H, W)`` on :attr:`head_grid`; train it with
-            :func:`model.losses.grounding_loss`.
+            :func:`model.losses.grounding_loss`. The referent path trains through
+            :meth:`detect`, :meth:`candidates` and :meth:`refer` (:mod:`model.referent_train`).
         """
+        if self.text_fusion is None:
+            raise ValueError(
+                "forward() is the paper's text-conditioned pass; a grounding='referent' model "
+                "trains through detect() / candidates() / refer()"
+            )
         batch = len(prompts)
         if batch == 0:
             raise ValueError("forward needs at least one sample")
         prompts = [validate_prompt(p) for p in prompts]  # fail before any network work
         lidar_t = self._clouds(lidar, batch, "lidar", LIDAR_FEATURES, self.cfg.uses_lidar)
         radar_t = self._clouds(radar, batch, "radar", RADAR_FEATURES, self.cfg.uses_radar)
-        stages, _ = self._encode(lidar_t, radar_t)
+        stages, _, _ = self._encode(lidar_t, radar_t)
         text = self.text_encoder(prompts)
         out, _ = self._ground(stages, text)
         return out

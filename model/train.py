@@ -37,8 +37,10 @@ from tqdm import tqdm
 from model import build_model
 from model.checkpoint import load_checkpoint, save_checkpoint
 from model.losses import grounding_loss
+from model.referent_train import ReferentTrainConfig, referent_step
 from model.targets import collate_targets, draw_targets
 from scenes.dataset import AugmentConfig, GroundingBatch, GroundingDataset, collate
+from scenes.frame_dataset import FrameDataset
 from scenes.root import Talk2RadarRoot
 
 
@@ -76,10 +78,13 @@ class TrainConfig:
     stop_epoch: int = 0
     log_every: int = 10
     flip_probability: float = 0.5
+    grounding: str = "referent"
+    init: str | None = None
+    prompts_per_scene: int = 8
 
     def model_overrides(self) -> dict[str, str]:
         """The ``build_model`` overrides given on the command line."""
-        names = ("modalities", "fusion", "text_fusion", "anchor", "text_encoder")
+        names = ("modalities", "fusion", "text_fusion", "anchor", "text_encoder", "grounding")
         return {n: getattr(self, n) for n in names if getattr(self, n) is not None}
 
 
@@ -136,6 +141,21 @@ def _targets(batch: GroundingBatch, model: torch.nn.Module, device: torch.device
     ).to(device)
 
 
+def init_from(model: torch.nn.Module, path: str) -> int:
+    """Copy every weight of the checkpoint at ``path`` whose name and shape match ``model``'s
+    (e.g. the sensor branches, fusion, neck and head of a paper-path checkpoint into a referent
+    model); returns how many tensors were copied."""
+    from model.checkpoint import read_checkpoint
+
+    state = read_checkpoint(path)["state_dict"]
+    own = model.state_dict()
+    same = {k: v for k, v in state.items() if k in own and own[k].shape == v.shape}
+    if not same:
+        raise TrainingError(f"{path}: no weight matches this model's names and shapes")
+    model.load_state_dict(same, strict=False)
+    return len(same)
+
+
 def _log(out: Path, record: dict) -> None:
     with open(out / "log.jsonl", "a") as handle:
         handle.write(json.dumps(record) + "\n")
@@ -168,7 +188,15 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
     torch.manual_seed(cfg.seed + rank)
     root = Talk2RadarRoot(cfg.data, radar=None if cfg.radar_folder == "none" else cfg.radar_folder)
     augment = AugmentConfig(flip_probability=cfg.flip_probability)
-    dataset = GroundingDataset(root, cfg.train_split, augment=augment, seed=cfg.seed)
+    referent = cfg.grounding == "referent"
+    dataset: GroundingDataset | FrameDataset
+    if referent:
+        if world > 1:
+            raise TrainingError("the referent path trains in one process (no torchrun yet)")
+        dataset = FrameDataset(root, cfg.train_split, augment=augment, seed=cfg.seed)
+    else:
+        dataset = GroundingDataset(root, cfg.train_split, augment=augment, seed=cfg.seed)
+    referent_cfg = ReferentTrainConfig(prompts_per_scene=cfg.prompts_per_scene)
 
     state = TrainState()
     if resume and (out / "last.pt").is_file():
@@ -193,6 +221,9 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
         if resume:
             print(f"{out}: nothing to resume, starting a new run", file=sys.stderr)
         model = build_model(cfg.preset, **cfg.model_overrides())
+        if cfg.init:
+            copied = init_from(model, cfg.init)
+            print(f"initialised {copied} weight tensors from {cfg.init}", file=sys.stderr)
         saved = None
     model.to(device)
     params = [p for p in model.parameters() if p.requires_grad]
@@ -247,23 +278,34 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
         for indices in batches[state.step_in_epoch :]:
             if state.step >= total_steps:
                 break
-            batch = collate([dataset[i] for i in indices])
             for group in optimizer.param_groups:
                 group["lr"] = cosine_lr(state.step, total_steps, cfg.lr, cfg.warmup_steps)
-            targets = _targets(batch, model, device)
-            lidar = [t.to(device) for t in batch.lidar]
-            radar = [t.to(device) for t in batch.radar]
-            with torch.autocast(device_type=device.type, dtype=torch.bfloat16, enabled=use_amp):
-                output = wrapped(lidar, radar, list(batch.prompts))
-            terms = grounding_loss(output, targets)
-            if not torch.isfinite(terms.total):
+            if referent:
+                step_rng = np.random.default_rng((cfg.seed, 7, state.step))
+                frames = [dataset[i] for i in indices]
+                with torch.autocast(device_type=device.type, dtype=torch.bfloat16, enabled=use_amp):
+                    ref = referent_step(model, frames, step_rng, referent_cfg)
+                terms = ref.detection
+                total = ref.total
+                extra = {"bce": ref.bce.item(), "listwise": ref.listwise.item()}
+            else:
+                batch = collate([dataset[i] for i in indices])
+                targets = _targets(batch, model, device)
+                lidar = [t.to(device) for t in batch.lidar]
+                radar = [t.to(device) for t in batch.radar]
+                with torch.autocast(device_type=device.type, dtype=torch.bfloat16, enabled=use_amp):
+                    output = wrapped(lidar, radar, list(batch.prompts))
+                terms = grounding_loss(output, targets)
+                total = terms.total
+                extra = {}
+            if not torch.isfinite(total):
                 raise TrainingError(
                     f"non-finite loss at step {state.step} (heatmap {terms.heatmap.item()}, "
-                    f"regression {terms.regression.item()}); the last good checkpoint in {out} "
-                    "is kept"
+                    f"regression {terms.regression.item()}, {extra}); the last good checkpoint "
+                    f"in {out} is kept"
                 )
             optimizer.zero_grad(set_to_none=True)
-            terms.total.backward()
+            total.backward()
             torch.nn.utils.clip_grad_norm_(params, cfg.grad_clip)
             optimizer.step()
             state.step += 1
@@ -271,18 +313,17 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
             seen += len(indices) * world
             rate = seen / max(time.perf_counter() - start_time, 1e-9)
             bar.update(1)
-            bar.set_postfix(
-                loss=f"{terms.total.item():.3f}", samples_s=f"{rate:.1f}", ep=state.epoch
-            )
+            bar.set_postfix(loss=f"{total.item():.3f}", samples_s=f"{rate:.1f}", ep=state.epoch)
             if rank == 0 and state.step % cfg.log_every == 0:
                 _log(
                     out,
                     {
                         "step": state.step,
                         "epoch": state.epoch,
-                        "loss": terms.total.item(),
+                        "loss": total.item(),
                         "heatmap": terms.heatmap.item(),
                         "regression": terms.regression.item(),
+                        **extra,
                         "lr": optimizer.param_groups[0]["lr"],
                         "samples_per_s": rate,
                     },
@@ -326,6 +367,22 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     p.add_argument("--text-fusion", choices=["dggf", "ggf"])
     p.add_argument("--anchor", choices=["corner", "edge", "center"])
     p.add_argument("--text-encoder", choices=["minilm", "gru"])
+    p.add_argument(
+        "--grounding",
+        default="referent",
+        choices=["referent", "tpcnet"],
+        help="referent: text-agnostic detector + referent stage (default); tpcnet: the paper's "
+        "DGGF + C3D-RECHead ranking",
+    )
+    p.add_argument(
+        "--init", help="copy matching weights from this checkpoint before training (new runs)"
+    )
+    p.add_argument(
+        "--prompts-per-scene",
+        type=int,
+        default=8,
+        help="referent path: prompts generated per scene and step",
+    )
     p.add_argument("--radar-folder", default="auto", help="radar tree, 'auto' or 'none'")
     p.add_argument("--val-every", type=int, default=1, help="validate every N epochs (0: never)")
     p.add_argument("--val-limit", type=int, default=0, help="validate on the first N frames only")
@@ -376,6 +433,9 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
         stop_epoch=a.stop_epoch,
         log_every=a.log_every,
         flip_probability=a.flip_probability,
+        grounding=a.grounding,
+        init=a.init,
+        prompts_per_scene=a.prompts_per_scene,
     )
     return cfg, a.resume
 
