@@ -5,8 +5,8 @@ Each *world* (:func:`scenes.world.generate_world`) is sensed once, LiDAR
 ``--prompts-per-world`` prompts (:func:`scenes.prompts.generate_prompts`); every prompt becomes one
 sample (Talk2Radar: one prompt per frame id) whose ``label_2`` holds the boxes of its referents and
 whose sidecar ``meta/<id>.json`` keeps every actor (and, in ``extra["clutter"]``, the parked
-bicycles, bicycle racks and mopeds, which are never referents and never in ``label_2``). The samples of a world share their sensor files
-(hard links to ``sources/w<world>/``). ``--frames N`` is the number of samples; ids run
+bicycles, bicycle racks and mopeds, which are never referents and never in ``label_2``). The
+samples of a world share their sensor files (hard links to ``sources/w<world>/``). ``--frames N`` is the number of samples; ids run
 ``00000..N-1`` in world order.
 
 Determinism and resuming

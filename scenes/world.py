@@ -107,26 +107,26 @@ class Material:
 
 
 MATERIALS: tuple[Material, ...] = (
-    Material(0.25, 0.1, radar_rcs=-20.0, radar_prob=0.004),  # ASPHALT (dark or wet: drops)
-    Material(0.80, radar_rcs=-20.0, radar_prob=0.004),  # MARKING
-    Material(0.30, radar_rcs=-20.0, radar_prob=0.004),  # BIKE_PATH (red asphalt)
-    Material(0.35, radar_rcs=-18.0, radar_prob=0.006),  # PAVING
-    Material(0.55, radar_rcs=-18.0, radar_prob=0.006),  # GRASS
-    Material(0.30, radar_rcs=-20.0, radar_prob=0.001),  # SOIL
-    Material(0.40, radar_rcs=0.0, radar_prob=0.08),  # BRICK
-    Material(0.45, radar_rcs=2.0, radar_prob=0.08),  # CONCRETE
-    Material(0.15, lidar_dropout=0.3, radar_rcs=5.0, radar_prob=0.1),  # GLASS_FACADE
-    Material(0.50, radar_rcs=8.0, radar_prob=0.5),  # METAL (poles)
-    Material(0.95, radar_rcs=10.0, radar_prob=0.6),  # SIGN (retro-reflective)
-    Material(0.35, radar_rcs=-5.0, radar_prob=0.1),  # BARK
-    Material(0.60, 0.25, 0.6, radar_rcs=-12.0, radar_prob=0.02),  # FOLIAGE
-    Material(0.20),  # PAINT_DARK
-    Material(0.80),  # PAINT_LIGHT
+    Material(0.25, 0.1, radar_rcs=-28.0, radar_prob=0.012),  # ASPHALT (dark or wet: drops)
+    Material(0.80, radar_rcs=-28.0, radar_prob=0.012),  # MARKING
+    Material(0.30, radar_rcs=-27.0, radar_prob=0.012),  # BIKE_PATH (red asphalt)
+    Material(0.35, radar_rcs=-25.0, radar_prob=0.02),  # PAVING
+    Material(0.55, radar_rcs=-26.0, radar_prob=0.015),  # GRASS
+    Material(0.30, radar_rcs=-28.0, radar_prob=0.004),  # SOIL
+    Material(0.40, radar_rcs=-12.0, radar_prob=0.1),  # BRICK
+    Material(0.45, radar_rcs=-10.0, radar_prob=0.1),  # CONCRETE
+    Material(0.15, lidar_dropout=0.3, radar_rcs=-8.0, radar_prob=0.12),  # GLASS_FACADE
+    Material(0.50, radar_rcs=0.0, radar_prob=0.5),  # METAL (poles, racks)
+    Material(0.95, radar_rcs=4.0, radar_prob=0.6),  # SIGN (retro-reflective)
+    Material(0.35, radar_rcs=-14.0, radar_prob=0.15),  # BARK
+    Material(0.60, 0.25, 0.6, radar_rcs=-22.0, radar_prob=0.04),  # FOLIAGE
+    Material(0.20, radar_rcs=-6.0, radar_prob=0.3),  # PAINT_DARK (static: mopeds)
+    Material(0.80, radar_rcs=-6.0, radar_prob=0.3),  # PAINT_LIGHT
     Material(0.06, lidar_dropout=0.4),  # CAR_GLASS
-    Material(0.08),  # RUBBER
-    Material(0.40),  # CLOTHING
+    Material(0.08, radar_rcs=-20.0, radar_prob=0.05),  # RUBBER
+    Material(0.40, radar_rcs=-20.0, radar_prob=0.05),  # CLOTHING (panniers)
     Material(0.50),  # SKIN
-    Material(0.45),  # BIKE_FRAME
+    Material(0.45, radar_rcs=-12.0, radar_prob=0.3),  # BIKE_FRAME (parked bicycles)
 )
 """Material properties indexed by :class:`Mat`."""
 
