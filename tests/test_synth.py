@@ -51,6 +51,10 @@ def test_cli_writes_a_root_that_loads_back_with_the_same_boxes(root_dir):
         np.testing.assert_allclose(wrap_yaw(sample.boxes[:, 6] - expected[:, 6]), 0.0, atol=1e-4)
         assert sample.classes == tuple(by_id[i].cls for i in meta.referent_ids)
         assert not set(meta.referent_ids) & set(meta.extra["unsensed_actor_ids"])
+        # Street clutter is recorded in the sidecar, never among the labelled referents.
+        clutter = meta.extra["clutter"]
+        assert {c["cls"] for c in clutter} <= {"bicycle", "bicycle_rack", "moped_scooter"}
+        assert set(sample.classes) <= {"Car", "Pedestrian", "Cyclist"}
         assert sample.lidar.shape[1] == 4 and len(sample.lidar) > 10_000
         assert set(np.unique(sample.radar[:, 6]).tolist()) <= {0.0, -1.0, -2.0, -3.0, -4.0}
         # Radar comes back in the LiDAR frame: static points' v_r is the ego-motion term there.

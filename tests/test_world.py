@@ -175,3 +175,24 @@ def test_tagged_mesh_parts():
     assert set(both.owner.tolist()) == {-1, 3}
     with pytest.raises(ValueError, match="one mesh per actor"):
         World(0, None, 1.7, 0.0, (Actor(0, "Car", [5, 0, 0, 4, 2, 1.5, 0], [0, 0]),), cyl, ())
+
+
+def test_street_clutter_is_static_visible_and_never_an_actor(worlds):
+    clutter = [c for w in worlds for c in w.clutter]
+    assert len(clutter) >= 10 * len(worlds)  # Delft: parked bicycles everywhere
+    assert {c.cls for c in clutter} <= {"bicycle", "bicycle_rack", "moped_scooter"}
+    assert {"bicycle", "bicycle_rack", "moped_scooter"} <= {c.cls for c in clutter}
+    for world in worlds:
+        assert all(a.cls in ("Car", "Pedestrian", "Cyclist") for a in world.actors)
+        boxes = np.array([c.box for c in world.clutter])
+        assert bev_iou(world.boxes(), boxes).max() == 0.0  # actors keep clear of the clutter
+        # The clutter is static geometry (owner -1): a ray down onto a parked bicycle hits it.
+        bikes = boxes[[c.cls == "bicycle" for c in world.clutter]]
+        origins = bikes[:, :3] + np.array([0.0, 0.0, 3.0])
+        hits = RayCaster(world).cast(origins, np.tile([0.0, 0.0, -1.0], (len(bikes), 1)))
+        top = bikes[:, 2] + bikes[:, 5] / 2
+        assert np.mean(hits.points[:, 2] > top - 0.8) > 0.5 and (hits.owner == -1).all()
+    refs = sum(a.cls != "Car" for w in worlds for a in w.actors) / sum(
+        len(w.actors) for w in worlds
+    )
+    assert refs > 0.6  # mostly cyclists and pedestrians
