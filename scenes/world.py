@@ -11,8 +11,8 @@ Frame and time
 Streets
     Delft-like city streets (calibrated to View-of-Delft, issue 14): mostly one narrow lane each
     way, raised cycle paths or red cycle lanes on most sides, few cars and many cyclists and
-    pedestrians (6-11 referable road users per frame, about 80 % of them cyclists and
-    pedestrians), and parked bicycles, bicycle racks and mopeds on verges and sidewalks.
+    pedestrians (a median of 10 referable road users per frame, about 80 % of them cyclists
+    and pedestrians; docs/SENSOR_STATS.md), and parked bicycles, bicycle racks and mopeds on verges and sidewalks.
     Those are :class:`Clutter`: static geometry that both sensors see but that is never an
     :class:`~scenes.actors.Actor`, so never a referent nor in ``label_2``; :attr:`World.clutter`
     records their VoD class and box.
