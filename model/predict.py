@@ -15,9 +15,11 @@ The writer follows mmdet3d's ``KittiMetric`` as the Talk2Radar workflow uses it 
 from __future__ import annotations
 
 import time
+from collections import OrderedDict
 from collections.abc import Iterator, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -26,6 +28,9 @@ from tqdm import tqdm
 from scenes.calib import IMAGE_SIZE, Calibration, bottom_centres
 from scenes.kitti import ObjectLabel, boxes_to_labels, write_label_file
 from scenes.root import Sample, Talk2RadarRoot
+
+if TYPE_CHECKING:
+    from model.tpcnet import SceneFeatures
 
 PCD_LIMIT_RANGE = (0.0, -40.0, -3.0, 70.4, 40.0, 0.0)
 """mmdet3d's default ``pcd_limit_range`` (x_min, y_min, z_min, x_max, y_max, z_max), LiDAR frame."""
@@ -73,9 +78,71 @@ def prediction_labels(
     return kept
 
 
+def operating_threshold(model: torch.nn.Module) -> float:
+    """The score above which the model's boxes are its answer (the set metrics, the app).
+
+    ``model.checkpoint_metadata["operating_threshold"]`` where the checkpoint stores one, else the
+    decoder's ``model.cfg.head.score_threshold``.
+
+    Raises:
+        ValueError: the stored value is not a number in ``[0, 1)`` (the message names the field).
+    """
+    meta = getattr(model, "checkpoint_metadata", None) or {}
+    value = meta.get("operating_threshold")
+    if value is None:
+        return float(model.cfg.head.score_threshold)
+    if isinstance(value, bool) or not isinstance(value, int | float) or not 0.0 <= value < 1.0:
+        raise ValueError(
+            f"checkpoint metadata field 'operating_threshold' must be a number in [0, 1), "
+            f"got {value!r}"
+        )
+    return float(value)
+
+
+def decode_threshold(model: torch.nn.Module) -> float:
+    """The smallest score ``model.ground`` returns when given no threshold: the referent stage's
+    ``cfg.referent.min_score`` where ``cfg.grounding == "referent"``, else the decoder's
+    ``cfg.head.score_threshold``."""
+    cfg = model.cfg
+    if getattr(cfg, "grounding", "tpcnet") == "referent":
+        return float(cfg.referent.min_score)
+    return float(cfg.head.score_threshold)
+
+
+SceneKey = tuple[object, ...]
+"""Identity of a sample's sensor data (see :func:`scene_key`)."""
+
+
+def scene_key(root: Talk2RadarRoot, sample_id: str) -> SceneKey:
+    """The identity of a sample's sensor files: ``(device, inode)`` of its LiDAR and radar point
+    files and of both calibrations. Samples of one synthetic world (or annotated from one source
+    frame) share these files as hard links, so they share a key and one encoded scene; a copied
+    root without hard links merely loses the sharing."""
+    folders = [(root.lidar_dir, "velodyne", "bin"), (root.lidar_dir, "calib", "txt")]
+    if root.radar_dir is not None:
+        folders += [(root.radar_dir, "velodyne", "bin"), (root.radar_dir, "calib", "txt")]
+    key: list[object] = [root.radar_folder]
+    for tree, folder, ext in folders:
+        stat = (tree / "training" / folder / f"{sample_id}.{ext}").stat()
+        key.append((stat.st_dev, stat.st_ino))
+    return tuple(key)
+
+
 @dataclass(frozen=True)
 class FramePrediction:
-    """The model's answer for one sample, with its ground truth and timing."""
+    """The model's answer for one sample, with its ground truth and timing.
+
+    Attributes:
+        sample: The sample.
+        boxes: ``(K, 7)`` LiDAR frame, sorted by score (every box the grounding threshold kept).
+        scores: ``(K,)``.
+        classes: ``K`` class names.
+        labels: KITTI prediction labels of the boxes scoring at least ``min_label_score`` (see
+            :func:`iterate_predictions`), filtered as :func:`prediction_labels`.
+        seconds: ``encode_scene`` (of this sample's scene, measured once when shared) + ``ground``.
+        features: The encoded scene (to ground other prompts on it).
+        scene_key: :func:`scene_key` of the sample.
+    """
 
     sample: Sample
     boxes: np.ndarray
@@ -83,6 +150,8 @@ class FramePrediction:
     classes: tuple[str, ...]
     labels: list[ObjectLabel]
     seconds: float
+    features: SceneFeatures | None = field(default=None, repr=False, compare=False)
+    scene_key: SceneKey = ()
 
 
 def iterate_predictions(
@@ -91,26 +160,58 @@ def iterate_predictions(
     ids: Sequence[str],
     score_threshold: float | None = None,
     progress: bool = True,
+    min_label_score: float = 0.0,
+    cache_scenes: int = 4,
 ) -> Iterator[FramePrediction]:
-    """Run ``model.encode_scene`` + ``model.ground`` on each sample (eval mode, no gradients)."""
+    """Run ``model.encode_scene`` + ``model.ground`` on each sample (eval mode, no gradients).
+
+    Args:
+        score_threshold: Decoding threshold given to ``ground`` (None: the model's own).
+        min_label_score: Only boxes scoring at least this become :attr:`FramePrediction.labels`.
+        cache_scenes: Encoded scenes kept (most recently used first) for the following samples
+            with the same :func:`scene_key`; ids in world order (as ``scenes.synth`` writes them)
+            encode each world once. 0 encodes every sample.
+    """
     model.eval()
+    cache: OrderedDict[SceneKey, tuple[SceneFeatures, float]] = OrderedDict()
     with torch.no_grad():
         for sid in tqdm(ids, desc="predict", unit="frame", disable=not progress):
             sample = root.load(sid)
             if sample.prompt is None:
                 raise ValueError(f"{root.path}: sample {sid} has no prompt to ground")
+            key = scene_key(root, sample.sample_id)
+            if key in cache:
+                cache.move_to_end(key)
+                features, encode_seconds = cache[key]
+            else:
+                start = time.perf_counter()
+                features = model.encode_scene(sample.lidar, sample.radar)
+                encode_seconds = time.perf_counter() - start
+                if cache_scenes > 0:
+                    cache[key] = (features, encode_seconds)
+                    while len(cache) > cache_scenes:
+                        cache.popitem(last=False)
             start = time.perf_counter()
-            features = model.encode_scene(sample.lidar, sample.radar)
             pred = model.ground(features, sample.prompt, score_threshold=score_threshold)
-            seconds = time.perf_counter() - start
-            labels = prediction_labels(pred.boxes, pred.classes, pred.scores, sample.calib)
+            seconds = encode_seconds + time.perf_counter() - start
+            scores = np.asarray(pred.scores, dtype=np.float64)
+            boxes = np.asarray(pred.boxes, dtype=np.float64).reshape(-1, 7)
+            keep = scores >= min_label_score
+            labels = prediction_labels(
+                boxes[keep],
+                [c for c, k in zip(pred.classes, keep, strict=True) if k],
+                scores[keep],
+                sample.calib,
+            )
             yield FramePrediction(
                 sample,
-                np.asarray(pred.boxes),
-                np.asarray(pred.scores),
+                boxes,
+                scores,
                 tuple(pred.classes),
                 labels,
                 seconds,
+                features,
+                key,
             )
 
 

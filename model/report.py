@@ -9,25 +9,74 @@
   spanning 10 meters". An object's depth is its camera-frame forward distance (the label's
   ``location.z``); ground truth and detections are both restricted to the bin, then scored.
 
+- Grounding per prompt (:mod:`model.grounding_metrics`): top-box Acc@0.25 / Acc@0.5 and the set
+  metrics at the operating threshold (:func:`model.predict.operating_threshold`), overall, per
+  prompt type and per group; with ``baselines=True`` also for the language-blind oracle and the
+  class-noun prompt (:mod:`model.baselines`), each with its official mAP. They judge the boxes as
+  ``ground`` returns them (LiDAR frame, before the prediction files' image / range filter), against
+  the referents of ``label_2``.
+
+Thresholds: the model grounds each prompt once, decoding at ``min(decode, operating)``; the boxes
+scoring at least the decode threshold (``score_threshold``, default
+:func:`model.predict.decode_threshold`, what ``ground`` returns by itself) make the prediction files and the mAP (unchanged by the operating
+threshold), the boxes scoring at least the operating threshold make the answer set.
+
 All AP values are the entire-area 3D mAP at 11 recall points unless a table says otherwise.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import torch
 
+from model.baselines import class_noun_prompt, named_class, oracle_boxes, unsensed_ids
+from model.grounding_metrics import (
+    GroundingMetrics,
+    PromptBoxes,
+    PromptOutcome,
+    format_grounding_tables,
+    grounding_metrics,
+    prompt_outcome,
+)
 from model.metrics import VodResult, evaluate_frames
-from model.predict import iterate_predictions
-from scenes.kitti import ObjectLabel
+from model.predict import (
+    decode_threshold,
+    iterate_predictions,
+    operating_threshold,
+    prediction_labels,
+)
+from scenes.kitti import ObjectLabel, format_label_line, parse_label_line
 from scenes.prompts import infer_tags
-from scenes.root import Talk2RadarRoot
+from scenes.root import Sample, Talk2RadarRoot
 
 PROMPT_TYPES: tuple[str, ...] = ("depth", "velocity", "motion", "position")
 DEPTH_BINS: tuple[tuple[float, float], ...] = tuple((10.0 * i, 10.0 * (i + 1)) for i in range(6))
+
+
+BASELINES: tuple[str, ...] = ("class_noun", "oracle")
+"""Baseline names, in table order (JSON keys under ``baselines``)."""
+
+ROW_NAMES: dict[str, str] = {"model": "model", "class_noun": "class noun", "oracle": "oracle"}
+"""Row labels of the printed grounding tables."""
+
+
+@dataclass(frozen=True)
+class BaselineResult:
+    """A baseline scored like the model.
+
+    Attributes:
+        result: Official VoD result of its answers (as the prediction files would hold them).
+        grounding: Its grounding metrics at the model's operating threshold.
+    """
+
+    result: VodResult
+    grounding: GroundingMetrics
+
+    def to_dict(self) -> dict:
+        return {**self.result.to_dict(), "grounding": self.grounding.to_dict()}
 
 
 @dataclass(frozen=True)
@@ -40,7 +89,11 @@ class GroundingReport:
         by_depth: ``"0-10"`` ... ``"50-60"`` -> (number of GT objects, result in that bin).
         predictions: Frame id -> prediction labels (what the files hold).
         ground_truth: Frame id -> ground-truth labels.
-        seconds: Per-frame ``encode_scene + ground`` wall time.
+        seconds: Per-frame ``encode_scene + ground`` wall time (a shared scene's encoding time
+            counts in each of its frames).
+        grounding: The model's grounding metrics (None when not computed).
+        baselines: Name of :data:`BASELINES` -> its result (only those computed).
+        notes: Baseline name -> why it was not computed.
     """
 
     result: VodResult
@@ -50,15 +103,21 @@ class GroundingReport:
     ground_truth: Mapping[str, list[ObjectLabel]] = field(repr=False)
     tags: Mapping[str, frozenset[str]] = field(repr=False, default_factory=dict)
     seconds: tuple[float, ...] = field(repr=False, default=())
+    grounding: GroundingMetrics | None = None
+    baselines: Mapping[str, BaselineResult] = field(default_factory=dict)
+    notes: Mapping[str, str] = field(default_factory=dict)
 
     def rescored(self, predictions: Mapping[str, list[ObjectLabel]]) -> GroundingReport:
         """The same report with other predictions for the same frames (e.g. read back from the
-        written files, as the official devkit would read them)."""
-        return build_report(self.ground_truth, predictions, self.tags, self.seconds)
+        written files, as the official devkit would read them); grounding and baselines kept."""
+        fresh = build_report(self.ground_truth, predictions, self.tags, self.seconds)
+        return replace(fresh, grounding=self.grounding, baselines=self.baselines, notes=self.notes)
 
     def to_dict(self) -> dict:
-        """JSON-ready: the official dict plus ``by_prompt_type``, ``by_depth`` and timing."""
-        return {
+        """JSON-ready: the official dict plus ``by_prompt_type``, ``by_depth`` and timing; with
+        grounding metrics, ``grounding`` (:meth:`GroundingMetrics.to_dict`), ``baselines`` (name ->
+        official dict + ``grounding``) and ``baseline_notes``."""
+        out = {
             **self.result.to_dict(),
             "num_frames": self.result.num_frames,
             "by_prompt_type": {
@@ -69,9 +128,26 @@ class GroundingReport:
             },
             "median_seconds_per_frame": float(np.median(self.seconds)) if self.seconds else None,
         }
+        if self.grounding is not None:
+            out["grounding"] = self.grounding.to_dict()
+            out["baselines"] = {k: v.to_dict() for k, v in self.baselines.items()}
+            out["baseline_notes"] = dict(self.notes)
+        return out
+
+    def grounding_rows(self) -> dict[str, tuple[GroundingMetrics, float | None]]:
+        """Row label -> (grounding metrics, entire-area 3D mAP): the model, then the baselines."""
+        if self.grounding is None:
+            return {}
+        rows = {ROW_NAMES["model"]: (self.grounding, self.result.entire_area.map_3d)}
+        for name in BASELINES:
+            if name in self.baselines:
+                b = self.baselines[name]
+                rows[ROW_NAMES[name]] = (b.grounding, b.result.entire_area.map_3d)
+        return rows
 
     def format_tables(self) -> str:
-        """The official table, then mAP by prompt type and by depth bin (3D, entire area, R11)."""
+        """The official table, mAP by prompt type and by depth bin (3D, entire area, R11), then the
+        grounding tables (model and baselines side by side)."""
         lines = [self.result.format_table()]
         lines.append("mAP by prompt type (3D, entire area, 11-point / 40-point)")
         for name, (n, res) in self.by_type.items():
@@ -81,6 +157,11 @@ class GroundingReport:
         for name, (n, res) in self.by_depth.items():
             area = res.entire_area
             lines.append(f"  {name:<10}{n:>6} objects {area.map_3d:6.2f} / {area.map_3d_r40:6.2f}")
+        rows = self.grounding_rows()
+        if rows:
+            lines.append(format_grounding_tables(rows).rstrip("\n"))
+        for name, why in self.notes.items():
+            lines.append(f"{ROW_NAMES.get(name, name)} baseline not computed: {why}")
         return "\n".join(lines) + "\n"
 
 
@@ -120,28 +201,113 @@ def breakdown_by_depth(
     return out
 
 
+def _as_written(labels: Sequence[ObjectLabel]) -> list[ObjectLabel]:
+    """Labels rounded as a prediction file holds them (4 decimals), so that baselines are scored
+    on the same footing as the model's files."""
+    return [parse_label_line(format_label_line(lab, decimals=4)) for lab in labels]
+
+
+def _labels(boxes: PromptBoxes, min_score: float, sample: Sample) -> list[ObjectLabel]:
+    kept = boxes.above(min_score)
+    return _as_written(prediction_labels(kept.boxes, kept.classes, kept.scores, sample.calib))
+
+
+def sample_tags(sample: Sample) -> frozenset[str]:
+    """The sidecar's prompt type tags, else :func:`scenes.prompts.infer_tags` of the prompt."""
+    meta = sample.meta
+    if meta is not None and meta.tags:
+        return frozenset(meta.tags)
+    return infer_tags(sample.prompt or "")
+
+
 def evaluate_predictions(
     model: torch.nn.Module,
     root: Talk2RadarRoot,
     ids: Sequence[str],
     progress: bool = True,
     score_threshold: float | None = None,
+    operating: float | None = None,
+    baselines: bool = False,
 ) -> GroundingReport:
-    """Ground every sample of ``ids`` and score the answers."""
+    """Ground every sample of ``ids`` and score the answers.
+
+    Args:
+        score_threshold: Decode threshold of the prediction files and the mAP (None:
+            :func:`model.predict.decode_threshold`).
+        operating: Operating threshold of the set metrics (None:
+            :func:`model.predict.operating_threshold`).
+        baselines: Also score the class-noun prompt and the language-blind oracle (the oracle
+            needs every sample's sidecar; without one it is left out with a note).
+    """
     if not ids:
         raise ValueError(f"{root.path}: no samples to evaluate")
+    decode = decode_threshold(model) if score_threshold is None else float(score_threshold)
+    op = operating_threshold(model) if operating is None else float(operating)
+    if not 0.0 <= op < 1.0:
+        raise ValueError(f"operating threshold must be in [0, 1), got {op}")
+    ground_at = min(decode, op)
     gt: dict[str, list[ObjectLabel]] = {}
     dt: dict[str, list[ObjectLabel]] = {}
     tags: dict[str, frozenset[str]] = {}
     seconds = []
-    for pred in iterate_predictions(model, root, ids, score_threshold, progress=progress):
-        sid = pred.sample.sample_id
-        gt[sid] = list(pred.sample.labels)
+    outcomes: dict[str, list[PromptOutcome]] = {"model": [], "class_noun": [], "oracle": []}
+    base_dt: dict[str, dict[str, list[ObjectLabel]]] = {"class_noun": {}, "oracle": {}}
+    noun_answers: dict[tuple[object, ...], PromptBoxes] = {}
+    no_meta: list[str] = []
+    for pred in iterate_predictions(
+        model, root, ids, ground_at, progress=progress, min_label_score=decode
+    ):
+        sample = pred.sample
+        sid = sample.sample_id
+        gt[sid] = list(sample.labels)
         dt[sid] = pred.labels
-        meta = pred.sample.meta
-        tags[sid] = meta.tags if meta is not None and meta.tags else infer_tags(pred.sample.prompt)
+        tags[sid] = sample_tags(sample)
         seconds.append(pred.seconds)
-    return build_report(gt, dt, tags, tuple(seconds))
+        where = f"{root.path}: sample {sid}"
+        referents = PromptBoxes.make(sample.boxes, sample.classes, source=f"{where} label_2")
+        answer = PromptBoxes.make(pred.boxes, pred.classes, pred.scores, source=f"{where} model")
+        outcomes["model"].append(prompt_outcome(sid, tags[sid], answer, referents, op))
+        if not baselines:
+            continue
+        cls = named_class(tags[sid], sample.classes)
+        noun = class_noun_prompt(cls)
+        key = (*pred.scene_key, noun)
+        if key not in noun_answers:
+            p = model.ground(pred.features, noun, score_threshold=ground_at)
+            noun_answers[key] = PromptBoxes.make(
+                p.boxes, p.classes, p.scores, source=f"{where} class noun"
+            )
+        noun_boxes = noun_answers[key]
+        base_dt["class_noun"][sid] = _labels(noun_boxes, decode, sample)
+        outcomes["class_noun"].append(prompt_outcome(sid, tags[sid], noun_boxes, referents, op))
+        if sample.meta is None:
+            no_meta.append(sid)
+            continue
+        skip = unsensed_ids(sample.meta, source=f"{root.path / 'meta' / sid}.json")
+        oracle = oracle_boxes(sample.meta.actors, cls, exclude=skip)
+        base_dt["oracle"][sid] = _labels(oracle, decode, sample)
+        outcomes["oracle"].append(prompt_outcome(sid, tags[sid], oracle, referents, op))
+    report = build_report(gt, dt, tags, tuple(seconds))
+    found: dict[str, BaselineResult] = {}
+    notes: dict[str, str] = {}
+    if baselines:
+        if no_meta:
+            notes["oracle"] = (
+                f"{len(no_meta)} sample(s) have no meta sidecar listing the frame's actors "
+                f"(e.g. {root.path / 'meta' / (no_meta[0] + '.json')})"
+            )
+        for name in BASELINES:
+            if name not in notes:
+                found[name] = BaselineResult(
+                    result=evaluate_frames(gt, base_dt[name]),
+                    grounding=grounding_metrics(outcomes[name], op),
+                )
+    return replace(
+        report,
+        grounding=grounding_metrics(outcomes["model"], op),
+        baselines=found,
+        notes=notes,
+    )
 
 
 def build_report(

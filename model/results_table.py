@@ -1,9 +1,15 @@
 """Markdown tables in the shape of the paper's tables I and III from ``model.evaluate`` JSON files.
 
-``python -m model.results_table NAME=PATH.json [NAME=PATH.json ...] [--by-type | --by-depth]`` prints one row per
-file: the overall table (3D AP per class and mAP/mAOS at 11 recall points, entire annotated area and
-driving corridor, the 40-point mAP beside it), or with ``--by-type`` the 3D mAP per prompt type
-(table III), or with ``--by-depth`` the 3D mAP per 10 m depth bin (table IV).
+``python -m model.results_table NAME=PATH.json [NAME=PATH.json ...] [--by-type | --by-depth |
+--grounding | --grounding-splits]`` prints one row per file: the overall table (3D AP per class and
+mAP/mAOS at 11 recall points, entire annotated area and driving corridor, the 40-point mAP beside
+it), or with ``--by-type`` the 3D mAP per prompt type (table III), or with ``--by-depth`` the 3D mAP
+per 10 m depth bin (table IV). ``--grounding`` prints the per-prompt grounding metrics
+(:mod:`model.grounding_metrics`) with three rows per file, the model and its baselines (class-noun
+prompt, language-blind oracle): Acc@0.25, Acc@0.5, set precision / recall / F1 (micro over boxes),
+set F1 (mean per-prompt F1), exact-set accuracy and the entire-area 3D mAP; ``--grounding-splits``
+prints Acc@0.25 / set F1 / exact-set per prompt group and type. Files written before the grounding
+metrics existed still give the first three tables.
 docs/RESULTS.md's comparison tables are made with it, so each figure there is one command away from
 the JSON it came from.
 """
@@ -17,8 +23,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from model.grounding_metrics import SPLIT_NAMES
 from model.metrics import AREAS, MIN_OVERLAPS
-from model.report import PROMPT_TYPES
+from model.report import BASELINES, PROMPT_TYPES, ROW_NAMES
 
 CLASSES: tuple[str, ...] = tuple(MIN_OVERLAPS)
 """The classes the mAP averages, in the official order."""
@@ -129,12 +136,88 @@ def by_depth_table(rows: Sequence[Row]) -> str:
     return _markdown(["model", *(f"{b} m" for b in bins)], body)
 
 
+def _grounding(row: Row) -> tuple[Mapping[str, object], list[tuple[str, Mapping[str, object]]]]:
+    """The file's ``grounding`` block and its answer sets: ``[(row label, block with "grounding"
+    and "entire_area")]``, the model first, then the baselines present."""
+    if "grounding" not in row.result:
+        raise ResultsTableError(
+            f"{row.source}: missing field 'grounding' (written before the grounding metrics; "
+            "rerun python -m model.evaluate --data ROOT)"
+        )
+    sets: list[tuple[str, Mapping[str, object]]] = [(row.name, row.result)]
+    baselines = row.result.get("baselines", {})
+    if not isinstance(baselines, Mapping):
+        raise ResultsTableError(f"{row.source}: field 'baselines' is not an object")
+    for name in BASELINES:
+        if name in baselines:
+            sets.append((f"{row.name} {ROW_NAMES[name]}", baselines[name]))
+    return _field(row.result, "grounding", row.source), sets  # type: ignore[return-value]
+
+
+def grounding_table(rows: Sequence[Row]) -> str:
+    """Per-prompt grounding, one row per answer set (model, class noun, oracle) of each file."""
+    head = ["model", "prompts", "Acc@0.25", "Acc@0.5", "P", "R", "F1", "**set F1**", "exact"]
+    head += ["EAA mAP", "threshold"]
+    keys = ("acc_25", "acc_50", "precision", "recall", "f1", "set_f1", "exact")
+    body = []
+    for row in rows:
+        _, sets = _grounding(row)
+        for label, block in sets:
+            where = f"{row.source} [{label}]"
+            g = _field(block, "grounding", where)
+            overall = _field(g, "overall", f"{where} grounding")
+            w = f"{where} grounding.overall"
+            cells = [label, str(int(_num(overall, "prompts", w)))]
+            cells += [f"{_num(overall, k, w):.1f}" for k in keys]
+            cells[7] = f"**{cells[7]}**"
+            cells.append(f"{_num(_field(block, 'entire_area', where), 'mAP_3d', where):.2f}")
+            cells.append(f"{_num(g, 'operating_threshold', f'{where} grounding'):g}")
+            body.append(cells)
+    return _markdown(head, body)
+
+
+def grounding_splits_table(rows: Sequence[Row]) -> str:
+    """Acc@0.25 / set F1 / exact-set per prompt group and type tag, one row per answer set (``-``
+    where a file has no prompt of that kind)."""
+    body = []
+    for row in rows:
+        _, sets = _grounding(row)
+        for label, block in sets:
+            where = f"{row.source} [{label}]"
+            g = _field(block, "grounding", where)
+            groups = _field(g, "by_group", f"{where} grounding")
+            types = _field(g, "by_prompt_type", f"{where} grounding")
+            cells = [label]
+            for split in SPLIT_NAMES:
+                entry = groups.get(split) if isinstance(groups, Mapping) else None
+                if entry is None and isinstance(types, Mapping):
+                    entry = types.get(split)
+                if entry is None:
+                    cells.append("-")
+                    continue
+                w = f"{where} grounding [{split}]"
+                a, f, e = (_num(entry, k, w) for k in ("acc_25", "set_f1", "exact"))
+                cells.append(f"{a:.1f} / {f:.1f} / {e:.1f}")
+            body.append(cells)
+    return _markdown(["Acc@0.25 / set F1 / exact", *SPLIT_NAMES], body)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m model.results_table", description=__doc__)
     parser.add_argument("rows", nargs="+", metavar="NAME=PATH.json")
     table = parser.add_mutually_exclusive_group()
     table.add_argument("--by-type", action="store_true", help="3D mAP per prompt type")
     table.add_argument("--by-depth", action="store_true", help="3D mAP per 10 m depth bin")
+    table.add_argument(
+        "--grounding",
+        action="store_true",
+        help="per-prompt grounding metrics, model and baselines (class noun, oracle)",
+    )
+    table.add_argument(
+        "--grounding-splits",
+        action="store_true",
+        help="Acc@0.25 / set F1 / exact per prompt group and type, model and baselines",
+    )
     args = parser.parse_args(argv)
     try:
         rows = [load_row(spec) for spec in args.rows]
@@ -142,6 +225,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(by_type_table(rows))
         elif args.by_depth:
             print(by_depth_table(rows))
+        elif args.grounding:
+            print(grounding_table(rows))
+        elif args.grounding_splits:
+            print(grounding_splits_table(rows))
         else:
             print(overall_table(rows))
     except ResultsTableError as exc:
