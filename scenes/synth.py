@@ -43,7 +43,7 @@ from tqdm import tqdm
 
 from scenes.calib import Calibration, sensor_to_lidar, vod_lidar_calibration, vod_radar_calibration
 from scenes.lidar_sim import LidarConfig, LidarScan, simulate_lidar
-from scenes.prompts import Prompt, generate_prompts
+from scenes.prompts import PHRASINGS, Prompt, PromptConfig, generate_prompts
 from scenes.radar_sim import RadarConfig, RadarScan, simulate_radar
 from scenes.root import SampleMeta, Talk2RadarWriter
 from scenes.weather import WEATHERS, Weather
@@ -73,6 +73,8 @@ class SynthSettings:
         prompts_per_world: Prompts (samples) drawn per world (fewer when the world has fewer).
         min_lidar_points, min_radar_points: An actor can be a referent when it has at least this
             many LiDAR points or radar points (see :func:`synthesize`).
+        phrasing: Prompt wording stream, ``train``, ``heldout`` or ``all``
+            (``scenes.prompts.PromptConfig.phrasing``).
     """
 
     seed: int = 0
@@ -84,8 +86,11 @@ class SynthSettings:
     world: WorldConfig = field(default_factory=WorldConfig)
     lidar: LidarConfig = field(default_factory=LidarConfig)
     radar: RadarConfig = field(default_factory=RadarConfig)
+    phrasing: str = "train"
 
     def __post_init__(self) -> None:
+        if self.phrasing not in PHRASINGS:
+            raise SynthError(f"phrasing must be one of {list(PHRASINGS)}, got {self.phrasing!r}")
         if self.seed < 0:
             raise SynthError(f"seed must be >= 0, got {self.seed}")
         if self.weather != MIXED and self.weather not in WEATHERS:
@@ -102,6 +107,8 @@ class SynthSettings:
             "weather": self.weather,
             "radar_scans": self.radar_scans,
             "prompts_per_world": self.prompts_per_world,
+            # Only when not the default, so roots written before the option resume as before.
+            **({"phrasing": self.phrasing} if self.phrasing != "train" else {}),
         }
 
 
@@ -188,7 +195,14 @@ def synthesize(settings: SynthSettings, world_index: int, radar_to_lidar: np.nda
     t3 = time.perf_counter()
     sensed = sensed_actor_ids(lidar, radar, settings.min_lidar_points, settings.min_radar_points)
     candidates = [world.actors[i] for i in sensed]
-    prompts = tuple(generate_prompts(candidates, rngs["prompts"], settings.prompts_per_world))
+    prompts = tuple(
+        generate_prompts(
+            candidates,
+            rngs["prompts"],
+            settings.prompts_per_world,
+            config=PromptConfig(phrasing=settings.phrasing),
+        )
+    )
     t4 = time.perf_counter()
     times = StageTimes(world=t1 - t0, lidar=t2 - t1, radar=t3 - t2, prompts=t4 - t3)
     return SynthFrame(world, weather, lidar, radar, prompts, sensed, times)
@@ -439,6 +453,13 @@ def _parser() -> argparse.ArgumentParser:
         metavar=("TRAIN", "VAL", "TEST"),
         help="share of worlds per split (default 0.7 0.1 0.2)",
     )
+    p.add_argument(
+        "--phrasing",
+        default="train",
+        choices=PHRASINGS,
+        help="prompt wording: train phrasings, held-out phrasings (for measuring generalisation "
+        "to other wording) or all (default train)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
@@ -451,6 +472,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             weather=args.weather,
             radar_scans=args.radar_scans,
             prompts_per_world=args.prompts_per_world,
+            phrasing=args.phrasing,
         )
         report = generate_root(
             args.out, args.frames, settings, args.split_fractions, progress=not args.quiet

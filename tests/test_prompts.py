@@ -1,4 +1,7 @@
-"""Tests for scenes/prompts.py: exact referents, phrasing rules, tags, flip, describe()."""
+"""Tests for scenes.prompts: exact referents, rendering, tags, flip, describe().
+
+The phrasing variants and their train / held-out split: tests/test_prompt_phrasing.py.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +11,6 @@ import re
 import numpy as np
 import pytest
 
-from scenes.actors import Actor
 from scenes.prompts import (
     DEFAULT_REGION,
     ActorFeatures,
@@ -37,83 +39,17 @@ from scenes.prompts import (
     render,
     resolve,
 )
-
-CAR = (4.5, 1.8, 1.6)
-PED = (0.6, 0.6, 1.7)
-CYC = (1.8, 0.6, 1.7)
-
-
-def _actor(i, cls, x, y, yaw, v, size):
-    return Actor(i, cls, [x, y, size[2] / 2, *size, yaw], v)
-
-
-def hand_world() -> list[Actor]:
-    """3 cars, 2 pedestrians and 1 cyclist in view, plus 3 actors outside the annotated area.
-
-    Hand-computed (depth = nearest-edge forward distance, v_r = ground radial velocity):
-      0 Car   (20, 3.5)  yaw 0   v (10, 0)     depth 17.75  v_r +9.85  left   36 km/h
-      1 Car   (30,-3.5)  yaw pi  v (-8, 0)     depth 27.75  v_r -7.95  right  28.8 km/h
-      2 Car   (12,-5)    yaw 0   parked        depth  9.75             right
-      3 Ped   (8, 2.5)   yaw -pi/2 v (0,-1.4)  depth  7.7   v_r -0.42  left   crossing
-      4 Ped   (15, 0.5)  yaw 0   standing      depth 14.7              ahead
-      5 Cyc   (25, 1.0)  yaw 0   v (5, 0)      depth 24.1   v_r +5.0   ahead  18 km/h
-      6 Car   (60, 0)    moving away, beyond 50 m and the 5 m guard band
-      7 Car   (-10, 0)   moving away, behind the ego vehicle
-      8 Ped   (10, -12)  moving away, bearing -50 deg, outside the FoV and its guard band
-    """
-    return [
-        _actor(0, "Car", 20.0, 3.5, 0.0, (10.0, 0.0), CAR),
-        _actor(1, "Car", 30.0, -3.5, math.pi, (-8.0, 0.0), CAR),
-        _actor(2, "Car", 12.0, -5.0, 0.0, (0.0, 0.0), CAR),
-        _actor(3, "Pedestrian", 8.0, 2.5, -math.pi / 2, (0.0, -1.4), PED),
-        _actor(4, "Pedestrian", 15.0, 0.5, 0.0, (0.0, 0.0), PED),
-        _actor(5, "Cyclist", 25.0, 1.0, 0.0, (5.0, 0.0), CYC),
-        _actor(6, "Car", 60.0, 0.0, 0.0, (10.0, 0.0), CAR),
-        _actor(7, "Car", -10.0, 0.0, math.pi, (-10.0, 0.0), CAR),
-        _actor(8, "Pedestrian", 10.0, -12.0, -math.pi / 2, (0.0, -1.5), PED),
-    ]
-
-
-def random_world(rng: np.random.Generator, n: int) -> list[Actor]:
-    """Actors on a few lanes and sidewalks, some parked, some outside the annotated area."""
-    actors = []
-    for i in range(n):
-        cls = str(rng.choice(["Car", "Car", "Pedestrian", "Cyclist"]))
-        size = {"Car": CAR, "Pedestrian": PED, "Cyclist": CYC}[cls]
-        x = float(rng.uniform(-5.0, 62.0))
-        if cls == "Pedestrian":
-            y = float(rng.choice([-7.0, 7.0]) + rng.normal(0, 1.0))
-        else:
-            y = float(rng.choice([-5.25, -1.75, 1.75, 5.25]) + rng.normal(0, 0.3))
-        if rng.random() < 0.1:
-            y = float(rng.uniform(-25, 25))
-        yaw = float(rng.choice([0.0, math.pi]) + rng.normal(0, 0.1))
-        if cls == "Pedestrian" and rng.random() < 0.4:
-            yaw = float(rng.choice([-math.pi / 2, math.pi / 2]))
-        speed = {"Car": (2, 16), "Pedestrian": (0.8, 2.0), "Cyclist": (2.0, 7.0)}[cls]
-        s = 0.0 if rng.random() < 0.35 else float(rng.uniform(*speed))
-        actors.append(_actor(i, cls, x, y, yaw, (s * math.cos(yaw), s * math.sin(yaw)), size))
-    return actors
-
-
-def flip_world(actors: list[Actor]) -> list[Actor]:
-    out = []
-    for a in actors:
-        box = a.box.copy()
-        box[1], box[6] = -box[1], -box[6]
-        out.append(Actor(a.actor_id, a.cls, box, [a.velocity[0], -a.velocity[1]]))
-    return out
-
-
-PLURAL_NOUNS = {"cars", "vehicles", "pedestrians", "people", "cyclists", "bike riders"}
-PLURAL_NOUNS |= {"objects", "road users", "targets"}
-COUNT_WORDS = {"two": 2, "both": 2, "three": 3, "four": 4, "five": 5, "six": 6, "seven": 7}
-COUNT_WORDS |= {"eight": 8, "nine": 9, "ten": 10}
-
-
-def _has_phrase(text: str, phrase: str) -> bool:
-    return re.search(rf"\b{phrase}\b", text.lower()) is not None
-
+from tests.prompt_helpers import (
+    CAR,
+    SINGULAR_NOUNS,
+    flip_world,
+    hand_world,
+    has_phrase,
+    is_plural,
+    make_actor,
+    random_world,
+    read_numbers,
+)
 
 # ---------------------------------------------------------------------------------------------
 # Semantics on the hand-built world
@@ -177,7 +113,7 @@ def test_region_is_a_parameter():
 
 
 def test_guard_band_conflict_makes_prompt_unusable():
-    world = [*hand_world(), _actor(9, "Car", 52.0, 0.0, 0.0, (8.0, 0.0), CAR)]
+    world = [*hand_world(), make_actor(9, "Car", 52.0, 0.0, 0.0, (8.0, 0.0), CAR)]
     res = analyse(Predicate("Car", (HeadingIs(Heading.AWAY),)), world)
     assert res.ids == (0,)
     assert res.conflicts == (9,)
@@ -215,31 +151,53 @@ def test_duplicate_ids_and_bad_predicates_raise():
 # ---------------------------------------------------------------------------------------------
 
 
+def _agrees(text: str, n: int) -> None:
+    """Singular / plural noun, is / are and any stated count agree with ``n`` referents."""
+    assert is_plural(text) == (n > 1), (n, text)
+    if n == 1:
+        assert any(has_phrase(text, w) for w in SINGULAR_NOUNS), text
+    assert not has_phrase(text, "is" if n > 1 else "are"), (n, text)
+    _, counts = read_numbers(text)
+    assert all(c == n for c in counts), (n, counts, text)
+
+
 def test_render_singular_plural_and_counts():
     pred = Predicate("Car", (HeadingIs(Heading.AWAY),))
+    cars = re.compile(r"\b(?:cars|vehicles|automobiles|autos|motor vehicles)\b", re.IGNORECASE)
     for seed in range(30):
+        plain = render(pred, 1, np.random.default_rng(seed), p_frame=0.0, p_restyle=0.0)
+        assert plain[0].isupper() and plain.endswith("."), plain  # Talk2Radar style
+        assert plain.split()[0] == "The", plain
         one = render(pred, 1, np.random.default_rng(seed))
-        assert one[0].isupper() and one.endswith(".")
-        assert not any(_has_phrase(one, w) for w in PLURAL_NOUNS), one
-        assert _has_phrase(one, "car") or _has_phrase(one, "vehicle")
+        _agrees(one, 1)
         three = render(pred, 3, np.random.default_rng(seed), p_count_word=1.0)
-        assert _has_phrase(three, "three"), three
-        assert _has_phrase(three, "cars") or _has_phrase(three, "vehicles")
+        _agrees(three, 3)
+        assert read_numbers(three)[1] == [3.0], three
+        assert cars.search(three), three
         two = render(pred, 2, np.random.default_rng(seed), p_count_word=1.0)
-        assert _has_phrase(two, "two") or _has_phrase(two, "both"), two
+        _agrees(two, 2)
+        assert read_numbers(two)[1] == [2.0], two
+        many = render(pred, 12, np.random.default_rng(seed), p_count_word=1.0)
+        _agrees(many, 12)
+        assert read_numbers(many)[1] == [], many  # counts are stated up to ten
     with pytest.raises(ValueError):
         render(pred, 0, np.random.default_rng(0))
     with pytest.raises(ValueError):
         render(Predicate("Car", (), Extreme.NEAREST), 2, np.random.default_rng(0))
+    with pytest.raises(ValueError, match="phrasing"):
+        render(pred, 1, np.random.default_rng(0), phrasing="test")
 
 
 def test_render_units_vary():
     pred = Predicate("Pedestrian", (DepthAbout(10.0),))
-    texts = {render(pred, 2, np.random.default_rng(s)) for s in range(60)}
+    texts = {render(pred, 2, np.random.default_rng(s)) for s in range(80)}
     for unit in ("m", "meters", "metres"):
-        assert any(re.search(rf"\b10 {unit}\b", t) for t in texts), unit
+        assert any(re.search(rf"\b10 {unit}\b", t, re.IGNORECASE) for t in texts), unit
+    assert any(re.search(r"\bten (?:meters|metres)\b", t, re.IGNORECASE) for t in texts)
     speed = Predicate("Car", (SpeedAbout(30.0, SpeedUnit.KMH),))
-    assert "30 km/h" in render(speed, 1, np.random.default_rng(0))
+    texts = {render(speed, 1, np.random.default_rng(s)) for s in range(80)}
+    for unit in ("30 km/h", "30 kph", "30 kilometres per hour", "thirty kilometres per hour"):
+        assert any(unit in t.lower() for t in texts), unit
 
 
 # ---------------------------------------------------------------------------------------------
@@ -265,7 +223,7 @@ def test_generated_prompts_are_exact_and_well_formed(generated):
     total = 0
     n_plural = 0
     for world, prompts in generated:
-        texts = [p.text.lower() for p in prompts]
+        texts = [p.text.lower().rstrip(".!?") for p in prompts]
         assert len(set(texts)) == len(texts)
         assert len({p.predicate for p in prompts}) == len(prompts)
         by_id = {a.actor_id: a for a in world}
@@ -278,13 +236,8 @@ def test_generated_prompts_are_exact_and_well_formed(generated):
             assert all(DEFAULT_REGION.contains(by_id[i]) for i in p.referent_ids)
             n = len(p.referent_ids)
             n_plural += n > 1
-            plural_present = any(_has_phrase(p.text, w) for w in PLURAL_NOUNS)
-            assert plural_present == (n > 1), (n, p.text)
-            for word, count in COUNT_WORDS.items():
-                if _has_phrase(p.text, word):
-                    assert count == n, (n, p.text)
+            _agrees(p.text, n)
             assert len(p.text.split()) <= 22
-            assert p.text[0].isupper() and p.text.endswith(".")
     assert total > 200
     assert n_plural > 0.15 * total
 
@@ -301,7 +254,7 @@ def test_generated_tags_match_keywords(generated):
 def test_no_prompt_for_empty_or_out_of_range_world():
     rng = np.random.default_rng(0)
     assert generate_prompts([], rng, 5) == []
-    behind = [_actor(0, "Car", -10.0, 0.0, 0.0, (3.0, 0.0), CAR)]
+    behind = [make_actor(0, "Car", -10.0, 0.0, 0.0, (3.0, 0.0), CAR)]
     assert generate_prompts(behind, rng, 5) == []
     assert generate_prompts(hand_world(), rng, 0) == []
 
@@ -439,6 +392,7 @@ def test_describe_round_trip_random_worlds(generated):
             assert d.referent_ids == res.ids == want, d.text
             assert not res.conflicts
             assert d.tags == infer_tags(d.text), d.text
-            assert any(_has_phrase(d.text, w) for w in PLURAL_NOUNS) == (len(want) > 1)
+            _agrees(d.text, len(want))
+            assert d.text[0].isupper() and d.text.endswith("."), d.text
     assert singles > 100 and found_singles >= 0.9 * singles
     assert found_sets >= 0.5 * sets
