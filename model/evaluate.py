@@ -2,6 +2,9 @@
 
 ``python -m model.evaluate --labels DIR --preds DIR [--json OUT]`` scores KITTI-format prediction
 files (``<frame id>.txt``, one detection per line with a 16th score field) against label files.
+``python -m model.evaluate --data ROOT`` grounds a split (default ``test``) with a checkpoint (default
+the bundled one), writes and scores its prediction files, and adds the per-prompt grounding metrics
+(:mod:`model.grounding_metrics`) with the class-noun and language-blind oracle baselines beside them.
 
 Decisions (the devkit behaves differently, see the spec §2.2):
 
@@ -12,8 +15,15 @@ Decisions (the devkit behaves differently, see the spec §2.2):
   means the wrong label folder or split.
 - Overlaps follow the devkit, including its +0.01 rad / +0.01 px offsets on detections
   (``--exact-overlaps`` turns them off; see :mod:`model.metrics`).
-- A malformed prediction line is an error naming the file and line. Within one prediction file the
-  lines must either all carry a score or none (then every score is 0, the devkit's rule).
+- A malformed prediction line is an error naming the file and line, and so is a prediction line
+  without its score (the devkit would score it 0, silently ranking it last).
+- Nothing that could silently change a score passes: every ``*.txt`` entry of both folders must be
+  a readable file named by a zero-padded 5-digit frame id (``2.txt`` beside ``00002.txt`` would be
+  one frame twice; a symlink loop would drop a frame), unreadable, non-UTF-8 and binary files are
+  errors naming the file, and class names that are neither scored nor known (a typo such as
+  ``Cyclst``) stay out of the metric, as the protocol says, but are counted and reported (the
+  table's last line and a warning on stderr).
+- Every error is one line on stderr, ``error: ...``, and exit code 2.
 """
 
 from __future__ import annotations
@@ -31,6 +41,13 @@ from model.metrics import VodResult, evaluate_frames
 if TYPE_CHECKING:
     from model.report import GroundingReport
 from scenes.kitti import LabelError, ObjectLabel, parse_label_line, read_label_file
+from scenes.textfile import read_text_file
+
+DEFAULT_CHECKPOINT = Path(__file__).resolve().parents[1] / "checkpoints" / "tpcnet-small.pt"
+"""The bundled checkpoint, model mode's default."""
+
+DEFAULT_EVAL_DIR = Path("runs") / "eval"
+"""Model mode's default output folder's parent (relative to the working directory)."""
 
 
 class EvaluationInputError(ValueError):
@@ -52,25 +69,60 @@ class ScoredDirectories:
     missing_predictions: tuple[str, ...]
 
 
-def _txt_files(folder: Path, what: str) -> dict[str, Path]:
+def _frame_files(folder: Path, what: str) -> dict[str, Path]:
+    """``<frame id>.txt`` files of ``folder`` (not recursive; hidden files skipped) by frame id.
+
+    Raises:
+        EvaluationInputError: the folder is missing or unreadable; a ``.txt`` entry is not a
+            readable file (a folder, a broken link, a symlink loop); a name is not a zero-padded
+            5-digit frame id (``2.txt`` beside ``00002.txt`` would be one frame counted twice).
+    """
     if not folder.is_dir():
         raise EvaluationInputError(f"{what} folder {folder} does not exist or is not a folder")
-    return {
-        p.stem: p
-        for p in sorted(folder.glob("*.txt"))
-        if p.is_file() and not p.name.startswith(".")
-    }
+    try:
+        entries = sorted(p for p in folder.iterdir() if p.suffix == ".txt")
+    except OSError as exc:
+        raise EvaluationInputError(
+            f"{what} folder {folder}: cannot list it ({exc.strerror or exc})"
+        ) from exc
+    files: dict[str, Path] = {}
+    for path in entries:
+        if path.name.startswith("."):
+            continue
+        try:
+            path.stat()
+            regular = path.is_file()
+            reason = "not a regular file"
+        except OSError as exc:  # a broken link, a symlink loop
+            regular, reason = False, exc.strerror or str(exc)
+        if not regular:
+            raise EvaluationInputError(f"{path}: cannot read this {what} file ({reason})")
+        stem = path.stem
+        if not (stem.isascii() and stem.isdigit()):
+            raise EvaluationInputError(
+                f"{path}: not a {what} file name: expected <5-digit frame id>.txt, e.g. 00002.txt"
+            )
+        padded = f"{int(stem):05d}"
+        if stem != padded:
+            raise EvaluationInputError(
+                f"{path}: frame id {stem!r} is not written as 5 digits; rename it {padded}.txt "
+                "(frame ids are zero-padded to 5 digits, and one frame has one file)"
+            )
+        files[stem] = path
+    return files
 
 
 def load_label_dir(folder: str | Path) -> dict[str, list[ObjectLabel]]:
     """Every ``<frame id>.txt`` label file of ``folder`` -> frame id -> labels.
 
     Raises:
-        EvaluationInputError: the folder is missing or holds no ``.txt`` files.
-        scenes.kitti.LabelError: a malformed line (file and line named).
+        EvaluationInputError: the folder is missing, holds no ``.txt`` files, or holds an entry
+            that is not a readable ``<5-digit id>.txt`` file (see :func:`_frame_files`).
+        scenes.kitti.LabelError: an unreadable, non-UTF-8 or binary file, or a malformed line
+            (file and line named).
     """
     folder = Path(folder)
-    files = _txt_files(folder, "label")
+    files = _frame_files(folder, "label")
     if not files:
         raise EvaluationInputError(f"label folder {folder} holds no .txt label files")
     return {frame: read_label_file(path) for frame, path in files.items()}
@@ -79,20 +131,24 @@ def load_label_dir(folder: str | Path) -> dict[str, list[ObjectLabel]]:
 def read_prediction_file(path: str | Path) -> list[ObjectLabel]:
     """Read one prediction file (empty file -> no detections); errors name the file and line.
 
+    Every line needs its score (the 16th field): the devkit would score a line without one as 0,
+    which silently ranks it last, so here it is an error.
+
     Raises:
-        scenes.kitti.LabelError: a malformed line, or a file mixing lines with and without score.
+        scenes.kitti.LabelError: an unreadable, non-UTF-8 or binary file, a malformed line, or a
+            line without a score.
     """
     path = Path(path)
     labels: list[ObjectLabel] = []
-    for lineno, line in enumerate(path.read_text().splitlines(), start=1):
+    text = read_text_file(path, "prediction file", LabelError)
+    for lineno, line in enumerate(text.splitlines(), start=1):
         if not line.strip():
             continue
         label = parse_label_line(line, source=f"{path}:{lineno}")
-        if labels and (label.score is None) != (labels[0].score is None):
+        if label.score is None:
             raise LabelError(
-                f"{path}:{lineno}: prediction lines must all have a score (16 fields) or none; "
-                f"the first line {'lacks' if labels[0].score is None else 'has'} one and this "
-                f"one does not: {line.strip()!r}"
+                f"{path}:{lineno}: prediction line without a score (15 fields; a detection "
+                f"needs 16, the last one its score): {line.strip()[:80]!r}"
             )
         labels.append(label)
     return labels
@@ -108,11 +164,13 @@ def load_prediction_dir(
         detections.
 
     Raises:
-        EvaluationInputError: ``folder`` is missing, or holds files for frames not in ``frame_ids``.
-        scenes.kitti.LabelError: a malformed prediction line (file and line named).
+        EvaluationInputError: ``folder`` is missing, holds files for frames not in
+            ``frame_ids``, or an entry that is not a readable ``<5-digit id>.txt`` file.
+        scenes.kitti.LabelError: an unreadable file, a malformed line or a line without a score
+            (file and line named).
     """
     folder = Path(folder)
-    files = _txt_files(folder, "prediction")
+    files = _frame_files(folder, "prediction")
     known = set(frame_ids)
     extra = sorted(set(files) - known)
     if extra:
@@ -167,8 +225,35 @@ def build_parser() -> argparse.ArgumentParser:
     model_mode = parser.add_argument_group("ground a split with a checkpoint, then score it")
     model_mode.add_argument("--data", type=Path, help="Talk2Radar root")
     model_mode.add_argument("--split", default="test", help="ImageSets split (default: test)")
-    model_mode.add_argument("--checkpoint", type=Path, help="model checkpoint (.pt)")
-    model_mode.add_argument("--out", type=Path, help="folder for the prediction files")
+    model_mode.add_argument(
+        "--checkpoint",
+        type=Path,
+        default=DEFAULT_CHECKPOINT,
+        help="model checkpoint (.pt; default: the bundled checkpoints/tpcnet-small.pt)",
+    )
+    model_mode.add_argument(
+        "--out",
+        type=Path,
+        help=(
+            f"folder for the prediction files (default: {DEFAULT_EVAL_DIR}/<root name>-<split>, "
+            "with the JSON beside it as <that folder>.json unless --json is given)"
+        ),
+    )
+    model_mode.add_argument(
+        "--threshold",
+        type=float,
+        default=None,
+        help=(
+            "operating threshold of the set metrics (default: the checkpoint's stored "
+            "operating_threshold, else its decode threshold); mAP always uses every decoded box"
+        ),
+    )
+    model_mode.add_argument(
+        "--baselines",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="also score the language-blind oracle and the class-noun prompt (default: on)",
+    )
     model_mode.add_argument(
         "--radar-folder", default="auto", help="radar tree to read: auto, none or a folder name"
     )
@@ -197,19 +282,37 @@ def _run_files_mode(args: argparse.Namespace) -> int:
         )
     )
     print(scored.result.format_table(), end="")
+    note = scored.result.unknown_classes_note()
+    if note is not None:
+        print(f"warning: {note}", file=sys.stderr)
     if args.json is not None:
         write_json(args.json, scored.result)
         print(f"wrote {args.json}")
     return 0
 
 
+def default_out_dir(data: Path, split: str) -> Path:
+    """Where model mode writes its prediction files without ``--out``:
+    ``runs/eval/<root folder name>-<split>``."""
+    return DEFAULT_EVAL_DIR / f"{data.resolve().name}-{split}"
+
+
 def _run_model_mode(args: argparse.Namespace) -> int:
     """Ground every sample of a split, write one prediction file per frame, score them, and print
-    the official table plus the per-prompt-type and per-depth tables."""
+    the official table, the per-prompt-type and per-depth tables, and the grounding tables (model,
+    class-noun prompt and language-blind oracle side by side)."""
     from model.checkpoint import load_checkpoint
-    from model.predict import write_predictions
+    from model.predict import operating_threshold, write_predictions
     from model.report import evaluate_predictions
     from scenes.root import Talk2RadarRoot
+
+    json_path = args.json
+    if args.out is None:
+        args.out = default_out_dir(args.data, args.split)
+        if json_path is None:
+            json_path = args.out.with_name(args.out.name + ".json")
+    if args.threshold is not None and not 0.0 <= args.threshold < 1.0:
+        raise EvaluationInputError(f"--threshold must be in [0, 1), got {args.threshold}")
 
     radar = None if args.radar_folder == "none" else args.radar_folder
     root = Talk2RadarRoot(args.data, radar=radar)
@@ -219,7 +322,8 @@ def _run_model_mode(args: argparse.Namespace) -> int:
     if not ids:
         raise EvaluationInputError(f"{args.data}: split {args.split!r} has no samples")
     model = load_checkpoint(args.checkpoint, device=args.device)
-    report = evaluate_predictions(model, root, ids)
+    operating = operating_threshold(model) if args.threshold is None else args.threshold
+    report = evaluate_predictions(model, root, ids, operating=operating, baselines=args.baselines)
     out = write_predictions(report.predictions, args.out)
     # Score the files as written (4 decimals), as the official devkit reads them.
     from_files, missing = load_prediction_dir(out, tuple(sorted(ids)))
@@ -227,11 +331,12 @@ def _run_model_mode(args: argparse.Namespace) -> int:
         raise EvaluationInputError(f"{out}: prediction files missing for {list(missing)[:5]}")
     report = report.rescored(from_files)
     print(f"data: {args.data} split {args.split} ({len(ids)} frames); checkpoint {args.checkpoint}")
-    print(f"predictions written to {out}")
+    source = "--threshold" if args.threshold is not None else "checkpoint"
+    print(f"predictions written to {out}; operating threshold {operating:g} ({source})")
     print(report.format_tables(), end="")
-    if args.json is not None:
-        write_json(args.json, report)
-        print(f"wrote {args.json}")
+    if json_path is not None:
+        write_json(json_path, report)
+        print(f"wrote {json_path}")
     return 0
 
 
@@ -241,20 +346,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.data is not None:
         if args.labels is not None or args.preds is not None:
             parser.error("--data does not go with --labels/--preds")
-        if args.checkpoint is None or args.out is None:
-            parser.error("--data needs --checkpoint PATH and --out DIR")
         runner = _run_model_mode
     elif args.labels is None and args.preds is None:
-        parser.error("give --labels DIR --preds DIR, or --data ROOT --checkpoint PATH --out DIR")
+        parser.error(
+            "give --labels DIR --preds DIR, or --data ROOT [--checkpoint PATH] [--out DIR]"
+        )
     elif args.labels is None or args.preds is None:
         parser.error("--labels and --preds go together")
     else:
         runner = _run_files_mode
     try:
         return runner(args)
-    except (EvaluationInputError, LabelError, ValueError, FileNotFoundError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    except (EvaluationInputError, LabelError, ValueError) as exc:
+        print(f"error: {_one_line(str(exc))}", file=sys.stderr)
         return 2
+    except OSError as exc:  # e.g. --json or --out in a folder that cannot be written
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"error: {where}{_one_line(exc.strerror or str(exc))}", file=sys.stderr)
+        return 2
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split()) or "unknown error"
 
 
 if __name__ == "__main__":

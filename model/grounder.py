@@ -183,6 +183,7 @@ def referent_heatmap(
     shape = 0.5 + 0.5 * detection / peak[:, None, None]
     return np.clip(weight * shape, 0.0, 1.0).astype(np.float32)
 
+
 __all__ = [
     "SceneCandidates",
     "SceneMaps",

@@ -8,7 +8,9 @@ Protocol, step by step (every number below is the devkit's):
 
 - Classes ``Car``, ``Pedestrian``, ``Cyclist``; names compare case-insensitively. ``Van`` is a
   neighbour of ``Car`` and ``Person_sitting`` of ``Pedestrian`` (their ground truth is "ignored",
-  not "missed"); VoD has neither.
+  not "missed"); VoD has neither. Every other name counts for no class; a name that is not one of
+  KITTI's or VoD's known classes either (a typo such as ``Cyclst``) is counted and reported
+  (:attr:`VodResult.unknown_gt_classes`, the last line of :meth:`VodResult.format_table`).
 - Minimum overlaps (the devkit's second table, the only one it reports): 2D image box 0.7 / 0.5 /
   0.5, BEV and 3D 0.5 / 0.25 / 0.25 for Car / Pedestrian / Cyclist. A match needs an overlap
   strictly greater than the minimum.
@@ -64,7 +66,7 @@ from __future__ import annotations
 
 import enum
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -96,6 +98,45 @@ DONT_CARE = "DontCare"
 """Ground-truth name of KITTI's don't-care regions (compared case-sensitively; VoD has none)."""
 
 _NEIGHBOURS = {"car": "van", "pedestrian": "person_sitting"}
+
+KNOWN_OTHER_CLASSES: frozenset[str] = frozenset(
+    {
+        # KITTI
+        "van",
+        "truck",
+        "person_sitting",
+        "tram",
+        "misc",
+        "dontcare",
+        # View-of-Delft (spec §1.4)
+        "rider",
+        "bicycle",
+        "bicycle_rack",
+        "human_depiction",
+        "moped_scooter",
+        "motor",
+        "ride_other",
+        "ride_uncertain",
+        "vehicle_other",
+    }
+)
+"""Class names (lower case) that are known but not scored: as the protocol says they never count,
+silently. Any other name outside the three classes (a typo such as ``Cyclst``) is also kept out of
+the metric, but counted in :attr:`VodResult.unknown_gt_classes` / ``unknown_dt_classes`` and
+reported, so that it cannot silently change a score."""
+
+
+def unknown_class_counts(frames: Mapping[str, Sequence[ObjectLabel]]) -> dict[str, int]:
+    """Class names of ``frames`` (frame id -> labels) that are neither metric classes nor
+    :data:`KNOWN_OTHER_CLASSES` (case-insensitive), with their number of objects, by name."""
+    metric = {c.lower() for c in CLASSES}
+    counts: dict[str, int] = {}
+    for labels in frames.values():
+        for lab in labels:
+            low = lab.name.lower()
+            if low not in metric and low not in KNOWN_OTHER_CLASSES:
+                counts[lab.name] = counts.get(lab.name, 0) + 1
+    return dict(sorted(counts.items()))
 
 
 class Metric(enum.Enum):
@@ -636,11 +677,16 @@ class VodResult:
         entire_area: Results over the entire annotated area.
         roi: Results in the driving corridor.
         num_frames: Frames evaluated.
+        unknown_gt_classes: Ground-truth class names that are neither scored nor known (see
+            :data:`KNOWN_OTHER_CLASSES`) -> number of objects; they count for no class.
+        unknown_dt_classes: The same for the detections.
     """
 
     entire_area: AreaResult
     roi: AreaResult
     num_frames: int
+    unknown_gt_classes: Mapping[str, int] = field(default_factory=dict)
+    unknown_dt_classes: Mapping[str, int] = field(default_factory=dict)
 
     def area(self, name: str) -> AreaResult:
         """``"entire_area"`` or ``"roi"``."""
@@ -651,6 +697,24 @@ class VodResult:
     def to_dict(self) -> dict[str, dict[str, float]]:
         """``{"entire_area": {...}, "roi": {...}}`` with :meth:`AreaResult.to_dict` inside."""
         return {"entire_area": self.entire_area.to_dict(), "roi": self.roi.to_dict()}
+
+    def unknown_classes_note(self) -> str | None:
+        """One line naming the unknown class names left out of the metric, or None."""
+        parts = []
+        for what, counts in (
+            ("ground-truth", self.unknown_gt_classes),
+            ("detection", self.unknown_dt_classes),
+        ):
+            if counts:
+                names = ", ".join(f"{name!r} x{n}" for name, n in counts.items())
+                parts.append(f"{sum(counts.values())} {what} object(s) ({names})")
+        if not parts:
+            return None
+        return (
+            "Not scored, unknown class name: "
+            + "; ".join(parts)
+            + f" (the classes are {', '.join(CLASSES)})"
+        )
 
     def format_table(self) -> str:
         """A plain-text summary: class x {3D, BEV, AOS} x {entire area, corridor}, R11 / R40."""
@@ -671,6 +735,9 @@ class VodResult:
                 f"{_pair(res.map_bev, res.map_bev_r40)}  {_pair(res.maos, res.maos_r40)}"
             )
             lines.append("")
+        note = self.unknown_classes_note()
+        if note is not None:
+            lines.append(note)
         return "\n".join(lines).rstrip() + "\n"
 
 
@@ -739,4 +806,6 @@ def evaluate_frames(
         entire_area=evaluate_area(frames, corridor=False),
         roi=evaluate_area(frames, corridor=True),
         num_frames=len(frames),
+        unknown_gt_classes=unknown_class_counts(gt),
+        unknown_dt_classes=unknown_class_counts({f: dt[f] for f in gt if f in dt}),
     )

@@ -74,7 +74,8 @@ def number_spans(text: str) -> list[tuple[int, int, float]]:
     """Numbers in ``text`` as ``(start, end, value)`` character spans, in order.
 
     Digits (``20``, ``2.5``, ``2,5``, ``10m``: the digits of a digit-unit word) and runs of number
-    words (``twenty five``, ``twenty-five``, ``two and a half``, ``a hundred``, ``half a``,
+    words (``twenty five``, ``twenty-five``, ``two and a half``, ``two point five``, ``a hundred``,
+    ``half a``,
     ``a dozen``, ``a couple of``). A lone "a" or "and" is never a number.
     """
     tokens = [(m.start(), m.end(), m.group()) for m in _WORD.finditer(text)]
@@ -87,17 +88,20 @@ def number_spans(text: str) -> list[tuple[int, int, float]]:
             value = float(word.replace(",", "."))
             j = i + 1
             # "2 and a half"
-            if (
-                j + 2 < len(tokens)
-                and [t[2].lower() for t in tokens[j : j + 3]] == ["and", "a", "half"]
-            ):
+            if j + 2 < len(tokens) and [t[2].lower() for t in tokens[j : j + 3]] == [
+                "and",
+                "a",
+                "half",
+            ]:
                 value += 0.5
                 end = tokens[j + 2][1]
                 j += 3
             spans.append((start, end, value))
             i = j
             continue
-        if low == "dozen" or (low == "a" and i + 1 < len(tokens) and tokens[i + 1][2].lower() == "dozen"):
+        if low == "dozen" or (
+            low == "a" and i + 1 < len(tokens) and tokens[i + 1][2].lower() == "dozen"
+        ):
             j = i + 1 if low == "dozen" else i + 2
             spans.append((start, tokens[j - 1][1], 12.0))
             i = j
@@ -109,7 +113,9 @@ def number_spans(text: str) -> list[tuple[int, int, float]]:
             spans.append((start, tokens[j - 1][1], 2.0))
             i = j
             continue
-        if low == "half" or (low == "a" and i + 1 < len(tokens) and tokens[i + 1][2].lower() == "half"):
+        if low == "half" or (
+            low == "a" and i + 1 < len(tokens) and tokens[i + 1][2].lower() == "half"
+        ):
             j = i + 1 if low == "half" else i + 2
             spans.append((start, tokens[j - 1][1], 0.5))
             i = j
@@ -140,6 +146,16 @@ def number_spans(text: str) -> list[tuple[int, int, float]]:
                 current += 0.5
                 last_end = tokens[j + 2][1]
                 j += 3
+                break
+            elif (
+                nxt == "point"
+                and j + 1 < len(tokens)
+                and (_word_value(tokens[j + 1][2]) or 10.0) < 10
+            ):
+                # "two point five": one decimal digit after "point".
+                current += float(_word_value(tokens[j + 1][2]) or 0.0) / 10.0
+                last_end = tokens[j + 1][1]
+                j += 2
                 break
             elif nxt == "and" and j + 1 < len(tokens) and _word_value(tokens[j + 1][2]) is not None:
                 j += 1

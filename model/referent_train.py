@@ -15,25 +15,32 @@ Per batch of ``B`` scenes (:class:`scenes.frame_dataset.FrameItem`):
 4. The referent stage scores every candidate for every prompt: BCE + a listwise term
    (:func:`model.referent.referent_loss`). The pooled BEV features carry gradients back into the
    backbones, so the scene features learn what the words need.
+
+A second, cheaper stage (``python -m model.train ... --freeze-scene``) trains the referent stage
+alone on cached scenes: every training scene is encoded once by the frozen detector
+(:func:`cache_scenes`), its detections are matched to its actors (:func:`match_detections`), and
+each step then scores many generated prompts per scene (:func:`cached_referent_step`) at a small
+fraction of a joint step's cost. Its candidates are exactly what inference sees: the detector's own
+boxes and scores, misses and false detections included.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
 from torch import Tensor
 
 from model.decode import decode
-from model.grounder import stack_candidates
+from model.grounder import SceneCandidates, stack_candidates
 from model.losses import LossTerms, grounding_loss
 from model.referent import referent_loss
 from model.targets import anchor_points, collate_targets, draw_targets
 from model.tpcnet import TPCNet, as_points
 from scenes.actors import CLASSES, Actor
-from scenes.frame_dataset import FrameItem
+from scenes.frame_dataset import FrameDataset, FrameItem
 from scenes.prompts import Prompt, PromptConfig, generate_prompts
 
 MATCH_DISTANCE = {"Car": 2.0, "Pedestrian": 1.0, "Cyclist": 1.2}
@@ -214,11 +221,167 @@ def referent_step(
     return ReferentLoss(total, det, bce, listwise, len(texts))
 
 
+@dataclass(frozen=True)
+class CachedScene:
+    """A training scene encoded once by the frozen detector, with its bank of prompts.
+
+    Attributes:
+        candidates: The detector's candidates (tensors detached, on the CPU).
+        actor_ids: ``(K,)`` the actor each candidate detects, -1 for a false detection.
+        prompts: Generated prompts with at least one detected referent.
+        targets: Per prompt, ``(K,)`` float32: 1 where the candidate is a referent.
+    """
+
+    candidates: SceneCandidates
+    actor_ids: np.ndarray
+    prompts: tuple[str, ...]
+    targets: tuple[np.ndarray, ...]
+
+
+def match_detections(boxes: np.ndarray, labels: np.ndarray, actors: Sequence[Actor]) -> np.ndarray:
+    """Actor id ``(K,)`` of each detection (-1: none): detections in the given (score) order take
+    the nearest free actor of their class within :data:`MATCH_DISTANCE` of the BEV centre."""
+    out = np.full(len(boxes), -1, dtype=np.int64)
+    taken: set[int] = set()
+    for i, (box, lab) in enumerate(zip(boxes, labels, strict=True)):
+        best, best_d = -1, MATCH_DISTANCE[CLASSES[lab]]
+        for a in actors:
+            if a.cls != CLASSES[lab] or a.actor_id in taken:
+                continue
+            d = float(np.hypot(*(a.box[:2] - box[:2])))
+            if d <= best_d:
+                best, best_d = a.actor_id, d
+        if best >= 0:
+            out[i] = best
+            taken.add(best)
+    return out
+
+
+@dataclass
+class TextBank:
+    """Frozen-encoder token features of every banked prompt: ``text -> (tokens, numbers,
+    truncated)`` (tokens kept as float16 to halve the memory)."""
+
+    entries: dict
+
+    def features(self, texts: Sequence[str], device: torch.device):
+        """:class:`model.text.TextFeatures` of ``texts`` (all in the bank)."""
+        from model.text import pad_features
+
+        return pad_features([self.entries[t] for t in texts], device)
+
+
+def cache_scenes(
+    model: TPCNet,
+    dataset: FrameDataset,
+    prompts_per_scene: int,
+    seed: int = 0,
+    phrasing: str = "train",
+    progress: bool = True,
+) -> tuple[list[CachedScene], TextBank]:
+    """Encode every scene of ``dataset`` with the frozen model, generate ``prompts_per_scene``
+    prompts per scene and encode them with the frozen text encoder (module docstring)."""
+    from tqdm import tqdm
+
+    from model.text import encode_minilm_batched
+
+    model.eval()
+    pcfg = _prompt_config(phrasing)
+    scenes = []
+    with torch.no_grad():
+        for i in tqdm(range(len(dataset)), desc="cache scenes", disable=not progress):
+            item = dataset[i]
+            objects = model.encode_scene(item.lidar, item.radar).objects
+            assert objects is not None
+            cpu = replace(
+                objects,
+                geometry=objects.geometry.cpu(),
+                fused=objects.fused.cpu(),
+                lidar=None if objects.lidar is None else objects.lidar.cpu(),
+                radar=None if objects.radar is None else objects.radar.cpu(),
+            )
+            ids = match_detections(objects.boxes, objects.labels, item.actors)
+            rng = np.random.default_rng((seed, 11, i))
+            prompts = generate_prompts(item.actors, rng, prompts_per_scene, config=pcfg)
+            usable = [p for p in prompts if np.isin(ids, p.referent_ids).any()]
+            scenes.append(
+                CachedScene(
+                    cpu,
+                    ids,
+                    tuple(p.text for p in usable),
+                    tuple(np.isin(ids, p.referent_ids).astype(np.float32) for p in usable),
+                )
+            )
+    texts = list(dict.fromkeys(t for s in scenes for t in s.prompts))
+    entries = {}
+    max_tokens = model.cfg.text.max_tokens
+    chunk = 256
+    for start in tqdm(
+        range(0, len(texts), chunk), desc="encode prompts", disable=not progress, unit="chunk"
+    ):
+        part = texts[start : start + chunk]
+        for text, (tok, num, trunc) in zip(
+            part, encode_minilm_batched(part, max_tokens, 64), strict=True
+        ):
+            entries[text] = (tok.half(), num, trunc)
+    return scenes, TextBank(entries)
+
+
+def cached_referent_step(
+    model: TPCNet,
+    scenes: Sequence[CachedScene],
+    bank: TextBank,
+    rng: np.random.Generator,
+    cfg: ReferentTrainConfig,
+) -> ReferentLoss:
+    """Referent loss on cached scenes, ``cfg.prompts_per_scene`` banked prompts drawn per scene
+    (only the referent stage learns). Undetected referents cannot be answered and are not in a
+    prompt's target."""
+    device = model.device
+    chosen, texts, rows, targets = [], [], [], []
+    for scene in scenes:
+        if not len(scene.candidates) or not scene.prompts:
+            continue
+        k = min(cfg.prompts_per_scene, len(scene.prompts))
+        picks = rng.choice(len(scene.prompts), size=k, replace=False)
+        index = len(chosen)
+        chosen.append(scene.candidates)
+        for j in picks:
+            texts.append(scene.prompts[j])
+            rows.append(index)
+            targets.append(scene.targets[j])
+    zero = torch.zeros((), device=device)
+    if not texts:
+        return ReferentLoss(zero, LossTerms(zero, zero, zero), zero, zero, 0)
+    text = bank.features(texts, device)
+    batch = stack_candidates(chosen).index(torch.tensor(rows))
+    batch = type(batch)(
+        batch.geometry.to(device),
+        batch.fused.to(device),
+        None if batch.lidar is None else batch.lidar.to(device),
+        None if batch.radar is None else batch.radar.to(device),
+        batch.padding.to(device),
+    )
+    assert model.referent is not None
+    logits = model.referent(batch, text.tokens, text.numbers, text.padding_mask)
+    target = torch.zeros_like(logits)
+    for i, t in enumerate(targets):
+        target[i, : len(t)] = torch.from_numpy(t).to(device)
+    bce, listwise = referent_loss(logits, target, batch.padding)
+    total = cfg.referent_weight * (bce + cfg.listwise_weight * listwise)
+    return ReferentLoss(total, LossTerms(zero, zero, zero), bce, listwise, len(texts))
+
+
 __all__ = [
     "MATCH_DISTANCE",
+    "CachedScene",
     "ReferentLoss",
     "ReferentTrainConfig",
+    "TextBank",
+    "cache_scenes",
+    "cached_referent_step",
     "in_grid_actors",
+    "match_detections",
     "referent_step",
     "training_candidates",
 ]

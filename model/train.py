@@ -37,10 +37,15 @@ from tqdm import tqdm
 from model import build_model
 from model.checkpoint import load_checkpoint, save_checkpoint
 from model.losses import grounding_loss
-from model.referent_train import ReferentTrainConfig, referent_step
+from model.referent_train import (
+    ReferentTrainConfig,
+    cache_scenes,
+    cached_referent_step,
+    referent_step,
+)
 from model.targets import collate_targets, draw_targets
 from scenes.dataset import AugmentConfig, GroundingBatch, GroundingDataset, collate
-from scenes.frame_dataset import FrameDataset
+from scenes.frame_dataset import FrameDataset, SensorAugment
 from scenes.root import Talk2RadarRoot
 
 
@@ -81,6 +86,19 @@ class TrainConfig:
     grounding: str = "referent"
     init: str | None = None
     prompts_per_scene: int = 8
+    sensor_augment: bool = True
+    freeze_scene: bool = False
+    bank_prompts: int = 24
+
+    def __post_init__(self) -> None:
+        for name in ("epochs", "batch_size", "prompts_per_scene"):
+            if getattr(self, name) < 1:
+                flag = "--" + name.replace("_", "-")
+                raise TrainingError(f"{flag} must be >= 1, got {getattr(self, name)}")
+        if self.grounding not in ("referent", "tpcnet"):
+            raise TrainingError(f"--grounding must be referent or tpcnet, got {self.grounding!r}")
+        if Path(self.out).exists() and not Path(self.out).is_dir():
+            raise TrainingError(f"--out {self.out} is a file; give a run folder")
 
     def model_overrides(self) -> dict[str, str]:
         """The ``build_model`` overrides given on the command line."""
@@ -193,7 +211,8 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
     if referent:
         if world > 1:
             raise TrainingError("the referent path trains in one process (no torchrun yet)")
-        dataset = FrameDataset(root, cfg.train_split, augment=augment, seed=cfg.seed)
+        sensors = SensorAugment() if cfg.sensor_augment else None
+        dataset = FrameDataset(root, cfg.train_split, augment, sensors, seed=cfg.seed)
     else:
         dataset = GroundingDataset(root, cfg.train_split, augment=augment, seed=cfg.seed)
     referent_cfg = ReferentTrainConfig(prompts_per_scene=cfg.prompts_per_scene)
@@ -226,6 +245,20 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
             print(f"initialised {copied} weight tensors from {cfg.init}", file=sys.stderr)
         saved = None
     model.to(device)
+    cached = None
+    if referent and cfg.freeze_scene:
+        # Only the referent stage learns; every scene is encoded once by the frozen detector.
+        for name, p in model.named_parameters():
+            p.requires_grad_(name.startswith("referent."))
+        if cfg.text_encoder not in (None, "minilm"):
+            raise TrainingError("--freeze-scene banks frozen MiniLM prompt features: use minilm")
+        cached, bank = cache_scenes(
+            model,
+            FrameDataset(root, cfg.train_split),
+            cfg.bank_prompts,
+            seed=cfg.seed,
+            progress=rank == 0,
+        )
     params = [p for p in model.parameters() if p.requires_grad]
     optimizer = torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay)
     if saved is not None:
@@ -280,7 +313,13 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
                 break
             for group in optimizer.param_groups:
                 group["lr"] = cosine_lr(state.step, total_steps, cfg.lr, cfg.warmup_steps)
-            if referent:
+            if cached is not None:
+                step_rng = np.random.default_rng((cfg.seed, 7, state.step))
+                picked = [cached[i] for i in indices]
+                ref = cached_referent_step(model, picked, bank, step_rng, referent_cfg)
+                terms, total = ref.detection, ref.total
+                extra = {"bce": ref.bce.item(), "listwise": ref.listwise.item()}
+            elif referent:
                 step_rng = np.random.default_rng((cfg.seed, 7, state.step))
                 frames = [dataset[i] for i in indices]
                 with torch.autocast(device_type=device.type, dtype=torch.bfloat16, enabled=use_amp):
@@ -399,6 +438,23 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     )
     p.add_argument("--log-every", type=int, default=10)
     p.add_argument("--flip-probability", type=float, default=0.5)
+    p.add_argument(
+        "--no-sensor-augment",
+        action="store_true",
+        help="referent path: no intensity / dropout / radar-count / single-scan augmentation",
+    )
+    p.add_argument(
+        "--freeze-scene",
+        action="store_true",
+        help="referent path: train only the referent stage on scenes encoded once by the frozen "
+        "detector (use with --init RUN/last.pt of a joint run)",
+    )
+    p.add_argument(
+        "--bank-prompts",
+        type=int,
+        default=24,
+        help="--freeze-scene: prompts generated and encoded once per scene",
+    )
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
     p.add_argument(
         "--threads",
@@ -436,12 +492,19 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
         grounding=a.grounding,
         init=a.init,
         prompts_per_scene=a.prompts_per_scene,
+        sensor_augment=not a.no_sensor_augment,
+        freeze_scene=a.freeze_scene,
+        bank_prompts=a.bank_prompts,
     )
     return cfg, a.resume
 
 
 def main(argv: list[str] | None = None) -> int:
-    cfg, resume = parse_args(argv)
+    try:
+        cfg, resume = parse_args(argv)
+    except TrainingError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     distributed = int(os.environ.get("WORLD_SIZE", "1")) > 1
     if distributed:
         dist.init_process_group("nccl" if cfg.device.startswith("cuda") else "gloo")

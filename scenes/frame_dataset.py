@@ -9,8 +9,12 @@ and the first sample of each group stands for it.
 
 Augmentations keep every statement about the scene true, because the prompts are generated from
 the augmented actors: the left-right flip mirrors points and actors (``y -> -y``, ``yaw -> -yaw``,
-``vy -> -vy``; radar radial velocities unchanged, as :func:`scenes.dataset.flip_sample`); LiDAR
-point dropout changes density only. Nothing rescales distances.
+``vy -> -vy``; radar radial velocities unchanged, as :func:`scenes.dataset.flip_sample`). The
+sensor augmentations of :class:`SensorAugment` (:mod:`scenes.augment`) make the model robust to what
+still differs between the synthetic and the real sensors: intensity gain and offset, random and
+beam-wise LiDAR dropout, radar point count, RCS offset, and single-scan radar (real roots often come
+with the single-scan ``radar`` tree only). They change what the sensors report, never where things
+are. Nothing rescales distances.
 """
 
 from __future__ import annotations
@@ -20,10 +24,50 @@ from dataclasses import dataclass
 import numpy as np
 from torch.utils.data import Dataset
 
+from scenes import augment as aug
 from scenes.actors import Actor
 from scenes.boxes import wrap_yaw
 from scenes.dataset import AugmentConfig
 from scenes.root import Talk2RadarRoot
+
+
+@dataclass(frozen=True)
+class SensorAugment:
+    """Probabilities and ranges of the sensor augmentations (each applied independently).
+
+    Attributes:
+        p_intensity: Probability of a random intensity gain/offset (:func:`jitter_intensity`).
+        p_beams: Probability of beam-wise LiDAR dropout at a rate up to ``max_beam_rate``.
+        max_beam_rate: Largest fraction of beams removed.
+        p_radar_subsample: Probability of keeping only ``radar_keep`` of the radar points.
+        radar_keep: Range of the kept fraction.
+        p_rcs: Probability of a common RCS offset of up to 3 dB.
+        p_single_scan: Probability of keeping only the newest radar scan (``time == 0``).
+    """
+
+    p_intensity: float = 0.5
+    p_beams: float = 0.2
+    max_beam_rate: float = 0.3
+    p_radar_subsample: float = 0.3
+    radar_keep: tuple[float, float] = (0.5, 1.0)
+    p_rcs: float = 0.3
+    p_single_scan: float = 0.25
+
+    def apply(
+        self, lidar: np.ndarray, radar: np.ndarray, rng: np.random.Generator
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Augmented copies of ``lidar (N, 4)`` and ``radar (M, 7)``."""
+        if rng.random() < self.p_intensity and len(lidar):
+            lidar = aug.jitter_intensity(lidar, rng)
+        if rng.random() < self.p_beams and len(lidar):
+            lidar = aug.drop_beams(lidar, rng, float(rng.uniform(0.0, self.max_beam_rate)))
+        if rng.random() < self.p_single_scan and len(radar):
+            radar = aug.single_scan(radar)
+        if rng.random() < self.p_radar_subsample and len(radar):
+            radar = aug.subsample_radar(radar, rng, self.radar_keep)
+        if rng.random() < self.p_rcs and len(radar):
+            radar = aug.jitter_rcs(radar, rng)
+        return np.asarray(lidar, np.float32), np.asarray(radar, np.float32)
 
 
 @dataclass(frozen=True)
@@ -77,6 +121,7 @@ class FrameDataset(Dataset):
         root: A :class:`Talk2RadarRoot` or its path.
         split: ImageSets name.
         augment: Augmentations (None for evaluation).
+        sensors: Sensor augmentations, applied when ``augment`` is given (None: none).
         seed: Seed of the augmentation stream (item ``i`` at epoch ``e`` draws from
             ``(seed, e, i)``; call :meth:`set_epoch`).
 
@@ -89,10 +134,12 @@ class FrameDataset(Dataset):
         root: Talk2RadarRoot | str,
         split: str,
         augment: AugmentConfig | None = None,
+        sensors: SensorAugment | None = None,
         seed: int = 0,
     ) -> None:
         self.root = root if isinstance(root, Talk2RadarRoot) else Talk2RadarRoot(root)
         self.split = split
+        self.sensors = sensors
         self.ids = scene_ids(self.root, split)
         if not self.ids:
             raise ValueError(f"{self.root.path}: split {split!r} has no samples")
@@ -126,6 +173,8 @@ class FrameDataset(Dataset):
                 radar[:, 1] *= -1
                 actors = tuple(flip_actor(a) for a in actors)
                 flipped = True
+            if self.sensors is not None:
+                lidar, radar = self.sensors.apply(lidar, radar, rng)
             if self.augment.lidar_keep_min < 1.0 and len(lidar):
                 keep = rng.uniform(self.augment.lidar_keep_min, 1.0)
                 lidar = lidar[rng.random(len(lidar)) < keep]
@@ -135,4 +184,4 @@ class FrameDataset(Dataset):
         return FrameItem(sample.sample_id, lidar, radar, actors, flipped)
 
 
-__all__ = ["FrameDataset", "FrameItem", "flip_actor", "scene_ids"]
+__all__ = ["FrameDataset", "FrameItem", "SensorAugment", "flip_actor", "scene_ids"]

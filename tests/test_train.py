@@ -39,6 +39,7 @@ def _config(root: Path, out: Path, **kw) -> TrainConfig:
         log_every=1,
         flip_probability=0.0,
         lr=2e-3,
+        grounding="tpcnet",
     )
     base.update(kw)
     return TrainConfig(**base)

@@ -1,0 +1,131 @@
+"""Choose a checkpoint's operating threshold on a validation split and store it in the checkpoint.
+
+``python -m model.calibrate --data ROOT --checkpoint PATH [--split val] [--limit N] [--dry-run]``
+
+The operating threshold is the score above which a model's boxes are its answer: the set the app
+shows and the set metrics of :mod:`model.grounding_metrics` score. It is chosen, never tuned on the
+test split, as the threshold in :data:`CANDIDATES` with the highest mean per-prompt set F1 on the
+validation prompts (ties: the higher exact-set rate, then the higher threshold), and written into
+the checkpoint's metadata as ``operating_threshold`` with ``operating_threshold_source`` (root,
+split, prompts, the F1 and exact-set it reached). :func:`model.predict.operating_threshold` reads it
+back for ``model.evaluate`` and the app. Both paths (referent and the paper's) are calibrated the
+same way, so their set metrics compare fairly.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from model.grounding_metrics import PromptBoxes, prompt_outcome
+from model.predict import iterate_predictions
+
+CANDIDATES: tuple[float, ...] = tuple(round(float(t), 3) for t in np.arange(0.05, 0.951, 0.025))
+"""Thresholds tried."""
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """The chosen threshold and what it reached on the calibration prompts."""
+
+    threshold: float
+    set_f1: float
+    exact_set: float
+    prompts: int
+    curve: tuple[tuple[float, float, float], ...]
+    """``(threshold, mean set F1 %, exact-set %)`` for every candidate."""
+
+
+def choose_threshold(
+    answers: Sequence[tuple[PromptBoxes, PromptBoxes]],
+    candidates: Sequence[float] = CANDIDATES,
+) -> Calibration:
+    """The threshold with the best mean set F1 over ``(predicted, referents)`` pairs (module doc).
+
+    Raises:
+        ValueError: No prompts.
+    """
+    if not answers:
+        raise ValueError("no prompts to calibrate on")
+    curve = []
+    for t in candidates:
+        outs = [prompt_outcome("", (), p, r, t) for p, r in answers]
+        curve.append(
+            (
+                float(t),
+                100.0 * np.mean([o.f1 for o in outs]),
+                100.0 * np.mean([o.exact for o in outs]),
+            )
+        )
+    best = max(curve, key=lambda c: (round(c[1], 6), round(c[2], 6), c[0]))
+    return Calibration(best[0], best[1], best[2], len(answers), tuple(curve))
+
+
+def calibrate(
+    checkpoint: str | Path, data: str | Path, split: str = "val", limit: int = 0
+) -> Calibration:
+    """Ground every prompt of ``split`` with the checkpoint and choose its threshold."""
+    from model.checkpoint import load_checkpoint
+    from model.predict import decode_threshold
+    from scenes.root import Talk2RadarRoot
+
+    model = load_checkpoint(checkpoint)
+    root = Talk2RadarRoot(data)
+    ids = root.ids(split)[: limit or None]
+    answers = []
+    low = min(decode_threshold(model), CANDIDATES[0])
+    for fp in iterate_predictions(model, root, ids, score_threshold=low):
+        predicted = PromptBoxes.make(fp.boxes, fp.classes, fp.scores, source=fp.sample.sample_id)
+        referents = PromptBoxes.make(fp.sample.boxes, fp.sample.classes)
+        answers.append((predicted, referents))
+    return choose_threshold(answers)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = argparse.ArgumentParser(
+        prog="python -m model.calibrate", description=__doc__.split("\n")[0]
+    )
+    p.add_argument("--data", required=True, help="Talk2Radar root with a validation split")
+    p.add_argument("--checkpoint", required=True, help="checkpoint to calibrate (rewritten)")
+    p.add_argument("--split", default="val")
+    p.add_argument("--limit", type=int, default=0, help="first N samples only (0: all)")
+    p.add_argument("--dry-run", action="store_true", help="print the choice, write nothing")
+    a = p.parse_args(argv)
+    from model.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+    from scenes.root import RootError
+
+    try:
+        cal = calibrate(a.checkpoint, a.data, a.split, a.limit)
+        for t, f1, exact in cal.curve:
+            mark = "  <- chosen" if t == cal.threshold else ""
+            print(f"threshold {t:.3f}: set F1 {f1:5.1f}  exact-set {exact:5.1f}{mark}")
+        print(
+            f"operating threshold {cal.threshold:.3f} (set F1 {cal.set_f1:.1f}, exact-set "
+            f"{cal.exact_set:.1f} on {cal.prompts} prompts of {a.data} {a.split})"
+        )
+        if not a.dry_run:
+            model = load_checkpoint(a.checkpoint)
+            meta = dict(model.checkpoint_metadata)
+            meta["operating_threshold"] = cal.threshold
+            meta["operating_threshold_source"] = {
+                "root": str(Path(a.data).resolve()),
+                "split": a.split,
+                "prompts": cal.prompts,
+                "set_f1": round(cal.set_f1, 2),
+                "exact_set": round(cal.exact_set, 2),
+            }
+            save_checkpoint(a.checkpoint, model, **meta)
+            print(f"wrote operating_threshold into {a.checkpoint}")
+    except (CheckpointError, RootError, ValueError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
