@@ -7,8 +7,10 @@
 - No ``--checkpoint``: the bundled ``checkpoints/tpcnet-small.pt``. Where it does not exist yet, a
   freshly initialised small model is served with a warning in the log and in every browser panel
   ("untrained model: boxes are meaningless").
-- A ``--checkpoint`` or ``--data`` that is missing or invalid, an unknown split, or ``--device
-  cuda`` without CUDA: a one-line error on stderr and exit code 2.
+- A ``--checkpoint`` or ``--data`` that is missing or invalid, an unknown split, a split where no
+  frame loads, ``--device cuda`` without CUDA, a ``--port`` outside 0..65535, a ``--host`` that is
+  not an address of this machine, or a server that does not listen within 20 s: a one-line error
+  on stderr and exit code 2, within seconds (the host and port are checked before anything else).
 
 The URL is printed once the server listens; Ctrl-C (or SIGTERM) stops it cleanly (exit code 0).
 """
@@ -162,23 +164,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     for noisy in ("httpx", "websockets", "urllib3"):
         logging.getLogger(noisy).setLevel(logging.WARNING)
+    from app.server import AppConfig, ServerStartError, Talk2PCApp, check_listen_address
+    from scenes.root import RootError
+
     try:
+        check_listen_address(args.host, args.port)
         data = args.data if args.data is not None else ensure_default_data()
         root = open_root(data, args.split)
         model, note = load_model(args.checkpoint, args.device, args.threads)
-    except LaunchError as exc:
+    except (LaunchError, ServerStartError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("Interrupted.", file=sys.stderr)
         return 130
 
-    from app.server import AppConfig, Talk2PCApp
-
     config = AppConfig(host=args.host, port=args.port, split=args.split, model_note=note)
-    app = Talk2PCApp(root, model, config)
     try:
+        app = Talk2PCApp(root, model, config)
         app.start()
+    except (RootError, ServerStartError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
     except OSError as exc:
         print(f"error: cannot serve on {args.host}:{args.port}: {exc}", file=sys.stderr)
         return 2

@@ -33,8 +33,16 @@ Consistency rules:
   too, so every version stays in the manifest.
 - **Errors.** A full disk (``ENOSPC``) or any other failure during an operation is undone as above
   and raised as :class:`DiskFullError` / :class:`SaveError`: nothing half-visible, earlier pairs
-  untouched. An invalid draft raises :class:`annotate.validation.ValidationError` before anything
-  is written.
+  untouched. An invalid draft raises :class:`annotate.validation.ValidationError` and a split the
+  store does not offer (:attr:`AnnotationStore.splits`: train, val, test by default) raises
+  :class:`SplitError`, both before anything is written. Every other filesystem error of a store
+  method (a read-only root, an unreadable list) is a :class:`StoreError` with a one-line message;
+  never a bare ``OSError``.
+- **Nothing blocks the store.** A journal that recovery cannot resolve (unreadable, or its undo
+  fails for a reason other than a full disk) is moved to ``annotations/unresolved/`` with a logged
+  warning, and the store carries on (its id stays reserved). While the disk is full, an interrupted
+  edit that still needs its old files written back keeps its journal and every operation raises
+  :class:`DiskFullError` until space is freed; then the next operation finishes the undo.
 """
 
 from __future__ import annotations
@@ -44,6 +52,7 @@ import enum
 import errno
 import hashlib
 import json
+import logging
 import os
 import re
 import threading
@@ -67,7 +76,7 @@ from scenes.kitti import (
     boxes_to_labels,
     format_label_line,
     labels_to_boxes,
-    parse_label_line,
+    read_label_file,
 )
 from scenes.prompts import infer_tags
 from scenes.root import (
@@ -79,6 +88,7 @@ from scenes.root import (
     Talk2RadarWriter,
     format_id,
 )
+from scenes.textfile import read_text_file
 
 try:  # POSIX only; elsewhere the in-process lock alone serialises writers.
     import fcntl
@@ -92,7 +102,12 @@ LABEL_DECIMALS = 6
 """Decimals of the numbers in written ``label_2`` lines (as :class:`Talk2RadarWriter`)."""
 
 _SAMPLE_FOLDERS = ("velodyne", "calib", "label_2", "prompt")
-_SPLIT_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]*")
+_SPLIT_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}")
+
+DEFAULT_SPLITS: tuple[str, ...] = ("train", "val", "test")
+"""The splits a store offers unless told otherwise (:attr:`AnnotationStore.splits`)."""
+
+log = logging.getLogger(__name__)
 
 
 class StoreError(RuntimeError):
@@ -109,6 +124,10 @@ class DiskFullError(SaveError):
 
 class ConflictError(StoreError):
     """The pair changed since the draft was opened (another client saved or deleted it)."""
+
+
+class SplitError(StoreError, ValueError):
+    """The split to save into is not one the store offers (nothing was written)."""
 
 
 class Action(enum.Enum):
@@ -383,6 +402,11 @@ class AnnotationStore:
         validation: Rules checked before every save.
         lock_timeout: Seconds to wait for another writer before :class:`StoreError`.
         clock: Returns the time written to the manifest (ISO 8601 text); default UTC now.
+        splits: The splits a pair may be saved into (default :data:`DEFAULT_SPLITS`); names of
+            letters, digits, ``_``, ``-`` and ``.``, at most 64 characters.
+
+    Raises:
+        StoreError: the root cannot be prepared (e.g. read-only), or another radar tree is there.
     """
 
     def __init__(
@@ -393,8 +417,12 @@ class AnnotationStore:
         validation: ValidationConfig | None = None,
         lock_timeout: float = 30.0,
         clock: Callable[[], str] = _utc_now,
+        splits: Sequence[str] | None = None,
     ) -> None:
         self.path = Path(root)
+        self.splits: tuple[str, ...] = tuple(DEFAULT_SPLITS if splits is None else splits)
+        for name in self.splits:
+            _check_split_name(name)
         present = [name for name in RADAR_FOLDERS if (self.path / name).is_dir()]
         if radar_folder is None:
             radar_folder = present[0] if present else RADAR_FOLDERS[0]
@@ -408,18 +436,23 @@ class AnnotationStore:
         self.annotations_dir = self.path / "annotations"
         self.manifest_path = self.annotations_dir / "manifest.jsonl"
         self.journal_dir = self.annotations_dir / "pending"
+        self.unresolved_dir = self.annotations_dir / "unresolved"
         self.validation = validation if validation is not None else ValidationConfig()
         self.lock_timeout = float(lock_timeout)
         self.clock = clock
-        for folder in (
-            self.lidar_dir / "ImageSets",
-            self.radar_dir / "ImageSets",
-            self.journal_dir,
-        ):
-            folder.mkdir(parents=True, exist_ok=True)
-        self._thread_lock = _process_lock(self.path)
-        with self._locked():
-            self._recover_all()
+        with _fs_errors(f"opening the annotation store {self.path}"):
+            for folder in (
+                self.lidar_dir / "ImageSets",
+                self.radar_dir / "ImageSets",
+                self.journal_dir,
+            ):
+                folder.mkdir(parents=True, exist_ok=True)
+            self._thread_lock = _process_lock(self.path)
+            with self._locked():
+                try:
+                    self._recover_all()
+                except DiskFullError as exc:  # the next operation retries, once there is space
+                    log.warning("%s", exc)
 
     def __repr__(self) -> str:
         return f"AnnotationStore({str(self.path)!r})"
@@ -431,7 +464,12 @@ class AnnotationStore:
         if not self._thread_lock.acquire(timeout=self.lock_timeout):
             raise StoreError(f"{self.path}: another save is still running; try again")
         try:
-            fd = os.open(self.annotations_dir / ".lock", os.O_RDWR | os.O_CREAT, 0o644)
+            try:
+                fd = os.open(self.annotations_dir / ".lock", os.O_RDWR | os.O_CREAT, 0o644)
+            except OSError as exc:
+                raise _fs_error(
+                    exc, f"opening the lock file {self.annotations_dir / '.lock'}"
+                ) from exc
             try:
                 if fcntl is not None:
                     deadline = time.monotonic() + self.lock_timeout
@@ -456,7 +494,8 @@ class AnnotationStore:
 
     def records(self) -> tuple[ManifestRecord, ...]:
         """Every manifest line, oldest first."""
-        return read_manifest(self.manifest_path).records
+        with _fs_errors(f"reading the manifest {self.manifest_path}"):
+            return read_manifest(self.manifest_path).records
 
     def history(self, sample_id: str | int) -> tuple[ManifestRecord, ...]:
         """The manifest lines of one pair, oldest first (every version)."""
@@ -496,9 +535,10 @@ class AnnotationStore:
         """The LiDAR-tree splits whose list holds the sample (empty: not visible)."""
         sid = int(format_id(sample_id))
         out = []
-        for path in sorted((self.lidar_dir / "ImageSets").glob("*.txt")):
-            if any(_int_or_none(line) == sid for line in path.read_text().splitlines()):
-                out.append(path.stem)
+        with _fs_errors(f"reading the split lists of {self.path}"):
+            for path in sorted((self.lidar_dir / "ImageSets").glob("*.txt")):
+                if any(_int_or_none(line) == sid for line in _read_list(path)):
+                    out.append(path.stem)
         return tuple(out)
 
     def open(self, sample_id: str | int) -> Draft:
@@ -510,8 +550,7 @@ class AnnotationStore:
         calib = read_calib(training / "calib" / f"{sid}.txt")
         labels = self._read_labels(sid)
         boxes, classes = labels_to_boxes(labels, calib)
-        prompt_path = training / "prompt" / f"{sid}.txt"
-        prompt = prompt_path.read_text(encoding="utf-8").strip() if prompt_path.is_file() else ""
+        prompt = self._read_prompt(sid) or ""
         return Draft.from_boxes(
             boxes,
             classes,
@@ -525,11 +564,7 @@ class AnnotationStore:
         path = self.lidar_dir / "training" / "label_2" / f"{sid}.txt"
         if not path.is_file():
             return []
-        return [
-            parse_label_line(line, f"{path}:{n}")
-            for n, line in enumerate(path.read_text().splitlines(), start=1)
-            if line.strip()
-        ]
+        return read_label_file(path)
 
     # ---------------------------------------------------------------- operations
 
@@ -561,9 +596,11 @@ class AnnotationStore:
 
         Raises:
             ValidationError: The draft is invalid (nothing written).
+            SplitError: ``split`` is not one of :attr:`splits` (nothing written).
             DiskFullError, SaveError: Writing failed (undone; earlier pairs intact).
+            StoreError: The root cannot be read or locked.
         """
-        _check_split(split)
+        self._check_split(split)
         annotator = _clean_annotator(annotator)
         report = validate(draft, self.validation, source.sample.calib)
         report.raise_if_invalid()
@@ -571,7 +608,7 @@ class AnnotationStore:
         boxes, classes = draft.box_array, draft.classes
         calib = source.sample.calib
         labels = boxes_to_labels(boxes, list(classes), calib)
-        with self._locked():
+        with self._locked(), _fs_errors(f"saving a new pair in {self.path}"):
             self._recover_all()
             sid = format_id(self._next_id())
             op = uuid.uuid4().hex
@@ -629,7 +666,7 @@ class AnnotationStore:
         report.raise_if_invalid()
         prompt = draft.prompt.strip()
         boxes, classes = draft.box_array, draft.classes
-        with self._locked():
+        with self._locked(), _fs_errors(f"saving the edit of pair {sid}"):
             self._recover_all()
             splits = self.splits_of(sid)
             if not splits:
@@ -704,7 +741,7 @@ class AnnotationStore:
         """
         sid = format_id(sample_id)
         annotator = _clean_annotator(annotator)
-        with self._locked():
+        with self._locked(), _fs_errors(f"deleting pair {sid}"):
             self._recover_all()
             splits = self.splits_of(sid)
             if not splits:
@@ -746,9 +783,13 @@ class AnnotationStore:
     def recover(self) -> tuple[str, ...]:
         """Resolve interrupted operations now (also done on open and before every operation).
 
-        Returns one line per journal resolved (``"00012: create rolled back"``).
+        Returns one line per journal resolved (``"00012: create rolled back"``, or ``"00012:
+        create set aside (...)"`` for one moved to ``annotations/unresolved/``).
+
+        Raises:
+            DiskFullError: an interrupted edit cannot be undone until disk space is freed.
         """
-        with self._locked():
+        with self._locked(), _fs_errors(f"recovering interrupted operations in {self.path}"):
             return self._recover_all()
 
     # ---------------------------------------------------------------- internals
@@ -761,7 +802,9 @@ class AnnotationStore:
 
     @staticmethod
     def _read_text(path: Path) -> str | None:
-        return path.read_text(encoding="utf-8") if path.is_file() else None
+        if not path.is_file():
+            return None
+        return read_text_file(path, "file", StoreError)
 
     def _read_prompt(self, sid: str) -> str | None:
         text = self._read_text(self.lidar_dir / "training" / "prompt" / f"{sid}.txt")
@@ -773,7 +816,7 @@ class AnnotationStore:
         best = -1
         for tree in self._all_trees():
             for path in (tree / "ImageSets").glob("*.txt"):
-                for line in path.read_text().splitlines():
+                for line in _read_list(path):
                     value = _int_or_none(line)
                     if value is not None:
                         best = max(best, value)
@@ -782,9 +825,10 @@ class AnnotationStore:
         best = max(best, _max_stem(self.path / "meta"))
         for r in self.records():
             best = max(best, int(r.sample_id))
-        for path in self.journal_dir.glob("*.json"):
-            with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
-                best = max(best, int(json.loads(path.read_text())["sample_id"]))
+        for folder in (self.journal_dir, self.unresolved_dir):
+            for path in folder.glob("*.json"):
+                with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
+                    best = max(best, int(json.loads(path.read_text())["sample_id"]))
         return best + 1
 
     def _write_source(self, source: SourceFrame) -> SensorFiles:
@@ -819,13 +863,13 @@ class AnnotationStore:
         path = self._split_path(tree, split)
         if not path.is_file():
             return False
-        return any(_int_or_none(line) == int(sid) for line in path.read_text().splitlines())
+        return any(_int_or_none(line) == int(sid) for line in _read_list(path))
 
     def _add_to_split(self, sid: str, split: str) -> None:
         """Append the id to the split's list: radar tree(s) first, the LiDAR tree (commit) last."""
         for tree in (*self._radar_trees(), self.lidar_dir):
             path = self._split_path(tree, split)
-            text = path.read_text() if path.is_file() else ""
+            text = read_text_file(path, "split list", StoreError) if path.is_file() else ""
             if any(_int_or_none(line) == int(sid) for line in text.splitlines()):
                 continue
             if text and not text.endswith("\n"):
@@ -837,7 +881,7 @@ class AnnotationStore:
         path = self._split_path(tree, split)
         if not path.is_file():
             return
-        lines = path.read_text().splitlines(keepends=True)
+        lines = read_text_file(path, "split list", StoreError).splitlines(keepends=True)
         kept = [line for line in lines if _int_or_none(line) != int(sid)]
         if len(kept) != len(lines):
             atomic_write_text(path, "".join(kept))
@@ -854,7 +898,12 @@ class AnnotationStore:
         _fsync_dir(self.journal_dir)
 
     def _remove_journal(self, op: str) -> None:
-        self._journal_path(op).unlink(missing_ok=True)
+        """Remove a finished operation's journal; a failure is only logged (the operation is
+        done, and a journal left behind resolves as "done" next time)."""
+        try:
+            self._journal_path(op).unlink(missing_ok=True)
+        except OSError as exc:
+            log.warning("cannot remove the journal %s: %s", self._journal_path(op), exc)
         _fsync_dir(self.journal_dir)
 
     def _fail(self, journal: dict, exc: BaseException, what: str) -> None:
@@ -910,7 +959,7 @@ class AnnotationStore:
                 path = self.path / rel
                 if text is None:
                     path.unlink(missing_ok=True)
-                else:
+                elif not _holds(path, str(text)):  # unchanged files need no writing back
                     targets.append((path, str(text)))
             _replace_all(targets, op)
             self._remove_temporaries(sid)
@@ -941,22 +990,74 @@ class AnnotationStore:
                 tmp.unlink(missing_ok=True)
 
     def _recover_all(self) -> tuple[str, ...]:
-        """Resolve every pending journal (under the lock); also sweep stale temporary lists."""
-        done = []
-        for path in sorted(self.journal_dir.glob("*.json"), key=lambda p: p.stat().st_mtime):
+        """Resolve every pending journal (under the lock); also sweep stale temporary lists.
+
+        A journal that cannot be resolved is set aside (:meth:`_set_aside`) and never blocks the
+        store; one whose undo needs disk space that is missing stays, and :class:`DiskFullError`
+        is raised after the others are resolved.
+        """
+        done: list[str] = []
+        full: list[str] = []
+        journals = []
+        for path in self.journal_dir.glob("*.json"):
+            with contextlib.suppress(OSError):  # vanished meanwhile
+                journals.append((path.stat().st_mtime, path))
+        for _, path in sorted(journals):
             try:
-                journal = json.loads(path.read_text())
-            except json.JSONDecodeError as exc:
-                raise StoreError(f"{path}: unreadable journal ({exc}); move it away") from exc
-            outcome = self._resolve(journal)
-            path.unlink(missing_ok=True)
-            done.append(f"{format_id(journal['sample_id'])}: {journal['action']} {outcome}")
-        for folder in (self.journal_dir, *(t / "ImageSets" for t in self._all_trees())):
-            for tmp in folder.glob(".*.tmp*"):
-                tmp.unlink(missing_ok=True)
+                journal = json.loads(read_text_file(path, "journal", StoreError))
+                if not isinstance(journal, dict):
+                    raise StoreError(f"{path}: the journal is not a JSON object")
+                what = f"{format_id(journal['sample_id'])}: {journal['action']}"
+                outcome = self._resolve(journal)
+                path.unlink(missing_ok=True)
+                done.append(f"{what} {outcome}")
+            except Exception as exc:
+                if _is_disk_full(exc):
+                    full.append(path.name)
+                    continue
+                done.append(self._set_aside(path, exc))
+        with contextlib.suppress(OSError):
+            for folder in (self.journal_dir, *(t / "ImageSets" for t in self._all_trees())):
+                for tmp in folder.glob(".*.tmp*"):
+                    tmp.unlink(missing_ok=True)
         if done:
             _fsync_dir(self.journal_dir)
+        if full:
+            raise DiskFullError(
+                f"the disk is full: {len(full)} interrupted operation(s) in {self.journal_dir} "
+                f"cannot be undone yet ({', '.join(full)}); nothing else was changed. Free some "
+                "space and try again."
+            )
         return tuple(done)
+
+    def _set_aside(self, path: Path, exc: BaseException) -> str:
+        """Move a journal recovery cannot resolve to ``annotations/unresolved/`` (its id stays
+        reserved) and log a warning; returns the line :meth:`recover` reports."""
+        why = _one_line(f"{type(exc).__name__}: {exc}")
+        target = self.unresolved_dir / path.name
+        try:
+            self.unresolved_dir.mkdir(parents=True, exist_ok=True)
+            os.replace(path, target)
+            _fsync_dir(self.journal_dir)
+            where = f"moved to {target}"
+        except OSError as move_exc:
+            where = f"left in place: cannot move it ({move_exc.strerror or move_exc})"
+        log.warning(
+            "%s: an interrupted operation could not be resolved (%s); %s; the store carries on, "
+            "check that operation's files by hand",
+            path,
+            why,
+            where,
+        )
+        return f"{path.stem}: set aside ({why}; {where})"
+
+    def _check_split(self, split: str) -> None:
+        """Raise :class:`SplitError` unless ``split`` is one of :attr:`splits`."""
+        _check_split_name(split)
+        if split not in self.splits:
+            raise SplitError(
+                f"unknown split {split!r}: {self.path} offers {', '.join(self.splits)}"
+            )
 
 
 _METRIC = {c.lower() for c in CLASSES}
@@ -1047,11 +1148,52 @@ def _conflict_message(sid: str, base: int, history: Sequence[ManifestRecord]) ->
     )
 
 
-def _check_split(split: str) -> None:
+def _check_split_name(split: object) -> None:
+    """Raise :class:`SplitError` for a split name that could not be a file name of ImageSets."""
     if not isinstance(split, str) or not _SPLIT_NAME.fullmatch(split):
-        raise ValueError(
-            f"invalid split name {split!r}: use letters, digits, '_', '-' or '.' (e.g. 'train')"
+        shown = repr(split) if len(repr(split)) <= 40 else repr(split)[:37] + "..."
+        raise SplitError(
+            f"invalid split name {shown}: use at most 64 letters, digits, '_', '-' or '.' "
+            "(e.g. 'train')"
         )
+
+
+def _holds(path: Path, text: str) -> bool:
+    """Whether the file ``path`` exists and holds exactly ``text`` (False when unreadable)."""
+    try:
+        return path.is_file() and path.read_bytes() == text.encode("utf-8")
+    except OSError:
+        return False
+
+
+def _read_list(path: Path) -> list[str]:
+    """The lines of an ImageSets list (errors: :class:`StoreError` naming the file)."""
+    return read_text_file(path, "split list", StoreError).splitlines()
+
+
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def _fs_error(exc: OSError | UnicodeError, what: str) -> StoreError:
+    """A store error for a filesystem error met while doing ``what``."""
+    if _is_disk_full(exc):
+        return DiskFullError(f"the disk is full: {what} failed. Free some space and try again.")
+    if isinstance(exc, OSError):
+        where = f" ({exc.filename})" if exc.filename else ""
+        reason = exc.strerror or str(exc)
+    else:
+        where, reason = "", str(exc)
+    return StoreError(_one_line(f"{what} failed{where}: {reason}"))
+
+
+@contextlib.contextmanager
+def _fs_errors(what: str) -> Iterator[None]:
+    """Turn a bare ``OSError`` / ``UnicodeError`` raised inside into a :class:`StoreError`."""
+    try:
+        yield
+    except (OSError, UnicodeError) as exc:
+        raise _fs_error(exc, what) from exc
 
 
 def _clean_annotator(name: str) -> str:
@@ -1068,6 +1210,7 @@ def _error(exc: BaseException, what: str, outcome: str) -> SaveError:
 
 
 __all__ = [
+    "DEFAULT_SPLITS",
     "MANIFEST_FORMAT",
     "Action",
     "AnnotationStore",
@@ -1079,6 +1222,7 @@ __all__ = [
     "SaveError",
     "SaveResult",
     "SourceFrame",
+    "SplitError",
     "StoreError",
     "append_manifest_line",
     "read_manifest",

@@ -83,8 +83,10 @@ from annotate import (
     suggest_prompt,
     validate,
 )
+from annotate.store import DEFAULT_SPLITS
 from app.annotation_view import DraftView, box_at, box_tag, ground_hit, wxyz_to_yaw
 from app.scene_view import estimate_ground_z
+from app.text import md_text
 from scenes.actors import CLASSES, Actor
 from scenes.boxes import bev_iou
 from scenes.root import Sample
@@ -94,8 +96,9 @@ if TYPE_CHECKING:
 
 log = logging.getLogger(__name__)
 
-SPLITS = ("train", "val", "test")
-"""Splits offered when saving (the store's default, ``train``, is selected)."""
+SPLITS = DEFAULT_SPLITS
+"""Splits offered when saving (the store's default, ``train``, is selected); the store refuses any
+other (a forged websocket message included)."""
 
 NO_BOX = "(none)"
 """The *Box* dropdown's entry for "no box selected"."""
@@ -306,11 +309,6 @@ def option_pair_id(option: str) -> str | None:
     return head if head.isdigit() else None
 
 
-def _md_text(text: str) -> str:
-    """``text`` safe inside a markdown table cell."""
-    return text.replace("|", "\\|").replace("\n", " ")
-
-
 def evidence_markdown(
     draft: Draft, evidence: Sequence[BoxEvidence], selected_id: int | None
 ) -> str:
@@ -324,7 +322,7 @@ def evidence_markdown(
     for i, (item, ev) in enumerate(zip(draft.boxes, evidence, strict=True)):
         v = "-" if ev.mean_radial_velocity is None else f"{ev.mean_radial_velocity:+.1f} m/s"
         cells = [
-            box_tag(i, item.cls),
+            md_text(box_tag(i, item.cls)),
             str(ev.lidar_points),
             str(ev.radar_points),
             v,
@@ -344,29 +342,29 @@ def checks_markdown(report: ValidationReport) -> str:
         lines.append("**Ready to save.**")
     else:
         lines.append("**Before saving:**")
-        lines += [f"- {_md_text(m)}" for m in report.messages()]
+        lines += [f"- {md_text(m)}" for m in report.messages()]
     warnings = report.messages(Severity.WARNING)
     if warnings:
         lines.append("**Warnings** (saving is allowed):")
-        lines += [f"- {_md_text(m)}" for m in warnings]
+        lines += [f"- {md_text(m)}" for m in warnings]
     return "\n".join(lines)
 
 
 def pairs_markdown(pairs: Sequence[PairInfo], root: Path, limit: int = RECENT_PAIRS) -> str:
-    """The table of the most recently saved pairs."""
+    """The table of the most recently saved pairs (every stored text escaped)."""
     if not pairs:
-        return f"*No pair saved in `{root}` yet.*"
+        return f"*No pair saved in {md_text(root)} yet.*"
     recent = sorted(pairs, key=lambda p: p.time, reverse=True)[:limit]
     rows = [
-        f"{len(pairs)} saved pair(s) in `{root}`; the latest:",
+        f"{len(pairs)} saved pair(s) in {md_text(root)}; the latest:",
         "",
         "| id | v | split | boxes | prompt | by |",
         "| --- | ---: | --- | ---: | --- | --- |",
     ]
     for p in recent:
         rows.append(
-            f"| {p.sample_id} | {p.version} | {', '.join(p.splits)} | {p.num_boxes} | "
-            f"{_md_text(p.prompt)} | {_md_text(p.annotator)} |"
+            f"| {md_text(p.sample_id)} | {p.version} | {md_text(', '.join(p.splits))} | "
+            f"{p.num_boxes} | {md_text(p.prompt)} | {md_text(p.annotator)} |"
         )
     return "\n".join(rows)
 
@@ -652,24 +650,24 @@ class AnnotationPanel:
     def _status_markdown(self, draft: Draft, visible: bool) -> str:
         lines = []
         if self.store is None:
-            lines.append(f"**Saving is unavailable:** {self.shared.error}")
+            lines.append(f"**Saving is unavailable:** {md_text(self.shared.error)}")
         frame = self.frame
         if draft.sample_id is not None:
             lines.append(
-                f"**Editing pair `{draft.sample_id}`** (version {draft.base_version}); "
+                f"**Editing pair {md_text(draft.sample_id)}** (version {draft.base_version}); "
                 f"*Save pair* writes version {draft.base_version + 1}."
             )
         elif frame is not None:
-            lines.append(f"**New pair** on sample `{frame.name}`.")
+            lines.append(f"**New pair** on sample {md_text(frame.name)}.")
         if frame is not None and not visible and not is_pristine(draft):
             lines.append(
-                f"This draft belongs to sample `{frame.name}`, not to the frame on screen: its "
+                f"This draft belongs to sample {md_text(frame.name)}, not to the frame on screen: its "
                 "boxes are hidden. *Back to the draft's frame* shows it; *New pair* starts over."
             )
         history = self.editor.history
         undo = history.undo_label if history.can_undo else "-"
         redo = history.redo_label if history.can_redo else "-"
-        lines.append(f"Undo: *{undo}* · Redo: *{redo}*")
+        lines.append(f"Undo: *{md_text(undo)}* · Redo: *{md_text(redo)}*")
         return "  \n".join(lines)
 
     def refresh_pairs(self) -> None:
@@ -1150,7 +1148,7 @@ class AnnotationPanel:
         """Ask in a modal window; ``fn`` runs when the person clicks ``action``."""
         gui = self.session.client.gui
         with gui.add_modal(title) as modal:
-            gui.add_markdown(text)
+            gui.add_markdown(md_text(text))
             yes = gui.add_button(action, color="red")
             no = gui.add_button("Cancel")
 

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import viser
 
 from app.scene_view import estimate_ground_z
+from app.text import md_text
 from scenes.root import RootError, Sample, Talk2RadarRoot
 
 
@@ -101,12 +102,17 @@ class FrameStore:
 
 
 def frame_markdown(frame: Frame, count: int) -> str:
-    """The frame summary shown under the navigation controls."""
+    """The frame summary shown under the navigation controls (the sample's text escaped)."""
     s = frame.sample
-    gt = ", ".join(s.classes) if s.classes else "none"
-    prompt = s.prompt if s.prompt else "(this root has no prompts)"
+    gt = md_text(", ".join(s.classes)) if s.classes else "none"
+    prompt = md_text(s.prompt) if s.prompt else "(this root has no prompts)"
+    sid = (
+        f"`{s.sample_id}`"
+        if s.sample_id.isascii() and s.sample_id.isdigit()
+        else md_text(s.sample_id)
+    )
     return (
-        f"**Frame {frame.index + 1} / {count}** · sample `{s.sample_id}`  \n"
+        f"**Frame {frame.index + 1} / {count}** · sample {sid}  \n"
         f"{len(s.lidar):,} LiDAR · {len(s.radar):,} radar points · GT: {gt}  \n"
         f"*Sample prompt:* {prompt}"
     )

@@ -20,6 +20,7 @@ import numpy as np
 import viser
 
 from app.engine import MODALITY_LABELS, Answer, Modality
+from app.text import md_text
 
 HISTORY_SIZE = 20
 """Prompts kept in a browser's history."""
@@ -94,7 +95,7 @@ def results_markdown(answer: Answer, ious: np.ndarray, latency_ms: float) -> str
         lines += ["", "| # | class | score | IoU w/ GT |", "|---|---|---|---|"]
         for i in range(min(len(scores), RESULT_ROWS)):
             iou = f"{ious[i]:.2f}" if np.isfinite(ious[i]) else "-"
-            lines.append(f"| {i} | {pred.classes[i]} | {scores[i]:.2f} | {iou} |")
+            lines.append(f"| {i} | {md_text(pred.classes[i])} | {scores[i]:.2f} | {iou} |")
         if len(scores) > RESULT_ROWS:
             lines.append(f"\n... and {len(scores) - RESULT_ROWS} more")
     return "\n".join(lines)

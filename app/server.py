@@ -15,11 +15,19 @@ Lifecycle::
 
 ``start`` loads the first loadable frame, begins encoding it and warms the model up (both in the
 background), so the first prompt pays neither the text encoder's loading nor the scene encoding.
+
+``start`` never hangs: viser 1.1.1 waits forever when its server thread dies before it listens (a
+port outside 0..65535, an address that is not this machine's), so the host and port are checked
+first (:func:`check_listen_address`) and viser is started under a deadline
+(:attr:`AppConfig.start_timeout`); both failures raise :class:`ServerStartError` (an ``OSError``).
+A busy port is no failure: viser serves on the next free one, as before.
 """
 
 from __future__ import annotations
 
+import errno
 import logging
+import socket
 import threading
 from concurrent.futures import Future
 from concurrent.futures import wait as futures_wait
@@ -39,6 +47,61 @@ log = logging.getLogger(__name__)
 DEFAULT_SCORE_THRESHOLD = 0.3
 """Initial score threshold when the model does not say (``model.cfg.head.score_threshold``)."""
 
+MAX_PORT = 65535
+"""The highest TCP port."""
+
+
+class ServerStartError(OSError):
+    """The server cannot listen on the host and port asked for; the one-line message says why."""
+
+
+def check_listen_address(host: str, port: int) -> None:
+    """Check that viser can listen on ``host:port`` before starting it.
+
+    ``port`` must be an integer in ``0..65535`` (0: any free port) and ``host`` must resolve to
+    addresses of this machine that a socket can be bound to; a port that is merely busy passes
+    (viser tries the next ones), one that may not be bound (e.g. below 1024 without privileges)
+    does not.
+
+    Raises:
+        ServerStartError: with a one-line message naming the host or port.
+    """
+    if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= MAX_PORT:
+        raise ServerStartError(f"port {port!r} is out of range: use 0..{MAX_PORT} (0: a free port)")
+    if not isinstance(host, str):
+        raise ServerStartError(f"host {host!r} is not a host name or an address")
+    try:
+        infos = socket.getaddrinfo(
+            host or None, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE
+        )
+    except socket.gaierror as exc:
+        raise ServerStartError(f"host {host!r}: cannot resolve it ({exc.strerror})") from exc
+    except (UnicodeError, ValueError) as exc:  # e.g. a label over 63 characters, a NUL
+        raise ServerStartError(f"host {host!r} is not a valid host name ({exc})") from exc
+    seen = set()
+    for family, kind, proto, _, address in infos:
+        if (family, address[0]) in seen:
+            continue
+        seen.add((family, address[0]))
+        for probe in (0, port) if port else (0,):
+            sock = socket.socket(family, kind, proto)
+            try:
+                sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+                if family == socket.AF_INET6:
+                    sock.setsockopt(socket.IPPROTO_IPV6, socket.IPV6_V6ONLY, 1)
+                sock.bind((address[0], probe, *address[2:]))
+            except OSError as exc:
+                if probe and exc.errno == errno.EADDRINUSE:
+                    continue  # busy: viser serves on the next free port
+                what = f"address {address[0]}" if not probe else f"port {probe}"
+                raise ServerStartError(
+                    f"cannot listen on {host}:{port}: {what} cannot be bound "
+                    f"({exc.strerror or exc})"
+                    + ("; is it an address of this machine?" if not probe else "")
+                ) from exc
+            finally:
+                sock.close()
+
 
 @dataclass(frozen=True)
 class AppConfig:
@@ -55,6 +118,8 @@ class AppConfig:
         workers: Threads of the model worker pool.
         warm_up: Run one tiny prompt at start (loads the text encoder before the first user).
         dark_mode: viser's dark theme (points read better on it).
+        start_timeout: Seconds :meth:`Talk2PCApp.start` waits for viser to listen before it
+            raises :class:`ServerStartError`.
     """
 
     host: str = "127.0.0.1"
@@ -67,6 +132,7 @@ class AppConfig:
     workers: int = 2
     warm_up: bool = True
     dark_mode: bool = True
+    start_timeout: float = 20.0
 
 
 class Talk2PCApp:
@@ -120,13 +186,18 @@ class Talk2PCApp:
         return f"http://{shown}:{self.port}"
 
     def start(self) -> Talk2PCApp:
-        """Load the first frame and start serving (non-blocking). Returns ``self``."""
+        """Load the first frame and start serving (non-blocking). Returns ``self``.
+
+        Raises:
+            ServerStartError: the host or port cannot be served (checked first), or viser did not
+                listen within :attr:`AppConfig.start_timeout` seconds.
+            RootError: no frame of the split loads.
+        """
         if self.server is not None:
             return self
+        check_listen_address(self.config.host, self.config.port)
         self.frame = self._first_frame()
-        server = viser.ViserServer(
-            host=self.config.host, port=self.config.port, label=self.config.title, verbose=False
-        )
+        server = self._start_viser()
         server.gui.configure_theme(
             dark_mode=self.config.dark_mode, control_width="large", show_share_button=False
         )
@@ -142,6 +213,46 @@ class Talk2PCApp:
         self._startup.append(self.engine.prefetch(self.frame.sample, self.engine.modalities[0]))
         log.info("serving %d frames of %s at %s", len(self.frames), self.frames.root, self.url)
         return self
+
+    def _start_viser(self) -> viser.ViserServer:
+        """``viser.ViserServer(...)`` under a deadline (it blocks forever when its server thread
+        dies before listening); a server that starts after the deadline is stopped at once."""
+        cfg = self.config
+        state: dict[str, object] = {}
+        lock = threading.Lock()
+
+        def create() -> None:
+            try:
+                server = viser.ViserServer(
+                    host=cfg.host, port=cfg.port, label=cfg.title, verbose=False
+                )
+            except BaseException as exc:
+                with lock:
+                    state["error"] = exc
+                return
+            with lock:
+                late = "gave_up" in state
+                state["server"] = server
+            if late:
+                server.stop()
+
+        thread = threading.Thread(target=create, name="viser-start", daemon=True)
+        thread.start()
+        thread.join(cfg.start_timeout)
+        with lock:
+            if "server" not in state and "error" not in state:
+                state["gave_up"] = True
+        if "gave_up" in state:
+            raise ServerStartError(
+                f"the server did not start listening on {cfg.host}:{cfg.port} within "
+                f"{cfg.start_timeout:g} s"
+            )
+        error = state.get("error")
+        if isinstance(error, OSError):
+            raise ServerStartError(f"cannot listen on {cfg.host}:{cfg.port}: {error}") from error
+        if isinstance(error, BaseException):
+            raise error
+        return state["server"]  # type: ignore[return-value]
 
     def wait_ready(self, timeout: float | None = None) -> None:
         """Block until the start-up work (model warm-up, first scene encoding) is done.

@@ -76,6 +76,7 @@ from app.scene_view import (
     build_view_panel,
     chase_pose,
 )
+from app.text import md_text
 from scenes.root import Sample
 
 if TYPE_CHECKING:
@@ -205,7 +206,7 @@ class ClientSession:
         """Create this browser's panel: note, Scene folder, Query / View / Annotate tabs."""
         gui = self.client.gui
         if self.app.model_note:
-            gui.add_markdown(f"**Warning: {self.app.model_note}**")
+            gui.add_markdown(f"**Warning: {md_text(self.app.model_note)}**")
         with gui.add_folder("Scene"):
             self.nav = build_navigation_panel(gui, len(self.app.frames))
         tabs = gui.add_tab_group()
@@ -227,7 +228,9 @@ class ClientSession:
                     module.build_annotation_tab(self)
                 except Exception as exc:
                     log.exception("the annotation panel failed to build")
-                    gui.add_markdown(f"The annotation panel failed: `{type(exc).__name__}: {exc}`")
+                    gui.add_markdown(
+                        f"The annotation panel failed: {md_text(f'{type(exc).__name__}: {exc}')}"
+                    )
 
     def _wire_navigation(self, nav: NavigationPanel) -> None:
         @nav.step.on_click
@@ -387,7 +390,7 @@ class ClientSession:
                 generation=self._generation,
                 received=received,
             )
-            self.query.results.content = f"*Running:* {text}"
+            self.query.results.content = f"*Running:* {md_text(text)}"
         return self.app.engine.submit(self._answer_job, request)
 
     def _stale(self, request: QueryRequest) -> bool:
@@ -404,7 +407,7 @@ class ClientSession:
             self.report_error("Model error", exc)
             with self.lock:
                 if not self._stale(request) and self.query is not None:
-                    self.query.results.content = f"*The model failed on:* {request.prompt}"
+                    self.query.results.content = f"*The model failed on:* {md_text(request.prompt)}"
             return
         with self.lock:
             if self._stale(request):

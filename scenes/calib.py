@@ -23,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from scenes.boxes import wrap_yaw
+from scenes.textfile import read_text_file
 
 IMAGE_SIZE: tuple[int, int] = (1936, 1216)
 """VoD camera image ``(width, height)`` in pixels."""
@@ -143,7 +144,7 @@ class Calibration:
         for key in _REQUIRED:
             if key not in values:
                 raise CalibrationError(f"{source}: missing {key}")
-        return Calibration(
+        calib = Calibration(
             P2=values["P2"].reshape(3, 4),
             R0_rect=values.get("R0_rect", np.eye(3).reshape(-1)).reshape(3, 3),
             Tr_velo_to_cam=values["Tr_velo_to_cam"].reshape(3, 4),
@@ -151,15 +152,39 @@ class Calibration:
             P1=values.get("P1"),
             P3=values.get("P3"),
         )
+        _check_invertible(calib, source)
+        return calib
+
+
+MAX_CONDITION = 1e12
+"""A ``R0_rect · Tr_velo_to_cam`` with a larger condition number is refused as singular: its
+inverse (camera -> sensor, used for every label and for the radar points) would be meaningless."""
+
+
+def _check_invertible(calib: Calibration, source: str) -> None:
+    """Raise :class:`CalibrationError` when the sensor -> camera transform cannot be inverted."""
+    with np.errstate(all="ignore"):
+        matrix = calib.velo_to_cam
+        try:
+            condition = float(np.linalg.cond(matrix)) if np.all(np.isfinite(matrix)) else np.inf
+        except np.linalg.LinAlgError:
+            condition = np.inf
+    if not np.isfinite(condition) or condition > MAX_CONDITION:
+        raise CalibrationError(
+            f"{source}: R0_rect · Tr_velo_to_cam is singular (not invertible; condition number "
+            f"{condition:.3g}), so camera boxes cannot be brought into the sensor frame"
+        )
 
 
 def read_calib(path: str | Path) -> Calibration:
-    """Read a VoD calib file; errors name the file and line."""
+    """Read a VoD calib file; errors name the file and line.
+
+    Raises:
+        CalibrationError: a missing, unreadable, non-UTF-8 or binary file, a malformed line, a
+            missing matrix, or a singular sensor -> camera transform.
+    """
     path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError as exc:
-        raise CalibrationError(f"{path}: calib file not found") from exc
+    text = read_text_file(path, "calib file", CalibrationError)
     return Calibration.from_text(text, source=str(path))
 
 

@@ -27,6 +27,11 @@ from scenes.calib import (
     boxes_camera_to_lidar,
     boxes_lidar_to_camera,
 )
+from scenes.textfile import read_text_file
+
+MAX_ABS_VALUE = 1e6
+"""No number of a label line may exceed this in magnitude: a location of 1e308 m would overflow the
+overlaps into NaN and silently change a score; real values are pixels, metres, radians, scores."""
 
 
 class LabelError(ValueError):
@@ -71,6 +76,12 @@ def parse_label_line(line: str, source: str = "<label>") -> ObjectLabel:
         raise LabelError(f"{source}: non-numeric field in {line.strip()!r}") from exc
     if not np.all(np.isfinite(nums)):
         raise LabelError(f"{source}: non-finite value in {line.strip()!r}")
+    if max(abs(v) for v in nums) > MAX_ABS_VALUE:
+        worst = max(range(len(nums)), key=lambda i: abs(nums[i]))
+        raise LabelError(
+            f"{source}: field {worst + 2} ({fields[worst + 1][:24]!r}) is out of range: no "
+            f"label value (pixels, metres, radians, score) exceeds {MAX_ABS_VALUE:g} in magnitude"
+        )
     occluded = nums[1]
     if occluded != int(occluded):
         raise LabelError(f"{source}: occluded must be an integer, got {fields[2]!r}")
@@ -116,12 +127,13 @@ def format_label_line(label: ObjectLabel, decimals: int = 4) -> str:
 
 
 def read_label_file(path: str | Path) -> list[ObjectLabel]:
-    """Read a label file (empty file -> no labels); errors name the file and line."""
+    """Read a label file (empty file -> no labels); errors name the file and line.
+
+    Raises:
+        LabelError: a missing, unreadable, non-UTF-8 or binary file, or a malformed line.
+    """
     path = Path(path)
-    try:
-        text = path.read_text()
-    except FileNotFoundError as exc:
-        raise LabelError(f"{path}: label file not found") from exc
+    text = read_text_file(path, "label file", LabelError)
     labels = []
     for lineno, line in enumerate(text.splitlines(), start=1):
         if line.strip():

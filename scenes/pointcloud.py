@@ -25,6 +25,10 @@ def read_points(path: str | Path, num_features: int) -> np.ndarray:
         raw = path.read_bytes()
     except FileNotFoundError as exc:
         raise PointCloudError(f"{path}: point-cloud file not found") from exc
+    except OSError as exc:  # a folder, a symlink loop, no permission
+        raise PointCloudError(
+            f"{path}: cannot read the point-cloud file ({exc.strerror or exc})"
+        ) from exc
     record = 4 * num_features
     if len(raw) % record:
         raise PointCloudError(

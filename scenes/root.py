@@ -38,6 +38,7 @@ from scenes.kitti import (
     write_label_file,
 )
 from scenes.pointcloud import LIDAR_FEATURES, RADAR_FEATURES, read_points, write_points
+from scenes.textfile import read_text_file
 
 RADAR_FOLDERS = ("radar_5frames", "radar_3frames", "radar")
 LIDAR_FOLDER = "lidar"
@@ -95,6 +96,8 @@ class SampleMeta:
     @staticmethod
     def from_json(data: dict, source: str = "<meta>") -> SampleMeta:
         """Inverse of :meth:`to_json`; errors name ``source``."""
+        if not isinstance(data, dict):
+            raise RootError(f"{source}: malformed sidecar: expected a JSON object")
         try:
             return SampleMeta(
                 tags=frozenset(data.get("tags", ())),
@@ -106,7 +109,7 @@ class SampleMeta:
                 radar_scans=int(data.get("radar_scans", 5)),
                 extra=dict(data.get("extra", {})),
             )
-        except (KeyError, TypeError, ValueError) as exc:
+        except (AttributeError, KeyError, TypeError, ValueError, IndexError, OverflowError) as exc:
             raise RootError(f"{source}: malformed sidecar: {exc}") from exc
 
 
@@ -137,6 +140,14 @@ class Sample:
     radar_calib: Calibration | None = field(repr=False, default=None)
     labels: tuple[ObjectLabel, ...] = field(repr=False, default=())
     meta: SampleMeta | None = field(repr=False, default=None)
+
+
+def _is_file(path: Path) -> bool:
+    """``path.is_file()`` that says False for a path the OS refuses (a name too long)."""
+    try:
+        return path.is_file()
+    except OSError:
+        return False
 
 
 class Talk2RadarRoot:
@@ -172,40 +183,67 @@ class Talk2RadarRoot:
         return sorted(p.stem for p in (self.lidar_dir / "ImageSets").glob("*.txt"))
 
     def ids(self, split: str) -> list[str]:
-        """The 5-digit ids listed in ``lidar/ImageSets/<split>.txt`` (blank lines skipped)."""
+        """The 5-digit ids listed in ``lidar/ImageSets/<split>.txt`` (blank lines skipped).
+
+        Raises:
+            RootError: the list is missing or unreadable, a line is not an integer, or an id is
+                listed twice (``2`` and ``00002`` are the same id); the message names file and line.
+        """
         path = self.lidar_dir / "ImageSets" / f"{split}.txt"
-        if not path.is_file():
+        if not _is_file(path):
             raise RootError(f"{path}: split {split!r} not found (present: {self.splits()})")
-        out = []
-        for lineno, line in enumerate(path.read_text().splitlines(), start=1):
+        out: list[str] = []
+        first: dict[str, int] = {}
+        text = read_text_file(path, "split list", RootError)
+        for lineno, line in enumerate(text.splitlines(), start=1):
             if line.strip():
                 try:
-                    out.append(format_id(line.strip()))
+                    sid = format_id(line.strip())
                 except RootError as exc:
                     raise RootError(f"{path}:{lineno}: {exc}") from exc
+                if sid in first:
+                    raise RootError(
+                        f"{path}:{lineno}: sample {sid} is listed twice (first on line "
+                        f"{first[sid]}); each id may appear once per split"
+                    )
+                first[sid] = lineno
+                out.append(sid)
         return out
 
     def _file(self, tree: Path, folder: str, sample_id: str, ext: str) -> Path:
         path = tree / "training" / folder / f"{sample_id}.{ext}"
-        if not path.is_file():
+        if not path.exists() and not path.is_symlink():
             raise RootError(f"{path}: missing {folder} file for sample {sample_id}")
-        return path
+        return path  # something is there: its reader says what is wrong with it, if anything
 
     def load_prompt(self, sample_id: str | int) -> str | None:
-        """The prompt of a sample (whole file, stripped), or None where the root has no prompts."""
+        """The prompt of a sample (whole file, stripped), or None where the root has no prompts.
+
+        Raises:
+            RootError: the file is missing, unreadable, not UTF-8 text, or holds no sentence.
+        """
         sid = format_id(sample_id)
         if not self._has_prompts:
             return None
-        return self._file(self.lidar_dir, "prompt", sid, "txt").read_text(encoding="utf-8").strip()
+        path = self._file(self.lidar_dir, "prompt", sid, "txt")
+        prompt = read_text_file(path, "prompt file", RootError).strip()
+        if not prompt:
+            raise RootError(f"{path}: the prompt file of sample {sid} is empty")
+        return prompt
 
     def load_meta(self, sample_id: str | int) -> SampleMeta | None:
-        """The sidecar of a sample, or None where it has none."""
+        """The sidecar of a sample, or None where it has none.
+
+        Raises:
+            RootError: the sidecar is unreadable, not UTF-8, not JSON or not a sidecar object.
+        """
         path = self.path / "meta" / f"{format_id(sample_id)}.json"
-        if not path.is_file():
+        if not path.exists() and not path.is_symlink():
             return None
+        text = read_text_file(path, "sidecar", RootError)
         try:
-            data = json.loads(path.read_text())
-        except json.JSONDecodeError as exc:
+            data = json.loads(text)
+        except (json.JSONDecodeError, RecursionError) as exc:
             raise RootError(f"{path}: invalid JSON: {exc}") from exc
         return SampleMeta.from_json(data, source=str(path))
 

@@ -480,6 +480,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SynthError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    except OSError as exc:  # --out is a file, a read-only folder, a full disk...
+        print(
+            f"error: cannot write {exc.filename or args.out}: {exc.strerror or exc}",
+            file=sys.stderr,
+        )
+        return 2
     counts = ", ".join(f"{k} {len(v)}" for k, v in report.splits.items())
     rate = report.samples / max(report.seconds, 1e-9)
     print(

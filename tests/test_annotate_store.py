@@ -25,6 +25,7 @@ from annotate import (
     ValidationError,
     read_manifest,
 )
+from annotate.store import SplitError
 from scenes import Actor, SampleMeta, Talk2RadarRoot, Talk2RadarWriter, read_label_file
 from scenes.boxes import wrap_yaw
 from scenes.calib import vod_lidar_calibration, vod_radar_calibration
@@ -604,3 +605,133 @@ def test_torn_manifest_line_is_skipped_and_terminated(source_root: Path, out_roo
     assert [r.prompt for r in store.records()] == ["first", "second"]
     lines = store.manifest_path.read_text().splitlines()
     assert json.loads(lines[-1])["prompt"] == "second" and len(lines) == 3
+
+
+# ------------------------------------------------------------------------------------------ reliability
+# (issue 11: no input can disable saving; every filesystem error is a store error)
+
+
+def test_overlong_split_name_is_refused_and_saving_keeps_working(
+    source_root: Path, out_root: Path
+) -> None:
+    store = AnnotationStore(out_root)
+    source = SourceFrame.from_root(source_root, 3)
+    before = _snapshot(out_root)
+    with pytest.raises(SplitError, match="invalid split name"):
+        store.create(_draft(), source, split="a" * 300)
+    assert _snapshot(out_root) == before  # nothing written, no journal left
+    # Saving still works, also for a store opened afterwards (a restart).
+    sid = store.create(_draft("after the bad split"), source).sample_id
+    edited = AnnotationStore(out_root).update(store.open(sid).set_prompt("edited"))
+    assert edited.version == 2
+    AnnotationStore(out_root).delete(sid)
+    assert AnnotationStore(out_root).pairs() == ()
+
+
+@pytest.mark.parametrize("split", ["holdout", "b" * 200, "../x", "", "train\n"])
+def test_only_the_offered_splits_are_accepted(
+    source_root: Path, out_root: Path, split: str
+) -> None:
+    store = AnnotationStore(out_root)
+    assert store.splits == ("train", "val", "test")
+    with pytest.raises(SplitError) as info:
+        store.create(_draft(), SourceFrame.from_root(source_root, 3), split=split)
+    assert "\n" not in str(info.value) and len(str(info.value)) < 200
+    assert sorted(p.name for p in (out_root / "lidar" / "ImageSets").iterdir()) == []
+    custom = AnnotationStore(out_root, splits=("train", "holdout"))
+    assert custom.create(_draft(), SourceFrame.from_root(source_root, 3), split="holdout")
+
+
+def _write_journal(root: Path, op: str, journal: dict | str) -> Path:
+    path = root / "annotations" / "pending" / f"{op}.json"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(journal if isinstance(journal, str) else json.dumps(journal))
+    return path
+
+
+def test_a_journal_recovery_cannot_resolve_is_set_aside(
+    source_root: Path, out_root: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    # What the old store left behind after a save into a 300-character split: a journal whose
+    # recovery fails (ENAMETOOLONG), which made every later operation fail, also after a restart.
+    AnnotationStore(out_root)
+    bad = _write_journal(
+        out_root,
+        "a" * 32,
+        {"op": "a" * 32, "action": "create", "sample_id": "00041", "splits": ["a" * 300]},
+    )
+    torn = _write_journal(out_root, "b" * 32, '{"op": "bbbb", "act')
+    with caplog.at_level("WARNING", logger="annotate.store"):
+        store = AnnotationStore(out_root)
+    unresolved = out_root / "annotations" / "unresolved"
+    assert not bad.exists() and not torn.exists()
+    assert sorted(p.name for p in unresolved.iterdir()) == [bad.name, torn.name]
+    assert sum("could not be resolved" in r.getMessage() for r in caplog.records) == 2
+    result = store.create(_draft(), SourceFrame.from_root(source_root, 3))
+    assert result.sample_id == "00042"  # the set-aside journal's id stays reserved
+    assert store.recover() == ()
+
+
+def test_full_disk_during_an_edit_is_disk_full_until_space_is_freed(
+    source_root: Path, out_root: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    store = AnnotationStore(out_root)
+    source = SourceFrame.from_root(source_root, 3)
+    sid = store.create(_draft("old prompt"), source).sample_id
+    prompt_path = out_root / "lidar" / "training" / "prompt" / f"{sid}.txt"
+    disk = {"full": False}
+    real_fsync, real_append = os.fsync, store_module.append_manifest_line
+
+    def fsync(fd: int) -> None:
+        if disk["full"]:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real_fsync(fd)
+
+    def append(path: Path, line: str) -> None:  # the disk fills up just before the manifest line
+        disk["full"] = True
+        real_append(path, line)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    monkeypatch.setattr(store_module, "append_manifest_line", append)
+    with pytest.raises(DiskFullError):
+        store.update(store.open(sid).set_prompt("new prompt"))
+    monkeypatch.setattr(store_module, "append_manifest_line", real_append)
+    # The old files cannot be written back yet: every later call says so, as a store error.
+    for attempt in (
+        lambda: store.create(_draft("another"), source),
+        lambda: store.delete(sid),
+        lambda: store.recover(),
+    ):
+        with pytest.raises(DiskFullError, match="disk is full"):
+            attempt()
+    AnnotationStore(out_root)  # opening the store still works (a warning in the log)
+    disk["full"] = False  # space freed: the next operation finishes the undo
+    assert store.recover() == (f"{sid}: edit rolled back",)
+    assert prompt_path.read_text() == "old prompt\n" and store.version(sid) == 1
+    assert store.update(store.open(sid).set_prompt("new prompt")).version == 2
+
+
+def test_filesystem_errors_are_store_errors(source_root: Path, out_root: Path) -> None:
+    store = AnnotationStore(out_root)
+    sid = store.create(_draft(), SourceFrame.from_root(source_root, 3)).sample_id
+    split_list = out_root / "lidar" / "ImageSets" / "train.txt"
+    text = split_list.read_bytes()
+    split_list.write_bytes(b"\xff\xfe\x00binary")
+    with pytest.raises(StoreError, match=r"train\.txt.*not UTF-8"):
+        store.open(sid)
+    with pytest.raises(StoreError, match=r"train\.txt"):
+        store.create(_draft(), SourceFrame.from_root(source_root, 3))
+    split_list.write_bytes(text)
+    lock = out_root / "annotations" / ".lock"
+    lock.unlink()
+    lock.mkdir()  # the lock file cannot be opened
+    with pytest.raises(StoreError, match=r"lock file .*\.lock"):
+        store.delete(sid)
+    with pytest.raises(StoreError, match=r"lock file"):
+        AnnotationStore(out_root)
+    lock.rmdir()
+    assert store.delete(sid).action is Action.DELETE
+    blocked = out_root.parent / "a-file"
+    blocked.write_text("not a folder")
+    with pytest.raises(StoreError, match="opening the annotation store"):
+        AnnotationStore(blocked / "root")

@@ -362,3 +362,82 @@ def test_failed_load_is_a_notification(running_app) -> None:
         client.pump_until(lambda: app.frame.index == target, 10, "the repaired frame")
     finally:
         client.close()
+
+
+# ---------------------------------------------------------------------------- reliability (issue 11)
+
+HOSTILE_TEXT = "<img src=x onerror=alert(1)> <b>b</b> ![t](http://host/x.png)"
+
+
+def _assert_only_text(markdown: str) -> None:
+    """The markdown, rendered as viser does (CommonMark, raw HTML on), holds no tag of the text."""
+    from tests.test_reliability_html import OWN_TAGS, _render, _tags
+
+    rendered = _render(markdown)
+    assert _tags(rendered) <= OWN_TAGS, rendered
+
+
+def test_a_hostile_prompt_is_shown_as_text(running_app) -> None:
+    app = running_app
+    client = _connected(app)
+    try:
+        client.set("Prompt", HOSTILE_TEXT + "\n")
+
+        def running() -> list[str]:
+            return [
+                m["updates"]["_markdown"]
+                for m in client.messages
+                if m["type"] == "GuiUpdateMessage"
+                and "Running" in m["updates"].get("_markdown", "")
+            ]
+
+        client.pump_until(lambda: bool(running()), 30, "the Running: line")
+        lines = running()
+        assert lines and all("onerror" in text for text in lines)
+        for text in lines:
+            _assert_only_text(text)
+    finally:
+        client.close()
+
+
+def test_stored_text_and_forged_splits(running_app) -> None:
+    """A saved pair's prompt and annotator are shown as text in the Annotate table; a split name
+    forged through the websocket is refused by the server and saving keeps working."""
+    from annotate import AnnotationStore, Draft, SourceFrame
+    from app.annotation_panel import shared_root
+
+    app = running_app
+    root = app.frames.root
+    store = shared_root(root.path).store
+    assert store is not None
+    pair = Draft().set_prompt(HOSTILE_TEXT).add_box(GT_BOX, "Car")
+    store.create(pair, SourceFrame.from_root(root, root.ids("test")[0]), annotator=HOSTILE_TEXT)
+    before = set(app.sessions)
+    client = _connected(app)
+    try:
+        session = app.sessions[(set(app.sessions) - before).pop()]
+        panel = next(p for p in shared_root(root.path).panels() if p.session is session)
+        client.pump_until(lambda: "Save pair" in client.gui and panel.frame is not None, 15, "tab")
+        tables = [text for text in client.markdown.values() if "saved pair(s)" in text]
+        assert tables and "onerror" in tables[0]
+        _assert_only_text(tables[0])
+
+        lists = sorted((root.lidar_dir / "ImageSets").iterdir())
+        with session.lock:
+            panel.editor.reset(Draft().set_prompt("the car ahead").add_box(GT_BOX, "Car"))
+        client.set("Split", "a" * 300)  # not an option: only a forged message can send it
+        client.click("Save pair")
+        client.pump_until(
+            lambda: any(t == "Save failed" for t, _ in client.notifications), 10, "the refusal"
+        )
+        body = next(b for t, b in client.notifications if t == "Save failed")
+        assert "invalid split name" in body
+        assert sorted((root.lidar_dir / "ImageSets").iterdir()) == lists  # no junk list
+        client.set("Split", "train")
+        client.click("Save pair")
+        client.pump_until(
+            lambda: any(t.startswith("Saved pair") for t, _ in client.notifications), 10, "saved"
+        )
+        assert len(AnnotationStore(root.path).pairs()) == 2
+    finally:
+        client.close()

@@ -173,3 +173,55 @@ def test_radar_calibration_places_radar_ahead_and_below():
     t = sensor_to_lidar(vod_lidar_calibration(), vod_radar_calibration())
     np.testing.assert_allclose(t[:3, 3], [2.51, 0.0, -1.15], atol=1e-12)
     np.testing.assert_allclose(t[:3, :3], np.eye(3), atol=1e-12)
+
+
+# ------------------------------------------------------------------------------------------ reliability
+# (issue 11: one error type per kind of file, one line naming it)
+
+
+def test_singular_calibration_is_refused_with_the_source():
+    zero = " ".join(["0"] * 12)
+    text = VOD_CALIB.replace("Tr_velo_to_cam: 0 -1 0 0.15 0 0 -1 -0.46 1 0 0 -0.92", "")
+    with pytest.raises(CalibrationError, match=r"c\.txt: R0_rect · Tr_velo_to_cam is singular"):
+        Calibration.from_text(text + f"\nTr_velo_to_cam: {zero}\n", source="c.txt")
+    flat = text.replace("R0_rect: 1.0 0.0 0.0 0.0 1.0 0.0 0.0 0.0 1.0", "R0_rect: " + "1 " * 9)
+    with pytest.raises(CalibrationError, match="singular"):
+        Calibration.from_text(flat + "\nTr_velo_to_cam: 0 -1 0 0 0 0 -1 0 1 0 0 0\n", "c.txt")
+    huge = VOD_CALIB.replace("0 -1 0 0.15", "1e300 -1e300 0 0.15")
+    with pytest.raises(CalibrationError, match="singular"):
+        Calibration.from_text(huge, source="c.txt")
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        (b"P2: 1 \xff", "not UTF-8"),
+        (b"\x00\x01", "binary"),
+    ],
+)
+def test_unreadable_calib_and_label_files(tmp_path, content, message):
+    path = tmp_path / "00001.txt"
+    path.write_bytes(content)
+    with pytest.raises(CalibrationError, match=rf"00001\.txt: the calib file is {message}"):
+        read_calib(path)
+    with pytest.raises(LabelError, match=rf"00001\.txt: the label file is {message}"):
+        read_label_file(path)
+    path.unlink()
+    path.mkdir()
+    with pytest.raises(CalibrationError, match=r"00001\.txt: cannot read the calib file"):
+        read_calib(path)
+    with pytest.raises(LabelError, match=r"00001\.txt: cannot read the label file"):
+        read_label_file(path)
+
+
+@pytest.mark.parametrize(
+    ("line", "message"),
+    [
+        (VOD_LINE.replace("bicycle 0 0", "bicycle 0 1e300"), "field 3 .* out of range"),
+        (VOD_LINE.replace("12.884601376284115", "1e308"), "field 14 .* out of range"),
+        (VOD_LINE.replace("1232.0646", "-2e6"), "field 5 .* out of range"),
+    ],
+)
+def test_absurd_label_values_are_refused(line, message):
+    with pytest.raises(LabelError, match=message):
+        parse_label_line(line, source="f.txt:3")

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from model.evaluate import main, score_directories
-from scenes.kitti import ObjectLabel, format_label_line
+from scenes.kitti import ObjectLabel, format_label_line, read_label_file
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -153,3 +153,83 @@ def test_labels_and_preds_are_required_together(tmp_path):
         main(["--labels", str(tmp_path)])
     with pytest.raises(SystemExit):
         main([])
+
+
+# ------------------------------------------------------------------------------------------ reliability
+# (issue 11: no file can silently change a score; every error is one line and exit code 2)
+
+
+def _error_line(capsys, progress: bool = False) -> str:
+    """The one error line on stderr (after the progress bar's lines when ``progress``)."""
+    err = capsys.readouterr().err.strip().splitlines()
+    if progress:
+        assert all(line.startswith("predict:") for line in err[:-1]), err
+        err = err[-1:]
+    assert len(err) == 1 and err[0].startswith("error: "), err
+    return err[0]
+
+
+def test_unknown_class_names_are_counted_and_reported(tmp_path, capsys):
+    labels, preds = make_root(tmp_path, frames=4, predicted=4)
+    typo = replace(car(30.0), name="Cyclst")
+    write(labels, "00001", [*read_label_file(labels / "00001.txt"), typo, typo])
+    write(labels, "00002", [*read_label_file(labels / "00002.txt"), replace(typo, name="bicycle")])
+    scored = score_directories(labels, preds)
+    assert scored.result.unknown_gt_classes == {"Cyclst": 2}  # bicycle is a known VoD class
+    assert scored.result.unknown_dt_classes == {}
+    assert scored.result.entire_area["Cyclist"].num_gt == 0  # kept out, as the protocol says
+    assert main(["--labels", str(labels), "--preds", str(preds)]) == 0
+    out, err = capsys.readouterr()
+    assert "Not scored, unknown class name: 2 ground-truth object(s) ('Cyclst' x2)" in out
+    assert err.startswith("warning: ") and "'Cyclst' x2" in err
+
+
+def test_prediction_line_without_score_is_an_error(tmp_path, capsys):
+    labels, preds = make_root(tmp_path, frames=2, predicted=2)
+    path = preds / "00001.txt"
+    path.write_text(format_label_line(replace(detection(car(7.0), 0.5), score=None)) + "\n")
+    assert main(["--labels", str(labels), "--preds", str(preds)]) == 2
+    line = _error_line(capsys)
+    assert f"{path}:1: prediction line without a score" in line
+
+
+def test_frame_files_that_could_change_a_score_are_errors(tmp_path, capsys):
+    labels, preds = make_root(tmp_path, frames=3, predicted=3)
+    args = ["--labels", str(labels), "--preds", str(preds)]
+    unpadded = write(labels, "2", [car(9.0)])  # beside 00002.txt: the same frame twice
+    assert main(args) == 2
+    assert f"{unpadded}: frame id '2' is not written as 5 digits" in _error_line(capsys)
+    unpadded.unlink()
+    loop = labels / "00007.txt"
+    loop.symlink_to(loop)  # a symlink loop would drop the frame
+    assert main(args) == 2
+    assert f"{loop}: cannot read this label file" in _error_line(capsys)
+    loop.unlink()
+    (preds / "00001.txt").write_bytes(b"Car \xff\xfe 0 0")
+    assert main(args) == 2
+    assert f"{preds / '00001.txt'}: the prediction file is not UTF-8" in _error_line(capsys)
+    (labels / "00000.txt").write_bytes(b"\x00\x01\x02")
+    assert main(args) == 2
+    assert f"{labels / '00000.txt'}: the label file is binary" in _error_line(capsys)
+
+
+def test_unwritable_json_is_an_error(tmp_path, capsys):
+    labels, preds = make_root(tmp_path, frames=2, predicted=2)
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    out = blocker / "metrics.json"
+    assert main(["--labels", str(labels), "--preds", str(preds), "--json", str(out)]) == 2
+    assert str(blocker) in _error_line(capsys)
+
+
+def test_data_mode_with_an_empty_prompt_names_the_sample(tmp_path, capsys):
+    from tests.test_app_ws import write_tiny_root
+
+    root = write_tiny_root(tmp_path / "root", frames=2)
+    prompt = root / "lidar" / "training" / "prompt" / "00001.txt"
+    prompt.write_text("  \n")
+    checkpoint = REPO / "checkpoints" / "tpcnet-small.pt"
+    args = ["--data", str(root), "--checkpoint", str(checkpoint), "--out", str(tmp_path / "o")]
+    assert main(args) == 2
+    line = _error_line(capsys, progress=True)
+    assert f"{prompt}: the prompt file of sample 00001 is empty" in line

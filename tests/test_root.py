@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from scenes import Actor, SampleMeta, Talk2RadarRoot, Talk2RadarWriter
-from scenes.calib import vod_lidar_calibration, vod_radar_calibration
+from scenes.calib import CalibrationError, vod_lidar_calibration, vod_radar_calibration
+from scenes.kitti import LabelError
 from scenes.pointcloud import PointCloudError, read_points
 from scenes.root import RootError
 
@@ -124,3 +125,76 @@ def test_empty_prompt_is_refused(root, tmp_path):
     )
     with pytest.raises(ValueError, match="prompt is empty"):
         writer.write_sample(9, files, BOXES, ["Car", "Car"], "   ")
+
+
+# ------------------------------------------------------------------------------------------ reliability
+# (issue 11: every unreadable file is one error naming it, never a bare exception)
+
+
+@pytest.mark.parametrize(
+    ("relative", "content", "error", "message"),
+    [
+        ("lidar/training/prompt/00001.txt", b"the car \xff\xfe", RootError, "not UTF-8"),
+        ("lidar/training/prompt/00001.txt", b"the\x00car", RootError, "binary"),
+        ("lidar/training/prompt/00001.txt", b" \n\t\n", RootError, "prompt file .* is empty"),
+        ("lidar/training/label_2/00001.txt", b"\x89PNG\r\n\x1a\n\x00\x00", LabelError, "not UTF"),
+        ("lidar/training/calib/00001.txt", b"P2: \xc3\x28", CalibrationError, "not UTF-8"),
+        ("radar_5frames/training/calib/00001.txt", b"\x00" * 8, CalibrationError, "binary"),
+        ("meta/00001.json", b"\xff", RootError, "not UTF-8"),
+        ("meta/00001.json", b"[1, 2]", RootError, "malformed sidecar"),
+        ("meta/00001.json", b'{"world_id": 1e400}', RootError, "malformed sidecar"),
+    ],
+)
+def test_unreadable_files_name_the_file(root, relative, content, error, message):
+    path, _, _ = root
+    target = path / relative
+    target.unlink()  # break a hard link first
+    target.write_bytes(content)
+    with pytest.raises(error, match=message) as info:
+        Talk2RadarRoot(path).load(1)
+    assert str(target) in str(info.value) and "\n" not in str(info.value)
+
+
+def test_a_folder_or_a_symlink_loop_instead_of_a_file(root):
+    path, _, _ = root
+    label = path / "lidar" / "training" / "label_2" / "00001.txt"
+    label.unlink()
+    label.symlink_to(label)  # a loop
+    with pytest.raises(LabelError, match=r"00001\.txt: cannot read the label file"):
+        Talk2RadarRoot(path).load(1)
+    label.unlink()
+    label.mkdir()
+    with pytest.raises(LabelError, match=r"00001\.txt: cannot read the label file"):
+        Talk2RadarRoot(path).load(1)
+    velodyne = path / "lidar" / "training" / "velodyne" / "00002.bin"
+    velodyne.unlink()
+    velodyne.mkdir()
+    with pytest.raises(PointCloudError, match=r"00002\.bin: cannot read the point-cloud file"):
+        Talk2RadarRoot(path).load(2)
+
+
+def test_singular_calibration_is_a_calibration_error(root):
+    path, _, _ = root
+    calib = path / "radar_5frames" / "training" / "calib" / "00001.txt"
+    text = calib.read_text()
+    calib.unlink()
+    zero = " ".join(["0"] * 12)
+    calib.write_text(
+        "\n".join(
+            f"Tr_velo_to_cam: {zero}" if line.startswith("Tr_velo_to_cam") else line
+            for line in text.splitlines()
+        )
+    )
+    with pytest.raises(CalibrationError, match=r"00001\.txt: R0_rect · Tr_velo_to_cam is singular"):
+        Talk2RadarRoot(path).load(1)
+
+
+def test_duplicate_split_ids_are_an_error(root):
+    path, _, _ = root
+    split = path / "lidar" / "ImageSets" / "test.txt"
+    split.write_text("00002\n1\n2\n")  # 2 and 00002 are one id
+    with pytest.raises(RootError, match=r"test\.txt:3: sample 00002 is listed twice"):
+        Talk2RadarRoot(path).ids("test")
+    split.write_bytes(b"00002\n\xff\n")
+    with pytest.raises(RootError, match=r"test\.txt: the split list is not UTF-8"):
+        Talk2RadarRoot(path).ids("test")

@@ -1,0 +1,122 @@
+"""No stored text renders as HTML or markdown (issue 11): every text that came from a user or a file
+reaches viser's markdown elements through :func:`app.text.md_text`.
+
+viser renders markdown with CommonMark + GFM tables and raw HTML; here the markdown is rendered
+with markdown-it-py (CommonMark, raw HTML on, tables on), and the rendered HTML may hold no tag
+but the ones the app's own markdown makes, while the text reads exactly as typed.
+"""
+
+from __future__ import annotations
+
+import html
+import re
+
+import numpy as np
+import pytest
+
+from annotate import Draft, PairInfo
+from annotate.evidence import BoxEvidence, Motion
+from annotate.validation import Issue, Severity, ValidationReport
+from app.annotation_panel import checks_markdown, evidence_markdown, pairs_markdown
+from app.navigation import Frame, frame_markdown
+from app.text import md_text
+from scenes.calib import vod_lidar_calibration
+from scenes.root import Sample
+
+markdown_it = pytest.importorskip("markdown_it")
+
+HOSTILE = (
+    "<img src=x onerror=alert(1)>",
+    "<b>bold</b> <script>alert(1)</script>",
+    "![t](http://host/x.png) and [click](javascript:alert(1))",
+    "<http://host/x> &lt;img src=x&gt; &#60;b&#62;",
+    "<!-- hidden --> <div\nonclick=alert(1)>x</div>",
+    "| a | b |\n|---|---|\n| c | d |",
+    "# heading\n- item\n> quote\n1. one\n```\ncode\n```",
+    "`code` **bold** _em_ ~~strike~~ \\<i>escaped\\</i> trailing \\",
+)
+"""Prompts and names a hostile but fair user could save."""
+
+OWN_TAGS = {"p", "br", "strong", "em", "code", "sub", "ul", "li"} | {
+    "table",
+    "thead",
+    "tbody",
+    "tr",
+    "th",
+    "td",
+}
+"""Tags the app's own markdown produces (bold titles, lists, tables, the v<sub>r</sub> heading)."""
+
+
+def _render(markdown: str) -> str:
+    return markdown_it.MarkdownIt("commonmark", {"html": True}).enable("table").render(markdown)
+
+
+def _tags(rendered: str) -> set[str]:
+    return {m.lower() for m in re.findall(r"<\s*/?\s*([a-zA-Z][\w-]*)", rendered)}
+
+
+def _visible(rendered: str) -> str:
+    return " ".join(html.unescape(re.sub(r"<[^>]*>", " ", rendered)).split())
+
+
+def _shown_as_text(markdown: str, text: str) -> None:
+    rendered = _render(markdown)
+    assert _tags(rendered) <= OWN_TAGS, rendered
+    assert " ".join(text.split()) in _visible(rendered), rendered
+
+
+@pytest.mark.parametrize("text", HOSTILE)
+def test_md_text_is_shown_literally(text: str) -> None:
+    escaped = md_text(text)
+    assert "\n" not in escaped
+    _shown_as_text(escaped, text)
+    _shown_as_text(f"*Running:* {escaped}", text)
+    _shown_as_text(f"| a |\n| --- |\n| {escaped} |", text)
+    _shown_as_text(f"- {escaped}", text)
+
+
+def test_md_text_keeps_plain_text() -> None:
+    assert md_text("the car about 15 m ahead") == "the car about 15 m ahead"
+    assert md_text("ünïcode – ok 42") == "ünïcode – ok 42"
+    assert md_text(None) == "None"
+
+
+@pytest.mark.parametrize("text", HOSTILE)
+def test_saved_pairs_table(text: str) -> None:
+    pairs = [
+        PairInfo("00042", 2, ("train",), text, 1, text, "2026-01-01T00:00:00", None),
+        PairInfo("00043", 1, (text,), "plain", 0, "ada", "2026-01-02T00:00:00", None),
+    ]
+    markdown = pairs_markdown(pairs, root=f"/data/{text}")
+    _shown_as_text(markdown, text)
+    rendered = _render(markdown)
+    assert rendered.count("<tr>") == 3  # header and two rows: the table is not broken
+    assert all(row.count("<td") == 6 for row in rendered.split("<tr>")[2:])
+    _shown_as_text(pairs_markdown([], root=text), text)
+
+
+@pytest.mark.parametrize("text", HOSTILE)
+def test_frame_info(text: str) -> None:
+    sample = Sample(
+        sample_id="00001",
+        lidar=np.zeros((0, 4), np.float32),
+        radar=np.zeros((0, 7), np.float32),
+        boxes=np.zeros((0, 7)),
+        classes=(),
+        prompt=text,
+        calib=vod_lidar_calibration(),
+    )
+    _shown_as_text(frame_markdown(Frame(index=0, sample=sample, ground_z=-1.7), 3), text)
+
+
+@pytest.mark.parametrize("text", HOSTILE)
+def test_checks_and_evidence(text: str) -> None:
+    report = ValidationReport(
+        (Issue("prompt", text), Issue("boxes", text, severity=Severity.WARNING))
+    )
+    _shown_as_text(checks_markdown(report), text)
+    # A class name forged through the websocket reaches the evidence table.
+    draft = Draft().add_box((12.0, 3.0, -0.95, 4.2, 1.8, 1.5, 0.4), text)
+    evidence = [BoxEvidence(10, 0, None, Motion.UNKNOWN, 12.4, 10.0)]
+    _shown_as_text(evidence_markdown(draft, evidence, selected_id=None), text)
