@@ -233,3 +233,15 @@ def test_data_mode_with_an_empty_prompt_names_the_sample(tmp_path, capsys):
     assert main(args) == 2
     line = _error_line(capsys, progress=True)
     assert f"{prompt}: the prompt file of sample 00001 is empty" in line
+
+
+def test_data_mode_with_an_unwritable_out_is_an_error(tmp_path, capsys):
+    from tests.test_app_ws import write_tiny_root
+
+    root = write_tiny_root(tmp_path / "root", frames=1)
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    checkpoint = REPO / "checkpoints" / "tpcnet-small.pt"
+    args = ["--data", str(root), "--checkpoint", str(checkpoint), "--out", str(blocker / "o")]
+    assert main(args) == 2
+    assert str(blocker) in _error_line(capsys, progress=True)
