@@ -14,21 +14,32 @@ tags and entities (``<``, ``&``), links and images (``!``, ``[``, ``]``, ``(``),
 start (``#``, ``-``, ``+``, ``>``, ``1.``) and GFM's bare-URL autolinks (``www.``, ``http:``, an
 ``@``). Line breaks become spaces (a line break could end a table row or start a block).
 Letters, digits and non-ASCII text are kept as they are, so the text reads the same.
+
+One more step: remark-gfm links bare URLs and e-mail addresses *after* parsing, on the text with
+its escapes already resolved, so ``http\\://host`` would still become a link. An empty HTML comment
+(:data:`BREAK`, our own constant, invisible) after every ``:`` and ``@`` and after a ``www`` before
+a dot splits the text where those links would start.
 """
 
 from __future__ import annotations
 
+import re
 import string
 
 _ESCAPES = str.maketrans(
     {c: "\\" + c for c in string.punctuation} | {"\r": " ", "\n": " ", "\0": " "}
 )
 
+BREAK = "<!-- -->"
+"""Invisible; splits a text node so that GFM's bare-URL and e-mail autolinks cannot start."""
+
+_AUTOLINK_STARTS = re.compile(r"(\\[:@]|(?i:www)(?=\\\.))")
+
 
 def md_text(text: object) -> str:
     """``str(text)`` shown literally inside viser markdown (inline: one line, any context, also a
     table cell); see the module docstring."""
-    return str(text).translate(_ESCAPES)
+    return _AUTOLINK_STARTS.sub(lambda m: m.group(0) + BREAK, str(text).translate(_ESCAPES))
 
 
-__all__ = ["md_text"]
+__all__ = ["BREAK", "md_text"]

@@ -57,7 +57,9 @@ def _tags(rendered: str) -> set[str]:
 
 
 def _visible(rendered: str) -> str:
-    return " ".join(html.unescape(re.sub(r"<[^>]*>", " ", rendered)).split())
+    """The text a browser shows (comments are invisible; other tags separate words)."""
+    text = re.sub(r"<[^>]*>", " ", re.sub(r"<!--.*?-->", "", rendered))
+    return " ".join(html.unescape(text).split())
 
 
 def _shown_as_text(markdown: str, text: str) -> None:
@@ -120,3 +122,56 @@ def test_checks_and_evidence(text: str) -> None:
     draft = Draft().add_box((12.0, 3.0, -0.95, 4.2, 1.8, 1.5, 0.4), text)
     evidence = [BoxEvidence(10, 0, None, Motion.UNKNOWN, 12.4, 10.0)]
     _shown_as_text(evidence_markdown(draft, evidence, selected_id=None), text)
+
+
+@pytest.mark.browser
+def test_viser_shows_escaped_text_literally_in_a_real_browser() -> None:
+    """The proof in viser's own client (react-markdown with raw HTML): escaped, the hostile text
+    is shown character for character and makes no element; unescaped (the control), the same
+    text makes ``<img>`` elements (fetched by the browser), a ``<b>`` and links (also from a bare
+    ``www.`` address and an e-mail address, which GFM links by itself)."""
+    import viser
+
+    from tests.test_app_browser import CHROMIUM_ARGS, find_chromium
+
+    chromium = find_chromium()
+    if chromium is None:
+        pytest.skip("no Chromium found (/usr/bin/chromium): install Debian's `chromium` package")
+    from playwright.sync_api import sync_playwright
+
+    payload = (
+        '<img src="http://127.0.0.1:9/tag.png" onerror="alert(1)"> <b>bold</b> '
+        "![t](http://127.0.0.1:9/fetched.png) [link](http://127.0.0.1:9/page) "
+        "www.host.example me@host.example"
+    )
+    count = """() => [
+        document.querySelectorAll('img[src*="127.0.0.1:9"]').length,
+        [...document.querySelectorAll('b, strong')].filter(e => e.innerText === 'bold').length,
+        document.querySelectorAll('a[href*="127.0.0.1:9"], a[href*="host.example"]').length,
+    ]"""
+    server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+    try:
+        server.gui.add_markdown(f"ESCAPED {md_text(payload)}")
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=chromium, headless=True, args=CHROMIUM_ARGS)
+            try:
+                page = browser.new_page()
+                page.goto(f"http://127.0.0.1:{server.get_port()}")
+                page.wait_for_function(
+                    "() => document.body.innerText.includes('ESCAPED')", timeout=60_000
+                )
+                page.wait_for_timeout(500)
+                text = " ".join(page.evaluate("() => document.body.innerText").split())
+                assert f"ESCAPED {payload}" in text
+                assert page.evaluate(count) == [0, 0, 0]
+                # The control: the same text unescaped is live HTML in viser's markdown.
+                server.gui.add_markdown(f"RAW {payload}")
+                page.wait_for_function(
+                    "() => document.body.innerText.includes('RAW')", timeout=30_000
+                )
+                page.wait_for_timeout(500)
+                assert page.evaluate(count) == [2, 1, 3]  # the link, the URL, the address
+            finally:
+                browser.close()
+    finally:
+        server.stop()
