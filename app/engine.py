@@ -51,6 +51,18 @@ class GroundingModel(Protocol):
     def ground(self, features: Any, prompt: str, score_threshold: float | None = None) -> Any: ...
 
 
+def initial_threshold(model: object, default: float) -> float:
+    """The score threshold the query panel starts at: the checkpoint's operating threshold
+    (:func:`model.predict.operating_threshold`, chosen on a validation split by
+    ``python -m model.calibrate``) so that the app shows the model's answer set, else the
+    decoder's ``cfg.head.score_threshold``, else ``default`` (a model without a config)."""
+    if getattr(model, "cfg", None) is None:
+        return float(default)
+    from model.predict import operating_threshold
+
+    return operating_threshold(model)  # type: ignore[arg-type]
+
+
 def model_modalities(model: object) -> tuple[Modality, ...]:
     """The modalities a model can answer with: all three for a two-sensor model, otherwise its
     own sensor (read from ``model.cfg.modalities``; a model without a config counts as both)."""

@@ -36,7 +36,7 @@ from pathlib import Path
 
 import viser
 
-from app.engine import GroundingEngine, GroundingModel
+from app.engine import GroundingEngine, GroundingModel, initial_threshold
 from app.navigation import Frame, FrameStore, step_index
 from app.scene_view import chase_pose
 from app.session import ClientSession
@@ -45,7 +45,7 @@ from scenes.root import RootError, Talk2RadarRoot
 log = logging.getLogger(__name__)
 
 DEFAULT_SCORE_THRESHOLD = 0.3
-"""Initial score threshold when the model does not say (``model.cfg.head.score_threshold``)."""
+"""Initial score threshold when the model does not say (see :func:`app.engine.initial_threshold`)."""
 
 MAX_PORT = 65535
 """The highest TCP port."""
@@ -160,8 +160,7 @@ class Talk2PCApp:
         self.engine = GroundingEngine(
             model, feature_cache_size=self.config.feature_cache_size, workers=self.config.workers
         )
-        head = getattr(getattr(model, "cfg", None), "head", None)
-        self.score_threshold = float(getattr(head, "score_threshold", DEFAULT_SCORE_THRESHOLD))
+        self.score_threshold = initial_threshold(model, DEFAULT_SCORE_THRESHOLD)
         self.model_note = self.config.model_note
         self.server: viser.ViserServer | None = None
         self.frame: Frame | None = None
