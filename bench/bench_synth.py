@@ -3,12 +3,13 @@
 Run from the repository root::
 
     .venv/bin/python bench/bench_synth.py            # 40 samples, default sensor settings
+    .venv/bin/python bench/bench_synth.py --no-camera --out /tmp/synth_nocam.json
 
 Two measurements, both single process:
 
-1. Stages: ``--worlds`` worlds synthesised one by one (world building, prompts, LiDAR, radar)
-   and written to a temporary root (sensor files + one sample per prompt); seconds per world
-   for each stage (mean and median).
+1. Stages: ``--worlds`` worlds synthesised one by one (world building, prompts, LiDAR, radar,
+   camera image) and written to a temporary root (sensor files, the JPEG, one sample per
+   prompt); seconds per world for each stage (mean and median).
 2. End to end: ``python -m scenes.synth`` as a user runs it (:func:`scenes.synth.generate_root`,
    progress bar off) writing ``--frames`` samples into a fresh temporary folder.
 
@@ -33,7 +34,8 @@ _REPO = Path(__file__).resolve().parents[1]
 if str(_REPO) not in sys.path:
     sys.path.insert(0, str(_REPO))
 
-from scenes.calib import sensor_to_lidar, vod_lidar_calibration, vod_radar_calibration  # noqa: E402
+from scenes.calib import sensor_to_lidar  # noqa: E402
+from scenes.camera import CameraConfig  # noqa: E402
 from scenes.lidar_sim import ray_directions  # noqa: E402
 from scenes.root import Talk2RadarWriter  # noqa: E402
 from scenes.synth import (  # noqa: E402
@@ -47,17 +49,17 @@ from scenes.synth import (  # noqa: E402
 
 def bench_stages(settings: SynthSettings, worlds: int) -> dict:
     """Per-stage seconds per world over ``worlds`` worlds (written to a temporary root)."""
-    lidar_calib, radar_calib = vod_lidar_calibration(), vod_radar_calibration()
+    lidar_calib, radar_calib = settings.calibrations()
     radar_to_lidar = sensor_to_lidar(lidar_calib, radar_calib)
     stages: dict[str, list[float]] = {
-        k: [] for k in ("world", "prompts", "lidar", "radar", "write")
+        k: [] for k in ("world", "prompts", "lidar", "radar", "camera", "write")
     }
     samples, lidar_pts, radar_pts, actors = 0, [], [], []
     cpu0 = time.process_time()
     with tempfile.TemporaryDirectory() as tmp:
         writer = Talk2RadarWriter(tmp, radar_folder=RADAR_FOLDER[settings.radar_scans])
         for index in range(worlds):
-            frame = synthesize(settings, index, radar_to_lidar)
+            frame = synthesize(settings, index, radar_to_lidar, lidar_calib)
             t0 = time.perf_counter()
             ids = []
             if frame.prompts:
@@ -65,7 +67,7 @@ def bench_stages(settings: SynthSettings, worlds: int) -> dict:
                     writer, frame, samples, len(frame.prompts), settings, lidar_calib, radar_calib
                 )
             stages["write"].append(time.perf_counter() - t0)
-            for name in ("world", "lidar", "radar", "prompts"):
+            for name in ("world", "lidar", "radar", "prompts", "camera"):
                 stages[name].append(getattr(frame.times, name))
             samples += len(ids)
             lidar_pts.append(len(frame.lidar.points))
@@ -139,9 +141,10 @@ def main() -> int:
     p.add_argument("--worlds", type=int, default=20, help="worlds for the per-stage measurement")
     p.add_argument("--frames", type=int, default=40, help="samples for the end-to-end run")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--no-camera", action="store_true", help="measure without camera images")
     p.add_argument("--out", type=Path, default=_REPO / "bench" / "results" / "synth.json")
     args = p.parse_args()
-    settings = SynthSettings(seed=args.seed)
+    settings = SynthSettings(seed=args.seed, camera=None if args.no_camera else CameraConfig())
     load = os.getloadavg()[0]
     bench_stages(settings, 1)  # warm-up: imports, caches
     stages = bench_stages(settings, args.worlds)
@@ -149,7 +152,8 @@ def main() -> int:
     table = markdown(stages, e2e, load)
     print(table)
     result = {
-        "command": f"python bench/bench_synth.py --worlds {args.worlds} --frames {args.frames}",
+        "command": f"python bench/bench_synth.py --worlds {args.worlds} --frames {args.frames}"
+        + (" --no-camera" if args.no_camera else ""),
         "settings": settings.key(),
         "machine": {
             "cpus": os.cpu_count(),

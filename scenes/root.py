@@ -11,8 +11,9 @@ Layout (spec §1.2)::
 
 Each sample is one frame id with one prompt and the boxes it refers to (``label_2``). The radar
 ``.bin`` files are in the radar frame as in VoD; :meth:`Talk2RadarRoot.load` brings them into the
-LiDAR frame with both calibration files. Ids are 5-digit, zero padded. ``image_2`` is not written
-for synthetic roots: neither this reader nor the official VoD evaluation reads images.
+LiDAR frame with both calibration files. Ids are 5-digit, zero padded. ``training/image_2/<id>.jpg``
+is the camera image where a root has one (VoD's, or the synthetic camera's, hard-linked into both
+trees); :attr:`Sample.image` reads it on first access.
 """
 
 from __future__ import annotations
@@ -22,13 +23,21 @@ import os
 import shutil
 import threading
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 
 from scenes.actors import Actor
-from scenes.calib import Calibration, read_calib, sensor_to_lidar, transform_points
+from scenes.calib import IMAGE_SIZE, Calibration, read_calib, sensor_to_lidar, transform_points
+from scenes.imagefile import (
+    IMAGE_SUFFIXES,
+    check_principal_point,
+    read_image,
+    warn_principal_point,
+    write_jpeg,
+)
 from scenes.kitti import (
     ObjectLabel,
     atomic_write_text,
@@ -128,6 +137,8 @@ class Sample:
         radar_calib: Radar calibration (radar -> camera), or None without a radar tree.
         labels: Every ``label_2`` line, non-metric classes included.
         meta: The sidecar, where present.
+        image_path: The camera image file (``image_2/<id>.jpg``), or None where there is none;
+            :attr:`image` reads it.
     """
 
     sample_id: str
@@ -140,6 +151,26 @@ class Sample:
     radar_calib: Calibration | None = field(repr=False, default=None)
     labels: tuple[ObjectLabel, ...] = field(repr=False, default=())
     meta: SampleMeta | None = field(repr=False, default=None)
+    image_path: Path | None = field(repr=False, default=None)
+
+    @cached_property
+    def image(self) -> np.ndarray | None:
+        """The camera image ``(H, W, 3)`` uint8 RGB (row 0 at the top; pixel coordinates as
+        ``calib.P2`` projects), read on first access and kept; None without an image file.
+
+        Warns (``UserWarning``, naming the file) when the image size puts P2's principal point
+        far from the image centre (:func:`scenes.imagefile.check_principal_point`).
+
+        Raises:
+            scenes.imagefile.ImageError: the file is unreadable, corrupt or truncated.
+        """
+        if self.image_path is None:
+            return None
+        image = read_image(self.image_path)
+        height, width = image.shape[:2]
+        principal = (float(self.calib.P2[0, 2]), float(self.calib.P2[1, 2]))
+        warn_principal_point((width, height), principal, str(self.image_path))
+        return image
 
 
 def _is_file(path: Path) -> bool:
@@ -247,6 +278,18 @@ class Talk2RadarRoot:
             raise RootError(f"{path}: invalid JSON: {exc}") from exc
         return SampleMeta.from_json(data, source=str(path))
 
+    def image_path(self, sample_id: str | int) -> Path | None:
+        """The camera image of a sample (``training/image_2/<id>.jpg``, or ``.png``, in the LiDAR
+        tree, else in the radar tree), or None where there is none."""
+        sid = format_id(sample_id)
+        trees = [self.lidar_dir] + ([self.radar_dir] if self.radar_dir is not None else [])
+        for tree in trees:
+            for suffix in IMAGE_SUFFIXES:
+                path = tree / "training" / "image_2" / f"{sid}{suffix}"
+                if path.exists() or path.is_symlink():
+                    return path  # something is there: read_image says what is wrong with it
+        return None
+
     def load(self, sample_id: str | int) -> Sample:
         """Load one sample; every error names the offending file."""
         sid = format_id(sample_id)
@@ -275,6 +318,7 @@ class Talk2RadarRoot:
             radar_calib=radar_calib,
             labels=labels,
             meta=self.load_meta(sid),
+            image_path=self.image_path(sid),
         )
 
 
@@ -285,6 +329,9 @@ class SensorFiles:
     Attributes:
         folder: ``<root>/sources/<frame_key>``.
         lidar_bin, radar_bin, lidar_calib, radar_calib: Paths of the four files.
+        image: The camera image (``image.jpg``), or None where the frame has none.
+        image_size: ``(width, height)`` of that image (the 2D boxes of ``label_2`` are clipped
+            to it), or None for VoD's 1936 x 1216.
     """
 
     folder: Path
@@ -292,6 +339,8 @@ class SensorFiles:
     radar_bin: Path
     lidar_calib: Path
     radar_calib: Path
+    image: Path | None = None
+    image_size: tuple[int, int] | None = None
 
 
 def _link_or_copy(src: Path, dst: Path) -> None:
@@ -328,12 +377,17 @@ class Talk2RadarWriter:
         radar: np.ndarray,
         lidar_calib: Calibration,
         radar_calib: Calibration,
+        image: np.ndarray | None = None,
+        jpeg_quality: int = 90,
     ) -> SensorFiles:
         """Write one frame's sensors under ``sources/<frame_key>/``.
 
         Args:
             lidar: ``(N, 4)`` LiDAR frame.
             radar: ``(M, 7)`` in the LiDAR frame; stored in the radar frame as VoD does.
+            image: ``(H, W, 3)`` uint8 camera image whose projection is ``lidar_calib.P2``
+                (written as ``image.jpg``), or None.
+            jpeg_quality: JPEG quality of the image.
         """
         folder = self.root / "sources" / frame_key
         files = SensorFiles(
@@ -343,6 +397,20 @@ class Talk2RadarWriter:
             lidar_calib=folder / "lidar_calib.txt",
             radar_calib=folder / "radar_calib.txt",
         )
+        if image is not None:
+            image = np.asarray(image)
+            if image.dtype != np.uint8 or image.ndim != 3 or image.shape[2] != 3:
+                raise ValueError(
+                    f"{frame_key}: the image must be (H, W, 3) uint8, got {image.shape} {image.dtype}"
+                )
+            size = (int(image.shape[1]), int(image.shape[0]))
+            problem = check_principal_point(
+                size, (float(lidar_calib.P2[0, 2]), float(lidar_calib.P2[1, 2])), frame_key
+            )
+            if problem is not None:
+                raise ValueError(problem)
+            files = replace(files, image=folder / "image.jpg", image_size=size)
+            write_jpeg(files.image, image, jpeg_quality)
         lidar_to_radar = np.linalg.inv(sensor_to_lidar(lidar_calib, radar_calib))
         write_points(files.lidar_bin, np.asarray(lidar, dtype=np.float32).reshape(-1, 4))
         radar_arr = np.asarray(radar, dtype=np.float64).reshape(-1, 7)
@@ -361,7 +429,9 @@ class Talk2RadarWriter:
         meta: SampleMeta | None = None,
         calib: Calibration | None = None,
     ) -> str:
-        """Write one sample (sensor links, labels, prompt, sidecar); returns its 5-digit id.
+        """Write one sample (sensor links, camera image link, labels, prompt, sidecar); returns its
+        5-digit id. The 2D boxes of ``label_2`` are clipped to ``files.image_size`` (VoD's
+        1936 x 1216 where None).
 
         The label file is written last among the tree files so that a sample whose label exists is
         complete; the id becomes visible to readers only through :meth:`write_image_sets`.
@@ -370,12 +440,16 @@ class Talk2RadarWriter:
         if not prompt or not prompt.strip():
             raise ValueError(f"sample {sid}: the prompt is empty")
         calib = calib if calib is not None else read_calib(files.lidar_calib)
-        labels = boxes_to_labels(boxes, list(classes), calib)
+        image_size = files.image_size if files.image_size is not None else IMAGE_SIZE
+        labels = boxes_to_labels(boxes, list(classes), calib, image_size=image_size)
         lidar_tree, radar_tree = self.trees
         _link_or_copy(files.lidar_bin, lidar_tree / "training" / "velodyne" / f"{sid}.bin")
         _link_or_copy(files.lidar_calib, lidar_tree / "training" / "calib" / f"{sid}.txt")
         _link_or_copy(files.radar_bin, radar_tree / "training" / "velodyne" / f"{sid}.bin")
         _link_or_copy(files.radar_calib, radar_tree / "training" / "calib" / f"{sid}.txt")
+        if files.image is not None:
+            for tree in self.trees:
+                _link_or_copy(files.image, tree / "training" / "image_2" / f"{sid}.jpg")
         if meta is not None:
             atomic_write_text(
                 self.root / "meta" / f"{sid}.json", json.dumps(meta.to_json(), indent=1)

@@ -9,9 +9,17 @@ bicycles, bicycle racks and mopeds, which are never referents and never in ``lab
 samples of a world share their sensor files (hard links to ``sources/w<world>/``). ``--frames N`` is the number of samples; ids run
 ``00000..N-1`` in world order.
 
+Camera
+    Each world also gets a camera image (:mod:`scenes.camera`), ``image_2/<id>.jpg`` in both trees,
+    rendered at the calibration written with it: VoD's 1936 x 1216 by default (one ray per 2 x 2
+    pixels, upsampled), or ``--camera-scale`` times that, with ``P2`` scaled to match and the 2D
+    boxes of ``label_2`` clipped to that size. ``--no-camera`` writes no image and leaves every
+    other file exactly as with the camera at scale 1.
+
 Determinism and resuming
     World ``i`` draws from ``SeedSequence([seed, i])`` (separate streams for the world, the
-    weather, the LiDAR, the radar and the prompts), so it does not depend on the other worlds and
+    weather, the LiDAR, the radar, the prompts and the camera; :mod:`scenes.synth_frame`), so it
+    does not depend on the other worlds and
     a resumed run reproduces exactly what an uninterrupted one writes. ``synth_manifest.jsonl`` in
     the output folder records the settings (first line) and, appended after each world is fully
     written, its sample ids (one JSON line per world; a later line for the same world wins, a torn
@@ -35,177 +43,60 @@ import os
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from tqdm import tqdm
 
-from scenes.calib import Calibration, sensor_to_lidar, vod_lidar_calibration, vod_radar_calibration
-from scenes.lidar_sim import LidarConfig, LidarScan, simulate_lidar
-from scenes.prompts import PHRASINGS, Prompt, PromptConfig, generate_prompts
-from scenes.radar_sim import RadarConfig, RadarScan, simulate_radar
+from scenes.calib import Calibration, sensor_to_lidar
+from scenes.camera import CameraConfig
+from scenes.prompts import PHRASINGS
 from scenes.root import SampleMeta, Talk2RadarWriter
-from scenes.weather import WEATHERS, Weather
-from scenes.world import RayCaster, World, WorldConfig, generate_world
+from scenes.synth_frame import (
+    MIXED,
+    MIXED_WEATHER,
+    RADAR_FOLDER,
+    StageTimes,
+    SynthError,
+    SynthFrame,
+    SynthSettings,
+    sensed_actor_ids,
+    synthesize,
+    world_streams,
+)
+from scenes.weather import WEATHERS
+
+__all__ = [  # with the settings and one frame from scenes.synth_frame, re-exported
+    "CAMERA_SCALES",
+    "DEFAULT_SETTINGS",
+    "MANIFEST",
+    "MAX_SAMPLES",
+    "MIXED",
+    "MIXED_WEATHER",
+    "RADAR_FOLDER",
+    "SPLITS",
+    "GenerationReport",
+    "StageTimes",
+    "SynthError",
+    "SynthFrame",
+    "SynthSettings",
+    "assign_splits",
+    "generate_root",
+    "main",
+    "sensed_actor_ids",
+    "synthesize",
+    "world_streams",
+    "write_frame",
+]
 
 MANIFEST = "synth_manifest.jsonl"
-RADAR_FOLDER = {1: "radar", 3: "radar_3frames", 5: "radar_5frames"}
-"""Radar tree name per number of accumulated scans (as VoD)."""
-MIXED = "mixed"
-MIXED_WEATHER = (("clear", 0.6), ("rain", 0.2), ("fog", 0.2))
 SPLITS = ("train", "val", "test")
 MAX_SAMPLES = 100_000  # 5-digit ids
-
-
-class SynthError(ValueError):
-    """Bad generation settings or an output folder that cannot be resumed."""
-
-
-@dataclass(frozen=True)
-class SynthSettings:
-    """What determines the generated content (``--frames`` and the splits do not).
-
-    Attributes:
-        seed: Base seed; world ``i`` uses ``SeedSequence([seed, i])``.
-        weather: ``clear``, ``rain``, ``fog`` or ``mixed``.
-        radar_scans: Accumulated radar scans, 1, 3 or 5.
-        prompts_per_world: Prompts (samples) drawn per world (fewer when the world has fewer).
-        min_lidar_points, min_radar_points: An actor can be a referent when it has at least this
-            many LiDAR points or radar points (see :func:`synthesize`).
-        phrasing: Prompt wording stream, ``train``, ``heldout`` or ``all``
-            (``scenes.prompts.PromptConfig.phrasing``).
-    """
-
-    seed: int = 0
-    weather: str = "clear"
-    radar_scans: int = 5
-    prompts_per_world: int = 2
-    min_lidar_points: int = 3
-    min_radar_points: int = 1
-    world: WorldConfig = field(default_factory=WorldConfig)
-    lidar: LidarConfig = field(default_factory=LidarConfig)
-    radar: RadarConfig = field(default_factory=RadarConfig)
-    phrasing: str = "train"
-
-    def __post_init__(self) -> None:
-        if self.phrasing not in PHRASINGS:
-            raise SynthError(f"phrasing must be one of {list(PHRASINGS)}, got {self.phrasing!r}")
-        if self.seed < 0:
-            raise SynthError(f"seed must be >= 0, got {self.seed}")
-        if self.weather != MIXED and self.weather not in WEATHERS:
-            raise SynthError(f"weather must be one of {[*WEATHERS, MIXED]}, got {self.weather!r}")
-        if self.radar_scans not in RADAR_FOLDER:
-            raise SynthError(f"radar_scans must be 1, 3 or 5, got {self.radar_scans}")
-        if self.prompts_per_world < 1:
-            raise SynthError(f"prompts_per_world must be >= 1, got {self.prompts_per_world}")
-
-    def key(self) -> dict:
-        """The settings recorded in (and compared with) the manifest."""
-        return {
-            "seed": self.seed,
-            "weather": self.weather,
-            "radar_scans": self.radar_scans,
-            "prompts_per_world": self.prompts_per_world,
-            # Only when not the default, so roots written before the option resume as before.
-            **({"phrasing": self.phrasing} if self.phrasing != "train" else {}),
-        }
-
-
-@dataclass(frozen=True)
-class StageTimes:
-    """Seconds spent per stage on one world."""
-
-    world: float = 0.0
-    lidar: float = 0.0
-    radar: float = 0.0
-    prompts: float = 0.0
-
-
-@dataclass(frozen=True)
-class SynthFrame:
-    """One sensed world and its prompts.
-
-    Attributes:
-        world: The world (actors, meshes).
-        weather: Its weather.
-        lidar: ``points (N, 4)`` LiDAR frame, and the owner of each point.
-        radar: ``points (M, 7)`` LiDAR frame, and the owner of each point.
-        prompts: Up to ``prompts_per_world`` prompts.
-        sensed: Indices of the actors the prompts could refer to (seen by a sensor).
-        times: Stage timings.
-    """
-
-    world: World
-    weather: Weather
-    lidar: LidarScan
-    radar: RadarScan
-    prompts: tuple[Prompt, ...]
-    sensed: tuple[int, ...]
-    times: StageTimes
-
-
-def world_streams(seed: int, world_index: int) -> dict[str, np.random.Generator]:
-    """The independent random streams of world ``world_index``."""
-    children = np.random.SeedSequence([seed, world_index]).spawn(5)
-    names = ("world", "weather", "lidar", "radar", "prompts")
-    return {name: np.random.default_rng(s) for name, s in zip(names, children, strict=True)}
-
-
-def _pick_weather(settings: SynthSettings, rng: np.random.Generator) -> Weather:
-    if settings.weather != MIXED:
-        return WEATHERS[settings.weather]
-    names, probs = zip(*MIXED_WEATHER, strict=True)
-    return WEATHERS[names[int(rng.choice(len(names), p=probs))]]
-
-
-def sensed_actor_ids(
-    lidar: LidarScan, radar: RadarScan, min_lidar_points: int, min_radar_points: int
-) -> tuple[int, ...]:
-    """Indices of the actors with at least ``min_lidar_points`` LiDAR or ``min_radar_points``
-    radar points (any scan)."""
-    n = int(max(lidar.owner.max(initial=-1), radar.owner.max(initial=-1))) + 1
-    lidar_count = np.bincount(lidar.owner[lidar.owner >= 0], minlength=n)
-    radar_count = np.bincount(radar.owner[radar.owner >= 0], minlength=n)
-    seen = (lidar_count >= min_lidar_points) | (radar_count >= min_radar_points)
-    return tuple(int(i) for i in np.flatnonzero(seen))
-
-
-def synthesize(settings: SynthSettings, world_index: int, radar_to_lidar: np.ndarray) -> SynthFrame:
-    """Build and sense world ``world_index`` and draw its prompts.
-
-    Prompts are drawn over the *sensed* actors only (:func:`sensed_actor_ids`): an actor hidden
-    from both sensors (occluded, or beyond the LiDAR's reach in fog and missed by the radar) is
-    as invisible to the prompt as it would be to an annotator.
-
-    Args:
-        radar_to_lidar: ``(4, 4)`` radar -> LiDAR transform (``scenes.calib.sensor_to_lidar``).
-    """
-    rngs = world_streams(settings.seed, world_index)
-    t0 = time.perf_counter()
-    world = generate_world(rngs["world"], world_index, settings.world)
-    weather = _pick_weather(settings, rngs["weather"])
-    t1 = time.perf_counter()
-    caster = RayCaster(world)
-    lidar = simulate_lidar(caster, rngs["lidar"], settings.lidar, weather)
-    t2 = time.perf_counter()
-    radar = simulate_radar(
-        caster, radar_to_lidar, rngs["radar"], settings.radar, weather, settings.radar_scans
-    )
-    t3 = time.perf_counter()
-    sensed = sensed_actor_ids(lidar, radar, settings.min_lidar_points, settings.min_radar_points)
-    candidates = [world.actors[i] for i in sensed]
-    prompts = tuple(
-        generate_prompts(
-            candidates,
-            rngs["prompts"],
-            settings.prompts_per_world,
-            config=PromptConfig(phrasing=settings.phrasing),
-        )
-    )
-    t4 = time.perf_counter()
-    times = StageTimes(world=t1 - t0, lidar=t2 - t1, radar=t3 - t2, prompts=t4 - t3)
-    return SynthFrame(world, weather, lidar, radar, prompts, sensed, times)
+CAMERA_SCALES = (1.0, 0.5, 0.25, 0.125)
+"""``--camera-scale`` values: the image sizes that divide VoD's exactly."""
+DEFAULT_SETTINGS = SynthSettings()
+"""The settings of ``python -m scenes.synth`` without options."""
 
 
 def assign_splits(n_worlds: int, fractions: Sequence[float]) -> list[str]:
@@ -234,9 +125,11 @@ def write_frame(
     lidar_calib: Calibration | None = None,
     radar_calib: Calibration | None = None,
 ) -> list[str]:
-    """Write the first ``count`` prompts of ``frame`` as samples ``first_id, first_id + 1, ...``."""
-    lidar_calib = lidar_calib if lidar_calib is not None else vod_lidar_calibration()
-    radar_calib = radar_calib if radar_calib is not None else vod_radar_calibration()
+    """Write the first ``count`` prompts of ``frame`` as samples ``first_id, first_id + 1, ...``
+    (calibrations default to ``settings.calibrations()``, which match the camera image)."""
+    default_lidar, default_radar = settings.calibrations()
+    lidar_calib = lidar_calib if lidar_calib is not None else default_lidar
+    radar_calib = radar_calib if radar_calib is not None else default_radar
     world = frame.world
     files = writer.write_sensors(
         f"w{world.world_id:05d}",
@@ -244,6 +137,8 @@ def write_frame(
         frame.radar.points,
         lidar_calib,
         radar_calib,
+        image=frame.image,
+        jpeg_quality=settings.camera.jpeg_quality if settings.camera is not None else 90,
     )
     by_id = {a.actor_id: a for a in world.actors}
     seen = {world.actors[i].actor_id for i in frame.sensed}
@@ -344,7 +239,7 @@ def _complete_on_disk(writer: Talk2RadarWriter, ids: Sequence[str]) -> bool:
 def generate_root(
     out: str | Path,
     frames: int,
-    settings: SynthSettings = SynthSettings(),
+    settings: SynthSettings = DEFAULT_SETTINGS,
     split_fractions: Sequence[float] = (0.7, 0.1, 0.2),
     progress: bool = False,
     max_empty_worlds: int = 200,
@@ -365,7 +260,7 @@ def generate_root(
     out.mkdir(parents=True, exist_ok=True)
     manifest = _read_manifest(out, settings)
     writer = Talk2RadarWriter(out, radar_folder=RADAR_FOLDER[settings.radar_scans])
-    lidar_calib, radar_calib = vod_lidar_calibration(), vod_radar_calibration()
+    lidar_calib, radar_calib = settings.calibrations()
     radar_to_lidar = sensor_to_lidar(lidar_calib, radar_calib)
 
     start = time.perf_counter()
@@ -385,7 +280,7 @@ def generate_root(
             ids = list(entry["ids"])
             skipped += 1
         else:
-            frame = synthesize(settings, world_index, radar_to_lidar)
+            frame = synthesize(settings, world_index, radar_to_lidar, lidar_calib)
             ids = []
             if frame.prompts:
                 count = min(len(frame.prompts), remaining)
@@ -460,8 +355,33 @@ def _parser() -> argparse.ArgumentParser:
         help="prompt wording: train phrasings, held-out phrasings (for measuring generalisation "
         "to other wording) or all (default train)",
     )
+    p.add_argument("--no-camera", action="store_true", help="write no camera images (image_2)")
+    p.add_argument(
+        "--camera-scale",
+        type=float,
+        default=1.0,
+        choices=CAMERA_SCALES,
+        help="camera image size relative to VoD's 1936 x 1216 (P2 scaled to match; default 1)",
+    )
+    p.add_argument(
+        "--camera-ray-step",
+        type=int,
+        default=2,
+        choices=(1, 2, 4),
+        help="one camera ray per N x N pixels, upsampled (default 2; 4 is about twice as fast)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
+
+
+def _camera_config(args: argparse.Namespace) -> CameraConfig | None:
+    """The camera of the command line (None with ``--no-camera``); SynthError when bad."""
+    if args.no_camera:
+        return None
+    try:
+        return CameraConfig(image_scale=args.camera_scale, ray_step=args.camera_ray_step)
+    except ValueError as exc:
+        raise SynthError(f"camera: {exc}") from exc
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -473,6 +393,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             radar_scans=args.radar_scans,
             prompts_per_world=args.prompts_per_world,
             phrasing=args.phrasing,
+            camera=_camera_config(args),
         )
         report = generate_root(
             args.out, args.frames, settings, args.split_fractions, progress=not args.quiet

@@ -9,6 +9,8 @@ import pytest
 
 from scenes import Talk2RadarRoot
 from scenes.boxes import wrap_yaw
+from scenes.calib import vod_lidar_calibration
+from scenes.camera import CameraConfig
 from scenes.lidar_sim import LidarScan
 from scenes.radar_sim import RadarScan
 from scenes.synth import (
@@ -89,6 +91,8 @@ def test_rerun_skips_complete_worlds_and_redoes_a_partial_one(root_dir):
     settings = SynthSettings(seed=3)
     velodyne = root_dir / "lidar" / "training" / "velodyne"
     before = {p.name: p.read_bytes() for p in velodyne.glob("*.bin")}
+    images = root_dir / "lidar" / "training" / "image_2"
+    before_images = {p.name: p.read_bytes() for p in images.glob("*.jpg")}
     again = generate_root(root_dir, FRAMES, settings)
     assert again.generated_worlds == 0 and again.samples == FRAMES
     # Break the last world half-way (its label is missing): only that world is redone, exactly.
@@ -100,6 +104,7 @@ def test_rerun_skips_complete_worlds_and_redoes_a_partial_one(root_dir):
     assert redo.generated_worlds == 1
     after = {p.name: p.read_bytes() for p in velodyne.glob("*.bin")}
     assert after == before
+    assert {p.name: p.read_bytes() for p in images.glob("*.jpg")} == before_images
     # An interruption that tore the manifest's last line: the line is dropped, nothing redone.
     lines = (root_dir / MANIFEST).read_text().splitlines()
     with open(root_dir / MANIFEST, "a") as handle:
@@ -166,3 +171,55 @@ def test_only_sensed_actors_can_be_referents():
     radar = RadarScan(np.zeros((3, 7), np.float32), np.array([2, -1, -3]))
     assert sensed_actor_ids(lidar, radar, 3, 1) == (0, 2)
     assert sensed_actor_ids(lidar, radar, 2, 2) == (0, 1)
+
+
+def test_camera_images_are_written_in_both_trees_and_sit_where_p2_says(root_dir):
+    root = Talk2RadarRoot(root_dir)
+    sample = root.load("00000")
+    lidar_image = root_dir / "lidar" / "training" / "image_2" / "00000.jpg"
+    radar_image = root_dir / "radar_5frames" / "training" / "image_2" / "00000.jpg"
+    assert sample.image_path == lidar_image
+    assert lidar_image.stat().st_ino == radar_image.stat().st_ino  # one file, hard-linked
+    assert sample.image.shape == (1216, 1936, 3)  # VoD's size; the calib is VoD's own
+    np.testing.assert_array_equal(sample.calib.P2, vod_lidar_calibration().P2)
+    # A referent's 2D box covers something other than sky (the camera sees what the label says).
+    x1, y1, x2, y2 = (int(v) for v in sample.labels[0].bbox)
+    patch = sample.image[y1:y2, x1:x2].astype(float)
+    sky = sample.image[:40].reshape(-1, 3).astype(float).mean(axis=0)
+    assert np.abs(patch - sky).max(axis=2).mean() > 20
+
+
+def test_no_camera_changes_nothing_but_the_images(root_dir, tmp_path):
+    assert main(["--out", str(tmp_path / "n"), "--frames", "2", "--seed", "3", "--quiet",
+                 "--no-camera"]) == 0  # fmt: skip
+    assert not (tmp_path / "n" / "lidar" / "training" / "image_2").exists()
+    assert "camera" not in (tmp_path / "n" / MANIFEST).read_text().splitlines()[0]
+    for tree in ("lidar", "radar_5frames"):
+        for folder, ext in (("velodyne", "bin"), ("calib", "txt"), ("label_2", "txt")):
+            for i in range(2):
+                name = f"{tree}/training/{folder}/{i:05d}.{ext}"
+                assert (tmp_path / "n" / name).read_bytes() == (root_dir / name).read_bytes()
+    # A root generated with images is not resumed without them (nor the other way round).
+    assert main(["--out", str(root_dir), "--frames", str(FRAMES), "--seed", "3", "--quiet",
+                 "--no-camera"]) == 2  # fmt: skip
+
+
+def test_a_smaller_camera_image_scales_p2_and_the_2d_boxes(tmp_path):
+    settings = SynthSettings(seed=3, camera=CameraConfig(image_scale=0.25))
+    generate_root(tmp_path / "q", 2, settings)
+    generate_root(tmp_path / "f", 2, SynthSettings(seed=3, camera=None))
+    quarter, full = Talk2RadarRoot(tmp_path / "q").load(0), Talk2RadarRoot(tmp_path / "f").load(0)
+    assert quarter.image.shape == (304, 484, 3)
+    np.testing.assert_allclose(quarter.calib.P2[:2], full.calib.P2[:2] / 4)
+    np.testing.assert_allclose(quarter.radar_calib.P2[:2], full.radar_calib.P2[:2] / 4)
+    np.testing.assert_allclose(quarter.boxes, full.boxes, atol=1e-5)  # 3D boxes unchanged
+    for q, f in zip(quarter.labels, full.labels, strict=True):
+        expected = np.clip(np.array(f.bbox) / 4, 0, [484, 304, 484, 304])
+        np.testing.assert_allclose(q.bbox, expected, atol=1e-5)
+
+
+def test_bad_camera_options_are_one_error_line(tmp_path, capsys):
+    argv = ["--out", str(tmp_path / "c"), "--frames", "1", "--quiet", "--camera-scale", "0.125"]
+    assert main([*argv, "--camera-ray-step", "4"]) == 2  # 242 x 152 is not a multiple of 4
+    assert "error: camera: ray_step" in capsys.readouterr().err
+    assert not (tmp_path / "c").exists()

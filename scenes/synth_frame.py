@@ -1,0 +1,206 @@
+"""One synthetic frame: the generation settings, the per-world random streams, and a world built
+and sensed (LiDAR, accumulated radar, camera image) with its prompts drawn over the sensed actors.
+:mod:`scenes.synth` writes such frames as a Talk2Radar root (and re-exports these names).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from scenes.calib import Calibration, vod_lidar_calibration, vod_radar_calibration
+from scenes.camera import CameraConfig, render_image
+from scenes.lidar_sim import LidarConfig, LidarScan, simulate_lidar
+from scenes.projection import scale_calibration
+from scenes.prompts import PHRASINGS, Prompt, PromptConfig, generate_prompts
+from scenes.radar_sim import RadarConfig, RadarScan, simulate_radar
+from scenes.weather import WEATHERS, Weather
+from scenes.world import RayCaster, World, WorldConfig, generate_world
+
+RADAR_FOLDER = {1: "radar", 3: "radar_3frames", 5: "radar_5frames"}
+"""Radar tree name per number of accumulated scans (as VoD)."""
+MIXED = "mixed"
+MIXED_WEATHER = (("clear", 0.6), ("rain", 0.2), ("fog", 0.2))
+
+
+class SynthError(ValueError):
+    """Bad generation settings or an output folder that cannot be resumed."""
+
+
+@dataclass(frozen=True)
+class SynthSettings:
+    """What determines the generated content (``--frames`` and the splits do not).
+
+    Attributes:
+        seed: Base seed; world ``i`` uses ``SeedSequence([seed, i])``.
+        weather: ``clear``, ``rain``, ``fog`` or ``mixed``.
+        radar_scans: Accumulated radar scans, 1, 3 or 5.
+        prompts_per_world: Prompts (samples) drawn per world (fewer when the world has fewer).
+        min_lidar_points, min_radar_points: An actor can be a referent when it has at least this
+            many LiDAR points or radar points (see :func:`synthesize`).
+        phrasing: Prompt wording stream, ``train``, ``heldout`` or ``all``
+            (``scenes.prompts.PromptConfig.phrasing``).
+        camera: The camera image's settings, or None for no image (``--no-camera``).
+    """
+
+    seed: int = 0
+    weather: str = "clear"
+    radar_scans: int = 5
+    prompts_per_world: int = 2
+    min_lidar_points: int = 3
+    min_radar_points: int = 1
+    world: WorldConfig = field(default_factory=WorldConfig)
+    lidar: LidarConfig = field(default_factory=LidarConfig)
+    radar: RadarConfig = field(default_factory=RadarConfig)
+    phrasing: str = "train"
+    camera: CameraConfig | None = field(default_factory=CameraConfig)
+
+    def __post_init__(self) -> None:
+        if self.phrasing not in PHRASINGS:
+            raise SynthError(f"phrasing must be one of {list(PHRASINGS)}, got {self.phrasing!r}")
+        if self.seed < 0:
+            raise SynthError(f"seed must be >= 0, got {self.seed}")
+        if self.weather != MIXED and self.weather not in WEATHERS:
+            raise SynthError(f"weather must be one of {[*WEATHERS, MIXED]}, got {self.weather!r}")
+        if self.radar_scans not in RADAR_FOLDER:
+            raise SynthError(f"radar_scans must be 1, 3 or 5, got {self.radar_scans}")
+        if self.prompts_per_world < 1:
+            raise SynthError(f"prompts_per_world must be >= 1, got {self.prompts_per_world}")
+
+    def key(self) -> dict:
+        """The settings recorded in (and compared with) the manifest."""
+        return {
+            "seed": self.seed,
+            "weather": self.weather,
+            "radar_scans": self.radar_scans,
+            "prompts_per_world": self.prompts_per_world,
+            # Only when not the default, so roots written before the option resume as before.
+            **({"phrasing": self.phrasing} if self.phrasing != "train" else {}),
+            # Only with a camera: a root without images records what it did before cameras.
+            **({"camera": self.camera.key()} if self.camera is not None else {}),
+        }
+
+    def calibrations(self) -> tuple[Calibration, Calibration]:
+        """The LiDAR and radar calibrations written: VoD's, with ``P2`` scaled to the camera
+        image (:attr:`scenes.camera.CameraConfig.image_scale`) where there is one."""
+        lidar, radar = vod_lidar_calibration(), vod_radar_calibration()
+        if self.camera is None or self.camera.image_scale == 1.0:
+            return lidar, radar
+        scale = self.camera.image_scale
+        return scale_calibration(lidar, scale), scale_calibration(radar, scale)
+
+
+@dataclass(frozen=True)
+class StageTimes:
+    """Seconds spent per stage on one world."""
+
+    world: float = 0.0
+    lidar: float = 0.0
+    radar: float = 0.0
+    prompts: float = 0.0
+    camera: float = 0.0
+
+
+@dataclass(frozen=True)
+class SynthFrame:
+    """One sensed world and its prompts.
+
+    Attributes:
+        world: The world (actors, meshes).
+        weather: Its weather.
+        lidar: ``points (N, 4)`` LiDAR frame, and the owner of each point.
+        radar: ``points (M, 7)`` LiDAR frame, and the owner of each point.
+        prompts: Up to ``prompts_per_world`` prompts.
+        sensed: Indices of the actors the prompts could refer to (seen by a sensor).
+        times: Stage timings.
+        image: ``(H, W, 3)`` uint8 camera image at ``t = 0`` (None without a camera, or when the
+            world yielded no prompt and so is not written).
+    """
+
+    world: World
+    weather: Weather
+    lidar: LidarScan
+    radar: RadarScan
+    prompts: tuple[Prompt, ...]
+    sensed: tuple[int, ...]
+    times: StageTimes
+    image: np.ndarray | None = None
+
+
+def world_streams(seed: int, world_index: int) -> dict[str, np.random.Generator]:
+    """The independent random streams of world ``world_index`` (a stream added later is spawned
+    last, so the earlier ones stay as they were)."""
+    children = np.random.SeedSequence([seed, world_index]).spawn(6)
+    names = ("world", "weather", "lidar", "radar", "prompts", "camera")
+    return {name: np.random.default_rng(s) for name, s in zip(names, children, strict=True)}
+
+
+def _pick_weather(settings: SynthSettings, rng: np.random.Generator) -> Weather:
+    if settings.weather != MIXED:
+        return WEATHERS[settings.weather]
+    names, probs = zip(*MIXED_WEATHER, strict=True)
+    return WEATHERS[names[int(rng.choice(len(names), p=probs))]]
+
+
+def sensed_actor_ids(
+    lidar: LidarScan, radar: RadarScan, min_lidar_points: int, min_radar_points: int
+) -> tuple[int, ...]:
+    """Indices of the actors with at least ``min_lidar_points`` LiDAR or ``min_radar_points``
+    radar points (any scan)."""
+    n = int(max(lidar.owner.max(initial=-1), radar.owner.max(initial=-1))) + 1
+    lidar_count = np.bincount(lidar.owner[lidar.owner >= 0], minlength=n)
+    radar_count = np.bincount(radar.owner[radar.owner >= 0], minlength=n)
+    seen = (lidar_count >= min_lidar_points) | (radar_count >= min_radar_points)
+    return tuple(int(i) for i in np.flatnonzero(seen))
+
+
+def synthesize(
+    settings: SynthSettings,
+    world_index: int,
+    radar_to_lidar: np.ndarray,
+    camera_calib: Calibration | None = None,
+) -> SynthFrame:
+    """Build and sense world ``world_index``, draw its prompts and, where it has some and the
+    settings have a camera, render its camera image.
+
+    Prompts are drawn over the *sensed* actors only (:func:`sensed_actor_ids`): an actor hidden
+    from both sensors (occluded, or beyond the LiDAR's reach in fog and missed by the radar) is
+    as invisible to the prompt as it would be to an annotator.
+
+    Args:
+        radar_to_lidar: ``(4, 4)`` radar -> LiDAR transform (``scenes.calib.sensor_to_lidar``).
+        camera_calib: The LiDAR calibration of the image (default ``settings.calibrations()``).
+    """
+    rngs = world_streams(settings.seed, world_index)
+    t0 = time.perf_counter()
+    world = generate_world(rngs["world"], world_index, settings.world)
+    weather = _pick_weather(settings, rngs["weather"])
+    t1 = time.perf_counter()
+    caster = RayCaster(world)
+    lidar = simulate_lidar(caster, rngs["lidar"], settings.lidar, weather)
+    t2 = time.perf_counter()
+    radar = simulate_radar(
+        caster, radar_to_lidar, rngs["radar"], settings.radar, weather, settings.radar_scans
+    )
+    t3 = time.perf_counter()
+    sensed = sensed_actor_ids(lidar, radar, settings.min_lidar_points, settings.min_radar_points)
+    candidates = [world.actors[i] for i in sensed]
+    prompts = tuple(
+        generate_prompts(
+            candidates,
+            rngs["prompts"],
+            settings.prompts_per_world,
+            config=PromptConfig(phrasing=settings.phrasing),
+        )
+    )
+    t4 = time.perf_counter()
+    image = None
+    if settings.camera is not None and prompts:
+        calib = camera_calib if camera_calib is not None else settings.calibrations()[0]
+        size = settings.camera.image_size
+        image = render_image(world, calib, size, weather, rngs["camera"], settings.camera)
+    t5 = time.perf_counter()
+    times = StageTimes(world=t1 - t0, lidar=t2 - t1, radar=t3 - t2, prompts=t4 - t3, camera=t5 - t4)
+    return SynthFrame(world, weather, lidar, radar, prompts, sensed, times, image)
