@@ -96,32 +96,72 @@ def geometry_features(boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray)
     return out
 
 
+def _near_boxes(points: np.ndarray, boxes: np.ndarray, margin: float) -> np.ndarray:
+    """Indices (ascending) of the ``points (N, >=2)`` that may lie in a box grown by ``margin``.
+
+    A superset of every box's points: each box marks the cells of a 1 m grid under its bounding
+    square (half-width ``hypot(l/2 + margin, w/2 + margin)`` plus 1 mm, which contains the grown
+    footprint at any yaw), and a point is kept when its cell is marked (cells are found by
+    truncation, which may keep a few more points, never fewer). One pass over the points and no
+    sort, so that the exact per-box tests of :func:`_in_footprints` see only the points near a
+    box instead of the whole cloud.
+    """
+    half = np.hypot(boxes[:, 3] / 2 + margin, boxes[:, 4] / 2 + margin) + 1e-3
+    x0 = float((boxes[:, 0] - half).min())
+    y0 = float((boxes[:, 1] - half).min())
+    c0 = np.floor(boxes[:, 0] - half - x0).astype(np.int64) + 1
+    c1 = np.floor(boxes[:, 0] + half - x0).astype(np.int64) + 1
+    r0 = np.floor(boxes[:, 1] - half - y0).astype(np.int64) + 1
+    r1 = np.floor(boxes[:, 1] + half - y0).astype(np.int64) + 1
+    # Cell i + 1 holds [x0 + i, x0 + i + 1); row/column 0 and the last one stay empty (outside).
+    occupied = np.zeros((int(c1.max()) + 2, int(r1.max()) + 2), dtype=bool)
+    for a, b, c, d in zip(c0.tolist(), c1.tolist(), r0.tolist(), r1.tolist(), strict=True):
+        occupied[a : b + 1, c : d + 1] = True
+    col = np.clip(points[:, 0] - (x0 - 1.0), 0.0, occupied.shape[0] - 1).astype(np.intp)
+    row = np.clip(points[:, 1] - (y0 - 1.0), 0.0, occupied.shape[1] - 1).astype(np.intp)
+    return np.flatnonzero(occupied[col, row])
+
+
 def _in_footprints(points: np.ndarray, boxes: np.ndarray, margin: float, use_z: bool) -> list:
     """Indices of ``points (N, >=3)`` inside each box grown by ``margin`` (list of K arrays).
 
-    Points are sorted by x once; each box only tests the slice within its bounding circle's x
-    range, so the cost is about ``N log N + sum of slice sizes`` rather than ``N * K``.
+    Each box tests the points within its bounding circle's x range (``box x -/+ r``, ``r`` =
+    half the box diagonal + ``margin``) against the grown box, and returns them in the order of
+    a stable sort of the points by x. Only the points near some box (:func:`_near_boxes`, a
+    superset of every box's points) are sorted, and all (box, point) pairs of the x ranges are
+    tested at once, so the cost is one pass over the cloud plus ``M log M + sum of range sizes``
+    for the ``M`` points near a box.
     """
     if len(boxes) == 0:
         return []
     if len(points) == 0:
         return [np.zeros(0, dtype=np.int64) for _ in boxes]
-    order = np.argsort(points[:, 0], kind="stable")
-    xs = points[order, 0]
-    out = []
-    for box in boxes:
-        r = 0.5 * float(np.hypot(box[3], box[4])) + margin
-        lo, hi = np.searchsorted(xs, [box[0] - r, box[0] + r])
-        idx = order[lo:hi]
-        p = points[idx]
-        dx, dy = p[:, 0] - box[0], p[:, 1] - box[1]
-        c, s = np.cos(box[6]), np.sin(box[6])
-        lx, ly = dx * c + dy * s, -dx * s + dy * c
-        keep = (np.abs(lx) <= box[3] / 2 + margin) & (np.abs(ly) <= box[4] / 2 + margin)
-        if use_z:
-            keep &= np.abs(p[:, 2] - box[2]) <= box[5] / 2 + margin
-        out.append(idx[keep])
-    return out
+    near = _near_boxes(points, boxes, margin)
+    order = near[np.argsort(points[near, 0], kind="stable")]
+    sub = points[order]
+    r = 0.5 * np.hypot(boxes[:, 3], boxes[:, 4]) + margin
+    lo = np.searchsorted(sub[:, 0], boxes[:, 0] - r)
+    hi = np.searchsorted(sub[:, 0], boxes[:, 0] + r)
+    sizes = np.maximum(hi - lo, 0)
+    # Pair j belongs to box which[j] and is point pos[j] of the sorted near set.
+    which = np.repeat(np.arange(len(boxes)), sizes)
+    starts = np.cumsum(sizes) - sizes
+    pos = np.arange(len(which)) - np.repeat(starts - lo, sizes)
+    box, p = boxes[which], sub[pos]
+    dx, dy = p[:, 0] - box[:, 0], p[:, 1] - box[:, 1]
+    c, s = np.cos(box[:, 6]), np.sin(box[:, 6])
+    lx, ly = dx * c + dy * s, -dx * s + dy * c
+    keep = (np.abs(lx) <= box[:, 3] / 2 + margin) & (np.abs(ly) <= box[:, 4] / 2 + margin)
+    if use_z:
+        keep &= np.abs(p[:, 2] - box[:, 2]) <= box[:, 5] / 2 + margin
+    counts = np.bincount(which[keep], minlength=len(boxes))
+    return np.split(order[pos[keep]], np.cumsum(counts)[:-1])
+
+
+def _mean(values: np.ndarray) -> float:
+    """``values.mean()`` of a non-empty 1-D float64 array, without its Python overhead (the same
+    pairwise sum divided by the count, so bit-identical)."""
+    return np.add.reduce(values) / len(values)
 
 
 def lidar_evidence(boxes: np.ndarray, lidar: np.ndarray) -> np.ndarray:
@@ -133,17 +173,17 @@ def lidar_evidence(boxes: np.ndarray, lidar: np.ndarray) -> np.ndarray:
     for i, idx in enumerate(_in_footprints(pts, b, LIDAR_MARGIN, use_z=True)):
         if len(idx):
             p = pts[idx]
-            out[i] = (np.log1p(len(idx)), p[:, 3].mean() / 255.0, np.ptp(p[:, 2]), 1.0)
+            z = p[:, 2]
+            out[i] = (np.log1p(len(idx)), _mean(p[:, 3]) / 255.0, z.max() - z.min(), 1.0)
     return out
 
 
-def _scan_slope(values: np.ndarray, times: np.ndarray) -> float:
-    """Least-squares slope of ``values`` over ``times`` (0 when fewer than two distinct times)."""
-    t = times - times.mean()
-    denom = float(np.sum(t * t))
+def _scan_slope(values: np.ndarray, t: np.ndarray, denom: float) -> float:
+    """Least-squares slope of ``values`` over times centred as ``t`` (``denom`` = sum of
+    ``t * t``; 0 when it is below 1e-9, i.e. fewer than two distinct times)."""
     if denom < 1e-9:
         return 0.0
-    return float(np.sum(t * (values - values.mean())) / denom)
+    return float(np.add.reduce(t * (values - _mean(values))) / denom)
 
 
 def radar_evidence(boxes: np.ndarray, radar: np.ndarray) -> np.ndarray:
@@ -162,17 +202,21 @@ def radar_evidence(boxes: np.ndarray, radar: np.ndarray) -> np.ndarray:
         if not len(idx):
             continue
         p = pts[idx]
-        vc = p[:, 5]
+        vc, times = p[:, 5], p[:, 6]
+        vc_mean = _mean(vc)
+        spread = vc - vc_mean
+        t = times - _mean(times)
+        denom = float(np.add.reduce(t * t))
         out[i] = (
             np.log1p(len(idx)),
-            np.log1p(int(np.sum(p[:, 6] == 0))),
-            p[:, 4].mean() / SPEED_SCALE,
-            vc.mean() / SPEED_SCALE,
+            np.log1p(np.count_nonzero(times == 0)),
+            _mean(p[:, 4]) / SPEED_SCALE,
+            vc_mean / SPEED_SCALE,
             np.median(vc) / SPEED_SCALE,
-            vc.std() / SPEED_SCALE,
-            p[:, 3].mean() / 10.0,
-            _scan_slope(p[:, 0], p[:, 6]),
-            _scan_slope(p[:, 1], p[:, 6]),
+            np.sqrt(np.add.reduce(spread * spread) / len(vc)) / SPEED_SCALE,
+            _mean(p[:, 3]) / 10.0,
+            _scan_slope(p[:, 0], t, denom),
+            _scan_slope(p[:, 1], t, denom),
             1.0,
         )
     return out

@@ -212,3 +212,197 @@ def test_cached_stage_banks_prompts_and_learns(tiny_root):
     boxes = np.array([[10.2, 0.1, 0, 0.6, 0.6, 1.7, 0], [10.3, 0, 0, 0.6, 0.6, 1.7, 0]])
     assert match_detections(boxes, np.array([1, 1]), [a]).tolist() == [4, -1]
     assert match_detections(boxes, np.array([0, 2]), [a]).tolist() == [-1, -1]
+
+
+# --------------------------------------------------------------------------- speed-ups, same outputs
+# The candidate evidence and the answer's heatmap were made faster (issue 15, speed); these are the
+# earlier, straightforward forms, kept here as references: the fast ones must match them bit for bit.
+
+
+def _reference_in_footprints(points, boxes, margin, use_z):
+    order = np.argsort(points[:, 0], kind="stable")
+    xs = points[order, 0]
+    out = []
+    for box in boxes:
+        r = 0.5 * float(np.hypot(box[3], box[4])) + margin
+        lo, hi = np.searchsorted(xs, [box[0] - r, box[0] + r])
+        idx = order[lo:hi]
+        p = points[idx]
+        dx, dy = p[:, 0] - box[0], p[:, 1] - box[1]
+        c, s = np.cos(box[6]), np.sin(box[6])
+        lx, ly = dx * c + dy * s, -dx * s + dy * c
+        keep = (np.abs(lx) <= box[3] / 2 + margin) & (np.abs(ly) <= box[4] / 2 + margin)
+        if use_z:
+            keep &= np.abs(p[:, 2] - box[2]) <= box[5] / 2 + margin
+        out.append(idx[keep])
+    return out
+
+
+def _reference_lidar_evidence(boxes, lidar):
+    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
+    pts = np.asarray(lidar, dtype=np.float64).reshape(-1, 4)
+    out = np.zeros((len(b), 4), dtype=np.float32)
+    for i, idx in enumerate(_reference_in_footprints(pts, b, 0.2, use_z=True)):
+        if len(idx):
+            p = pts[idx]
+            out[i] = (np.log1p(len(idx)), p[:, 3].mean() / 255.0, np.ptp(p[:, 2]), 1.0)
+    return out
+
+
+def _reference_slope(values, times):
+    t = times - times.mean()
+    denom = float(np.sum(t * t))
+    if denom < 1e-9:
+        return 0.0
+    return float(np.sum(t * (values - values.mean())) / denom)
+
+
+def _reference_radar_evidence(boxes, radar):
+    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
+    pts = np.asarray(radar, dtype=np.float64).reshape(-1, 7)
+    out = np.zeros((len(b), 10), dtype=np.float32)
+    for i, idx in enumerate(_reference_in_footprints(pts, b, 0.5, use_z=False)):
+        if not len(idx):
+            continue
+        p = pts[idx]
+        vc = p[:, 5]
+        out[i] = (
+            np.log1p(len(idx)),
+            np.log1p(int(np.sum(p[:, 6] == 0))),
+            p[:, 4].mean() / 10.0,
+            vc.mean() / 10.0,
+            np.median(vc) / 10.0,
+            vc.std() / 10.0,
+            p[:, 3].mean() / 10.0,
+            _reference_slope(p[:, 0], p[:, 6]),
+            _reference_slope(p[:, 1], p[:, 6]),
+            1.0,
+        )
+    return out
+
+
+def _reference_heatmap(detection, boxes, labels, probabilities, grid, anchor, sigma_cells=1.5):
+    from model.targets import anchor_points
+
+    _, h, w = detection.shape
+    weight = np.zeros_like(detection, dtype=np.float32)
+    if len(boxes):
+        cells = grid.xy_to_cell(anchor_points(np.asarray(boxes).reshape(-1, 7), anchor))
+        cols = np.arange(w)[None, None, :] + 0.5
+        rows = np.arange(h)[None, :, None] + 0.5
+        d2 = (cols - cells[:, 0, None, None]) ** 2 + (rows - cells[:, 1, None, None]) ** 2
+        g = np.exp(-d2 / (2 * sigma_cells**2)) * np.asarray(probabilities)[:, None, None]
+        for c in range(detection.shape[0]):
+            mine = np.asarray(labels) == c
+            if mine.any():
+                weight[c] = g[mine].max(axis=0)
+    peak = np.maximum(detection.reshape(detection.shape[0], -1).max(axis=1), 1e-6)
+    shape = 0.5 + 0.5 * detection / peak[:, None, None]
+    return np.clip(weight * shape, 0.0, 1.0).astype(np.float32)
+
+
+def _scene_like(seed: int, k: int = 40, n_lidar: int = 20000, n_radar: int = 1500):
+    """Boxes of every size and yaw, some touching or overlapping, and clouds dense around them:
+    points on the box surfaces and edges (the inside tests' borderline cases), repeated x values
+    (the stable order), background points, radar with 1-5 scans and exact zero velocities."""
+    rng = np.random.default_rng(seed)
+    size = rng.choice([[4.2, 1.8, 1.6], [0.6, 0.6, 1.7], [1.8, 0.7, 1.6]], size=k)
+    centre = np.column_stack(
+        [rng.uniform(0.0, 52.0, k), rng.uniform(-26.0, 26.0, k), rng.uniform(-0.5, 0.5, k)]
+    )
+    centre[k // 2 :, :2] = centre[: k - k // 2, :2] + rng.normal(0.0, 0.8, (k - k // 2, 2))
+    boxes = np.column_stack([centre, size * rng.uniform(0.8, 1.2, (k, 3)), rng.uniform(-4, 4, k)])
+
+    def around(n: int) -> np.ndarray:
+        which = rng.integers(0, k, n)
+        b = boxes[which]
+        # Local coordinates up to 1.3x the half-size: inside, on the border and just outside.
+        local = rng.uniform(-0.65, 0.65, (n, 3)) * (b[:, 3:6] + 0.6)
+        local[: n // 5, 0] = np.sign(local[: n // 5, 0]) * (b[: n // 5, 3] / 2 + 0.2)
+        c, s = np.cos(b[:, 6]), np.sin(b[:, 6])
+        x = b[:, 0] + local[:, 0] * c - local[:, 1] * s
+        y = b[:, 1] + local[:, 0] * s + local[:, 1] * c
+        return np.column_stack([x, y, b[:, 2] + local[:, 2]])
+
+    xyz = np.concatenate([around(n_lidar), rng.uniform([-5, -40, -3], [60, 40, 3], (5000, 3))])
+    xyz[::7, 0] = xyz[1::7, 0][: len(xyz[::7])]  # ties in x
+    lidar = np.column_stack([xyz, rng.integers(0, 256, len(xyz)).astype(np.float64)])
+    rxyz = around(n_radar)
+    vc = np.round(rng.normal(0.0, 3.0, n_radar), 1)
+    vc[::3] = 0.0
+    vc[1::9] = -0.0
+    scans = rng.integers(0, rng.integers(1, 6, n_radar) + 1)
+    radar = np.column_stack(
+        [rxyz, rng.normal(0, 10, n_radar), vc + rng.normal(0, 1, n_radar), vc, -scans]
+    )
+    return boxes, lidar.astype(np.float32), radar.astype(np.float32)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_fast_point_evidence_is_bit_identical_to_the_reference(seed):
+    boxes, lidar, radar = _scene_like(seed)
+    for fast, ref, pts in (
+        (lidar_evidence, _reference_lidar_evidence, lidar),
+        (radar_evidence, _reference_radar_evidence, radar),
+    ):
+        got, want = fast(boxes, pts), ref(boxes, pts)
+        assert got.dtype == want.dtype and got.tobytes() == want.tobytes()
+        assert (want[:, -1] > 0).sum() >= len(boxes) // 2  # most boxes do hold points
+    # Degenerate inputs: no boxes, no points, one point, a single scan.
+    assert lidar_evidence(np.zeros((0, 7)), lidar).shape == (0, 4)
+    assert not radar_evidence(boxes, np.zeros((0, 7))).any()
+    one = radar[:1].copy()
+    assert radar_evidence(boxes, one).tobytes() == _reference_radar_evidence(boxes, one).tobytes()
+    single = radar.copy()
+    single[:, 6] = 0.0
+    assert radar_evidence(boxes, single).tobytes() == (
+        _reference_radar_evidence(boxes, single).tobytes()
+    )
+
+
+def test_fast_point_evidence_matches_on_a_generated_scene(tiny_root):
+    root = Talk2RadarRoot(tiny_root)
+    sample = root.load(root.ids("train")[0])
+    rng = np.random.default_rng(3)
+    meta = root.load_meta(root.ids("train")[0])
+    boxes = np.array([a.box for a in meta.actors], dtype=np.float64).reshape(-1, 7)
+    boxes = np.concatenate([boxes, boxes + rng.normal(0, 0.3, boxes.shape)])
+    for fast, ref, pts in (
+        (lidar_evidence, _reference_lidar_evidence, sample.lidar),
+        (radar_evidence, _reference_radar_evidence, sample.radar),
+    ):
+        assert fast(boxes, pts).tobytes() == ref(boxes, pts).tobytes()
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_fast_referent_heatmap_is_bit_identical_to_the_reference(seed):
+    from model.grounder import referent_heatmap
+
+    rng = np.random.default_rng(seed)
+    grid = BevGrid(0.0, 51.2, -25.6, 25.6, 0.64)
+    detection = rng.random((3, 80, 80)).astype(np.float32)
+    k = 40
+    # Anchors inside the grid, on its border and well outside it (their Gaussians' tails still
+    # reach in, or not); probabilities from certain to vanishing, and exactly 0.
+    boxes = np.column_stack(
+        [
+            rng.uniform(-20, 70, k), rng.uniform(-45, 45, k), np.zeros(k),
+            rng.uniform(0.5, 5, k), rng.uniform(0.5, 2.5, k), np.ones(k), rng.uniform(-4, 4, k),
+        ]
+    )  # fmt: skip
+    labels = rng.integers(0, 3, k)
+    probs = rng.random(k) ** rng.choice([1, 4, 40], k)
+    probs[:3] = (0.0, 1e-30, 1.0)
+    for anchor in ("corner", "center"):
+        for p in (probs, probs * 1e-20, np.zeros(k)):
+            got = referent_heatmap(detection, boxes, labels, p, grid, anchor)
+            want = _reference_heatmap(detection, boxes, labels, p, grid, anchor)
+            assert got.tobytes() == want.tobytes()
+    none = referent_heatmap(detection, np.zeros((0, 7)), labels[:0], probs[:0], grid, "corner")
+    assert (
+        not none.any()
+        and none.tobytes()
+        == (
+            _reference_heatmap(detection, np.zeros((0, 7)), labels[:0], probs[:0], grid, "corner")
+        ).tobytes()
+    )
