@@ -298,3 +298,106 @@ def test_render_includes_scene_generation_results(tmp_path) -> None:
     assert "| world | 0.1 |" in text
     failed = render({}, {"latency": "exit code 1"}, synth, "python -m bench.run_all", 1.0)
     assert "- `latency`: exit code 1" in failed
+
+
+# --------------------------------------------------------------------------- latency (both paths)
+
+
+def _calls(walls: list[float], stages: dict[str, list[float]]):
+    from bench.latency_measure import Call
+
+    return [
+        Call(w, {k: v[i] for k, v in stages.items()}, boxes=3, answer=1)
+        for i, w in enumerate(walls)
+    ]
+
+
+def _path_calls(cached: list[float], fresh: list[float], repeated: list[float], spec):
+    from bench.latency_measure import PathCalls
+
+    ground = {k: [1.0] * len(cached) for k in spec.ground_stages}
+    scene = {k: [2.0] * len(fresh) for k in spec.scene_stages + spec.ground_stages}
+    return PathCalls(
+        _calls(cached, ground),
+        _calls(fresh, scene),
+        _calls(repeated, {k: [0.5] * len(repeated) for k in spec.ground_stages}),
+    )
+
+
+def test_latency_targets_and_side_by_side_table() -> None:
+    from bench.latency_measure import REFERENT, TPCNET
+    from bench.latency_report import side_by_side_table, targets
+
+    calls = {
+        "referent": _path_calls([20.0, 24.0, 30.0], [140.0, 150.0, 170.0], [8.0], REFERENT),
+        "tpcnet": _path_calls([60.0, 70.0, 80.0], [160.0, 170.0, 180.0], [40.0], TPCNET),
+    }
+    ref = targets(REFERENT, calls["referent"], "small, CPU")
+    tpc = targets(TPCNET, calls["tpcnet"], "small, CPU")
+    assert [(t.value, t.limit, t.met) for t in ref] == [(24.0, 25.0, True), (150.0, 150.0, True)]
+    assert [(t.value, t.met) for t in tpc] == [(70.0, False), (170.0, False)]
+    # The TPCNet path's names start like bench.run_all's notes on DGGF; the referent path's not.
+    assert tpc[0].name.startswith("`ground` median") and ref[0].name.startswith("Referent path")
+    table = side_by_side_table(
+        "Both", [REFERENT, TPCNET], calls, {"referent": "untrained", "tpcnet": "`x.pt`"}
+    )
+    assert [r[0] for r in table.rows] == [
+        "referent path (untrained)",
+        "TPCNet path (DGGF) (`x.pt`)",
+        "**Target** (issue 15)",
+    ]
+    assert table.rows[0][2:6] == ("24.0", "28.8", "150", "166")
+    assert table.rows[-1][2] == "<= 25" and table.rows[-1][4] == "<= 150"
+    assert table.rows[0][-1] == "3.0 / 1.0"
+
+
+def test_latency_stage_check_and_detect_tables() -> None:
+    from bench.latency_measure import DETECT_NAMES, REFERENT
+    from bench.latency_report import calls_data, check_table, detect_table, stage_table
+
+    calls = _calls([10.0, 12.0], {"text": [6.0, 7.0], "referent": [2.0, 3.0], "decode": [1.0, 1.0]})
+    table = stage_table("t", calls, REFERENT.ground_stages, REFERENT.stage_names)
+    rows = {r[0]: r for r in table.rows}
+    assert rows["text encoder (MiniLM)"][1] == "6.50"
+    assert rows["other (input checks, result packing)"][1] == "1.00"  # 10-9 and 12-11
+    assert rows["**wall-clock total**"][1:3] == ("11.0", "11.8")
+    outside = {"text": [6.0, 8.0], "referent": [2.5, 2.5], "decode": [1.0, 2.0]}
+    check = check_table("c", calls, outside, REFERENT.stage_names, "by hand")
+    assert check.rows[0] == ("text encoder (MiniLM)", "6.50", "7.00", "0.50")
+    assert "first 2 prompts" in check.notes[0]
+    parts = {
+        "neck": [1.0, 1.0],
+        "head": [2.0, 4.0],
+        "decode": [10.0, 20.0],
+        "candidates": [1.0, 1.0],
+    }
+    detect = detect_table("d", parts, [15.0, 27.0], DETECT_NAMES)
+    assert detect.rows[-2][1:] == ("20.0", "24.8")  # the parts sum to 14 and 26 ms
+    assert detect.rows[-1][1] == "21.0"
+    path = _path_calls([10.0], [100.0], [5.0], REFERENT)
+    data = calls_data(REFERENT, path)
+    assert set(data["encode_stages_ms"]) == {*REFERENT.scene_stages, *REFERENT.ground_stages}
+    assert data["answer_per_prompt"] == [1] and data["cached_ground_ms"] == [10.0]
+
+
+def test_latency_model_choice_follows_the_checkpoints_grounding(tmp_path, monkeypatch) -> None:
+    import bench.latency_measure as lm
+    from model import build_model
+    from model.checkpoint import save_checkpoint
+
+    torch.manual_seed(0)
+    served, faithful = tmp_path / "tpcnet-small.pt", tmp_path / "tpcnet-small-faithful.pt"
+    monkeypatch.setattr(lm, "REPO", tmp_path)
+    monkeypatch.setattr(lm, "CHECKPOINT", served)
+    monkeypatch.setattr(lm, "FAITHFUL_CHECKPOINT", faithful)
+    missing = lm.load_path_model(lm.REFERENT, "small", "cpu")
+    assert not missing.trained and "`tpcnet-small.pt` does not exist" in missing.note
+    assert missing.model.cfg.grounding == "referent" and not missing.model.training
+    save_checkpoint(served, build_model("small"), step=7)  # the faithful model, served for now
+    old = lm.load_path_model(lm.REFERENT, "small", "cpu")
+    assert not old.trained and "has grounding 'tpcnet'" in old.note and old.short == "untrained"
+    tpc = lm.load_path_model(lm.TPCNET, "small", "cpu")  # falls back to the served one
+    assert tpc.trained and tpc.short == "`tpcnet-small.pt`" and "(step 7)" in tpc.note
+    save_checkpoint(served, build_model("small", grounding="referent"), step=9)
+    new = lm.load_path_model(lm.REFERENT, "small", "cpu")
+    assert new.trained and new.model.cfg.grounding == "referent" and "(step 9)" in new.note
