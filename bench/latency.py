@@ -33,7 +33,7 @@ decoding and rotated NMS: decoding (the TPCNet path's ``decode``, the referent p
 is then much slower than with trained weights.
 
 Layout: measurements in :mod:`bench.latency_measure`, tables in :mod:`bench.latency_report`, the
-workload from :func:`bench.common.synthetic_scenes`.
+workload from :func:`bench.workloads.synthetic_scenes`.
 """
 
 from __future__ import annotations
@@ -43,18 +43,7 @@ from dataclasses import asdict
 
 import torch
 
-from bench.common import (
-    BenchResult,
-    SceneWorkload,
-    Table,
-    Target,
-    bench_main,
-    fmt_ms,
-    fmt_ratio,
-    machine_info,
-    summarize,
-    synthetic_scenes,
-)
+from bench.common import bench_main
 from bench.latency_measure import (
     DETECT_NAMES,
     PATHS,
@@ -83,6 +72,9 @@ from bench.latency_report import (
     targets,
     threads_table,
 )
+from bench.measure import summarize
+from bench.report import BenchResult, Table, Target, fmt_ms, fmt_ratio, machine_info
+from bench.workloads import SceneWorkload, synthetic_scenes
 from model.tpcnet import TPCNet
 
 

@@ -20,7 +20,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from bench.common import REPO, SceneWorkload, synchronize
+from bench.measure import synchronize
+from bench.report import REPO
+from bench.workloads import SceneWorkload
 from model import build_model
 from model.decode import decode
 from model.grounder import SceneMaps, referent_heatmap

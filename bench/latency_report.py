@@ -5,8 +5,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from bench.common import Table, Target, fmt_ms, summarize
 from bench.latency_measure import Call, PathCalls, PathSpec, ProfileRow
+from bench.measure import summarize
+from bench.report import Table, Target, fmt_ms
 
 GROUND_TARGET_MS = 25.0
 """Issue 15: ``ground`` on a cached scene, prompts new to the text cache, median."""

@@ -401,3 +401,19 @@ def test_latency_model_choice_follows_the_checkpoints_grounding(tmp_path, monkey
     save_checkpoint(served, build_model("small", grounding="referent"), step=9)
     new = lm.load_path_model(lm.REFERENT, "small", "cpu")
     assert new.trained and new.model.cfg.grounding == "referent" and "(step 9)" in new.note
+
+
+def test_common_re_exports_the_split_modules() -> None:
+    import bench.common as common
+    import bench.measure as measure
+    import bench.report as report
+    import bench.workloads as workloads
+
+    for module in (measure, report, workloads):
+        public = [
+            n
+            for n, v in vars(module).items()
+            if not n.startswith("_") and getattr(v, "__module__", "") == module.__name__
+        ]
+        assert public and all(getattr(common, n) is getattr(module, n) for n in public)
+    assert set(common.__all__) <= set(vars(common))
