@@ -187,7 +187,7 @@ def _path_findings(spec: PathSpec, calls: PathCalls, loaded: LoadedModel) -> lis
             f"{spec.label}: with an untrained detection head (~0.1 everywhere) up to `top_k` = "
             f"{model.cfg.head.top_k} heatmap peaks pass the candidate threshold "
             f"{model.cfg.referent.candidate_threshold} and go through rotated NMS inside "
-            "`encode_scene` (the detection table below); a trained head leaves a few dozen."
+            "`encode_scene` (the table of its detection stage); a trained head leaves a few dozen."
         )
     return out
 
@@ -213,7 +213,7 @@ def _referent_miss_notes(missed: set[str], trained: bool) -> list[str]:
         )
         out.append(
             "Referent path, `encode_scene` + `ground` missed: the scene half (pillars, "
-            "backbones, BACA) is the TPCNet path's, plus the detection stage (table above)."
+            "backbones, BACA) is the TPCNet path's, plus the detection stage (its own table)."
             + untrained
             + " Same boxes in less time: stop each class's NMS once `max_detections` boxes are "
             "kept (only that many survive the final cut), or compute the IoUs of all nearby "
