@@ -12,7 +12,9 @@ from annotate.draft import (
     DraftEditor,
     DraftError,
     History,
+    changed_box,
     default_box,
+    is_pristine,
 )
 from annotate.evidence import (
     BoxEvidence,
@@ -32,6 +34,7 @@ from annotate.fitting import (
     fit_box,
     min_area_rectangle,
 )
+from annotate.proposals import DUPLICATE_IOU, MAX_PROPOSALS, proposals
 from annotate.store import (
     Action,
     AnnotationStore,
@@ -45,7 +48,14 @@ from annotate.store import (
     StoreError,
     read_manifest,
 )
-from annotate.suggest import SceneObject, SuggestConfig, Suggestion, scene_actors, suggest_prompt
+from annotate.suggest import (
+    SceneObject,
+    SuggestConfig,
+    Suggestion,
+    scene_actors,
+    scene_objects,
+    suggest_prompt,
+)
 from annotate.validation import (
     Issue,
     Severity,
@@ -57,6 +67,8 @@ from annotate.validation import (
 
 __all__ = [
     "DEFAULT_SIZES",
+    "DUPLICATE_IOU",
+    "MAX_PROPOSALS",
     "Action",
     "AnnotationStore",
     "BoxEvidence",
@@ -89,14 +101,18 @@ __all__ = [
     "ValidationError",
     "ValidationReport",
     "box_evidence",
+    "changed_box",
     "classify_motion",
     "convex_hull",
     "default_box",
     "estimate_velocity",
     "fit_box",
+    "is_pristine",
     "min_area_rectangle",
+    "proposals",
     "read_manifest",
     "scene_actors",
+    "scene_objects",
     "suggest_prompt",
     "validate",
 ]

@@ -305,6 +305,26 @@ class Draft:
             raise DraftError(f"malformed draft JSON: {exc!r}") from exc
 
 
+def is_pristine(draft: Draft) -> bool:
+    """Whether a draft holds nothing worth keeping (a new pair, no box, no prompt, no mark)."""
+    return (
+        draft.sample_id is None
+        and not draft.boxes
+        and not draft.prompt.strip()
+        and not draft.refers_to_nothing
+    )
+
+
+def changed_box(before: Draft, after: Draft) -> int | None:
+    """The id of the first box of ``after`` that is new or differs from ``before`` (None when
+    no box was added or changed, e.g. after a deletion)."""
+    old = {b.box_id: b for b in before.boxes}
+    for item in after.boxes:
+        if old.get(item.box_id) != item:
+            return item.box_id
+    return None
+
+
 @dataclass(frozen=True)
 class _Entry:
     draft: Draft

@@ -25,6 +25,7 @@ import numpy as np
 from annotate.evidence import EvidenceConfig, box_evidence, estimate_velocity
 from scenes.actors import CLASSES, Actor
 from scenes.prompts import DEFAULT_REGION, Predicate, ReferableRegion, describe
+from scenes.root import Sample
 
 
 @dataclass(frozen=True)
@@ -206,3 +207,14 @@ def suggest_prompt(
             actors=actors,
         )
     return Suggestion(prompt.text, prompt.tags, None, actors, prompt.predicate)
+
+
+def scene_objects(sample: Sample) -> list[Actor | SceneObject]:
+    """The objects of a frame a suggested prompt must tell the draft boxes apart from: the
+    sidecar's actors (with velocities) when the sample has one, else its labelled boxes."""
+    if sample.meta is not None and sample.meta.actors:
+        return list(sample.meta.actors)
+    return [
+        SceneObject(tuple(float(v) for v in box), cls)
+        for box, cls in zip(np.asarray(sample.boxes).reshape(-1, 7), sample.classes, strict=True)
+    ]

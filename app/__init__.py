@@ -1,9 +1,10 @@
 """The viser front: scene rendering, colour maps, the query panel, navigation.
 
 ``python launch.py`` serves it; :class:`Talk2PCApp` is the app object (start / stop, port 0 for
-tests) and :class:`ClientSession` the per-browser state that the annotation mode builds on (see
-:mod:`app.session` for its extension point). ``app`` imports ``scenes`` and ``model``-like objects;
-neither imports ``app``.
+tests; it owns everything shared: navigation, engine, annotation store) and :class:`ClientSession`
+the per-browser state that the Annotate tab (:mod:`app.annotate_tab`) builds on (see
+:mod:`app.session` for what a tab may use). ``app`` imports ``annotate``, ``scenes`` and
+``model``; none of them imports ``app``.
 """
 
 from app.server import AppConfig, Talk2PCApp

@@ -25,7 +25,7 @@ from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass
-from typing import Any, Literal, Protocol
+from typing import Any, Generic, Literal, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
@@ -43,35 +43,108 @@ MODALITY_LABELS: dict[str, Modality] = {
 """GUI label -> modality."""
 
 
-class GroundingModel(Protocol):
-    """What the app needs of a model (:class:`model.tpcnet.TPCNet` satisfies it)."""
+class GridExtent(Protocol):
+    """The BEV extent of a heatmap grid (``model.grid.BevGrid`` has it), metres, LiDAR frame."""
 
-    def encode_scene(self, lidar: np.ndarray | None, radar: np.ndarray | None) -> Any: ...
+    @property
+    def x_min(self) -> float: ...
 
-    def ground(self, features: Any, prompt: str, score_threshold: float | None = None) -> Any: ...
+    @property
+    def x_max(self) -> float: ...
+
+    @property
+    def y_min(self) -> float: ...
+
+    @property
+    def y_max(self) -> float: ...
 
 
-def initial_threshold(model: object, default: float) -> float:
+@runtime_checkable
+class Predictions(Protocol):
+    """What the app reads of one answer (:class:`model.tpcnet.Predictions` satisfies it)."""
+
+    @property
+    def boxes(self) -> np.ndarray:
+        """``(K, 7)`` ``x, y, z, l, w, h, yaw``, LiDAR frame, best score first."""
+        ...
+
+    @property
+    def scores(self) -> np.ndarray:
+        """``(K,)`` in ``[0, 1]``."""
+        ...
+
+    @property
+    def classes(self) -> tuple[str, ...]:
+        """``K`` class names (``scenes.actors.CLASSES``)."""
+        ...
+
+    @property
+    def heatmaps(self) -> np.ndarray:
+        """``(3, H, W)`` sigmoid heatmaps on :attr:`grid`, ``heatmaps[c, iy, ix]``."""
+        ...
+
+    @property
+    def grid(self) -> GridExtent: ...
+
+
+class ModelConfig(Protocol):
+    """What the app reads of a model's configuration (:class:`model.config.ModelConfig`)."""
+
+    @property
+    def modalities(self) -> str:
+        """``"both"``, ``"lidar"`` or ``"radar"``: the sensors the model was built for."""
+        ...
+
+
+Features = TypeVar("Features")
+"""A model's encoded scene (``model.tpcnet.SceneFeatures``); the engine only caches it."""
+
+
+@runtime_checkable
+class GroundingModel(Protocol[Features]):
+    """What the app needs of a model (:class:`model.tpcnet.TPCNet` satisfies it).
+
+    A model without ``cfg`` (or with None) counts as a two-sensor model with no threshold of its
+    own; :func:`initial_threshold` and :func:`model_modalities` read it.
+    """
+
+    @property
+    def cfg(self) -> ModelConfig | None: ...
+
+    def encode_scene(self, lidar: np.ndarray | None, radar: np.ndarray | None) -> Features: ...
+
+    def ground(
+        self, features: Features, prompt: str, score_threshold: float | None = None
+    ) -> Predictions: ...
+
+
+def initial_threshold(model: GroundingModel, default: float) -> float:
     """The score threshold the query panel starts at: the checkpoint's operating threshold
     (:func:`model.predict.operating_threshold`, chosen on a validation split by
     ``python -m model.calibrate``) so that the app shows the model's answer set, else the
     decoder's ``cfg.head.score_threshold``, else ``default`` (a model without a config)."""
-    if getattr(model, "cfg", None) is None:
+    if _config(model) is None:
         return float(default)
     from model.predict import operating_threshold
 
     return operating_threshold(model)  # type: ignore[arg-type]
 
 
-def model_modalities(model: object) -> tuple[Modality, ...]:
+def model_modalities(model: GroundingModel) -> tuple[Modality, ...]:
     """The modalities a model can answer with: all three for a two-sensor model, otherwise its
     own sensor (read from ``model.cfg.modalities``; a model without a config counts as both)."""
-    built = getattr(getattr(model, "cfg", None), "modalities", "both")
+    cfg = _config(model)
+    built = "both" if cfg is None else cfg.modalities
     if built == "lidar":
         return ("lidar",)
     if built == "radar":
         return ("radar",)
     return ("both", "lidar", "radar")
+
+
+def _config(model: GroundingModel) -> ModelConfig | None:
+    """The model's configuration, None for a model without one."""
+    return getattr(model, "cfg", None)
 
 
 def sensor_inputs(sample: Sample, modality: Modality) -> tuple[np.ndarray, np.ndarray]:
@@ -93,7 +166,8 @@ class Answer:
     """The model's answer to one prompt on one frame.
 
     Attributes:
-        predictions: What ``model.ground`` returned (boxes, scores, classes, heatmaps, grid).
+        predictions: What ``model.ground`` returned (:class:`Predictions`: boxes, scores,
+            classes, heatmaps, grid).
         sample_id: The frame's sample id.
         modality: Sensors used.
         prompt: The prompt as sent.
@@ -103,7 +177,7 @@ class Answer:
         waited_ms: Time spent waiting for the model lock (other browsers' work).
     """
 
-    predictions: Any
+    predictions: Predictions
     sample_id: str
     modality: Modality
     prompt: str
@@ -173,7 +247,7 @@ class DaemonWorkers:
             self._queue.put(None)
 
 
-class GroundingEngine:
+class GroundingEngine(Generic[Features]):
     """Runs a model for the app: thread pool, model lock, scene-feature cache.
 
     Args:
@@ -182,14 +256,16 @@ class GroundingEngine:
         workers: Worker threads.
     """
 
-    def __init__(self, model: GroundingModel, feature_cache_size: int = 8, workers: int = 2):
+    def __init__(
+        self, model: GroundingModel[Features], feature_cache_size: int = 8, workers: int = 2
+    ) -> None:
         self.model = model
         self.modalities = model_modalities(model)
         self.feature_cache_size = max(1, feature_cache_size)
         self.workers = DaemonWorkers(workers, "talk2pc-model")
         self._model_lock = threading.Lock()
         self._cache_lock = threading.Lock()
-        self._features: OrderedDict[tuple[str, Modality], Any] = OrderedDict()
+        self._features: OrderedDict[tuple[str, Modality], Features] = OrderedDict()
         self.encode_calls = 0
         self.ground_calls = 0
 
@@ -210,7 +286,7 @@ class GroundingEngine:
                 f"this model answers with {', '.join(self.modalities)} only, not {modality!r}"
             )
 
-    def _encode_locked(self, sample: Sample, modality: Modality) -> tuple[Any, float]:
+    def _encode_locked(self, sample: Sample, modality: Modality) -> tuple[Features, float]:
         """Features of (sample, modality) and the encoding time (0 when cached); hold the lock."""
         key = (sample.sample_id, modality)
         with self._cache_lock:
@@ -228,7 +304,7 @@ class GroundingEngine:
                 self._features.popitem(last=False)
         return features, max(elapsed, 1e-3)
 
-    def encode(self, sample: Sample, modality: Modality) -> tuple[Any, float]:
+    def encode(self, sample: Sample, modality: Modality) -> tuple[Features, float]:
         """Encode (or fetch from the cache) one scene; returns ``(features, encode_ms)``."""
         self._check_modality(modality)
         with self._model_lock:

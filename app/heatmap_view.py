@@ -21,6 +21,7 @@ import numpy as np
 import viser
 
 from app.colors import RGB, class_color
+from app.engine import GridExtent
 from scenes.actors import CLASSES
 
 GROUND_LIFT = 0.05
@@ -29,7 +30,7 @@ GROUND_LIFT = 0.05
 
 @dataclass(frozen=True)
 class GridLike:
-    """The fields of a BEV grid the view needs (any object with them works, e.g. ``BevGrid``)."""
+    """A plain :class:`app.engine.GridExtent` (any object with these fields works: ``BevGrid``)."""
 
     x_min: float
     x_max: float
@@ -46,7 +47,7 @@ class Placement:
     render_height: float
 
 
-def ground_placement(grid: GridLike, ground_z: float, lift: float = GROUND_LIFT) -> Placement:
+def ground_placement(grid: GridExtent, ground_z: float, lift: float = GROUND_LIFT) -> Placement:
     """The placement of a heatmap on ``grid`` lying ``lift`` metres above ``ground_z``."""
     return Placement(
         position=(
@@ -107,7 +108,7 @@ class HeatmapView:
         """Whether an image node exists."""
         return self._handle is not None
 
-    def show(self, heatmaps: np.ndarray, grid: GridLike, ground_z: float, opacity: float) -> None:
+    def show(self, heatmaps: np.ndarray, grid: GridExtent, ground_z: float, opacity: float) -> None:
         """Draw ``heatmaps (C, H, W)`` on ``grid`` (LiDAR frame) just above ``ground_z``."""
         self._heatmaps = np.asarray(heatmaps, dtype=np.float32)
         self._opacity = float(opacity)

@@ -7,19 +7,29 @@ sample's own prompt). Query results, display settings and the camera stay per br
 
 Frames are loaded on demand through :class:`FrameStore`, which keeps the last few in memory
 (loading a synthetic frame reads three small files). Previous / next wrap around the split.
+
+:class:`Navigator` holds the shared current frame. Browsers subscribe to it
+(:class:`FrameSubscriber`: a new frame is shown, the split changed size); moving fails with a
+:class:`NavigationError` (:class:`NoSuchFrameError`, :class:`FrameLoadError`) that the browser
+which asked turns into a notification, so the navigator knows nothing of sessions or the GUI.
 """
 
 from __future__ import annotations
 
+import logging
 import threading
 from collections import OrderedDict
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Protocol
 
 import viser
 
 from app.scene_view import estimate_ground_z
 from app.text import md_text
 from scenes.root import RootError, Sample, Talk2RadarRoot
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -99,6 +109,140 @@ class FrameStore:
             while len(self._cache) > self.cache_size:
                 self._cache.popitem(last=False)
         return frame
+
+
+class NavigationError(RuntimeError):
+    """Moving to a frame failed; the current frame stays. ``title`` heads the notification."""
+
+    title = "Navigation failed"
+
+
+class NoSuchFrameError(NavigationError, IndexError):
+    """The frame number is outside the split."""
+
+    title = "No such frame"
+
+
+class FrameLoadError(NavigationError):
+    """The frame's files do not load (the cause is chained); ``title`` names the frame."""
+
+    def __init__(self, title: str, cause: BaseException) -> None:
+        super().__init__(f"{title}: {type(cause).__name__}: {cause}")
+        self.title = title
+        self.cause = cause
+
+
+class FrameSubscriber(Protocol):
+    """Something that shows the shared frame (a browser's session)."""
+
+    def frame_shown(self, frame: Frame) -> None:
+        """Draw ``frame``, the new current frame (called holding :attr:`Navigator.lock`)."""
+
+    def split_changed(self) -> None:
+        """The split was re-read (its size may differ); the current frame stays."""
+
+
+class Navigator:
+    """The current frame shared by every browser, and the split it belongs to.
+
+    Args:
+        frames: The split's frames.
+        after_move: Called with the new frame after every move, outside the lock (the app
+            starts encoding it for the modalities the browsers use).
+
+    Every method is thread-safe; :attr:`lock` (reentrant) serialises moves, subscriptions and
+    re-reads, so a subscriber sees frames in order and never misses one.
+    """
+
+    def __init__(
+        self, frames: FrameStore, after_move: Callable[[Frame], None] | None = None
+    ) -> None:
+        self.frames = frames
+        self.frame: Frame | None = None
+        self.lock = threading.RLock()
+        self._after_move = after_move
+        self._subscribers: list[FrameSubscriber] = []
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def load_first(self) -> Frame:
+        """Make the first loadable frame of the split current (no subscriber is told).
+
+        Raises:
+            RootError: no frame of the split loads.
+        """
+        errors = []
+        for index in range(len(self.frames)):
+            try:
+                frame = self.frames.load(index)
+            except (RootError, OSError, ValueError) as exc:
+                log.error("frame %d (%s) failed to load: %s", index, self.frames.ids[index], exc)
+                errors.append(str(exc))
+                continue
+            with self.lock:
+                self.frame = frame
+            return frame
+        raise RootError(f"no frame of split {self.frames.split!r} loads; first error: {errors[0]}")
+
+    def subscribe(self, subscriber: FrameSubscriber) -> None:
+        """Tell ``subscriber`` of every move and re-read from now on."""
+        with self.lock:
+            self._subscribers.append(subscriber)
+
+    def unsubscribe(self, subscriber: FrameSubscriber) -> None:
+        """Stop telling ``subscriber`` (no-op when it was not subscribed)."""
+        with self.lock:
+            self._subscribers = [s for s in self._subscribers if s is not subscriber]
+
+    def go_to(self, index: int) -> Frame:
+        """Make frame ``index`` (0-based) current and show it to every subscriber.
+
+        Raises:
+            NoSuchFrameError: ``index`` is outside the split.
+            FrameLoadError: the frame does not load.
+        """
+        with self.lock:
+            if not 0 <= index < len(self.frames):
+                raise NoSuchFrameError(
+                    f"There are frames 1..{len(self.frames)}; {index + 1} does not exist."
+                )
+            if self.frame is not None and index == self.frame.index:
+                return self.frame
+            try:
+                frame = self.frames.load(index)
+            except Exception as exc:
+                title = f"Could not load frame {index + 1} ({self.frames.ids[index]})"
+                raise FrameLoadError(title, exc) from exc
+            self.frame = frame
+            for subscriber in list(self._subscribers):
+                try:
+                    subscriber.frame_shown(frame)
+                except Exception:  # one browser's failure must not stop the others
+                    log.exception("a subscriber failed to show frame %d", index)
+        if self._after_move is not None:
+            self._after_move(frame)
+        return frame
+
+    def step(self, delta: int) -> Frame:
+        """Go ``delta`` frames forward (negative: back), wrapping around the split (errors as
+        :meth:`go_to`)."""
+        with self.lock:
+            current = self.frame.index if self.frame is not None else 0
+            return self.go_to(step_index(current, delta, len(self.frames)))
+
+    def reload(self) -> None:
+        """Re-read the split (after samples were added to the root) and tell every subscriber;
+        the frame on screen stays (its position may change)."""
+        with self.lock:
+            current = self.frame.sample_id if self.frame is not None else None
+            self.frames.refresh()
+            if current in self.frames.ids:
+                index = self.frames.index_of(current)
+                if self.frame is not None and index != self.frame.index:
+                    self.frame = replace(self.frame, index=index)
+            for subscriber in list(self._subscribers):
+                subscriber.split_changed()
 
 
 def frame_markdown(frame: Frame, count: int) -> str:

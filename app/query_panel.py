@@ -20,6 +20,7 @@ import numpy as np
 import viser
 
 from app.engine import MODALITY_LABELS, Answer, Modality
+from app.navigation import Frame
 from app.text import md_text
 
 HISTORY_SIZE = 20
@@ -30,6 +31,30 @@ NO_HISTORY = "(no prompts yet)"
 
 RESULT_ROWS = 10
 """Boxes listed in the answer summary."""
+
+EXAMPLE_PROMPT = "the car about 15 metres ahead"
+"""Suggested in the empty-prompt notification."""
+
+
+@dataclass(frozen=True)
+class QueryRequest:
+    """One prompt to answer.
+
+    Attributes:
+        prompt: Normalised, non-empty prompt.
+        modality: Sensors to use.
+        score_threshold: Decoder threshold.
+        frame: The frame on screen when the prompt was sent.
+        generation: The session's generation number at that moment.
+        received: ``time.perf_counter()`` when the server received the prompt.
+    """
+
+    prompt: str
+    modality: Modality
+    score_threshold: float
+    frame: Frame
+    generation: int
+    received: float
 
 
 def submitted_prompt(value: str) -> str | None:

@@ -15,6 +15,8 @@ Points are sent as float32 (viser's float16 default quantises 3 cm beyond 32 m).
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, replace
 from typing import Literal
 
@@ -322,6 +324,31 @@ class ViewPanel:
         """Redraw the legends for ``settings``."""
         self.radar_legend.image = velocity_legend(settings.velocity_range)
         self.lidar_legend.image = lidar_legend(settings.lidar_coloring)
+
+    def wire(
+        self,
+        view: SceneView,
+        client: viser.ClientHandle,
+        lock: AbstractContextManager,
+        ground_z: Callable[[], float],
+    ) -> None:
+        """Apply every settings change to ``view`` (holding ``lock``, the browser's drawing lock)
+        and the camera presets to ``client.camera`` (``ground_z()``: the ground on screen)."""
+
+        def apply_settings(_: viser.GuiEvent) -> None:
+            settings = self.settings()
+            with lock, client.atomic():
+                view.apply(settings)
+                self.update_legends(settings)
+
+        for handle in self.inputs():
+            handle.on_update(apply_settings)
+
+        @self.camera.on_click
+        def _(event: viser.GuiEvent) -> None:
+            ground = ground_z()
+            pose = bev_pose(ground) if event.target.value == "BEV" else chase_pose(ground)
+            apply_pose(client.camera, pose)
 
 
 def lidar_legend(coloring: LidarColoring) -> np.ndarray:

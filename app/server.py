@@ -1,9 +1,12 @@
 """The app object: :class:`Talk2PCApp` serves one split of a Talk2Radar root with one model.
 
-Shared by every browser: the viser server, the current frame (navigation is shared, see
-:mod:`app.navigation`), the frame cache and the model engine (:class:`app.engine.GroundingEngine`:
-worker pool, model lock, scene-feature cache). Per browser: a :class:`app.session.ClientSession`
-with its own panel, boxes, heatmap, history and camera.
+Shared by every browser, owned here: the viser server, the current frame and the frame cache
+(:class:`app.navigation.Navigator`: navigation is shared), the model engine
+(:class:`app.engine.GroundingEngine`: worker pool, model lock, scene-feature cache) and the
+annotation store with the open Annotate tabs (:class:`app.annotate_tab.AnnotationHub`). Per
+browser: a :class:`app.session.ClientSession` with its own panel, boxes, heatmap, history and
+camera; it subscribes to the navigator and gets the Annotate tab as an extra tab. Nothing here is
+global: :meth:`Talk2PCApp.stop` forgets it all.
 
 Lifecycle::
 
@@ -29,18 +32,27 @@ import errno
 import logging
 import socket
 import threading
+from collections.abc import Callable
 from concurrent.futures import Future
 from concurrent.futures import wait as futures_wait
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import viser
 
+from app.annotate_tab import AnnotationHub, build_annotation_tab
 from app.engine import GroundingEngine, GroundingModel, initial_threshold
-from app.navigation import Frame, FrameStore, step_index
+from app.navigation import (
+    Frame,
+    FrameLoadError,
+    FrameStore,
+    NavigationError,
+    Navigator,
+)
 from app.scene_view import chase_pose
-from app.session import ClientSession
-from scenes.root import RootError, Talk2RadarRoot
+from app.session import ClientSession, ExtraTab, SessionOptions
+from scenes.root import Talk2RadarRoot
 
 log = logging.getLogger(__name__)
 
@@ -156,17 +168,29 @@ class Talk2PCApp:
         self.config = config or AppConfig()
         if not isinstance(root, Talk2RadarRoot):
             root = Talk2RadarRoot(root)
-        self.frames = FrameStore(root, self.config.split, self.config.frame_cache_size)
+        self.navigator = Navigator(
+            FrameStore(root, self.config.split, self.config.frame_cache_size),
+            after_move=self._prefetch,
+        )
         self.engine = GroundingEngine(
             model, feature_cache_size=self.config.feature_cache_size, workers=self.config.workers
         )
         self.score_threshold = initial_threshold(model, DEFAULT_SCORE_THRESHOLD)
         self.model_note = self.config.model_note
+        self.annotations = AnnotationHub(root.path)
         self.server: viser.ViserServer | None = None
-        self.frame: Frame | None = None
         self.sessions: dict[int, ClientSession] = {}
-        self._nav_lock = threading.RLock()
         self._startup: list[Future] = []
+
+    @property
+    def frames(self) -> FrameStore:
+        """The frames of the split being served."""
+        return self.navigator.frames
+
+    @property
+    def frame(self) -> Frame | None:
+        """The frame on screen (shared by every browser; None before :meth:`start`)."""
+        return self.navigator.frame
 
     # ------------------------------------------------------------------ lifecycle
 
@@ -195,12 +219,12 @@ class Talk2PCApp:
         if self.server is not None:
             return self
         check_listen_address(self.config.host, self.config.port)
-        self.frame = self._first_frame()
+        first = self.navigator.load_first()
         server = self._start_viser()
         server.gui.configure_theme(
             dark_mode=self.config.dark_mode, control_width="large", show_share_button=False
         )
-        pose = chase_pose(self.frame.ground_z)
+        pose = chase_pose(first.ground_z)
         server.initial_camera.position = pose.position
         server.initial_camera.look_at = pose.look_at
         server.initial_camera.up = pose.up
@@ -209,7 +233,7 @@ class Talk2PCApp:
         self.server = server
         if self.config.warm_up:
             self._startup.append(self.engine.warm_up())
-        self._startup.append(self.engine.prefetch(self.frame.sample, self.engine.modalities[0]))
+        self._startup.append(self.engine.prefetch(first.sample, self.engine.modalities[0]))
         log.info("serving %d frames of %s at %s", len(self.frames), self.frames.root, self.url)
         return self
 
@@ -266,10 +290,12 @@ class Talk2PCApp:
     def stop(self) -> None:
         """Stop serving and the worker pool (idempotent)."""
         server, self.server = self.server, None
-        with self._nav_lock:
+        with self.navigator.lock:
             for session in self.sessions.values():
+                self.navigator.unsubscribe(session)
                 session.close()
             self.sessions.clear()
+        self.annotations.close()
         self.engine.close()
         if server is not None:
             server.stop()
@@ -280,24 +306,20 @@ class Talk2PCApp:
     def __exit__(self, *exc: object) -> None:
         self.stop()
 
-    def _first_frame(self) -> Frame:
-        errors = []
-        for index in range(len(self.frames)):
-            try:
-                return self.frames.load(index)
-            except (RootError, OSError, ValueError) as exc:
-                log.error("frame %d (%s) failed to load: %s", index, self.frames.ids[index], exc)
-                errors.append(str(exc))
-        raise RootError(f"no frame of split {self.frames.split!r} loads; first error: {errors[0]}")
-
     # ------------------------------------------------------------------ clients
 
+    def _extra_tabs(self) -> tuple[ExtraTab, ...]:
+        build = partial(build_annotation_tab, hub=self.annotations)
+        return (ExtraTab("Annotate", viser.Icon.PENCIL, build, name="annotation panel"),)
+
     def _on_connect(self, client: viser.ClientHandle) -> None:
-        with self._nav_lock:
-            session = ClientSession(self, client)
+        options = SessionOptions(model_note=self.model_note, score_threshold=self.score_threshold)
+        with self.navigator.lock:
+            session = ClientSession(client, self.navigator, self.engine, options)
             self.sessions[client.client_id] = session
+            self.navigator.subscribe(session)
             try:
-                session.build_gui()
+                session.build_gui(self._extra_tabs())
                 if self.frame is not None:
                     session.show_frame(self.frame)
             except Exception as exc:
@@ -305,63 +327,44 @@ class Talk2PCApp:
         log.info("client %d connected (%d connected)", client.client_id, len(self.sessions))
 
     def _on_disconnect(self, client: viser.ClientHandle) -> None:
-        with self._nav_lock:
+        with self.navigator.lock:
             session = self.sessions.pop(client.client_id, None)
+            if session is not None:
+                self.navigator.unsubscribe(session)
         if session is not None:
             session.close()
         log.info("client %d disconnected", client.client_id)
 
     # ------------------------------------------------------------------ navigation (shared)
 
-    def go_to(self, index: int, requester: ClientSession | None = None) -> Frame | None:
-        """Show frame ``index`` in every browser; returns it, or None when it fails (the
-        requesting browser gets a notification and keeps the current frame)."""
-        with self._nav_lock:
-            if not 0 <= index < len(self.frames):
-                message = f"There are frames 1..{len(self.frames)}; {index + 1} does not exist."
-                if requester is not None:
-                    requester.notify("No such frame", message, color="yellow")
-                    requester.reset_frame_number()
-                return None
-            if self.frame is not None and index == self.frame.index:
-                return self.frame
-            try:
-                frame = self.frames.load(index)
-            except Exception as exc:
-                title = f"Could not load frame {index + 1} ({self.frames.ids[index]})"
-                if requester is not None:
-                    requester.report_error(title, exc)
-                    requester.reset_frame_number()
-                else:
-                    log.error("%s: %s", title, exc)
-                return None
-            self.frame = frame
-            sessions = list(self.sessions.values())
-            for session in sessions:
-                try:
-                    session.show_frame(frame)
-                except Exception as exc:
-                    session.report_error("Could not draw the frame", exc)
-            modalities = {s.query.selected_modality() for s in sessions if s.query is not None}
-        for modality in modalities or {self.engine.modalities[0]}:
-            self.engine.prefetch(frame.sample, modality)
-        return frame
+    def go_to(self, index: int) -> Frame | None:
+        """Show frame ``index`` in every browser; returns it, or None when it fails (logged; a
+        browser's own moves go through :meth:`ClientSession.go_to`, which shows the error)."""
+        return self._move(lambda: self.navigator.go_to(index))
+
+    def step(self, delta: int) -> Frame | None:
+        """Go ``delta`` frames forward (negative: back), wrapping around the split."""
+        return self._move(lambda: self.navigator.step(delta))
 
     def reload_frames(self) -> None:
         """Re-read the split (after samples were added to the root) and update every panel's
         frame count; the frame on screen stays."""
-        with self._nav_lock:
-            current = self.frame.sample_id if self.frame is not None else None
-            self.frames.refresh()
-            if current in self.frames.ids:
-                index = self.frames.index_of(current)
-                if self.frame is not None and index != self.frame.index:
-                    self.frame = replace(self.frame, index=index)
-            for session in list(self.sessions.values()):
-                session.update_frame_count()
+        self.navigator.reload()
 
-    def step(self, delta: int, requester: ClientSession | None = None) -> Frame | None:
-        """Go ``delta`` frames forward (negative: back), wrapping around the split."""
-        with self._nav_lock:
-            current = self.frame.index if self.frame is not None else 0
-            return self.go_to(step_index(current, delta, len(self.frames)), requester)
+    @staticmethod
+    def _move(move: Callable[[], Frame]) -> Frame | None:
+        try:
+            return move()
+        except FrameLoadError as exc:
+            log.error("%s: %s", exc.title, exc.cause)
+        except NavigationError:
+            pass
+        return None
+
+    def _prefetch(self, frame: Frame) -> None:
+        """Start encoding a new frame for the modalities the browsers have selected."""
+        with self.navigator.lock:
+            sessions = list(self.sessions.values())
+        modalities = {s.query.selected_modality() for s in sessions if s.query is not None}
+        for modality in modalities or {self.engine.modalities[0]}:
+            self.engine.prefetch(frame.sample, modality)

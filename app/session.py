@@ -2,27 +2,28 @@
 
 One session per viser client (websocket connection), created when the browser connects and closed
 when it leaves. It owns that browser's GUI (``client.gui``) and scene nodes (``client.scene``):
-points, ground-truth and predicted boxes, heatmap. What is shared by every browser lives in the
-app (:class:`app.server.Talk2PCApp`): the current frame (navigation is shared), the model and its
-scene-feature cache.
+points, ground-truth and predicted boxes, heatmap. It knows nothing of the app object: what every
+browser shares comes in as the :class:`~app.navigation.Navigator` (the current frame: the session
+subscribes to its moves, :meth:`ClientSession.frame_shown`, and shows a failed move, a
+:class:`~app.navigation.NavigationError`, as a notification), the
+:class:`~app.engine.GroundingEngine` (model, worker pool, scene-feature cache) and
+:class:`SessionOptions`.
 
 Threading: viser runs ``def`` callbacks in its thread pool, so callbacks of one browser may run
-concurrently (with each other and with the app's navigation). Model work goes to the engine's
-worker pool (:meth:`GroundingEngine.submit <app.engine.GroundingEngine.submit>`); everything that
-draws into this browser holds :attr:`ClientSession.lock`. Each prompt gets a generation number:
-an answer that arrives after a newer prompt, a frame change or the browser leaving is dropped.
+concurrently (with each other and with navigation). Model work goes to the engine's worker pool
+(:meth:`GroundingEngine.submit <app.engine.GroundingEngine.submit>`); everything that draws into
+this browser holds :attr:`ClientSession.lock`. Each prompt gets a generation number: an answer
+that arrives after a newer prompt, a frame change or the browser leaving is dropped.
 
-Extension point (the annotation mode)
--------------------------------------
-If a module ``app.annotation_panel`` exists, every session calls its
-``build_annotation_tab(session: ClientSession) -> None`` inside the context of an "Annotate" tab,
-so the widgets it adds with ``session.client.gui`` land in that tab; nothing in this package has
-to change. What it may use:
+Extra tabs (the annotation mode): :meth:`ClientSession.build_gui` takes :class:`ExtraTab` s (the
+app passes the Annotate tab, :func:`app.annotate_tab.build_annotation_tab`); each one's
+``build(session)`` runs inside its tab, so the widgets it adds with ``session.client.gui`` land
+there. What a tab may use:
 
-- ``session.client`` (the :class:`viser.ClientHandle`: ``client.gui``, ``client.scene`` for
-  per-browser drafts and gizmos, ``client.camera``), ``session.app`` (``app.server``,
-  ``app.frames``: the :class:`~app.navigation.FrameStore` and its ``root``, ``app.engine``;
-  ``app.reload_frames()`` after saving a sample into the root being served, ``app.go_to(i)``);
+- ``session.client`` (``client.gui``, ``client.scene`` for per-browser drafts and gizmos,
+  ``client.camera``), ``session.navigator`` (``frames``: the :class:`~app.navigation.FrameStore`
+  and its ``root``; ``reload()`` after saving a sample into the root being served),
+  ``session.go_to(i)`` (a move, its errors shown in this browser), ``session.engine``;
 - ``session.frame`` / ``session.sample`` (the frame on screen), ``session.answer`` /
   ``session.predictions`` (the last answer drawn, or None);
 - ``session.add_frame_listener(fn)`` and ``session.add_answer_listener(fn)``: ``fn(session)`` is
@@ -31,38 +32,39 @@ to change. What it may use:
 - ``session.lock``: hold it while drawing into ``client.scene`` from a worker thread.
 
 Scene-tree names used here (avoid them): ``/scene/...``, ``/pred/...``, ``/gt/...``, ``/heatmap``.
-An exception raised by ``build_annotation_tab`` is logged and shown in the tab; the app keeps
-running.
+An exception raised by a tab's ``build`` is logged and shown in the tab; the app keeps running.
 """
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
 import logging
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from concurrent.futures import Future
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
 
 import viser
 
 from app.boxes_view import GT_STYLE, PRED_STYLE, BoxesView, best_iou, box_label
-from app.engine import Answer, Modality
+from app.engine import Answer, GroundingEngine, Predictions
 from app.heatmap_view import HeatmapView
 from app.navigation import (
     PREVIOUS,
     Frame,
+    FrameLoadError,
+    NavigationError,
     NavigationPanel,
+    Navigator,
     build_navigation_panel,
     frame_markdown,
 )
 from app.query_panel import (
+    EXAMPLE_PROMPT,
     NO_HISTORY,
     PromptHistory,
     QueryPanel,
+    QueryRequest,
     build_query_panel,
     normalise_prompt,
     results_markdown,
@@ -71,60 +73,67 @@ from app.query_panel import (
 from app.scene_view import (
     SceneView,
     ViewPanel,
-    apply_pose,
-    bev_pose,
     build_view_panel,
-    chase_pose,
 )
 from app.text import md_text
 from scenes.root import Sample
 
-if TYPE_CHECKING:
-    from app.server import Talk2PCApp
-
 log = logging.getLogger(__name__)
-
-ANNOTATION_MODULE = "app.annotation_panel"
-"""Module whose ``build_annotation_tab(session)`` fills the "Annotate" tab, when it exists."""
-
-EXAMPLE_PROMPT = "the car about 15 metres ahead"
-"""Suggested in the empty-prompt notification."""
 
 Listener = Callable[["ClientSession"], None]
 
 
 @dataclass(frozen=True)
-class QueryRequest:
-    """One prompt to answer.
+class SessionOptions:
+    """What every session shows the same way.
 
     Attributes:
-        prompt: Normalised, non-empty prompt.
-        modality: Sensors to use.
-        score_threshold: Decoder threshold.
-        frame: The frame on screen when the prompt was sent.
-        generation: The session's generation number at that moment.
-        received: ``time.perf_counter()`` when the server received the prompt.
+        model_note: A warning shown at the top of the panel (None: none).
+        score_threshold: The query panel's initial score threshold.
     """
 
-    prompt: str
-    modality: Modality
-    score_threshold: float
-    frame: Frame
-    generation: int
-    received: float
+    model_note: str | None = None
+    score_threshold: float = 0.3
+
+
+@dataclass(frozen=True)
+class ExtraTab:
+    """A tab added after Query and View (see the module docstring).
+
+    Attributes:
+        label: The tab's title.
+        icon: Its icon (a ``viser.Icon``).
+        build: Fills the tab of one browser: ``build(session)``.
+        name: What the tab is called in the message shown when ``build`` fails.
+    """
+
+    label: str
+    icon: str
+    build: Callable[[ClientSession], object]
+    name: str = "panel"
 
 
 class ClientSession:
     """The state and the GUI of one browser (see the module docstring).
 
     Args:
-        app: The app (shared state: frames, engine, server).
         client: The browser's viser client handle.
+        navigator: The shared current frame (the session subscribes to it when its GUI is built).
+        engine: The model behind the app.
+        options: What every session shows the same way.
     """
 
-    def __init__(self, app: Talk2PCApp, client: viser.ClientHandle) -> None:
-        self.app = app
+    def __init__(
+        self,
+        client: viser.ClientHandle,
+        navigator: Navigator,
+        engine: GroundingEngine,
+        options: SessionOptions | None = None,
+    ) -> None:
         self.client = client
+        self.navigator = navigator
+        self.engine = engine
+        self.options = options or SessionOptions()
         self.lock = threading.RLock()
         self.frame: Frame | None = None
         self.answer: Answer | None = None
@@ -137,7 +146,8 @@ class ClientSession:
         self.nav: NavigationPanel | None = None
         self.query: QueryPanel | None = None
         self.view: ViewPanel | None = None
-        self.annotate_tab: viser.GuiTabHandle | None = None
+        self.tabs: dict[str, viser.GuiTabHandle] = {}
+        """The extra tabs by label (see :meth:`build_gui`)."""
         self.closed = False
         self._generation = 0
         self._frame_listeners: list[Listener] = []
@@ -155,7 +165,7 @@ class ClientSession:
         return None if self.frame is None else self.frame.sample
 
     @property
-    def predictions(self) -> Any | None:
+    def predictions(self) -> Predictions | None:
         """The predictions drawn (``model.tpcnet.Predictions``), or None."""
         return None if self.answer is None else self.answer.predictions
 
@@ -202,40 +212,41 @@ class ClientSession:
 
     # ------------------------------------------------------------------ GUI
 
-    def build_gui(self) -> None:
-        """Create this browser's panel: note, Scene folder, Query / View / Annotate tabs."""
+    def build_gui(self, extra_tabs: Sequence[ExtraTab] = ()) -> None:
+        """Create this browser's panel: note, Scene folder, Query / View tabs, then ``extra_tabs``."""
         gui = self.client.gui
-        if self.app.model_note:
-            gui.add_markdown(f"**Warning: {md_text(self.app.model_note)}**")
+        if self.options.model_note:
+            gui.add_markdown(f"**Warning: {md_text(self.options.model_note)}**")
         with gui.add_folder("Scene"):
-            self.nav = build_navigation_panel(gui, len(self.app.frames))
+            self.nav = build_navigation_panel(gui, len(self.navigator))
         tabs = gui.add_tab_group()
         sample_prompt = (self.sample.prompt or "") if self.sample is not None else ""
         with tabs.add_tab("Query", icon=viser.Icon.MESSAGE):
             self.query = build_query_panel(
-                gui, self.app.engine.modalities, self.app.score_threshold, prompt=sample_prompt
+                gui, self.engine.modalities, self.options.score_threshold, prompt=sample_prompt
             )
         with tabs.add_tab("View", icon=viser.Icon.EYE):
             self.view = build_view_panel(gui, self.scene_view.settings)
         self._wire_navigation(self.nav)
         self._wire_query(self.query)
-        self._wire_view(self.view)
-        if importlib.util.find_spec(ANNOTATION_MODULE) is not None:
-            self.annotate_tab = tabs.add_tab("Annotate", icon=viser.Icon.PENCIL)
-            with self.annotate_tab:
+        self.view.wire(self.scene_view, self.client, self.lock, self._ground_z)
+        for extra in extra_tabs:
+            tab = tabs.add_tab(extra.label, icon=extra.icon)
+            self.tabs[extra.label] = tab
+            with tab:
                 try:
-                    module = importlib.import_module(ANNOTATION_MODULE)
-                    module.build_annotation_tab(self)
+                    extra.build(self)
                 except Exception as exc:
-                    log.exception("the annotation panel failed to build")
+                    log.exception("the %s failed to build", extra.name)
                     gui.add_markdown(
-                        f"The annotation panel failed: {md_text(f'{type(exc).__name__}: {exc}')}"
+                        f"The {md_text(extra.name)} failed: "
+                        f"{md_text(f'{type(exc).__name__}: {exc}')}"
                     )
 
     def _wire_navigation(self, nav: NavigationPanel) -> None:
         @nav.step.on_click
         def _(event: viser.GuiEvent) -> None:
-            self.app.step(-1 if event.target.value == PREVIOUS else 1, requester=self)
+            self.step(-1 if event.target.value == PREVIOUS else 1)
 
         @nav.frame_number.on_update
         def _(event: viser.GuiEvent) -> None:
@@ -244,7 +255,7 @@ class ClientSession:
             value = nav.frame_number.value
             if value is None:
                 return
-            self.app.go_to(int(round(value)) - 1, requester=self)
+            self.go_to(int(round(value)) - 1)
 
     def _wire_query(self, q: QueryPanel) -> None:
         @q.prompt.on_update
@@ -278,7 +289,7 @@ class ClientSession:
             if self.answer is not None:
                 self.run_prompt(self.answer.prompt)
             elif self.sample is not None:
-                self.app.engine.prefetch(self.sample, q.selected_modality())
+                self.engine.prefetch(self.sample, q.selected_modality())
 
         q.modality.on_update(rerun_last)
         q.threshold.on_update(rerun_last)
@@ -298,27 +309,22 @@ class ClientSession:
             with self.lock:
                 self.gt_view.visible = q.show_gt.value
 
-    def _wire_view(self, view: ViewPanel) -> None:
-        def apply_settings(_: viser.GuiEvent) -> None:
-            settings = view.settings()
-            with self.lock, self.client.atomic():
-                self.scene_view.apply(settings)
-                view.update_legends(settings)
-
-        for handle in view.inputs():
-            handle.on_update(apply_settings)
-
-        @view.camera.on_click
-        def _(event: viser.GuiEvent) -> None:
-            ground = self.frame.ground_z if self.frame is not None else self.scene_view.ground_z
-            pose = bev_pose(ground) if event.target.value == "BEV" else chase_pose(ground)
-            apply_pose(self.client.camera, pose)
-
     # ------------------------------------------------------------------ frames
 
+    def _ground_z(self) -> float:
+        return self.frame.ground_z if self.frame is not None else self.scene_view.ground_z
+
+    def frame_shown(self, frame: Frame) -> None:
+        """The shared frame moved (called by the navigator): draw it here; a failure is shown in
+        this browser."""
+        try:
+            self.show_frame(frame)
+        except Exception as exc:
+            self.report_error("Could not draw the frame", exc)
+
     def show_frame(self, frame: Frame) -> None:
-        """Draw ``frame`` (called by the app for every browser on navigation): points, ground
-        truth, the sample's prompt in the prompt box; the previous answer is cleared."""
+        """Draw ``frame``: points, ground truth, the sample's prompt in the prompt box; the
+        previous answer is cleared."""
         with self.lock:
             if self.closed:
                 return
@@ -339,21 +345,40 @@ class ClientSession:
                     self.query.results.content = "*Type a prompt and press Enter.*"
                 if self.nav is not None:
                     self.nav.frame_number.value = frame.index + 1
-                    self.nav.info.content = frame_markdown(frame, len(self.app.frames))
+                    self.nav.info.content = frame_markdown(frame, len(self.navigator))
             self._call(self._frame_listeners)
 
-    def update_frame_count(self) -> None:
-        """Refresh the navigation widgets after the split changed size."""
+    def split_changed(self) -> None:
+        """Refresh the navigation widgets after the split was re-read (called by the navigator)."""
         with self.lock:
             if self.nav is None:
                 return
-            count = len(self.app.frames)
+            count = len(self.navigator)
             self.nav.frame_number.max = count
             self.nav.frame_number.hint = f"1..{count}"
-            if self.app.frame is not None:
-                self.frame = self.app.frame
+            if self.navigator.frame is not None:
+                self.frame = self.navigator.frame
                 self.nav.frame_number.value = self.frame.index + 1
                 self.nav.info.content = frame_markdown(self.frame, count)
+
+    def go_to(self, index: int) -> Frame | None:
+        """Show frame ``index`` in every browser; returns it, or None when it fails (this browser
+        gets a notification and its frame number box goes back to the frame shown)."""
+        return self._move(lambda: self.navigator.go_to(index))
+
+    def step(self, delta: int) -> Frame | None:
+        """Go ``delta`` frames forward (negative: back) in every browser, as :meth:`go_to`."""
+        return self._move(lambda: self.navigator.step(delta))
+
+    def _move(self, move: Callable[[], Frame]) -> Frame | None:
+        try:
+            return move()
+        except FrameLoadError as exc:
+            self.report_error(exc.title, exc.cause)
+        except NavigationError as exc:
+            self.notify(exc.title, str(exc), color="yellow")
+        self.reset_frame_number()
+        return None
 
     def reset_frame_number(self) -> None:
         """Put the frame number box back on the frame shown (after a failed jump)."""
@@ -391,7 +416,7 @@ class ClientSession:
                 received=received,
             )
             self.query.results.content = f"*Running:* {md_text(text)}"
-        return self.app.engine.submit(self._answer_job, request)
+        return self.engine.submit(self._answer_job, request)
 
     def _stale(self, request: QueryRequest) -> bool:
         return self.closed or request.generation != self._generation
@@ -400,7 +425,7 @@ class ClientSession:
         if self._stale(request):
             return
         try:
-            answer = self.app.engine.answer(
+            answer = self.engine.answer(
                 request.frame.sample, request.modality, request.prompt, request.score_threshold
             )
         except Exception as exc:

@@ -15,7 +15,10 @@ from annotate import (
     Severity,
     ValidationConfig,
     ValidationError,
+    changed_box,
     default_box,
+    is_pristine,
+    proposals,
     validate,
 )
 from scenes.calib import vod_lidar_calibration
@@ -232,3 +235,38 @@ def test_range_and_image_checks_are_configurable() -> None:
     assert validate(side).ok  # no calibration: no image check
     config = ValidationConfig(require_in_image=False)
     assert validate(side, config, calib=vod_lidar_calibration()).ok
+
+
+def test_proposals_skip_duplicates_and_other_classes() -> None:
+    existing = np.array([[10.0, 0.0, -1.0, 4.0, 2.0, 1.5, 0.0]])
+    pred = np.array(
+        [
+            [10.1, 0.0, -1.0, 4.0, 2.0, 1.5, 0.0],  # IoU ~0.95 with the draft box: duplicate
+            [20.0, 5.0, -1.0, 4.0, 2.0, 1.5, 0.0],
+            [20.2, 5.0, -1.0, 4.0, 2.0, 1.5, 0.0],  # duplicate of the previous proposal
+            [30.0, 0.0, -1.0, 0.7, 0.7, 1.7, 0.0],
+        ]
+    )
+    boxes, classes, duplicates = proposals(pred, ["Car", "Car", "Car", "Pedestrian"], existing)
+    assert classes == ("Car", "Pedestrian") and duplicates == 2
+    np.testing.assert_array_equal(boxes, pred[[1, 3]])
+    boxes, classes, _ = proposals(pred, ["Car", "Truck", "Car", "Car"], existing, limit=1)
+    assert classes == ("Car",) and boxes[0, 0] == 20.2  # "Truck" is not a metric class
+
+
+def test_changed_box_finds_the_added_or_edited_box() -> None:
+    one = Draft().add_box(default_box("Car", 10.0, 0.0), "Car")
+    two = one.add_box(default_box("Cyclist", 20.0, 1.0), "Cyclist")
+    assert changed_box(one, two) == 1
+    assert changed_box(two, two.move_box(0, 11.0, 0.0)) == 0
+    assert changed_box(two, two.delete_box(1)) is None
+    assert changed_box(two, one) is None
+
+
+def test_is_pristine_only_for_an_untouched_new_pair() -> None:
+    assert is_pristine(Draft())
+    assert is_pristine(Draft().set_prompt("  \n"))  # whitespace is nothing worth keeping
+    assert not is_pristine(Draft().set_prompt("the car"))
+    assert not is_pristine(Draft().add_box(CAR, "Car"))
+    assert not is_pristine(Draft().set_refers_to_nothing(True))
+    assert not is_pristine(Draft(sample_id="00003"))  # a reopened pair, even emptied

@@ -15,18 +15,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from annotate import AnnotationStore, Draft, default_box
-from app.annotation_panel import (
-    NO_BOX,
-    AnnotationPanel,
-    changed_box,
-    option_index,
-    option_pair_id,
-    pair_option,
-    proposals,
-    shared_root,
-)
-from app.annotation_view import box_at, ground_hit, wxyz_to_yaw, yaw_to_wxyz
+from annotate import AnnotationStore, Draft, default_box, proposals
+from app.annotate_tab import AnnotationPanel
+from app.annotate_tab.formatting import NO_BOX, option_index, option_pair_id, pair_option
+from app.annotate_tab.view import box_at, ground_hit, wxyz_to_yaw, yaw_to_wxyz
 from scenes.root import Talk2RadarRoot
 from tests.test_app_ws import GT_BOX, BrowserLikeClient, torch_threads, write_tiny_root
 
@@ -63,32 +55,6 @@ def test_yaw_quaternion_round_trip() -> None:
         assert wxyz_to_yaw(yaw_to_wxyz(yaw)) == pytest.approx(yaw, abs=1e-12)
     # A quaternion for 90 degrees about z: w = z = sqrt(1/2).
     assert wxyz_to_yaw((math.sqrt(0.5), 0.0, 0.0, math.sqrt(0.5))) == pytest.approx(math.pi / 2)
-
-
-def test_proposals_skip_duplicates_and_other_classes() -> None:
-    existing = np.array([[10.0, 0.0, -1.0, 4.0, 2.0, 1.5, 0.0]])
-    pred = np.array(
-        [
-            [10.1, 0.0, -1.0, 4.0, 2.0, 1.5, 0.0],  # IoU ~0.95 with the draft box: duplicate
-            [20.0, 5.0, -1.0, 4.0, 2.0, 1.5, 0.0],
-            [20.2, 5.0, -1.0, 4.0, 2.0, 1.5, 0.0],  # duplicate of the previous proposal
-            [30.0, 0.0, -1.0, 0.7, 0.7, 1.7, 0.0],
-        ]
-    )
-    boxes, classes, duplicates = proposals(pred, ["Car", "Car", "Car", "Pedestrian"], existing)
-    assert classes == ("Car", "Pedestrian") and duplicates == 2
-    np.testing.assert_array_equal(boxes, pred[[1, 3]])
-    boxes, classes, _ = proposals(pred, ["Car", "Truck", "Car", "Car"], existing, limit=1)
-    assert classes == ("Car",) and boxes[0, 0] == 20.2  # "Truck" is not a metric class
-
-
-def test_changed_box_finds_the_added_or_edited_box() -> None:
-    one = Draft().add_box(default_box("Car", 10.0, 0.0), "Car")
-    two = one.add_box(default_box("Cyclist", 20.0, 1.0), "Cyclist")
-    assert changed_box(one, two) == 1
-    assert changed_box(two, two.move_box(0, 11.0, 0.0)) == 0
-    assert changed_box(two, two.delete_box(1)) is None
-    assert changed_box(two, one) is None
 
 
 def test_option_parsing() -> None:
@@ -185,7 +151,7 @@ def _connect(app) -> tuple[AnnotatingClient, AnnotationPanel]:
         "the scene and the Annotate tab",
     )
     session = app.sessions[(set(app.sessions) - before).pop()]
-    panel = next(p for p in shared_root(app.frames.root.path).panels() if p.session is session)
+    panel = next(p for p in app.annotations.panels() if p.session is session)
     client.pump_until(lambda: panel.frame is not None, 5, "the draft's frame")
     return client, panel
 
@@ -274,6 +240,65 @@ def test_place_two_boxes_type_prompt_save_and_find_the_sample(annotating_app) ->
         )
     finally:
         again.close()
+
+
+def test_typing_revalidates_without_recounting_points_or_redrawing_boxes(
+    annotating_app, monkeypatch
+) -> None:
+    import app.annotate_tab.panel as panel_module
+
+    client, panel = _connect(annotating_app)
+    try:
+        client.click_ground(18.0, -1.0, panel.frame.ground_z)
+        client.pump_until(lambda: len(panel.draft.boxes) == 1, 5, "a box")
+        client.pump_until(lambda: "/annotate/gizmo/selected/edges" in client.nodes, 5, "drawn")
+        client.drain(0.5)  # every refresh of the placement is done
+        counted, drawn, checked = [], [], []
+        real_evidence, real_show, real_checks = (
+            panel_module.box_evidence,
+            panel.view.show,
+            panel_module.checks_markdown,
+        )
+        monkeypatch.setattr(
+            panel_module, "box_evidence", lambda *a: counted.append(1) or real_evidence(*a)
+        )
+        monkeypatch.setattr(panel.view, "show", lambda *a: drawn.append(1) or real_show(*a))
+        monkeypatch.setattr(
+            panel_module, "checks_markdown", lambda r: checked.append(r.ok) or real_checks(r)
+        )
+        client.set("Pair prompt", "the car ahead")
+        client.pump_until(lambda: checked and checked[-1], 5, "the draft revalidated")
+        assert panel.draft.prompt == "the car ahead" and not counted and not drawn
+        client.set("Box", NO_BOX)  # a selection: boxes redrawn, evidence re-shown, not recounted
+        client.pump_until(lambda: panel.selected is None and drawn, 5, "the box unselected")
+        assert not counted and checked == [True]
+        client.set("Box", client.dropdown("Box")[1])
+        client.pump_until(lambda: panel.selected is not None, 5, "the box selected")
+        client.set("Height (m)", 1.9)  # a box edit: the points in it are counted again
+        client.pump_until(lambda: counted, 5, "the evidence recounted")
+        assert len(checked) == 2
+    finally:
+        client.close()
+
+
+def test_each_app_owns_its_annotation_hub(tmp_path) -> None:
+    import types
+
+    from app import AppConfig, Talk2PCApp
+
+    root = write_tiny_root(tmp_path / "root", frames=1)
+    first = Talk2PCApp(root, types.SimpleNamespace(), AppConfig(port=0, warm_up=False))
+    second = Talk2PCApp(root, types.SimpleNamespace(), AppConfig(port=0, warm_up=False))
+    try:
+        assert first.annotations is not second.annotations
+        assert not (root / "annotations").exists()  # nothing written before a tab asks
+        assert first.annotations.store is not None and first.annotations.error is None
+        assert (root / "annotations").is_dir()
+        assert first.annotations.store is not second.annotations.store
+    finally:
+        first.stop()
+        second.stop()
+    assert first.annotations.panels() == []
 
 
 def test_invalid_save_notifies_and_writes_nothing(annotating_app) -> None:
@@ -389,7 +414,7 @@ def test_fit_to_points_and_use_predictions(annotating_app) -> None:
 
 def test_open_edit_and_delete_a_saved_pair(annotating_app) -> None:
     app = annotating_app
-    store = shared_root(app.frames.root.path).store
+    store = app.annotations.store
     client, panel = _connect(app)
     try:
         client.click_ground(11.0, 1.0, panel.frame.ground_z)
@@ -485,7 +510,7 @@ def drive_annotation(
 
     from tests.test_app_browser import CHROMIUM_ARGS, _scene_has
 
-    store = shared_root(app.frames.root.path).store
+    store = app.annotations.store
     before = {p.sample_id for p in store.pairs()}
     timeout_ms = timeout_s * 1000
     with sync_playwright() as p:
@@ -503,9 +528,7 @@ def drive_annotation(
                 page.get_by_role("tab", name="Annotate").click()
                 _poll(lambda: set(app.sessions) - sessions, timeout_s, "the session")
                 session = app.sessions[max(set(app.sessions) - sessions)]
-                return next(
-                    p for p in shared_root(app.frames.root.path).panels() if p.session is session
-                )
+                return next(p for p in app.annotations.panels() if p.session is session)
 
             panel = open_tab()
             _poll(lambda: panel.frame is not None, timeout_s, "the frame")
@@ -611,7 +634,7 @@ def main() -> int:
                 apply_pose(panel.session.client.camera, pose)
 
             elapsed, sid = drive_annotation(app, chromium, targets, args.out, close_up)
-            pair = next(p for p in shared_root(root).store.pairs() if p.sample_id == sid)
+            pair = next(p for p in app.annotations.store.pairs() if p.sample_id == sid)
             print(
                 f"{args.out}: pair {sid} {pair.prompt!r} saved {elapsed:.1f} s after the 1st click"
             )

@@ -27,9 +27,23 @@ from app.colors import (
     velocity_colors,
     velocity_legend,
 )
-from app.engine import DaemonWorkers, GroundingEngine, model_modalities, sensor_inputs
+from app.engine import (
+    DaemonWorkers,
+    GroundingEngine,
+    GroundingModel,
+    Predictions,
+    initial_threshold,
+    model_modalities,
+    sensor_inputs,
+)
 from app.heatmap_view import GridLike, ground_placement, heatmap_rgba
-from app.navigation import FrameStore, step_index
+from app.navigation import (
+    FrameLoadError,
+    FrameStore,
+    Navigator,
+    NoSuchFrameError,
+    step_index,
+)
 from app.query_panel import (
     NO_HISTORY,
     PromptHistory,
@@ -288,6 +302,18 @@ def test_model_modalities() -> None:
     assert model_modalities(fake("both")) == ("both", "lidar", "radar")
     assert model_modalities(fake("lidar")) == ("lidar",)
     assert model_modalities(fake("radar")) == ("radar",)
+    assert model_modalities(types.SimpleNamespace()) == ("both", "lidar", "radar")  # no config
+
+
+def test_initial_threshold_operating_then_decoder_then_default() -> None:
+    head = types.SimpleNamespace(score_threshold=0.2)
+    decoder_only = types.SimpleNamespace(cfg=types.SimpleNamespace(head=head))
+    calibrated = types.SimpleNamespace(
+        cfg=decoder_only.cfg, checkpoint_metadata={"operating_threshold": 0.35}
+    )
+    assert initial_threshold(calibrated, 0.3) == 0.35
+    assert initial_threshold(decoder_only, 0.3) == 0.2
+    assert initial_threshold(types.SimpleNamespace(), 0.3) == 0.3  # a model without a config
 
 
 # ---------------------------------------------------------------------------- frames + engine
@@ -340,3 +366,61 @@ def test_engine_caches_scene_features_per_modality(tmp_path) -> None:
             lidar_only.answer(sample, "both", "the car", 0.1)
     finally:
         lidar_only.close()
+
+
+class _Subscriber:
+    def __init__(self) -> None:
+        self.shown: list[int] = []
+        self.changed = 0
+
+    def frame_shown(self, frame) -> None:
+        self.shown.append(frame.index)
+
+    def split_changed(self) -> None:
+        self.changed += 1
+
+
+class _Broken(_Subscriber):
+    def frame_shown(self, frame) -> None:
+        raise RuntimeError("this browser cannot draw")
+
+
+def test_navigator_tells_subscribers_and_raises_navigation_errors(tmp_path) -> None:
+    root = Talk2RadarRoot(write_tiny_root(tmp_path / "root", frames=3))
+    moved = []
+    nav = Navigator(FrameStore(root, "test"), after_move=moved.append)
+    first = nav.load_first()
+    assert first.index == 0 and nav.frame is first and not moved
+    sub = _Subscriber()
+    nav.subscribe(_Broken())  # a failing subscriber does not stop the others
+    nav.subscribe(sub)
+    assert nav.go_to(2).index == 2 and sub.shown == [2] and [f.index for f in moved] == [2]
+    assert nav.go_to(2) is nav.frame and sub.shown == [2]  # the same frame: nothing to tell
+    with pytest.raises(NoSuchFrameError, match=r"frames 1\.\.3; 4 does not exist"):
+        nav.go_to(3)
+    assert nav.step(1).index == 0 and sub.shown == [2, 0]  # wraps around
+    velodyne = root.lidar_dir / "training" / "velodyne" / "00001.bin"
+    velodyne.write_bytes(velodyne.read_bytes()[:-3])
+    with pytest.raises(FrameLoadError) as caught:
+        nav.go_to(1)
+    assert caught.value.title == "Could not load frame 2 (00001)"
+    assert isinstance(caught.value.cause, RootError | OSError | ValueError)
+    assert nav.frame.index == 0 and sub.shown == [2, 0]
+    nav.reload()
+    assert sub.changed == 1
+    nav.unsubscribe(sub)
+    nav.go_to(2)
+    assert sub.shown == [2, 0] and [f.index for f in moved] == [2, 0, 2]
+
+
+def test_tpcnet_satisfies_the_app_model_protocol() -> None:
+    from model import build_model
+
+    with torch_threads(1):
+        model = build_model("small", text_encoder="gru").eval()
+        assert isinstance(model, GroundingModel)
+        features = model.encode_scene(np.zeros((0, 4), np.float32), np.zeros((0, 7), np.float32))
+        pred = model.ground(features, "the car ahead", score_threshold=0.99)
+    assert isinstance(pred, Predictions)
+    assert pred.heatmaps.shape[0] == 3 and pred.boxes.shape[1:] == (7,)
+    assert pred.grid.x_min < pred.grid.x_max and pred.grid.y_min < pred.grid.y_max

@@ -404,11 +404,10 @@ def test_stored_text_and_forged_splits(running_app) -> None:
     """A saved pair's prompt and annotator are shown as text in the Annotate table; a split name
     forged through the websocket is refused by the server and saving keeps working."""
     from annotate import AnnotationStore, Draft, SourceFrame
-    from app.annotation_panel import shared_root
 
     app = running_app
     root = app.frames.root
-    store = shared_root(root.path).store
+    store = app.annotations.store
     assert store is not None
     pair = Draft().set_prompt(HOSTILE_TEXT).add_box(GT_BOX, "Car")
     store.create(pair, SourceFrame.from_root(root, root.ids("test")[0]), annotator=HOSTILE_TEXT)
@@ -416,7 +415,7 @@ def test_stored_text_and_forged_splits(running_app) -> None:
     client = _connected(app)
     try:
         session = app.sessions[(set(app.sessions) - before).pop()]
-        panel = next(p for p in shared_root(root.path).panels() if p.session is session)
+        panel = next(p for p in app.annotations.panels() if p.session is session)
         client.pump_until(lambda: "Save pair" in client.gui and panel.frame is not None, 15, "tab")
         tables = [text for text in client.markdown.values() if "saved pair(s)" in text]
         assert tables and "onerror" in tables[0]

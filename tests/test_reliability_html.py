@@ -17,7 +17,7 @@ import pytest
 from annotate import Draft, PairInfo
 from annotate.evidence import BoxEvidence, Motion
 from annotate.validation import Issue, Severity, ValidationReport
-from app.annotation_panel import checks_markdown, evidence_markdown, pairs_markdown
+from app.annotate_tab.formatting import checks_markdown, evidence_markdown, pairs_markdown
 from app.navigation import Frame, frame_markdown
 from app.text import md_text
 from scenes.calib import vod_lidar_calibration

@@ -144,7 +144,7 @@ def box_tag(index: int, cls: str) -> str:
 class DraftView:
     """The draft boxes and the gizmo of one browser (see the module docstring).
 
-    Not thread-safe by itself: the owner (:class:`app.annotation_panel.AnnotationPanel`) holds
+    Not thread-safe by itself: the owner (:class:`app.annotate_tab.panel.AnnotationPanel`) holds
     the session's lock while calling it.
 
     Args:

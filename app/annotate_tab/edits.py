@@ -1,0 +1,282 @@
+"""What the person does to the draft in the Annotate tab: :class:`DraftEdits`.
+
+Each action changes the panel's state through the :class:`annotate.DraftEditor` (one undo step)
+and redraws only the :class:`~app.annotate_tab.panel.Part` s that show what it changed.
+"""
+
+from __future__ import annotations
+
+import asyncio
+from collections.abc import Sequence
+
+import numpy as np
+import viser
+
+from annotate import (
+    BoxRegion,
+    DraftError,
+    FitError,
+    default_box,
+    fit_box,
+    is_pristine,
+    proposals,
+    scene_objects,
+    suggest_prompt,
+)
+from app.annotate_tab.formatting import option_index
+from app.annotate_tab.panel import AnnotationPanel, Part
+from app.annotate_tab.view import box_at, box_tag, ground_hit, wxyz_to_yaw
+
+
+class DraftEdits:
+    """The draft-editing actions of one browser's tab (wired by :mod:`app.annotate_tab.tab`).
+
+    Args:
+        panel: The tab's state and drawing.
+    """
+
+    def __init__(self, panel: AnnotationPanel) -> None:
+        self.panel = panel
+        self._drag = 0
+        """Gizmo drags so far: each drag is one undo step (its ``merge_key``)."""
+        self._suggestions = 0
+        """Suggestions so far: each one is drawn with a new seed."""
+
+    # ------------------------------------------------------------------ scene interaction
+
+    def click_ground(self, ray_origin: Sequence[float], ray_direction: Sequence[float]) -> None:
+        """A click in the 3D view: place a box where the ray meets the ground, or select the
+        draft box there."""
+        p = self.panel
+        if not p.w.place.value:
+            return
+        with p.session.lock:
+            if p.frame is None:
+                return
+            if not p.on_screen():
+                p.notify(
+                    "The draft is on another frame",
+                    f"This draft belongs to sample {p.frame.name}. Go back to its frame "
+                    "(button in the Annotate tab) or start a new pair.",
+                )
+                return
+            hit = ground_hit(ray_origin, ray_direction, p.frame.ground_z)
+            if hit is None:
+                p.notify("Click on the ground", "That click did not hit the ground nearby.")
+                return
+            draft = p.editor.draft
+            index = box_at(draft.box_array, *hit)
+            if index is not None:
+                p.selected = draft.boxes[index].box_id
+                p.refresh(Part.SELECTION)
+                return
+            cls = p.w.new_class.value
+            box = default_box(cls, hit[0], hit[1], p.frame.ground_z)
+            p.selected = p.editor.add_box(box, cls)
+            p.refresh(Part.DRAFT)
+
+    async def on_gizmo(self, event: viser.TransformControlsEvent) -> None:
+        """A gizmo drag (on the event loop, in message order): one undo step per drag."""
+        p = self.panel
+        box_id = p.view.gizmo_box_id
+        if box_id is None:
+            return
+        if event.phase == "start":
+            self._drag += 1
+            return
+        key = ("gizmo", box_id, self._drag)
+        x, y, _ = (float(v) for v in event.target.position)
+        yaw = wxyz_to_yaw(event.target.wxyz)
+        try:
+            p.editor.move_box(box_id, x, y, merge_key=key)
+            p.editor.rotate_box(box_id, yaw, merge_key=key)
+        except DraftError:  # The box went away (undo in another callback): drop the drag.
+            return
+        if event.phase == "end":  # Redraw in a worker thread; the loop goes on at once.
+            asyncio.get_running_loop().run_in_executor(
+                None, p.guarded, lambda: p.refresh(Part.DRAFT)
+            )
+
+    # ------------------------------------------------------------------ box edits
+
+    def select_from_list(self) -> None:
+        p = self.panel
+        with p.session.lock:
+            index = option_index(p.w.box.value)
+            draft = p.editor.draft
+            if index is None:
+                p.selected = None
+            elif index < len(draft.boxes):
+                p.selected = draft.boxes[index].box_id
+            p.refresh(Part.SELECTION)
+
+    def set_class(self) -> None:
+        p = self.panel
+        with p.session.lock:
+            if p.selected is not None:
+                p.editor.set_class(p.selected, p.w.cls.value)
+            p.refresh(Part.DRAFT)
+
+    def resize(self, source: viser.GuiNumberHandle) -> None:
+        p = self.panel
+        with p.session.lock:
+            if p.selected is not None:
+                w = p.w
+                p.editor.resize_box(
+                    p.selected,
+                    float(w.length.value),
+                    float(w.width.value),
+                    float(w.height.value),
+                    merge_key=("size", p.selected),
+                )
+            p.refresh(Part.DRAFT, skip=source)
+
+    def set_yaw(self) -> None:
+        p = self.panel
+        with p.session.lock:
+            if p.selected is not None:
+                yaw = float(np.radians(float(p.w.yaw.value)))
+                p.editor.rotate_box(p.selected, yaw, merge_key=("yaw", p.selected))
+            p.refresh(Part.DRAFT, skip=p.w.yaw)
+
+    def set_prompt(self) -> None:
+        p = self.panel
+        with p.session.lock:
+            p.editor.set_prompt(p.w.prompt.value)
+            p.refresh(Part.TEXT, skip=p.w.prompt)
+
+    def set_nothing(self) -> None:
+        p = self.panel
+        with p.session.lock:
+            p.editor.set_refers_to_nothing(bool(p.w.nothing.value))
+            p.refresh(Part.TEXT)
+
+    def fit_selected(self) -> None:
+        """Fit the selected box to the LiDAR points in and around it."""
+        p = self.panel
+        with p.session.lock:
+            if p.selected is None or p.frame is None:
+                return
+            draft = p.editor.draft
+            index = draft.index_of(p.selected)
+            try:
+                result = fit_box(p.frame.sample.lidar, BoxRegion(draft.boxes[index].box))
+            except (FitError, ValueError) as exc:
+                p.notify("Cannot fit the box", str(exc))
+                return
+            p.editor.set_box(p.selected, result.box, label=f"fit {box_tag(index, '')}".strip())
+            length, width, height = result.box[3:6]
+            p.notify(
+                "Box fitted",
+                f"{box_tag(index, draft.boxes[index].cls)} fitted to {result.num_points} LiDAR "
+                f"points: {length:.2f} x {width:.2f} x {height:.2f} m.",
+                color="green",
+            )
+            p.refresh(Part.DRAFT)
+
+    def delete_selected(self) -> None:
+        """Delete the selected box (undoable)."""
+        p = self.panel
+        with p.session.lock:
+            if p.selected is None:
+                return
+            p.editor.delete_box(p.selected)
+            p.selected = None
+            p.refresh(Part.DRAFT)
+
+    def use_predictions(self) -> None:
+        """Add the last answer's boxes on this frame to the draft (one undo step)."""
+        p = self.panel
+        with p.session.lock:
+            answer = p.session.answer
+            if answer is None:
+                p.notify(
+                    "No answer to use", "Run a prompt in the Query tab first; its boxes are added."
+                )
+                return
+            if p.frame is None or answer.sample_id not in p.frame.sample_ids:
+                p.notify(
+                    "The answer is for another frame",
+                    "Run the prompt again on the draft's frame.",
+                )
+                return
+            pred = answer.predictions
+            boxes, classes, duplicates = proposals(
+                pred.boxes, pred.classes, p.editor.draft.box_array
+            )
+            if not len(boxes):
+                p.notify(
+                    "No new boxes", "Every predicted box is already in the draft (or none fits)."
+                )
+                return
+            ids = p.editor.add_boxes(boxes, classes)
+            p.selected = ids[0]
+            extra = f"; {duplicates} already in the draft" if duplicates else ""
+            p.notify(
+                "Predicted boxes added",
+                f"{len(ids)} of {len(pred.boxes)} predicted box(es) added{extra}.",
+                color="green",
+            )
+            p.refresh(Part.DRAFT)
+
+    def suggest(self) -> None:
+        """Write a suggested prompt for the boxes into *Pair prompt* (undoable)."""
+        p = self.panel
+        with p.session.lock:
+            if p.frame is None:
+                return
+            draft = p.editor.draft
+            self._suggestions += 1
+            sample = p.frame.sample
+            suggestion = suggest_prompt(
+                draft.box_array,
+                draft.classes,
+                scene_objects(sample),
+                sample.radar,
+                np.random.default_rng(self._suggestions),
+            )
+            if suggestion.text is None:
+                p.notify("No suggestion", suggestion.reason or "no sentence fits these boxes")
+                return
+            p.editor.set_prompt(suggestion.text, merge_key=None)
+            p.refresh(Part.TEXT)
+
+    # ------------------------------------------------------------------ draft actions
+
+    def undo(self) -> None:
+        """Take back the last edit; the box it changed (if still there) becomes selected."""
+        p = self.panel
+        with p.session.lock:
+            before = p.editor.draft
+            p.select_changed(before, p.editor.undo())
+            p.refresh(Part.DRAFT)
+
+    def redo(self) -> None:
+        """Re-apply the last undone edit; the box it changed becomes selected."""
+        p = self.panel
+        with p.session.lock:
+            before = p.editor.draft
+            p.select_changed(before, p.editor.redo())
+            p.refresh(Part.DRAFT)
+
+    def new_pair(self) -> None:
+        """Start a new pair on the frame on screen (asks first when there are unsaved edits)."""
+        p = self.panel
+        if p.editor.history.can_undo and not is_pristine(p.editor.draft):
+            p.confirm(
+                "Discard the draft?",
+                "The draft has unsaved changes. Start a new pair and discard them?",
+                "Discard the draft",
+                self.reset_draft,
+            )
+        else:
+            self.reset_draft()
+
+    def reset_draft(self) -> None:
+        """An empty draft on the frame on screen (no question asked)."""
+        p = self.panel
+        with p.session.lock:
+            p.editor.reset()
+            p.selected = None
+            p.bind_to_screen()
+            p.refresh()

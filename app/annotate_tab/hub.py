@@ -1,0 +1,94 @@
+"""What every browser's Annotate tab shares: the served root's store and the open tabs.
+
+One :class:`AnnotationHub` per app (:attr:`app.server.Talk2PCApp.annotations`), created with the
+app and forgotten with it (:meth:`AnnotationHub.close` in ``app.stop``): nothing is kept at module
+level, so a second app in the same process (a test, a restarted server) opens its own store.
+The store is opened when the first tab asks for it, so serving a root writes nothing into it
+before someone opens the Annotate tab.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import weakref
+from pathlib import Path
+from typing import Protocol
+
+from annotate import AnnotationStore, StoreError
+from app.session import ClientSession
+
+log = logging.getLogger(__name__)
+
+
+class PairsView(Protocol):
+    """An open tab, as the hub sees it: its browser's session and its list of saved pairs."""
+
+    session: ClientSession
+
+    def refresh_pairs(self) -> None:
+        """Re-read the saved pairs into the tab."""
+
+
+class AnnotationHub:
+    """The store of one served root and the open Annotate tabs (see the module docstring).
+
+    Args:
+        path: The served root.
+    """
+
+    def __init__(self, path: Path) -> None:
+        self.path = Path(path)
+        self._store: AnnotationStore | None = None
+        self._error: str | None = None
+        self._opened = False
+        self._open_lock = threading.Lock()
+        self._views: weakref.WeakValueDictionary[int, PairsView] = weakref.WeakValueDictionary()
+        self._lock = threading.Lock()
+
+    def _open(self) -> None:
+        with self._open_lock:
+            if self._opened:
+                return
+            self._opened = True
+            try:
+                self._store = AnnotationStore(self.path)
+            except (OSError, StoreError, ValueError) as exc:
+                self._error = f"{type(exc).__name__}: {exc}"
+                log.error("annotation store of %s unavailable: %s", self.path, self._error)
+
+    @property
+    def store(self) -> AnnotationStore | None:
+        """The root's :class:`annotate.AnnotationStore`, or None when it cannot be opened."""
+        self._open()
+        return self._store
+
+    @property
+    def error(self) -> str | None:
+        """Why the store could not be opened (None when it could)."""
+        self._open()
+        return self._error
+
+    def register(self, view: PairsView) -> None:
+        """Keep ``view`` informed of saved and deleted pairs (until its browser leaves)."""
+        with self._lock:
+            self._views[id(view)] = view
+
+    def panels(self) -> list[PairsView]:
+        """The tabs of the browsers still connected."""
+        with self._lock:
+            items = list(self._views.values())
+        return [v for v in items if not v.session.closed]
+
+    def pairs_changed(self) -> None:
+        """Re-list the saved pairs in every connected browser."""
+        for view in self.panels():
+            try:
+                view.refresh_pairs()
+            except Exception:  # One browser's failure must not stop the others' update.
+                log.exception("client %s: could not re-list the pairs", view.session.client_id)
+
+    def close(self) -> None:
+        """Forget the open tabs (the app stopped)."""
+        with self._lock:
+            self._views.clear()

@@ -1,0 +1,161 @@
+"""Saving, reopening and deleting pairs from the Annotate tab: :class:`PairActions`.
+
+The store's work runs outside the session's lock (it takes the store's own lock and may wait for
+another browser's save); after a save or a deletion the served split is re-read (the navigator's
+``reload``) and every browser's list of saved pairs is refreshed (the hub).
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+from annotate import ConflictError, SourceFrame, StoreError, ValidationError, is_pristine
+from app.annotate_tab.formatting import option_pair_id
+from app.annotate_tab.panel import AnnotationPanel, DraftFrame
+from app.scene_view import estimate_ground_z
+
+log = logging.getLogger(__name__)
+
+
+class PairActions:
+    """The saved-pair actions of one browser's tab (wired by :mod:`app.annotate_tab.tab`).
+
+    Args:
+        panel: The tab's state and drawing.
+    """
+
+    def __init__(self, panel: AnnotationPanel) -> None:
+        self.panel = panel
+
+    def save(self) -> None:
+        """Save the draft (a new pair, or a new version of the reopened pair)."""
+        p = self.panel
+        store = p.store
+        with p.session.lock:
+            draft, frame = p.editor.draft, p.frame
+            split, annotator = p.w.split.value, p.w.annotator.value
+        if store is None:
+            p.notify("Saving is unavailable", str(p.hub.error), color="red")
+            return
+        if frame is None:
+            return
+        root = p.navigator.frames.root
+        try:
+            source = None
+            if draft.sample_id is None:
+                source = SourceFrame.from_root(root, frame.sample.sample_id, sample=frame.sample)
+            result = store.save(draft, source, annotator=annotator, split=split)
+        except ValidationError as exc:
+            p.notify("Cannot save the pair", "\n".join(i.message for i in exc.issues), color="red")
+            return
+        except ConflictError as exc:
+            p.notify("The pair changed meanwhile", str(exc), color="red")
+            return
+        except (StoreError, OSError, ValueError) as exc:
+            log.error("client %s: save failed: %s", p.session.client_id, exc)
+            p.notify("Save failed", str(exc), color="red")
+            return
+        warnings = "".join(f"\n{w.message}" for w in result.warnings)
+        where = "new pair" if result.version == 1 else f"version {result.version}"
+        p.notify(
+            f"Saved pair {result.sample_id}",
+            f"{where} in {', '.join(result.record.splits)} of {store.path}.{warnings}",
+            color="green",
+        )
+        log.info(
+            "client %s: saved pair %s v%d", p.session.client_id, result.sample_id, result.version
+        )
+        with p.session.lock:
+            p.editor.reset()
+            p.selected = None
+            p.bind_to_screen()
+        self._after_store_change()
+
+    def _after_store_change(self) -> None:
+        p = self.panel
+        store = p.store
+        root = p.navigator.frames.root
+        if store is not None and Path(store.path).resolve() == Path(root.path).resolve():
+            try:
+                p.navigator.reload()
+            except Exception as exc:
+                p.session.report_error("Could not re-read the split", exc)
+        p.hub.pairs_changed()
+        p.refresh()
+
+    def _selected_pair(self) -> str | None:
+        sid = option_pair_id(self.panel.w.pair.value)
+        return sid if sid in self.panel.pair_ids else None
+
+    def open_selected_pair(self) -> None:
+        """Reopen the pair chosen in *Pair* into the draft (asks first about unsaved edits)."""
+        p = self.panel
+        sid = self._selected_pair()
+        if sid is None:
+            return
+        if p.editor.history.can_undo and not is_pristine(p.editor.draft):
+            p.confirm(
+                f"Open pair {sid}?",
+                "The draft has unsaved changes. Open the pair and discard them?",
+                "Discard and open",
+                lambda: self.open_pair(sid),
+            )
+        else:
+            self.open_pair(sid)
+
+    def open_pair(self, sample_id: str) -> None:
+        """Reopen a saved pair for editing and show its frame."""
+        p = self.panel
+        store = p.store
+        if store is None:
+            return
+        root = p.navigator.frames.root
+        try:
+            draft = store.open(sample_id)
+            sample = root.load(sample_id)
+        except (StoreError, OSError, ValueError) as exc:
+            p.notify(f"Cannot open pair {sample_id}", str(exc), color="red")
+            return
+        ids = {sample_id}
+        history = store.history(sample_id)
+        source = dict(history[-1].source) if history else {}
+        same_root = bool(source.get("root")) and (
+            Path(str(source["root"])).resolve() == Path(root.path).resolve()
+        )
+        if same_root and source.get("sample_id"):
+            ids.add(str(source["sample_id"]))
+        with p.session.lock:
+            p.editor.reset(draft)
+            p.selected = draft.boxes[0].box_id if draft.boxes else None
+            p.frame = DraftFrame(sample, estimate_ground_z(sample.lidar), frozenset(ids))
+            on_screen = p.on_screen()
+        if not on_screen:
+            p.back_to_draft_frame()
+        p.refresh()
+
+    def delete_selected_pair(self) -> None:
+        """Delete the pair chosen in *Pair* (after a confirmation)."""
+        sid = self._selected_pair()
+        if sid is None:
+            return
+        self.panel.confirm(
+            f"Delete pair {sid}?",
+            "The pair disappears from its split; its files and its history stay on disk.",
+            "Delete the pair",
+            lambda: self.delete_pair(sid),
+        )
+
+    def delete_pair(self, sample_id: str) -> None:
+        """Delete a saved pair from the root."""
+        p = self.panel
+        store = p.store
+        if store is None:
+            return
+        try:
+            store.delete(sample_id, annotator=p.w.annotator.value)
+        except (StoreError, OSError, ValueError) as exc:
+            p.notify(f"Cannot delete pair {sample_id}", str(exc), color="red")
+            return
+        p.notify("Pair deleted", f"Pair {sample_id} was removed from its split.", color="green")
+        self._after_store_change()

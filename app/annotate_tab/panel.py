@@ -1,0 +1,347 @@
+"""The state of one browser's Annotate tab and how it is drawn: :class:`AnnotationPanel`.
+
+The panel owns the tab's state (the :class:`annotate.DraftEditor`, the selected box, the draft's
+frame) and draws it into the widgets and the scene. What the person does is handled by
+:class:`app.annotate_tab.edits.DraftEdits` and :class:`app.annotate_tab.pairs.PairActions`, which
+change the state and then ask for the :class:`Part` s that depend on what they changed
+(:meth:`AnnotationPanel.refresh`): a keystroke in the prompt revalidates the draft but neither
+redraws the boxes nor recounts the points in them; selecting a box redraws the boxes and the
+evidence table but does not revalidate. The per-box evidence (:func:`annotate.box_evidence`, over
+every LiDAR point of the frame) is computed again only when the boxes or the frame changed.
+"""
+
+from __future__ import annotations
+
+import enum
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+import viser
+
+from annotate import (
+    AnnotationStore,
+    BoxEvidence,
+    Draft,
+    DraftEditor,
+    ValidationConfig,
+    box_evidence,
+    changed_box,
+    is_pristine,
+    validate,
+)
+from app.annotate_tab.formatting import (
+    NO_BOX,
+    NO_PAIRS,
+    box_option,
+    checks_markdown,
+    evidence_markdown,
+    option_pair_id,
+    pair_option,
+    pairs_markdown,
+    status_markdown,
+)
+from app.annotate_tab.hub import AnnotationHub
+from app.annotate_tab.view import DraftView
+from app.annotate_tab.widgets import AnnotationWidgets, build_annotation_widgets
+from app.session import ClientSession
+from app.text import md_text
+from scenes.actors import CLASSES
+from scenes.root import Sample
+
+
+class Part(enum.Flag):
+    """The parts of the tab that :meth:`AnnotationPanel.refresh` brings up to date."""
+
+    VIEW = enum.auto()
+    """The draft boxes and the gizmo in the 3D view, the *Box* list and the selected box's inputs."""
+    EVIDENCE = enum.auto()
+    """The evidence table (its numbers are recomputed only when the boxes or the frame changed)."""
+    SENTENCE = enum.auto()
+    """*Pair prompt* and *Refers to nothing*."""
+    CHECKS = enum.auto()
+    """Validation of the draft (above *Save pair*), and what may be saved (*Save*, *Split*)."""
+    STATUS = enum.auto()
+    """The status line (pair, frame, undo / redo) and *Back to the draft's frame*."""
+    ANSWER = enum.auto()
+    """*Use predictions* (an answer on the draft's frame is drawn)."""
+
+    SELECTION = VIEW | EVIDENCE
+    """What shows which box is selected."""
+    TEXT = SENTENCE | CHECKS | STATUS
+    """What depends on the prompt and its flag."""
+    DRAFT = VIEW | EVIDENCE | SENTENCE | CHECKS | STATUS
+    """Everything that shows the draft (any edit of its boxes, undo, redo)."""
+    ALL = DRAFT | ANSWER
+    """Everything (the draft's frame or the frame on screen changed)."""
+
+
+@dataclass(frozen=True)
+class DraftFrame:
+    """The frame a draft is annotated on.
+
+    Attributes:
+        sample: Its sensors (LiDAR frame) and calibration.
+        ground_z: Ground height (m, LiDAR frame) where clicks land and new boxes stand.
+        sample_ids: The samples of the served root that show this frame (the sample itself;
+            for a reopened pair also the frame it was annotated on).
+    """
+
+    sample: Sample
+    ground_z: float
+    sample_ids: frozenset[str]
+
+    @property
+    def name(self) -> str:
+        return self.sample.sample_id
+
+
+class AnnotationPanel:
+    """The Annotate tab of one browser (see the module docstring and :mod:`app.annotate_tab`).
+
+    Locking: everything that reads or changes the panel's state or draws holds
+    ``session.lock`` (the lock the session holds while it draws frames and answers, so the order
+    of locks is always the same); the store's work (saving, deleting) runs outside it, and so do
+    moves of the shared frame (``session.go_to``, ``navigator.reload``), which take the
+    navigator's lock first. The gizmo's callback runs on viser's event loop (in message order)
+    and only touches the :class:`annotate.DraftEditor`, which has its own lock.
+
+    Args:
+        session: The browser's session.
+        hub: The served root's store and open tabs.
+    """
+
+    def __init__(self, session: ClientSession, hub: AnnotationHub) -> None:
+        self.session = session
+        self.hub = hub
+        self.navigator = session.navigator
+        self.editor = DraftEditor()
+        self.selected: int | None = None
+        self.frame: DraftFrame | None = None
+        self.view = DraftView(session.client.scene)
+        self.w: AnnotationWidgets = build_annotation_widgets(session.client.gui)
+        self.pair_ids: tuple[str, ...] = ()
+        """The sample ids listed in *Pair*, in order."""
+        self._shown: dict[int, object] = {}
+        """The value the server last wrote into each edit widget (by ``id``), see :meth:`_show`."""
+        self._evidence: tuple[DraftFrame, tuple[object, ...], tuple[BoxEvidence, ...]] | None
+        self._evidence = None
+        """The last evidence computed: ``(frame, boxes, evidence)``."""
+
+    # ------------------------------------------------------------------ state
+
+    @property
+    def store(self) -> AnnotationStore | None:
+        return self.hub.store
+
+    @property
+    def draft(self) -> Draft:
+        return self.editor.draft
+
+    def on_screen(self) -> bool:
+        """Whether the frame on screen is the draft's frame."""
+        sample = self.session.sample
+        return (
+            sample is not None
+            and self.frame is not None
+            and sample.sample_id in self.frame.sample_ids
+        )
+
+    def bind_to_screen(self) -> None:
+        """Make the frame on screen the draft's frame."""
+        frame = self.session.frame
+        if frame is not None:
+            self.frame = DraftFrame(frame.sample, frame.ground_z, frozenset({frame.sample_id}))
+
+    def select_changed(self, before: Draft, after: Draft) -> None:
+        """Select the box an edit (undo, redo) added or changed, if any."""
+        changed = changed_box(before, after)
+        if changed is not None:
+            self.selected = changed
+
+    def notify(self, title: str, body: str, color: str = "yellow") -> None:
+        self.session.notify(title, body, color=color, auto_close_seconds=10.0)
+
+    # ------------------------------------------------------------------ drawing
+
+    def refresh(self, parts: Part = Part.ALL, skip: object | None = None) -> None:
+        """Bring ``parts`` of the tab up to date with the state (``skip``: a widget the person
+        is editing, whose value must not be written back)."""
+        with self.session.lock:
+            if self.session.closed:
+                return
+            draft = self.editor.draft
+            if self.selected not in draft.box_ids:
+                self.selected = None
+            visible = self.on_screen()
+            w = self.w
+            with self.session.client.atomic():
+                if parts & Part.VIEW:
+                    self.view.show(draft, self.selected, visible)
+                if parts & Part.STATUS:
+                    w.status.content = self._status(draft, visible)
+                    w.back.visible = (
+                        not visible and self.frame is not None and not is_pristine(draft)
+                    )
+                if parts & Part.VIEW:
+                    self._show_boxes(draft, skip)
+                if parts & Part.ANSWER:
+                    answer = self.session.answer
+                    w.use_predictions.disabled = not (
+                        visible and answer is not None and len(answer.predictions.boxes) > 0
+                    )
+                if parts & Part.EVIDENCE:
+                    w.evidence.content = evidence_markdown(
+                        draft, self._box_evidence(draft), self.selected
+                    )
+                if parts & Part.SENTENCE:
+                    if w.prompt is not skip:
+                        self._show(w.prompt, draft.prompt)
+                    w.nothing.value = draft.refers_to_nothing
+                if parts & Part.CHECKS:
+                    self._show_checks(draft)
+
+    def _status(self, draft: Draft, visible: bool) -> str:
+        return status_markdown(
+            draft,
+            self.editor.history,
+            self.frame.name if self.frame is not None else None,
+            visible,
+            is_pristine(draft),
+            unavailable=self.hub.error if self.store is None else None,
+        )
+
+    def _show_boxes(self, draft: Draft, skip: object | None) -> None:
+        """The *Box* list and the selected box's inputs (disabled while none is selected)."""
+        w = self.w
+        options = tuple(box_option(i, b.cls, b.box) for i, b in enumerate(draft.boxes))
+        w.box.options = (NO_BOX, *options)
+        selected = None
+        if self.selected is not None:
+            index = draft.index_of(self.selected)
+            selected = draft.boxes[index]
+            w.box.value = options[index]
+        else:
+            w.box.value = NO_BOX
+        for handle in w.box_inputs():
+            handle.disabled = selected is None
+        if selected is None:
+            return
+        length, width, height, yaw = selected.box[3:]
+        if selected.cls in CLASSES and w.cls is not skip:
+            self._show(w.cls, selected.cls)
+        for handle, value in (
+            (w.length, length),
+            (w.width, width),
+            (w.height, height),
+            (w.yaw, float(np.degrees(yaw))),
+        ):
+            if handle is not skip:
+                self._show(handle, round(float(value), 4))
+
+    def _show_checks(self, draft: Draft) -> None:
+        w = self.w
+        calib = self.frame.sample.calib if self.frame is not None else None
+        config = self.store.validation if self.store is not None else ValidationConfig()
+        w.checks.content = checks_markdown(validate(draft, config, calib))
+        w.save.disabled = self.store is None or self.frame is None
+        w.split.disabled = draft.sample_id is not None
+
+    def _box_evidence(self, draft: Draft) -> tuple[BoxEvidence, ...]:
+        """The evidence of the draft's boxes on its frame (cached for the same frame and boxes)."""
+        if self.frame is None or not draft.boxes:
+            return ()
+        frame, boxes = self.frame, tuple(b.box for b in draft.boxes)
+        cached = self._evidence
+        if cached is None or cached[0] is not frame or cached[1] != boxes:
+            evidence = box_evidence(draft.box_array, frame.sample.lidar, frame.sample.radar)
+            cached = self._evidence = (frame, boxes, tuple(evidence))
+        return cached[2]
+
+    def _show(self, handle: viser.GuiInputHandle, value: object) -> None:
+        """Write the draft's ``value`` into an edit widget, unless the browser has changed the widget
+        since the server last wrote it: that edit's callback is still queued behind the one running
+        now (viser runs callbacks on worker threads, and they read the widget's value when they
+        run), and writing the draft's older value would silently undo what the user typed."""
+        key = id(handle)
+        if key in self._shown and handle.value != self._shown[key]:
+            return
+        handle.value = value
+        self._shown[key] = handle.value
+
+    def accept_edit(self, handle: viser.GuiInputHandle) -> None:
+        """The browser's value of ``handle`` is being applied now (holding ``session.lock``): it
+        is no longer a pending edit that :meth:`_show` must not overwrite."""
+        self._shown[id(handle)] = handle.value
+
+    def refresh_pairs(self) -> None:
+        """Re-read the saved pairs of the root into the *Pair* dropdown and table."""
+        pairs = self.store.pairs() if self.store is not None else ()
+        with self.session.lock:
+            if self.session.closed:
+                return
+            w = self.w
+            previous = option_pair_id(w.pair.value)
+            options = tuple(pair_option(p) for p in pairs)
+            self.pair_ids = tuple(p.sample_id for p in pairs)
+            w.pair.options = options or (NO_PAIRS,)
+            if previous in self.pair_ids:
+                w.pair.value = options[self.pair_ids.index(previous)]
+            elif options:
+                w.pair.value = options[-1]
+            w.open_pair.disabled = w.delete_pair.disabled = not options
+            w.pairs.content = pairs_markdown(pairs, self.hub.path)
+
+    # ------------------------------------------------------------------ listeners
+
+    def on_frame(self, session: ClientSession) -> None:
+        """A new frame is on screen (called by the session, holding its lock)."""
+        if self.frame is None or is_pristine(self.editor.draft):
+            self.bind_to_screen()
+        self.refresh()
+
+    def on_answer(self, session: ClientSession) -> None:
+        """A new answer is drawn: *Use predictions* may apply now."""
+        self.refresh(Part.ANSWER)
+
+    # ------------------------------------------------------------------ helpers
+
+    def guarded(self, fn: Callable[[], None]) -> None:
+        """Run a GUI action; an unexpected error becomes a notification, never a dead panel."""
+        try:
+            fn()
+        except Exception as exc:
+            self.session.report_error("Annotation error", exc)
+
+    def confirm(self, title: str, text: str, action: str, fn: Callable[[], None]) -> None:
+        """Ask in a modal window; ``fn`` runs when the person clicks ``action``."""
+        gui = self.session.client.gui
+        with gui.add_modal(title) as modal:
+            gui.add_markdown(md_text(text))
+            yes = gui.add_button(action, color="red")
+            no = gui.add_button("Cancel")
+
+        @yes.on_click
+        def _(_: viser.GuiEvent) -> None:
+            modal.close()
+            self.guarded(fn)
+
+        @no.on_click
+        def _(_: viser.GuiEvent) -> None:
+            modal.close()
+
+    def back_to_draft_frame(self) -> None:
+        """Show the draft's frame (in every browser: navigation is shared)."""
+        with self.session.lock:
+            frame = self.frame
+        if frame is None:
+            return
+        frames = self.navigator.frames
+        target = next((i for i, sid in enumerate(frames.ids) if sid in frame.sample_ids), None)
+        if target is None:
+            self.notify(
+                "Frame not in this split",
+                f"Sample {frame.name} is not in split '{frames.split}' being served.",
+            )
+            return
+        self.session.go_to(target)

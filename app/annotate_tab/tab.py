@@ -1,0 +1,107 @@
+"""Building one browser's Annotate tab: :func:`build_annotation_tab` wires the widgets, the scene
+click, the gizmo and the hotkeys to the actions (:class:`~app.annotate_tab.edits.DraftEdits`,
+:class:`~app.annotate_tab.pairs.PairActions`) and the panel to its session and hub.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable
+
+import viser
+
+from app.annotate_tab.edits import DraftEdits
+from app.annotate_tab.hub import AnnotationHub
+from app.annotate_tab.pairs import PairActions
+from app.annotate_tab.panel import AnnotationPanel
+from app.annotate_tab.widgets import HOTKEYS, NEW_PAIR, REDO, UNDO
+from app.session import ClientSession
+
+log = logging.getLogger(__name__)
+
+
+def build_annotation_tab(session: ClientSession, hub: AnnotationHub) -> AnnotationPanel:
+    """Fill the Annotate tab of one browser (called inside the tab's container)."""
+    panel = AnnotationPanel(session, hub)
+    edits = DraftEdits(panel)
+    pairs = PairActions(panel)
+    _wire(panel, edits, pairs)
+    _register_hotkeys(panel, edits, pairs)
+    hub.register(panel)
+    panel.refresh_pairs()
+    panel.refresh()
+    session.add_frame_listener(panel.on_frame)
+    session.add_answer_listener(panel.on_answer)
+    return panel
+
+
+def _from_browser(event: viser.GuiEvent) -> bool:
+    """Whether a GUI event came from the browser (not from the server setting a value)."""
+    return event.client is not None
+
+
+def _wire(panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions) -> None:
+    w = panel.w
+    scene = panel.session.client.scene
+
+    @scene.on_click()
+    def _(event: viser.SceneClickEvent) -> None:
+        panel.guarded(lambda: edits.click_ground(event.ray_origin, event.ray_direction))
+
+    panel.view.gizmo.on_update(edits.on_gizmo)
+
+    def on_user(handle: viser.GuiInputHandle, fn: Callable[[], None]) -> None:
+        def callback(event: viser.GuiEvent) -> None:
+            if _from_browser(event):
+                with panel.session.lock:  # reentrant; fn takes it too
+                    # From here on no other callback can write the widget, and fn reads
+                    # and applies this value: it is no longer a pending edit.
+                    panel.accept_edit(handle)
+                    panel.guarded(fn)
+
+        handle.on_update(callback)
+
+    def on_click(handle: viser.GuiButtonHandle, fn: Callable[[], None]) -> None:
+        handle.on_click(lambda _event: panel.guarded(fn))
+
+    on_user(w.box, edits.select_from_list)
+    on_user(w.cls, edits.set_class)
+    for handle in (w.length, w.width, w.height):
+        on_user(handle, lambda h=handle: edits.resize(h))
+    on_user(w.yaw, edits.set_yaw)
+    on_user(w.prompt, edits.set_prompt)
+    on_user(w.nothing, edits.set_nothing)
+    on_click(w.fit, edits.fit_selected)
+    on_click(w.delete, edits.delete_selected)
+    on_click(w.use_predictions, edits.use_predictions)
+    on_click(w.suggest, edits.suggest)
+    on_click(w.save, pairs.save)
+    on_click(w.open_pair, pairs.open_selected_pair)
+    on_click(w.delete_pair, pairs.delete_selected_pair)
+    on_click(w.back, panel.back_to_draft_frame)
+
+    @w.draft.on_click
+    def _(event: viser.GuiEvent) -> None:
+        action = {UNDO: edits.undo, REDO: edits.redo, NEW_PAIR: edits.new_pair}.get(
+            event.target.value
+        )
+        if action is not None:
+            panel.guarded(action)
+
+
+def _register_hotkeys(panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions) -> None:
+    actions = {
+        "undo": edits.undo,
+        "redo": edits.redo,
+        "delete": edits.delete_selected,
+        "save": pairs.save,
+    }
+    gui = panel.session.client.gui
+    for action, key, modifier, label in HOTKEYS:
+        try:
+            command = gui.add_command(label, hotkey=key, modifier=modifier)  # type: ignore[arg-type]
+        except Exception as exc:  # Experimental in viser 1.1.1: the panel works without.
+            log.warning("hotkey %s unavailable: %s", label, exc)
+            return
+        fn = actions[action]
+        command.on_trigger(lambda _event, fn=fn: panel.guarded(fn))

@@ -1,0 +1,158 @@
+"""The widgets of the Annotate tab: built once per browser, in the tab's container.
+
+:func:`build_annotation_widgets` adds them in the order a person uses them (status, placing, the
+*Boxes* folder with the evidence table, *Sentence*, *Save*, *Saved pairs*) and returns their
+handles (:class:`AnnotationWidgets`); what they do is wired by :mod:`app.annotate_tab.tab`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import viser
+
+from annotate.store import DEFAULT_SPLITS
+from app.annotate_tab.formatting import NO_BOX, NO_PAIRS
+from scenes.actors import CLASSES
+
+SPLITS = DEFAULT_SPLITS
+"""Splits offered when saving (the store's default, ``train``, is selected); the store refuses any
+other (a forged websocket message included)."""
+
+HOTKEYS: tuple[tuple[str, str, str | None, str], ...] = (
+    ("undo", "Z", "cmd/ctrl", "Annotate: undo"),
+    ("redo", "Z", "cmd/ctrl+shift", "Annotate: redo"),
+    ("delete", "delete", None, "Annotate: delete the selected box"),
+    ("save", "S", "cmd/ctrl+shift", "Annotate: save the pair"),
+)
+"""``(action, key, modifier, palette label)`` of the hotkeys."""
+
+
+@dataclass(frozen=True)
+class AnnotationWidgets:
+    """Handles of the Annotate tab (built by :func:`build_annotation_widgets`)."""
+
+    status: viser.GuiMarkdownHandle
+    back: viser.GuiButtonHandle
+    place: viser.GuiCheckboxHandle
+    new_class: viser.GuiDropdownHandle
+    box: viser.GuiDropdownHandle
+    cls: viser.GuiDropdownHandle
+    length: viser.GuiNumberHandle
+    width: viser.GuiNumberHandle
+    height: viser.GuiNumberHandle
+    yaw: viser.GuiNumberHandle
+    fit: viser.GuiButtonHandle
+    delete: viser.GuiButtonHandle
+    use_predictions: viser.GuiButtonHandle
+    evidence: viser.GuiMarkdownHandle
+    prompt: viser.GuiTextHandle
+    suggest: viser.GuiButtonHandle
+    nothing: viser.GuiCheckboxHandle
+    split: viser.GuiDropdownHandle
+    annotator: viser.GuiTextHandle
+    checks: viser.GuiMarkdownHandle
+    save: viser.GuiButtonHandle
+    draft: viser.GuiButtonGroupHandle
+    pair: viser.GuiDropdownHandle
+    open_pair: viser.GuiButtonHandle
+    delete_pair: viser.GuiButtonHandle
+    pairs: viser.GuiMarkdownHandle
+
+    def box_inputs(self) -> tuple[viser.GuiInputHandle, ...]:
+        """The inputs that edit the selected box (disabled while none is selected)."""
+        return (self.cls, self.length, self.width, self.height, self.yaw, self.fit, self.delete)
+
+
+UNDO, REDO, NEW_PAIR = "Undo", "Redo", "New pair"
+"""Buttons of the *Draft* group."""
+
+
+def build_annotation_widgets(gui: viser.GuiApi) -> AnnotationWidgets:
+    """Add the Annotate tab's widgets to ``gui`` (in the current container)."""
+    status = gui.add_markdown("Loading...")
+    back = gui.add_button("Back to the draft's frame", icon=viser.Icon.ARROW_BACK, visible=False)
+    place = gui.add_checkbox(
+        "Click to place",
+        True,
+        hint="A click on the ground places a box of the class below; a click on a draft box "
+        "selects it",
+    )
+    new_class = gui.add_dropdown("New box class", CLASSES, initial_value=CLASSES[0])
+    with gui.add_folder("Boxes"):
+        box = gui.add_dropdown("Box", (NO_BOX,), initial_value=NO_BOX)
+        cls = gui.add_dropdown("Class", CLASSES, initial_value=CLASSES[0], disabled=True)
+        size = {"min": 0.1, "max": 20.0, "step": 0.05, "disabled": True}
+        length = gui.add_number("Length (m)", 4.2, hint="Along the heading", **size)
+        width = gui.add_number("Width (m)", 1.8, **size)
+        height = gui.add_number("Height (m)", 1.5, hint="The bottom stays on the ground", **size)
+        yaw = gui.add_number(
+            "Yaw (deg)",
+            0.0,
+            min=-180.0,
+            max=180.0,
+            step=1.0,
+            disabled=True,
+            hint="Counter-clockwise from forward (+x); the gizmo's ring turns it too",
+        )
+        fit = gui.add_button(
+            "Fit to points",
+            icon=viser.Icon.BOX_MODEL,
+            disabled=True,
+            hint="Fit centre, size and yaw to the LiDAR points in and around the box",
+        )
+        delete = gui.add_button("Delete box", icon=viser.Icon.TRASH, disabled=True)
+        use_predictions = gui.add_button(
+            "Use predictions",
+            icon=viser.Icon.WAND,
+            disabled=True,
+            hint="The boxes of the last answer (Query tab) become draft boxes",
+        )
+        evidence = gui.add_markdown("")
+    with gui.add_folder("Sentence"):
+        prompt = gui.add_text("Pair prompt", "", hint="The sentence that refers to the boxes")
+        suggest = gui.add_button(
+            "Suggest", icon=viser.Icon.BULB, hint="Write a Talk2Radar-style prompt for the boxes"
+        )
+        nothing = gui.add_checkbox(
+            "Refers to nothing", False, hint="The prompt describes no object of this frame"
+        )
+    with gui.add_folder("Save"):
+        split = gui.add_dropdown("Split", SPLITS, initial_value=SPLITS[0])
+        annotator = gui.add_text("Annotator", "", hint="Your name, recorded with the pair")
+        checks = gui.add_markdown("")
+        save = gui.add_button("Save pair", color="green", icon=viser.Icon.DEVICE_FLOPPY)
+        draft = gui.add_button_group("Draft", (UNDO, REDO, NEW_PAIR))
+    with gui.add_folder("Saved pairs"):
+        pair = gui.add_dropdown("Pair", (NO_PAIRS,), initial_value=NO_PAIRS)
+        open_pair = gui.add_button("Open pair", icon=viser.Icon.FOLDER_OPEN, disabled=True)
+        delete_pair = gui.add_button("Delete pair", icon=viser.Icon.TRASH, disabled=True)
+        pairs = gui.add_markdown("")
+    return AnnotationWidgets(
+        status=status,
+        back=back,
+        place=place,
+        new_class=new_class,
+        box=box,
+        cls=cls,
+        length=length,
+        width=width,
+        height=height,
+        yaw=yaw,
+        fit=fit,
+        delete=delete,
+        use_predictions=use_predictions,
+        evidence=evidence,
+        prompt=prompt,
+        suggest=suggest,
+        nothing=nothing,
+        split=split,
+        annotator=annotator,
+        checks=checks,
+        save=save,
+        draft=draft,
+        pair=pair,
+        open_pair=open_pair,
+        delete_pair=delete_pair,
+        pairs=pairs,
+    )
