@@ -53,7 +53,9 @@ class Detections:
         return Detections(np.zeros((0, 7)), np.zeros(0), np.zeros(0, dtype=np.int64), ())
 
 
-def rotated_nms(boxes: np.ndarray, scores: np.ndarray, iou_threshold: float) -> np.ndarray:
+def rotated_nms(
+    boxes: np.ndarray, scores: np.ndarray, iou_threshold: float, max_keep: int | None = None
+) -> np.ndarray:
     """Greedy non-maximum suppression with the exact rotated BEV IoU.
 
     Args:
@@ -61,6 +63,8 @@ def rotated_nms(boxes: np.ndarray, scores: np.ndarray, iou_threshold: float) -> 
         scores: ``(K,)`` scores.
         iou_threshold: A box is suppressed when its BEV IoU with a kept, higher-scoring box is
             strictly greater than this.
+        max_keep: Stop once this many boxes are kept (the result is the first ``max_keep`` of
+            the full run's, since greedy NMS keeps boxes in descending score order).
 
     Returns:
         ``(M,)`` int64 indices of the kept boxes into ``boxes``, by descending score (ties keep the
@@ -79,6 +83,8 @@ def rotated_nms(boxes: np.ndarray, scores: np.ndarray, iou_threshold: float) -> 
         if suppressed[i]:
             continue
         keep.append(int(i))
+        if max_keep is not None and len(keep) >= max_keep:
+            break
         rest = order[pos + 1 :]
         rest = rest[~suppressed[rest]]
         if len(rest) == 0:
@@ -127,7 +133,9 @@ def _decode_one(
     for c in range(NUM_CLASSES):
         idx = np.flatnonzero(labels == c)
         if len(idx):
-            kept.append(idx[rotated_nms(boxes[idx], scores_np[idx], cfg.nms_iou)])
+            kept.append(
+                idx[rotated_nms(boxes[idx], scores_np[idx], cfg.nms_iou, cfg.max_detections)]
+            )
     sel = np.concatenate(kept)
     sel = sel[np.argsort(-scores_np[sel], kind="stable")][: cfg.max_detections]
     return Detections(

@@ -343,3 +343,23 @@ def test_rotated_nms_empty_and_mismatch():
     assert rotated_nms(np.zeros((0, 7)), np.zeros(0), 0.2).tolist() == []
     with pytest.raises(ValueError, match="scores"):
         rotated_nms(np.zeros((2, 7)), np.zeros(3), 0.2)
+
+
+def test_rotated_nms_max_keep_is_a_prefix_of_the_full_run():
+    rng = np.random.default_rng(5)
+    boxes = np.column_stack(
+        [
+            rng.uniform(0, 20, 200),
+            rng.uniform(-10, 10, 200),
+            np.zeros(200),
+            rng.uniform(0.5, 4.5, 200),
+            rng.uniform(0.5, 2.0, 200),
+            np.ones(200),
+            rng.uniform(-3, 3, 200),
+        ]
+    )
+    scores = rng.random(200)
+    full = rotated_nms(boxes, scores, 0.2)
+    assert len(full) > 10
+    for k in (1, 5, 10, len(full), len(full) + 3):
+        assert rotated_nms(boxes, scores, 0.2, max_keep=k).tolist() == full[:k].tolist()
