@@ -89,6 +89,7 @@ class TrainConfig:
     sensor_augment: bool = True
     freeze_scene: bool = False
     bank_prompts: int = 24
+    scene_limit: int = 0
 
     def __post_init__(self) -> None:
         for name in ("epochs", "batch_size", "prompts_per_scene"):
@@ -213,6 +214,8 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
             raise TrainingError("the referent path trains in one process (no torchrun yet)")
         sensors = SensorAugment() if cfg.sensor_augment else None
         dataset = FrameDataset(root, cfg.train_split, augment, sensors, seed=cfg.seed)
+        if cfg.freeze_scene and cfg.scene_limit:
+            dataset.ids = dataset.ids[: cfg.scene_limit]  # the cached scenes (see below)
     else:
         dataset = GroundingDataset(root, cfg.train_split, augment=augment, seed=cfg.seed)
     referent_cfg = ReferentTrainConfig(prompts_per_scene=cfg.prompts_per_scene)
@@ -230,6 +233,9 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
             "log_every",
             "device",
             "amp",
+            "prompts_per_scene",
+            "bank_prompts",
+            "init",
         }
         now = asdict(cfg)
         changed = sorted(k for k, v in saved["config"].items() if k not in free and now.get(k) != v)
@@ -252,9 +258,12 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
             p.requires_grad_(name.startswith("referent."))
         if cfg.text_encoder not in (None, "minilm"):
             raise TrainingError("--freeze-scene banks frozen MiniLM prompt features: use minilm")
+        scenes = FrameDataset(root, cfg.train_split)
+        if cfg.scene_limit:
+            scenes.ids = scenes.ids[: cfg.scene_limit]
         cached, bank = cache_scenes(
             model,
-            FrameDataset(root, cfg.train_split),
+            scenes,
             cfg.bank_prompts,
             seed=cfg.seed,
             progress=rank == 0,
@@ -455,6 +464,12 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
         default=24,
         help="--freeze-scene: prompts generated and encoded once per scene",
     )
+    p.add_argument(
+        "--scene-limit",
+        type=int,
+        default=0,
+        help="--freeze-scene: cache only the first N training scenes (0: all)",
+    )
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
     p.add_argument(
         "--threads",
@@ -495,6 +510,7 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
         sensor_augment=not a.no_sensor_augment,
         freeze_scene=a.freeze_scene,
         bank_prompts=a.bank_prompts,
+        scene_limit=a.scene_limit,
     )
     return cfg, a.resume
 
