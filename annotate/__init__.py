@@ -1,6 +1,8 @@
 """The annotation domain, with no GUI in it: drafts of prompt-to-box pairs with undo / redo,
 validation, box fitting, per-box sensor evidence, prompt suggestion, and the store that saves pairs
-atomically into a Talk2Radar root (see ``docs/ANNOTATION.md``).
+atomically into a Talk2Radar root (see ``docs/ANNOTATION.md``; the store is :mod:`annotate.store`
+over :mod:`annotate.manifest`, :mod:`annotate.journal`, :mod:`annotate.transaction` and
+:mod:`annotate.tree`).
 
 Dependency direction: ``app -> annotate -> scenes``; nothing here imports ``app`` or ``model``.
 """
@@ -9,13 +11,13 @@ from annotate.draft import (
     DEFAULT_SIZES,
     Draft,
     DraftBox,
-    DraftEditor,
     DraftError,
-    History,
     changed_box,
     default_box,
     is_pristine,
 )
+from annotate.editor import DraftEditor, History
+from annotate.errors import ConflictError, DiskFullError, SaveError, SplitError, StoreError
 from annotate.evidence import (
     BoxEvidence,
     EvidenceConfig,
@@ -34,20 +36,10 @@ from annotate.fitting import (
     fit_box,
     min_area_rectangle,
 )
+from annotate.manifest import Action, ManifestRecord, PairInfo, read_manifest
 from annotate.proposals import DUPLICATE_IOU, MAX_PROPOSALS, proposals
-from annotate.store import (
-    Action,
-    AnnotationStore,
-    ConflictError,
-    DiskFullError,
-    ManifestRecord,
-    PairInfo,
-    SaveError,
-    SaveResult,
-    SourceFrame,
-    StoreError,
-    read_manifest,
-)
+from annotate.source import SourceFrame
+from annotate.store import DEFAULT_SPLITS, AnnotationStore, SaveResult
 from annotate.suggest import (
     SceneObject,
     SuggestConfig,
@@ -67,6 +59,7 @@ from annotate.validation import (
 
 __all__ = [
     "DEFAULT_SIZES",
+    "DEFAULT_SPLITS",
     "DUPLICATE_IOU",
     "MAX_PROPOSALS",
     "Action",
@@ -94,6 +87,7 @@ __all__ = [
     "SceneObject",
     "Severity",
     "SourceFrame",
+    "SplitError",
     "StoreError",
     "SuggestConfig",
     "Suggestion",

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import annotate.store as store_module
+import annotate.manifest as manifest_module
 from annotate import (
     Action,
     AnnotationStore,
@@ -25,7 +25,7 @@ from annotate import (
     ValidationError,
     read_manifest,
 )
-from annotate.store import SplitError
+from annotate.errors import SplitError
 from scenes import Actor, SampleMeta, Talk2RadarRoot, Talk2RadarWriter, read_label_file
 from scenes.boxes import wrap_yaw
 from scenes.calib import vod_lidar_calibration, vod_radar_calibration
@@ -424,7 +424,7 @@ def test_manifest_failure_after_the_commit_is_completed_later(
     def broken(path, line):
         raise OSError(errno.EIO, "simulated I/O error")
 
-    monkeypatch.setattr(store_module, "append_manifest_line", broken)
+    monkeypatch.setattr(manifest_module, "append_manifest_line", broken)
     with pytest.raises(SaveError, match="resolved the next time the store opens"):
         store.create(_draft(), source)
     monkeypatch.undo()
@@ -661,7 +661,7 @@ def test_a_journal_recovery_cannot_resolve_is_set_aside(
         {"op": "a" * 32, "action": "create", "sample_id": "00041", "splits": ["a" * 300]},
     )
     torn = _write_journal(out_root, "b" * 32, '{"op": "bbbb", "act')
-    with caplog.at_level("WARNING", logger="annotate.store"):
+    with caplog.at_level("WARNING", logger="annotate"):
         store = AnnotationStore(out_root)
     unresolved = out_root / "annotations" / "unresolved"
     assert not bad.exists() and not torn.exists()
@@ -680,7 +680,7 @@ def test_full_disk_during_an_edit_is_disk_full_until_space_is_freed(
     sid = store.create(_draft("old prompt"), source).sample_id
     prompt_path = out_root / "lidar" / "training" / "prompt" / f"{sid}.txt"
     disk = {"full": False}
-    real_fsync, real_append = os.fsync, store_module.append_manifest_line
+    real_fsync, real_append = os.fsync, manifest_module.append_manifest_line
 
     def fsync(fd: int) -> None:
         if disk["full"]:
@@ -692,10 +692,10 @@ def test_full_disk_during_an_edit_is_disk_full_until_space_is_freed(
         real_append(path, line)
 
     monkeypatch.setattr(os, "fsync", fsync)
-    monkeypatch.setattr(store_module, "append_manifest_line", append)
+    monkeypatch.setattr(manifest_module, "append_manifest_line", append)
     with pytest.raises(DiskFullError):
         store.update(store.open(sid).set_prompt("new prompt"))
-    monkeypatch.setattr(store_module, "append_manifest_line", real_append)
+    monkeypatch.setattr(manifest_module, "append_manifest_line", real_append)
     # The old files cannot be written back yet: every later call says so, as a store error.
     for attempt in (
         lambda: store.create(_draft("another"), source),
@@ -735,3 +735,41 @@ def test_filesystem_errors_are_store_errors(source_root: Path, out_root: Path) -
     blocked.write_text("not a folder")
     with pytest.raises(StoreError, match="opening the annotation store"):
         AnnotationStore(blocked / "root")
+
+
+# ------------------------------------------------------------------------------------------ one format
+
+
+def _pair_files(root: Path, sid: str) -> dict[str, bytes]:
+    """The files a save writes for pair ``sid`` (prompt, labels of both trees, sidecar)."""
+    names = [
+        f"{tree}/training/{folder}/{sid}.txt"
+        for tree in ("lidar", "radar_5frames")
+        for folder in ("prompt", "label_2")
+    ]
+    return {name: (root / name).read_bytes() for name in [*names, f"meta/{sid}.json"]}
+
+
+def test_create_and_update_write_the_same_files(source_root: Path, tmp_path: Path) -> None:
+    """A pair saved by create and the same pair saved by an update of another pair on the same
+    frame are the same bytes (the sidecar's version aside)."""
+    clock = lambda: "2024-01-01T00:00:00.000+00:00"  # noqa: E731
+    draft = _draft("the car on the left and the pedestrian")
+    created = AnnotationStore(tmp_path / "a", clock=clock)
+    sid = created.create(draft, SourceFrame.from_root(source_root, 3), annotator="ada").sample_id
+    edited = AnnotationStore(tmp_path / "b", clock=clock)
+    first = Draft().set_prompt("the cyclist").add_box(CYC, "Cyclist")
+    assert (
+        edited.create(first, SourceFrame.from_root(source_root, 3), annotator="ada").sample_id
+        == sid
+    )
+    reopened = edited.open(sid)
+    again = reopened.delete_box(0).set_prompt(draft.prompt)
+    for item in draft.boxes:
+        again = again.add_box(item.box, item.cls)
+    assert edited.update(again, annotator="ada").version == 2
+    a, b = _pair_files(tmp_path / "a", sid), _pair_files(tmp_path / "b", sid)
+    meta_a, meta_b = json.loads(a.pop(f"meta/{sid}.json")), json.loads(b.pop(f"meta/{sid}.json"))
+    assert a == b
+    assert meta_a["extra"].pop("version") == 1 and meta_b["extra"].pop("version") == 2
+    assert meta_a == meta_b

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import viser
 
-from annotate.store import DEFAULT_SPLITS
+from annotate import DEFAULT_SPLITS
 from app.annotate_tab.formatting import NO_BOX, NO_PAIRS
 from scenes.actors import CLASSES
 
