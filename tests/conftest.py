@@ -1,11 +1,283 @@
-"""Session-wide test settings.
+"""Session-wide test settings and the fixtures several test modules share.
 
 Torch runs with one intra-op thread in the test process: on a 2-core machine the suite's own
 servers, browser and subprocesses share the cores, and torch's OpenMP pool with two threads slows
 down many times over when a core is taken (see docs/PERFORMANCE.md's thread table), which turned
 the overfit test's two minutes into a timeout on a loaded machine.
+
+Fixtures (test modules take them by name; none imports another test module):
+
+- ``write_tiny_root(path, frames=3, seed=0) -> path``: a tiny Talk2Radar root (flat ground, one
+  car-sized cluster around ``gt_box`` per frame, sparse radar); ``gt_box``: that car's box.
+- ``torch_threads(count)``: a context manager running torch with ``count`` threads.
+- ``ws_client(port)``: a :class:`BrowserLikeClient` speaking viser's websocket protocol.
+- ``chromium``: Debian's Chromium (the test skips without it); ``chromium_args``: its flags.
 """
 
+from __future__ import annotations
+
+import contextlib
+import os
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import msgspec
+import numpy as np
+import pytest
 import torch
+import viser
+import zstandard
+from websockets.sync.client import connect
+
+from scenes.calib import vod_lidar_calibration, vod_radar_calibration
+from scenes.root import Talk2RadarWriter
+from tests.browser_helpers import CHROMIUM_ARGS, find_chromium
 
 torch.set_num_threads(1)
+
+GT_BOX = np.array([15.0, 2.0, -0.95, 4.2, 1.8, 1.5, 0.1])
+"""The car of every tiny-root frame (frame ``i`` shifted by ``2 i`` metres along x)."""
+
+TIMEOUT_SCALE = float(os.environ.get("TALK2PC_TEST_TIMEOUT_SCALE", "4"))
+"""Multiplies every wait's timeout (``pump_until``); waits end as soon as their condition holds."""
+
+
+# ---------------------------------------------------------------------------- tiny roots
+
+
+def write_tiny_root(path: Path, frames: int = 3, seed: int = 0) -> Path:
+    """A Talk2Radar root with ``frames`` test samples: a flat ground at z = -1.7, a car-sized
+    cluster of points around :data:`GT_BOX` (its label), sparse radar with velocities."""
+    rng = np.random.default_rng(seed)
+    writer = Talk2RadarWriter(path)
+    ids = []
+    for i in range(frames):
+        ground = np.c_[
+            rng.uniform([1.0, -20.0], [50.0, 20.0], size=(4000, 2)),
+            rng.normal(-1.7, 0.01, 4000),
+            rng.uniform(0, 60, 4000),
+        ]
+        box = GT_BOX + np.array([i * 2.0, 0, 0, 0, 0, 0, 0])
+        car = np.c_[
+            rng.uniform(box[:3] - box[3:6] / 2, box[:3] + box[3:6] / 2, size=(600, 3)),
+            rng.uniform(100, 255, 600),
+        ]
+        radar = np.c_[
+            rng.uniform([2.0, -15.0, -1.5], [45.0, 15.0, 0.5], size=(80, 3)),
+            rng.normal(5, 5, 80),
+            rng.normal(0, 4, (80, 2)),
+            -rng.integers(0, 5, 80),
+        ]
+        files = writer.write_sensors(
+            f"f{i}",
+            np.r_[ground, car].astype(np.float32),
+            radar.astype(np.float32),
+            vod_lidar_calibration(),
+            vod_radar_calibration(),
+        )
+        ids.append(writer.write_sample(i, files, box[None], ["Car"], "the car about 15 m ahead"))
+    writer.write_image_sets({"test": ids, "train": ids[:1]})
+    return path
+
+
+@contextlib.contextmanager
+def torch_threads(count: int) -> Iterator[None]:
+    """Run with ``count`` torch CPU threads, as ``launch.py`` does (restored afterwards)."""
+    old = torch.get_num_threads()
+    torch.set_num_threads(count)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(old)
+
+
+@pytest.fixture(name="write_tiny_root", scope="session")
+def _write_tiny_root() -> Callable[..., Path]:
+    return write_tiny_root
+
+
+@pytest.fixture(name="gt_box", scope="session")
+def _gt_box() -> np.ndarray:
+    return GT_BOX.copy()
+
+
+@pytest.fixture(name="torch_threads", scope="session")
+def _torch_threads() -> Callable[[int], contextlib.AbstractContextManager[None]]:
+    return torch_threads
+
+
+# ---------------------------------------------------------------------------- websocket client
+
+
+def _decode(frame: bytes) -> list[dict]:
+    raw_len = int.from_bytes(frame[:8], "little")
+    zstd_len = int.from_bytes(frame[8:16], "little")
+    payload = zstandard.ZstdDecompressor().decompress(
+        frame[16 : 16 + zstd_len], max_output_size=raw_len
+    )
+    return msgspec.msgpack.decode(payload)["messages"]
+
+
+class BrowserLikeClient:
+    """A websocket client that behaves like the viser web client, minus the rendering.
+
+    It speaks viser 1.1.1's protocol (spec §7): it registers with a ``ViewerCameraMessage``, then
+    sends ``GuiUpdateMessage`` s (typing, clicking, selecting), scene clicks and gizmo drags, and
+    decodes the server's frames (``[u64 raw][u64 zstd][zstd(msgpack)][binary]``) to track the
+    scene nodes, GUI labels, dropdown options, markdown and notifications.
+    """
+
+    def __init__(self, port: int) -> None:
+        self.ws = connect(
+            f"ws://127.0.0.1:{port}",
+            subprotocols=[f"viser-v{viser.__version__}"],
+            max_size=None,
+        )
+        self.nodes: dict[str, str] = {}  # scene node name -> message type
+        self.visible: dict[str, bool] = {}
+        self.gui: dict[str, str] = {}  # label -> uuid
+        self.notifications: list[tuple[str, str]] = []
+        self.markdown: dict[str, str] = {}  # uuid -> content
+        self.options: dict[str, tuple[str, ...]] = {}  # uuid -> dropdown options
+        self.owners: dict[str, str] = {}  # scene node name -> owner id
+        self.messages: list[dict] = []
+        self._send(
+            {
+                "type": "ViewerCameraMessage",
+                "wxyz": [1.0, 0.0, 0.0, 0.0],
+                "position": [-10.0, 0.0, 5.0],
+                "fov": 1.0,
+                "near": 0.01,
+                "far": 1000.0,
+                "image_height": 600,
+                "image_width": 800,
+                "look_at": [10.0, 0.0, 0.0],
+                "up_direction": [0.0, 0.0, 1.0],
+            }
+        )
+
+    def _send(self, message: dict) -> None:
+        self.ws.send(msgspec.msgpack.encode(message))
+
+    def _handle(self, m: dict) -> None:
+        self.messages.append(m)
+        kind = m["type"]
+        if kind == "RemoveSceneNodeMessage":
+            for name in [n for n in self.nodes if n == m["name"] or n.startswith(m["name"] + "/")]:
+                del self.nodes[name]
+        elif kind == "SetSceneNodeVisibilityMessage":
+            self.visible[m["name"]] = m["visible"]
+        elif "name" in m and kind.endswith("Message") and "props" in m:
+            self.nodes[m["name"]] = kind
+        if kind == "NotificationShowMessage":
+            self.notifications.append((m["props"]["title"], m["props"]["body"]))
+        props = m.get("props")
+        if kind.startswith("Gui") and isinstance(props, dict) and props.get("label"):
+            self.gui[props["label"]] = m["uuid"]
+        if kind == "GuiMarkdownMessage":
+            self.markdown[m["uuid"]] = props["_markdown"]
+        updates = m.get("updates", {}) if kind == "GuiUpdateMessage" else {}
+        if "_markdown" in updates:
+            self.markdown[m["uuid"]] = updates["_markdown"]
+        if kind == "GuiDropdownMessage":
+            self.options[m["uuid"]] = tuple(props["options"])
+        elif "options" in updates:
+            self.options[m["uuid"]] = tuple(updates["options"])
+        if "owner" in m and "name" in m:
+            self.owners[m["name"]] = m["owner"]
+
+    def pump_until(self, condition: Callable[[], bool], timeout: float, what: str) -> None:
+        """Read messages until ``condition()`` holds; fail after ``timeout`` seconds, scaled by
+        ``TIMEOUT_SCALE`` (a bound for a stalled server, not a speed check: a machine whose cores
+        are busy with other jobs can be many times slower than an idle one)."""
+        timeout *= TIMEOUT_SCALE
+        deadline = time.monotonic() + timeout
+        while not condition():
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+            try:
+                frame = self.ws.recv(timeout=min(left, 0.2))
+            except TimeoutError:
+                continue
+            for m in _decode(frame):
+                self._handle(m)
+
+    def set(self, label: str, value: object) -> None:
+        """Change an input as a user would (typing, selecting, dragging)."""
+        self._send(
+            {"type": "GuiUpdateMessage", "uuid": self.gui[label], "updates": {"value": value}}
+        )
+
+    def click(self, label: str, option: object = True) -> None:
+        """Click a button (or one button of a button group)."""
+        self.set(label, option)
+
+    def dropdown(self, label: str) -> tuple[str, ...]:
+        """The options of a dropdown."""
+        return self.options[self.gui[label]]
+
+    def click_ground(self, x: float, y: float, ground_z: float) -> None:
+        """A click on the ground point ``(x, y)`` seen from 10 m above the sensor."""
+        origin = np.array([0.0, 0.0, 10.0])
+        direction = np.array([x, y, ground_z]) - origin
+        direction /= np.linalg.norm(direction)
+        self._send(
+            {
+                "type": "ScenePointerMessage",
+                "event_type": "click",
+                "ray_origin": origin.tolist(),
+                "ray_direction": direction.tolist(),
+                "screen_pos": [[0.5, 0.5]],
+                "modifier": None,
+            }
+        )
+
+    def drag_gizmo(
+        self, name: str, poses: list[tuple[float, float, tuple[float, ...]]], z: float
+    ) -> None:
+        """Drag the transform gizmo ``name`` through ``(x, y, wxyz)`` poses, as one drag."""
+        owner = self.owners[name]
+        self._send({"type": "TransformControlsDragStartMessage", "name": name, "owner": owner})
+        for x, y, wxyz in poses:
+            self._send(
+                {
+                    "type": "TransformControlsUpdateMessage",
+                    "name": name,
+                    "wxyz": list(wxyz),
+                    "position": [x, y, z],
+                    "owner": owner,
+                }
+            )
+        self._send({"type": "TransformControlsDragEndMessage", "name": name, "owner": owner})
+
+    def drain(self, seconds: float) -> None:
+        """Read whatever arrives during ``seconds``."""
+        deadline = time.monotonic() + seconds
+        self.pump_until(lambda: time.monotonic() >= deadline, seconds + 1.0, "nothing")
+
+    def close(self) -> None:
+        self.ws.close()
+
+
+@pytest.fixture(name="ws_client", scope="session")
+def _ws_client() -> Callable[[int], BrowserLikeClient]:
+    return BrowserLikeClient
+
+
+# ---------------------------------------------------------------------------- Chromium
+
+
+@pytest.fixture
+def chromium() -> str:
+    """Debian's Chromium; the test skips (and says so) where there is none."""
+    path = find_chromium()
+    if path is None:
+        pytest.skip("no Chromium found (/usr/bin/chromium): install Debian's `chromium` package")
+    return path
+
+
+@pytest.fixture(name="chromium_args", scope="session")
+def _chromium_args() -> list[str]:
+    return list(CHROMIUM_ARGS)

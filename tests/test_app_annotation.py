@@ -20,7 +20,6 @@ from app.annotate_tab import AnnotationPanel
 from app.annotate_tab.formatting import NO_BOX, option_index, option_pair_id, pair_option
 from app.annotate_tab.view import box_at, ground_hit, wxyz_to_yaw, yaw_to_wxyz
 from scenes.root import Talk2RadarRoot
-from tests.test_app_ws import GT_BOX, BrowserLikeClient, torch_threads, write_tiny_root
 
 # ---------------------------------------------------------------------- pure helpers
 
@@ -71,62 +70,8 @@ def test_option_parsing() -> None:
 # ---------------------------------------------------------------------- through the websocket
 
 
-class AnnotatingClient(BrowserLikeClient):
-    """The websocket client of test_app_ws.py, plus scene clicks, gizmo drags and dropdowns."""
-
-    def __init__(self, port: int) -> None:
-        self.options: dict[str, tuple[str, ...]] = {}  # uuid -> dropdown options
-        self.owners: dict[str, str] = {}  # scene node name -> owner id
-        super().__init__(port)
-
-    def _handle(self, m: dict) -> None:
-        super()._handle(m)
-        if m["type"] == "GuiDropdownMessage":
-            self.options[m["uuid"]] = tuple(m["props"]["options"])
-        elif m["type"] == "GuiUpdateMessage" and "options" in m.get("updates", {}):
-            self.options[m["uuid"]] = tuple(m["updates"]["options"])
-        if "owner" in m and "name" in m:
-            self.owners[m["name"]] = m["owner"]
-
-    def dropdown(self, label: str) -> tuple[str, ...]:
-        return self.options[self.gui[label]]
-
-    def click_ground(self, x: float, y: float, ground_z: float) -> None:
-        """A click on the ground point ``(x, y)`` seen from 10 m above the sensor."""
-        origin = np.array([0.0, 0.0, 10.0])
-        direction = np.array([x, y, ground_z]) - origin
-        direction /= np.linalg.norm(direction)
-        self._send(
-            {
-                "type": "ScenePointerMessage",
-                "event_type": "click",
-                "ray_origin": origin.tolist(),
-                "ray_direction": direction.tolist(),
-                "screen_pos": [[0.5, 0.5]],
-                "modifier": None,
-            }
-        )
-
-    def drag_gizmo(self, poses: list[tuple[float, float, float]], z: float) -> None:
-        """Drag the gizmo through ``(x, y, yaw)`` poses, as one drag."""
-        name = "/annotate/gizmo"
-        owner = self.owners[name]
-        self._send({"type": "TransformControlsDragStartMessage", "name": name, "owner": owner})
-        for x, y, yaw in poses:
-            self._send(
-                {
-                    "type": "TransformControlsUpdateMessage",
-                    "name": name,
-                    "wxyz": list(yaw_to_wxyz(yaw)),
-                    "position": [x, y, z],
-                    "owner": owner,
-                }
-            )
-        self._send({"type": "TransformControlsDragEndMessage", "name": name, "owner": owner})
-
-
 @pytest.fixture(scope="module")
-def annotating_app(tmp_path_factory):
+def annotating_app(tmp_path_factory, write_tiny_root, torch_threads):
     from app import AppConfig, Talk2PCApp
     from model import build_model
 
@@ -142,9 +87,9 @@ def annotating_app(tmp_path_factory):
             app.stop()
 
 
-def _connect(app) -> tuple[AnnotatingClient, AnnotationPanel]:
+def _connect(app, ws_client):
     before = set(app.sessions)
-    client = AnnotatingClient(app.port)
+    client = ws_client(app.port)
     client.pump_until(
         lambda: "/scene/lidar" in client.nodes and "Save pair" in client.gui,
         15,
@@ -167,9 +112,9 @@ def _files(root: Path) -> dict[str, tuple[int, int]]:
     return out
 
 
-def test_place_two_boxes_type_prompt_save_and_find_the_sample(annotating_app) -> None:
+def test_place_two_boxes_type_prompt_save_and_find_the_sample(annotating_app, ws_client) -> None:
     app = annotating_app
-    client, panel = _connect(app)
+    client, panel = _connect(app, ws_client)
     try:
         ground = panel.frame.ground_z
         client.click_ground(12.0, 3.0, ground)
@@ -231,7 +176,7 @@ def test_place_two_boxes_type_prompt_save_and_find_the_sample(annotating_app) ->
         client.close()
 
     # A page reload (a new connection) lists the pair.
-    again, _ = _connect(app)
+    again, _ = _connect(app, ws_client)
     try:
         again.pump_until(
             lambda: any(o.startswith(f"{sid} · 2 boxes") for o in again.dropdown("Pair")),
@@ -243,11 +188,11 @@ def test_place_two_boxes_type_prompt_save_and_find_the_sample(annotating_app) ->
 
 
 def test_typing_revalidates_without_recounting_points_or_redrawing_boxes(
-    annotating_app, monkeypatch
+    annotating_app, ws_client, monkeypatch
 ) -> None:
     import app.annotate_tab.panel as panel_module
 
-    client, panel = _connect(annotating_app)
+    client, panel = _connect(annotating_app, ws_client)
     try:
         client.click_ground(18.0, -1.0, panel.frame.ground_z)
         client.pump_until(lambda: len(panel.draft.boxes) == 1, 5, "a box")
@@ -281,7 +226,7 @@ def test_typing_revalidates_without_recounting_points_or_redrawing_boxes(
         client.close()
 
 
-def test_each_app_owns_its_annotation_hub(tmp_path) -> None:
+def test_each_app_owns_its_annotation_hub(tmp_path, write_tiny_root) -> None:
     import types
 
     from app import AppConfig, Talk2PCApp
@@ -301,9 +246,9 @@ def test_each_app_owns_its_annotation_hub(tmp_path) -> None:
     assert first.annotations.panels() == []
 
 
-def test_invalid_save_notifies_and_writes_nothing(annotating_app) -> None:
+def test_invalid_save_notifies_and_writes_nothing(annotating_app, ws_client) -> None:
     app = annotating_app
-    client, panel = _connect(app)
+    client, panel = _connect(app, ws_client)
     try:
         client.click_ground(14.0, -4.0, panel.frame.ground_z)
         client.pump_until(lambda: len(panel.draft.boxes) == 1, 5, "a box")
@@ -322,8 +267,8 @@ def test_invalid_save_notifies_and_writes_nothing(annotating_app) -> None:
         client.close()
 
 
-def test_undo_redo_and_one_undo_step_per_gizmo_drag(annotating_app) -> None:
-    client, panel = _connect(annotating_app)
+def test_undo_redo_and_one_undo_step_per_gizmo_drag(annotating_app, ws_client) -> None:
+    client, panel = _connect(annotating_app, ws_client)
     try:
         ground = panel.frame.ground_z
         client.click_ground(20.0, 1.0, ground)
@@ -342,7 +287,8 @@ def test_undo_redo_and_one_undo_step_per_gizmo_drag(annotating_app) -> None:
 
         client.pump_until(lambda: "/annotate/gizmo" in client.owners, 5, "the gizmo")
         z = placed[2]
-        client.drag_gizmo([(20.5, 1.5, 0.2), (21.0, 2.0, 0.4), (21.5, 2.5, 0.6)], z)
+        drag = [(20.5, 1.5, 0.2), (21.0, 2.0, 0.4), (21.5, 2.5, 0.6)]
+        client.drag_gizmo("/annotate/gizmo", [(x, y, yaw_to_wxyz(t)) for x, y, t in drag], z)
         client.pump_until(
             lambda: panel.draft.boxes[0].box[0] == pytest.approx(21.5), 5, "the dragged box"
         )
@@ -357,9 +303,9 @@ def test_undo_redo_and_one_undo_step_per_gizmo_drag(annotating_app) -> None:
         client.close()
 
 
-def test_two_clients_have_separate_drafts(annotating_app) -> None:
-    a, panel_a = _connect(annotating_app)
-    b, panel_b = _connect(annotating_app)
+def test_two_clients_have_separate_drafts(annotating_app, ws_client) -> None:
+    a, panel_a = _connect(annotating_app, ws_client)
+    b, panel_b = _connect(annotating_app, ws_client)
     try:
         a.click_ground(16.0, -3.0, panel_a.frame.ground_z)
         a.pump_until(lambda: len(panel_a.draft.boxes) == 1, 5, "A's box")
@@ -377,13 +323,13 @@ def test_two_clients_have_separate_drafts(annotating_app) -> None:
         b.close()
 
 
-def test_fit_to_points_and_use_predictions(annotating_app) -> None:
+def test_fit_to_points_and_use_predictions(annotating_app, ws_client, gt_box) -> None:
     app = annotating_app
-    client, panel = _connect(app)
+    client, panel = _connect(app, ws_client)
     try:
-        # The frame's car: points filling GT_BOX's extent shifted by 2 m per frame, axis-aligned
+        # The frame's car: points filling gt_box's extent shifted by 2 m per frame, axis-aligned
         # (write_tiny_root draws them between the box's min and max corners: yaw 0).
-        car = GT_BOX + np.array([2.0 * app.frame.index, 0, 0, 0, 0, 0, -GT_BOX[6]])
+        car = gt_box + np.array([2.0 * app.frame.index, 0, 0, 0, 0, 0, -gt_box[6]])
         client.set("New box class", "Car")
         client.pump_until(lambda: panel.w.new_class.value == "Car", 5, "the class")
         client.click_ground(car[0] + 0.1, car[1], panel.frame.ground_z)
@@ -412,10 +358,10 @@ def test_fit_to_points_and_use_predictions(annotating_app) -> None:
         client.close()
 
 
-def test_open_edit_and_delete_a_saved_pair(annotating_app) -> None:
+def test_open_edit_and_delete_a_saved_pair(annotating_app, ws_client) -> None:
     app = annotating_app
     store = app.annotations.store
-    client, panel = _connect(app)
+    client, panel = _connect(app, ws_client)
     try:
         client.click_ground(11.0, 1.0, panel.frame.ground_z)
         client.pump_until(lambda: len(panel.draft.boxes) == 1, 5, "a box")
@@ -508,7 +454,7 @@ def drive_annotation(
 
     from playwright.sync_api import sync_playwright
 
-    from tests.test_app_browser import CHROMIUM_ARGS, _scene_has
+    from tests.browser_helpers import CHROMIUM_ARGS, scene_has
 
     store = app.annotations.store
     before = {p.sample_id for p in store.pairs()}
@@ -524,7 +470,7 @@ def drive_annotation(
                 page.wait_for_function(
                     "() => !document.body.innerText.includes('Connecting...')", timeout=timeout_ms
                 )
-                page.wait_for_function(_scene_has("/scene/lidar"), timeout=timeout_ms)
+                page.wait_for_function(scene_has("/scene/lidar"), timeout=timeout_ms)
                 page.get_by_role("tab", name="Annotate").click()
                 _poll(lambda: set(app.sessions) - sessions, timeout_s, "the session")
                 session = app.sessions[max(set(app.sessions) - sessions)]
@@ -567,12 +513,9 @@ def drive_annotation(
 
 @pytest.mark.browser
 @pytest.mark.slow
-def test_browser_makes_a_two_box_pair_with_the_mouse(tmp_path) -> None:
-    from tests.test_app_browser import find_chromium
-
-    chromium = find_chromium()
-    if chromium is None:
-        pytest.skip("no Chromium found (/usr/bin/chromium): install Debian's `chromium` package")
+def test_browser_makes_a_two_box_pair_with_the_mouse(
+    tmp_path, chromium, write_tiny_root, torch_threads, gt_box
+) -> None:
     from app import AppConfig, Talk2PCApp
     from model import build_model
 
@@ -581,7 +524,7 @@ def test_browser_makes_a_two_box_pair_with_the_mouse(tmp_path) -> None:
         model = build_model("small", text_encoder="gru").eval()
         app = Talk2PCApp(root, model, AppConfig(port=0, warm_up=False)).start()
         try:
-            car = GT_BOX[:2] + np.array([2.0 * app.frame.index, 0.0])
+            car = gt_box[:2] + np.array([2.0 * app.frame.index, 0.0])
             targets = [(float(car[0]), float(car[1]), True), (25.0, -4.0, False)]
             shot = Path(__file__).resolve().parents[1] / "artifacts" / "annotate-browser.png"
             elapsed, sid = drive_annotation(app, chromium, targets, shot)
@@ -604,7 +547,7 @@ def main() -> int:
     import launch
     from app import AppConfig, Talk2PCApp
     from app.scene_view import CameraPose, apply_pose
-    from tests.test_app_browser import REPO, find_chromium
+    from tests.browser_helpers import REPO, find_chromium
 
     parser = argparse.ArgumentParser(description="Screenshot the Annotate tab for the docs.")
     parser.add_argument("--out", type=Path, default=REPO / "docs" / "images" / "annotate.png")

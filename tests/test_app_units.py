@@ -60,7 +60,6 @@ from app.scene_view import (
     ring_segments,
 )
 from scenes.root import RootError, Talk2RadarRoot
-from tests.test_app_ws import torch_threads, write_tiny_root
 
 # ---------------------------------------------------------------------------- colours
 
@@ -319,7 +318,7 @@ def test_initial_threshold_operating_then_decoder_then_default() -> None:
 # ---------------------------------------------------------------------------- frames + engine
 
 
-def test_frame_store_and_step(tmp_path) -> None:
+def test_frame_store_and_step(tmp_path, write_tiny_root) -> None:
     root = Talk2RadarRoot(write_tiny_root(tmp_path / "root", frames=3))
     store = FrameStore(root, "test", cache_size=2)
     assert len(store) == 3 and store.ids == ("00000", "00001", "00002")
@@ -339,7 +338,9 @@ def test_frame_store_and_step(tmp_path) -> None:
     assert step_index(0, -1, 3) == 2
 
 
-def test_engine_caches_scene_features_per_modality(tmp_path) -> None:
+def test_engine_caches_scene_features_per_modality(
+    tmp_path, write_tiny_root, torch_threads
+) -> None:
     from model import build_model
 
     root = Talk2RadarRoot(write_tiny_root(tmp_path / "root", frames=1))
@@ -385,7 +386,9 @@ class _Broken(_Subscriber):
         raise RuntimeError("this browser cannot draw")
 
 
-def test_navigator_tells_subscribers_and_raises_navigation_errors(tmp_path) -> None:
+def test_navigator_tells_subscribers_and_raises_navigation_errors(
+    tmp_path, write_tiny_root
+) -> None:
     root = Talk2RadarRoot(write_tiny_root(tmp_path / "root", frames=3))
     moved = []
     nav = Navigator(FrameStore(root, "test"), after_move=moved.append)
@@ -413,7 +416,7 @@ def test_navigator_tells_subscribers_and_raises_navigation_errors(tmp_path) -> N
     assert sub.shown == [2, 0] and [f.index for f in moved] == [2, 0, 2]
 
 
-def test_tpcnet_satisfies_the_app_model_protocol() -> None:
+def test_tpcnet_satisfies_the_app_model_protocol(torch_threads) -> None:
     from model import build_model
 
     with torch_threads(1):

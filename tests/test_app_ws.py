@@ -1,183 +1,21 @@
 """Integration test: the app on port 0, driven through its websocket as a browser would.
 
-The client below speaks viser 1.1.1's protocol (spec §7): it registers with a
-``ViewerCameraMessage``, then sends ``GuiUpdateMessage`` s (typing into the prompt box, clicking
-buttons) and decodes the server's frames (``[u64 raw][u64 zstd][zstd(msgpack)][binary]``) to
-track which scene nodes exist and which notifications were shown. The model is the real small
-TPCNet with its default MiniLM text encoder, untrained.
+The client (the ``ws_client`` fixture, :class:`tests.conftest.BrowserLikeClient`) speaks viser
+1.1.1's protocol (spec §7): it registers with a ``ViewerCameraMessage``, then sends
+``GuiUpdateMessage`` s (typing into the prompt box, clicking buttons) and decodes the server's
+frames to track which scene nodes exist and which notifications were shown. The model is the real
+small TPCNet with its default MiniLM text encoder, untrained.
 """
 
 from __future__ import annotations
 
-import contextlib
-import os
-import time
-from collections.abc import Callable, Iterator
-from pathlib import Path
-
-import msgspec
-import numpy as np
 import pytest
-import viser
-import zstandard
-from websockets.sync.client import connect
 
-from scenes.calib import vod_lidar_calibration, vod_radar_calibration
-from scenes.root import Talk2RadarWriter
-
-GT_BOX = np.array([15.0, 2.0, -0.95, 4.2, 1.8, 1.5, 0.1])
-TIMEOUT_SCALE = float(os.environ.get("TALK2PC_TEST_TIMEOUT_SCALE", "4"))
-"""Multiplies every wait's timeout (``pump_until``); waits end as soon as their condition holds."""
-
-
-def write_tiny_root(path: Path, frames: int = 3, seed: int = 0) -> Path:
-    """A Talk2Radar root with ``frames`` test samples: a flat ground at z = -1.7, a car-sized
-    cluster of points around :data:`GT_BOX` (its label), sparse radar with velocities."""
-    rng = np.random.default_rng(seed)
-    writer = Talk2RadarWriter(path)
-    ids = []
-    for i in range(frames):
-        ground = np.c_[
-            rng.uniform([1.0, -20.0], [50.0, 20.0], size=(4000, 2)),
-            rng.normal(-1.7, 0.01, 4000),
-            rng.uniform(0, 60, 4000),
-        ]
-        box = GT_BOX + np.array([i * 2.0, 0, 0, 0, 0, 0, 0])
-        car = np.c_[
-            rng.uniform(box[:3] - box[3:6] / 2, box[:3] + box[3:6] / 2, size=(600, 3)),
-            rng.uniform(100, 255, 600),
-        ]
-        radar = np.c_[
-            rng.uniform([2.0, -15.0, -1.5], [45.0, 15.0, 0.5], size=(80, 3)),
-            rng.normal(5, 5, 80),
-            rng.normal(0, 4, (80, 2)),
-            -rng.integers(0, 5, 80),
-        ]
-        files = writer.write_sensors(
-            f"f{i}",
-            np.r_[ground, car].astype(np.float32),
-            radar.astype(np.float32),
-            vod_lidar_calibration(),
-            vod_radar_calibration(),
-        )
-        ids.append(writer.write_sample(i, files, box[None], ["Car"], "the car about 15 m ahead"))
-    writer.write_image_sets({"test": ids, "train": ids[:1]})
-    return path
-
-
-def _decode(frame: bytes) -> list[dict]:
-    raw_len = int.from_bytes(frame[:8], "little")
-    zstd_len = int.from_bytes(frame[8:16], "little")
-    payload = zstandard.ZstdDecompressor().decompress(
-        frame[16 : 16 + zstd_len], max_output_size=raw_len
-    )
-    return msgspec.msgpack.decode(payload)["messages"]
-
-
-class BrowserLikeClient:
-    """A websocket client that behaves like the viser web client, minus the rendering."""
-
-    def __init__(self, port: int) -> None:
-        self.ws = connect(
-            f"ws://127.0.0.1:{port}",
-            subprotocols=[f"viser-v{viser.__version__}"],
-            max_size=None,
-        )
-        self.nodes: dict[str, str] = {}  # scene node name -> message type
-        self.visible: dict[str, bool] = {}
-        self.gui: dict[str, str] = {}  # label -> uuid
-        self.notifications: list[tuple[str, str]] = []
-        self.markdown: dict[str, str] = {}  # uuid -> content
-        self.messages: list[dict] = []
-        self._send(
-            {
-                "type": "ViewerCameraMessage",
-                "wxyz": [1.0, 0.0, 0.0, 0.0],
-                "position": [-10.0, 0.0, 5.0],
-                "fov": 1.0,
-                "near": 0.01,
-                "far": 1000.0,
-                "image_height": 600,
-                "image_width": 800,
-                "look_at": [10.0, 0.0, 0.0],
-                "up_direction": [0.0, 0.0, 1.0],
-            }
-        )
-
-    def _send(self, message: dict) -> None:
-        self.ws.send(msgspec.msgpack.encode(message))
-
-    def _handle(self, m: dict) -> None:
-        self.messages.append(m)
-        kind = m["type"]
-        if kind == "RemoveSceneNodeMessage":
-            for name in [n for n in self.nodes if n == m["name"] or n.startswith(m["name"] + "/")]:
-                del self.nodes[name]
-        elif kind == "SetSceneNodeVisibilityMessage":
-            self.visible[m["name"]] = m["visible"]
-        elif "name" in m and kind.endswith("Message") and "props" in m:
-            self.nodes[m["name"]] = kind
-        if kind == "NotificationShowMessage":
-            self.notifications.append((m["props"]["title"], m["props"]["body"]))
-        props = m.get("props")
-        if kind.startswith("Gui") and isinstance(props, dict) and props.get("label"):
-            self.gui[props["label"]] = m["uuid"]
-        if kind == "GuiMarkdownMessage":
-            self.markdown[m["uuid"]] = props["_markdown"]
-        if kind == "GuiUpdateMessage" and "_markdown" in m.get("updates", {}):
-            self.markdown[m["uuid"]] = m["updates"]["_markdown"]
-
-    def pump_until(self, condition: Callable[[], bool], timeout: float, what: str) -> None:
-        """Read messages until ``condition()`` holds; fail after ``timeout`` seconds, scaled by
-        ``TIMEOUT_SCALE`` (a bound for a stalled server, not a speed check: a machine whose cores
-        are busy with other jobs can be many times slower than an idle one)."""
-        timeout *= TIMEOUT_SCALE
-        deadline = time.monotonic() + timeout
-        while not condition():
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-            try:
-                frame = self.ws.recv(timeout=min(left, 0.2))
-            except TimeoutError:
-                continue
-            for m in _decode(frame):
-                self._handle(m)
-
-    def set(self, label: str, value: object) -> None:
-        """Change an input as a user would (typing, selecting, dragging)."""
-        self._send(
-            {"type": "GuiUpdateMessage", "uuid": self.gui[label], "updates": {"value": value}}
-        )
-
-    def click(self, label: str, option: object = True) -> None:
-        """Click a button (or one button of a button group)."""
-        self.set(label, option)
-
-    def drain(self, seconds: float) -> None:
-        """Read whatever arrives during ``seconds``."""
-        deadline = time.monotonic() + seconds
-        self.pump_until(lambda: time.monotonic() >= deadline, seconds + 1.0, "nothing")
-
-    def close(self) -> None:
-        self.ws.close()
-
-
-@contextlib.contextmanager
-def torch_threads(count: int) -> Iterator[None]:
-    """Run with ``count`` torch CPU threads, as ``launch.py`` does (restored afterwards)."""
-    import torch
-
-    old = torch.get_num_threads()
-    torch.set_num_threads(count)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(old)
+from tests.markdown_helpers import assert_only_text
 
 
 @pytest.fixture(scope="module")
-def running_app(tmp_path_factory):
+def running_app(tmp_path_factory, write_tiny_root, torch_threads):
     from app import AppConfig, Talk2PCApp
     from model import build_model
 
@@ -193,8 +31,8 @@ def running_app(tmp_path_factory):
             app.stop()
 
 
-def _connected(app, timeout: float = 15.0) -> BrowserLikeClient:
-    client = BrowserLikeClient(app.port)
+def _connected(app, ws_client, timeout: float = 15.0):
+    client = ws_client(app.port)
     client.pump_until(
         lambda: (
             "/scene/lidar" in client.nodes and "Run" in client.gui and "/gt/edges" in client.nodes
@@ -205,9 +43,9 @@ def _connected(app, timeout: float = 15.0) -> BrowserLikeClient:
     return client
 
 
-def test_prompt_run_enter_and_empty_prompt(running_app) -> None:
+def test_prompt_run_enter_and_empty_prompt(running_app, ws_client) -> None:
     app = running_app
-    client = _connected(app)
+    client = _connected(app, ws_client)
     try:
         assert {"/scene/radar", "/scene/rings", "/scene/ego"} <= set(client.nodes)
         assert any("test note" in text for text in client.markdown.values())
@@ -254,9 +92,9 @@ def test_prompt_run_enter_and_empty_prompt(running_app) -> None:
         client.close()
 
 
-def test_model_error_is_a_notification(running_app, monkeypatch) -> None:
+def test_model_error_is_a_notification(running_app, monkeypatch, ws_client) -> None:
     app = running_app
-    client = _connected(app)
+    client = _connected(app, ws_client)
     try:
 
         def broken(*args, **kwargs):
@@ -275,12 +113,12 @@ def test_model_error_is_a_notification(running_app, monkeypatch) -> None:
         client.close()
 
 
-def test_two_browsers_share_the_scene_not_the_answers(running_app) -> None:
+def test_two_browsers_share_the_scene_not_the_answers(running_app, ws_client) -> None:
     app = running_app
     before = set(app.sessions)
-    a = _connected(app)
+    a = _connected(app, ws_client)
     session_a = app.sessions[(set(app.sessions) - before).pop()]
-    b = _connected(app)
+    b = _connected(app, ws_client)
     try:
         # While A's prompt waits for the model (its lock held here), B's GUI stays responsive.
         lock = app.engine._model_lock
@@ -320,9 +158,9 @@ def test_two_browsers_share_the_scene_not_the_answers(running_app) -> None:
         b.close()
 
 
-def test_reload_frames_updates_the_panels(running_app) -> None:
+def test_reload_frames_updates_the_panels(running_app, ws_client, write_tiny_root) -> None:
     app = running_app
-    client = _connected(app)
+    client = _connected(app, ws_client)
     try:
         session = next(s for s in app.sessions.values() if s.nav is not None)
         count = len(app.frames)
@@ -337,9 +175,9 @@ def test_reload_frames_updates_the_panels(running_app) -> None:
         client.close()
 
 
-def test_failed_load_is_a_notification(running_app) -> None:
+def test_failed_load_is_a_notification(running_app, ws_client) -> None:
     app = running_app
-    client = _connected(app)
+    client = _connected(app, ws_client)
     try:
         target = (app.frame.index + 1) % len(app.frames)
         bad_id = app.frames.ids[target]
@@ -369,17 +207,9 @@ def test_failed_load_is_a_notification(running_app) -> None:
 HOSTILE_TEXT = "<img src=x onerror=alert(1)> <b>b</b> ![t](http://host/x.png)"
 
 
-def _assert_only_text(markdown: str) -> None:
-    """The markdown, rendered as viser does (CommonMark, raw HTML on), holds no tag of the text."""
-    from tests.test_reliability_html import OWN_TAGS, _render, _tags
-
-    rendered = _render(markdown)
-    assert _tags(rendered) <= OWN_TAGS, rendered
-
-
-def test_a_hostile_prompt_is_shown_as_text(running_app) -> None:
+def test_a_hostile_prompt_is_shown_as_text(running_app, ws_client) -> None:
     app = running_app
-    client = _connected(app)
+    client = _connected(app, ws_client)
     try:
         client.set("Prompt", HOSTILE_TEXT + "\n")
 
@@ -395,12 +225,12 @@ def test_a_hostile_prompt_is_shown_as_text(running_app) -> None:
         lines = running()
         assert lines and all("onerror" in text for text in lines)
         for text in lines:
-            _assert_only_text(text)
+            assert_only_text(text)
     finally:
         client.close()
 
 
-def test_stored_text_and_forged_splits(running_app) -> None:
+def test_stored_text_and_forged_splits(running_app, ws_client, gt_box) -> None:
     """A saved pair's prompt and annotator are shown as text in the Annotate table; a split name
     forged through the websocket is refused by the server and saving keeps working."""
     from annotate import AnnotationStore, Draft, SourceFrame
@@ -409,21 +239,21 @@ def test_stored_text_and_forged_splits(running_app) -> None:
     root = app.frames.root
     store = app.annotations.store
     assert store is not None
-    pair = Draft().set_prompt(HOSTILE_TEXT).add_box(GT_BOX, "Car")
+    pair = Draft().set_prompt(HOSTILE_TEXT).add_box(gt_box, "Car")
     store.create(pair, SourceFrame.from_root(root, root.ids("test")[0]), annotator=HOSTILE_TEXT)
     before = set(app.sessions)
-    client = _connected(app)
+    client = _connected(app, ws_client)
     try:
         session = app.sessions[(set(app.sessions) - before).pop()]
         panel = next(p for p in app.annotations.panels() if p.session is session)
         client.pump_until(lambda: "Save pair" in client.gui and panel.frame is not None, 15, "tab")
         tables = [text for text in client.markdown.values() if "saved pair(s)" in text]
         assert tables and "onerror" in tables[0]
-        _assert_only_text(tables[0])
+        assert_only_text(tables[0])
 
         lists = sorted((root.lidar_dir / "ImageSets").iterdir())
         with session.lock:
-            panel.editor.reset(Draft().set_prompt("the car ahead").add_box(GT_BOX, "Car"))
+            panel.editor.reset(Draft().set_prompt("the car ahead").add_box(gt_box, "Car"))
         client.set("Split", "a" * 300)  # not an option: only a forged message can send it
         client.click("Save pair")
         client.pump_until(

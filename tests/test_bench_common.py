@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import time
 
 import pytest
@@ -181,7 +182,9 @@ def test_read_result_names_the_file_and_the_field(tmp_path) -> None:
 def test_machine_info_records_the_command() -> None:
     m = machine_info("python -m bench.latency")
     assert m.command == "python -m bench.latency"
-    assert m.cores >= 1 and m.torch_threads >= 1
+    affinity = getattr(os, "sched_getaffinity", None)
+    assert m.cores == (len(affinity(0)) if affinity else os.cpu_count())
+    assert m.torch_threads == torch.get_num_threads()
     assert m.torch_version == torch.__version__
     assert m.cpu_model in m.describe()
 

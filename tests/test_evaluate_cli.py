@@ -222,9 +222,7 @@ def test_unwritable_json_is_an_error(tmp_path, capsys):
     assert str(blocker) in _error_line(capsys)
 
 
-def test_data_mode_with_an_empty_prompt_names_the_sample(tmp_path, capsys):
-    from tests.test_app_ws import write_tiny_root
-
+def test_data_mode_with_an_empty_prompt_names_the_sample(tmp_path, capsys, write_tiny_root):
     root = write_tiny_root(tmp_path / "root", frames=2)
     prompt = root / "lidar" / "training" / "prompt" / "00001.txt"
     prompt.write_text("  \n")
@@ -235,9 +233,7 @@ def test_data_mode_with_an_empty_prompt_names_the_sample(tmp_path, capsys):
     assert f"{prompt}: the prompt file of sample 00001 is empty" in line
 
 
-def test_data_mode_with_an_unwritable_out_is_an_error(tmp_path, capsys):
-    from tests.test_app_ws import write_tiny_root
-
+def test_data_mode_with_an_unwritable_out_is_an_error(tmp_path, capsys, write_tiny_root):
     root = write_tiny_root(tmp_path / "root", frames=1)
     blocker = tmp_path / "a-file"
     blocker.write_text("")

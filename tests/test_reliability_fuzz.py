@@ -29,7 +29,6 @@ from scenes.calib import CalibrationError
 from scenes.kitti import LabelError, format_label_line, read_label_file
 from scenes.pointcloud import PointCloudError
 from scenes.root import RootError, SampleMeta, Talk2RadarRoot
-from tests.test_app_ws import GT_BOX, write_tiny_root
 
 SEED = 11
 CASES_PER_FILE = 40
@@ -167,10 +166,10 @@ def _one_line_naming(exc: BaseException, path: Path) -> None:
 
 
 @pytest.fixture(scope="module")
-def reader_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def reader_root(tmp_path_factory: pytest.TempPathFactory, write_tiny_root, gt_box) -> Path:
     """A tiny root whose sample 00001 also has a sidecar (with an actor) to mutate."""
     root = write_tiny_root(tmp_path_factory.mktemp("fuzz") / "root", frames=2)
-    actor = Actor(0, "Car", GT_BOX, [3.0, 0.0])
+    actor = Actor(0, "Car", gt_box, [3.0, 0.0])
     meta = SampleMeta(tags=frozenset({"class"}), actors=(actor,), extra={"annotator": "ada"})
     (root / "meta").mkdir(exist_ok=True)
     (root / "meta" / "00001.json").write_text(json.dumps(meta.to_json()))
@@ -233,7 +232,7 @@ def _restore(path: Path, original: bytes) -> None:
 
 
 @pytest.fixture
-def score_folders(tmp_path: Path) -> tuple[Path, Path]:
+def score_folders(tmp_path: Path, write_tiny_root) -> tuple[Path, Path]:
     """Labels and predictions of 3 frames (cars and a cyclist, VoD-style lines)."""
     root = write_tiny_root(tmp_path / "root", frames=3)
     labels, preds = tmp_path / "labels", tmp_path / "preds"

@@ -8,9 +8,6 @@ but the ones the app's own markdown makes, while the text reads exactly as typed
 
 from __future__ import annotations
 
-import html
-import re
-
 import numpy as np
 import pytest
 
@@ -22,8 +19,7 @@ from app.navigation import Frame, frame_markdown
 from app.text import md_text
 from scenes.calib import vod_lidar_calibration
 from scenes.root import Sample
-
-markdown_it = pytest.importorskip("markdown_it")
+from tests.markdown_helpers import OWN_TAGS, render, tags, visible
 
 HOSTILE = (
     "<img src=x onerror=alert(1)>",
@@ -37,35 +33,11 @@ HOSTILE = (
 )
 """Prompts and names a hostile but fair user could save."""
 
-OWN_TAGS = {"p", "br", "strong", "em", "code", "sub", "ul", "li"} | {
-    "table",
-    "thead",
-    "tbody",
-    "tr",
-    "th",
-    "td",
-}
-"""Tags the app's own markdown produces (bold titles, lists, tables, the v<sub>r</sub> heading)."""
-
-
-def _render(markdown: str) -> str:
-    return markdown_it.MarkdownIt("commonmark", {"html": True}).enable("table").render(markdown)
-
-
-def _tags(rendered: str) -> set[str]:
-    return {m.lower() for m in re.findall(r"<\s*/?\s*([a-zA-Z][\w-]*)", rendered)}
-
-
-def _visible(rendered: str) -> str:
-    """The text a browser shows (comments are invisible; other tags separate words)."""
-    text = re.sub(r"<[^>]*>", " ", re.sub(r"<!--.*?-->", "", rendered))
-    return " ".join(html.unescape(text).split())
-
 
 def _shown_as_text(markdown: str, text: str) -> None:
-    rendered = _render(markdown)
-    assert _tags(rendered) <= OWN_TAGS, rendered
-    assert " ".join(text.split()) in _visible(rendered), rendered
+    rendered = render(markdown)
+    assert tags(rendered) <= OWN_TAGS, rendered
+    assert " ".join(text.split()) in visible(rendered), rendered
 
 
 @pytest.mark.parametrize("text", HOSTILE)
@@ -92,7 +64,7 @@ def test_saved_pairs_table(text: str) -> None:
     ]
     markdown = pairs_markdown(pairs, root=f"/data/{text}")
     _shown_as_text(markdown, text)
-    rendered = _render(markdown)
+    rendered = render(markdown)
     assert rendered.count("<tr>") == 3  # header and two rows: the table is not broken
     assert all(row.count("<td") == 6 for row in rendered.split("<tr>")[2:])
     _shown_as_text(pairs_markdown([], root=text), text)
@@ -125,18 +97,12 @@ def test_checks_and_evidence(text: str) -> None:
 
 
 @pytest.mark.browser
-def test_viser_shows_escaped_text_literally_in_a_real_browser() -> None:
+def test_viser_shows_escaped_text_literally_in_a_real_browser(chromium, chromium_args) -> None:
     """The proof in viser's own client (react-markdown with raw HTML): escaped, the hostile text
     is shown character for character and makes no element; unescaped (the control), the same
     text makes ``<img>`` elements (fetched by the browser), a ``<b>`` and links (also from a bare
     ``www.`` address and an e-mail address, which GFM links by itself)."""
     import viser
-
-    from tests.test_app_browser import CHROMIUM_ARGS, find_chromium
-
-    chromium = find_chromium()
-    if chromium is None:
-        pytest.skip("no Chromium found (/usr/bin/chromium): install Debian's `chromium` package")
     from playwright.sync_api import sync_playwright
 
     payload = (
@@ -153,7 +119,7 @@ def test_viser_shows_escaped_text_literally_in_a_real_browser() -> None:
     try:
         server.gui.add_markdown(f"ESCAPED {md_text(payload)}")
         with sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=chromium, headless=True, args=CHROMIUM_ARGS)
+            browser = p.chromium.launch(executable_path=chromium, headless=True, args=chromium_args)
             try:
                 page = browser.new_page()
                 page.goto(f"http://127.0.0.1:{server.get_port()}")
