@@ -14,42 +14,14 @@ the bundled checkpoint (or an untrained model when there is none)::
 from __future__ import annotations
 
 import argparse
-import shutil
 import time
 from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
-ARTIFACTS = REPO / "artifacts"
-CHROMIUM_CANDIDATES = ("/usr/bin/chromium", "/usr/bin/chromium-browser")
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--enable-unsafe-swiftshader",
-    "--use-angle=swiftshader",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-    "--disable-quic",
-]
+from tests.browser_helpers import ARTIFACTS, CHROMIUM_ARGS, REPO, find_chromium, scene_has
+
 PROMPT = "the car about 15 m ahead"
-
-
-def find_chromium() -> str | None:
-    """Path of a Chromium executable, or None."""
-    for candidate in CHROMIUM_CANDIDATES:
-        if Path(candidate).is_file():
-            return candidate
-    return shutil.which("chromium")
-
-
-def _scene_has(name: str) -> str:
-    return (
-        "() => window.__viserSceneTree !== undefined && "
-        f"Object.keys(window.__viserSceneTree.getState()).includes({name!r})"
-    )
 
 
 def drive(
@@ -81,14 +53,14 @@ def drive(
             page.wait_for_function(
                 "() => !document.body.innerText.includes('Connecting...')", timeout=timeout_ms
             )
-            page.wait_for_function(_scene_has("/scene/lidar"), timeout=timeout_ms)
+            page.wait_for_function(scene_has("/scene/lidar"), timeout=timeout_ms)
             box = page.locator("textarea:not([aria-hidden='true'])").first
             box.wait_for(timeout=timeout_ms)
             box.fill(prompt)
             start = time.perf_counter()
             box.press("Enter")
-            page.wait_for_function(_scene_has("/pred/edges"), timeout=timeout_ms)
-            page.wait_for_function(_scene_has("/heatmap"), timeout=timeout_ms)
+            page.wait_for_function(scene_has("/pred/edges"), timeout=timeout_ms)
+            page.wait_for_function(scene_has("/heatmap"), timeout=timeout_ms)
             elapsed = time.perf_counter() - start
             if wait_answer is not None:
                 deadline = time.monotonic() + timeout_s
@@ -106,12 +78,9 @@ def drive(
 
 
 @pytest.mark.browser
-def test_browser_types_prompt_and_sees_boxes(tmp_path) -> None:
-    chromium = find_chromium()
-    if chromium is None:
-        pytest.skip("no Chromium found (/usr/bin/chromium): install Debian's `chromium` package")
-    from tests.test_app_ws import torch_threads, write_tiny_root
-
+def test_browser_types_prompt_and_sees_boxes(
+    tmp_path, chromium, write_tiny_root, torch_threads
+) -> None:
     root = write_tiny_root(tmp_path / "root", frames=2)
     with torch_threads(1):
         _run_browser_test(root, chromium)
