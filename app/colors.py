@@ -8,6 +8,8 @@
   values (it **recedes**) red, static returns grey. Values beyond ``+-v_max`` saturate.
 - Classes: one colour per metric class, shared by predicted boxes and the heatmap; ground-truth
   boxes use :data:`GT_COLOR` whatever their class.
+- Depth (the camera panel's LiDAR overlay): warm near, cold far (:func:`depth_colors`), so that
+  the depth ordering reads at a glance on a camera image of any colour.
 
 Every map returns ``(N, 3)`` uint8 RGB, the format ``viser`` point clouds take.
 """
@@ -55,6 +57,18 @@ FALLBACK_COLOR: RGB = (200, 200, 200)
 
 GT_COLOR: RGB = (110, 255, 110)
 """Ground-truth boxes, whatever their class."""
+
+DEPTH_STOPS: tuple[RGB, ...] = (
+    (255, 40, 40),
+    (255, 190, 0),
+    (90, 230, 90),
+    (0, 200, 255),
+    (120, 90, 255),
+)
+"""LiDAR depth ramp of the camera overlay, near (red) to far (violet)."""
+
+DEPTH_RANGE = (2.0, 50.0)
+"""Metres in front of the camera mapped to the ends of :data:`DEPTH_STOPS`."""
 
 
 def class_color(name: str) -> RGB:
@@ -109,6 +123,19 @@ def velocity_colors(v_r_compensated: np.ndarray, v_max: float) -> np.ndarray:
     if v_max <= 0:
         raise ValueError(f"velocity_colors: v_max must be positive, got {v_max}")
     return lut_map(v_r_compensated, -v_max, v_max, VELOCITY_STOPS)
+
+
+def depth_colors(
+    depth: np.ndarray, near: float = DEPTH_RANGE[0], far: float = DEPTH_RANGE[1]
+) -> np.ndarray:
+    """Colours of points by their depth in front of the camera (m), ``(N, 3)`` uint8; ``near``
+    is red, ``far`` violet (saturating beyond)."""
+    return lut_map(depth, near, far, DEPTH_STOPS)
+
+
+def label_font(size: int) -> ImageFont.ImageFont | ImageFont.FreeTypeFont:
+    """Pillow's default font at ``size`` px (the fixed bitmap font where FreeType is missing)."""
+    return _font(size)
 
 
 def _font(size: int) -> ImageFont.ImageFont | ImageFont.FreeTypeFont:

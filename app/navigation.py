@@ -270,6 +270,22 @@ class NavigationPanel:
     frame_number: viser.GuiNumberHandle
     info: viser.GuiMarkdownHandle
 
+    def wire(self, step: Callable[[int], object], go_to: Callable[[int], object]) -> None:
+        """*Previous* / *Next* call ``step(-1)`` / ``step(1)``; a frame number typed in the
+        browser calls ``go_to(number - 1)`` (a value set by the server calls nothing)."""
+
+        @self.step.on_click
+        def _(event: viser.GuiEvent) -> None:
+            step(-1 if event.target.value == PREVIOUS else 1)
+
+        @self.frame_number.on_update
+        def _(event: viser.GuiEvent) -> None:
+            if event.client is None:  # Set by the server (a frame shown), not typed.
+                return
+            value = self.frame_number.value
+            if value is not None:
+                go_to(int(round(value)) - 1)
+
 
 PREVIOUS, NEXT = "Previous", "Next"
 """Labels of the step buttons."""

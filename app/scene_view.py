@@ -10,15 +10,19 @@ Points are sent as float32 (viser's float16 default quantises 3 cm beyond 32 m).
 - The ground height is estimated per frame (:func:`estimate_ground_z`); rings, the ego marker
   and the heatmap sit on it.
 - Camera presets (per browser): ``BEV`` looks straight down from 70 m over the model's range with
-  forward (+x) pointing up the screen; ``Chase`` looks forward from 14 m behind and 8 m above.
+  forward (+x) pointing up the screen; ``Chase`` looks forward from 14 m behind and 8 m above;
+  ``Camera`` puts the view at the frame's camera (its projection centre, viewing direction and
+  vertical field of view, :func:`camera_view_pose`), so the cloud lines up with the camera panel's
+  image (horizontally as far as the browser window's aspect ratio allows).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, replace
-from typing import Literal
+from typing import Literal, Protocol
 
 import numpy as np
 import viser
@@ -33,7 +37,7 @@ from app.colors import (
     velocity_legend,
 )
 from scenes.boxes import box_corners
-from scenes.calib import LIDAR_HEIGHT
+from scenes.calib import LIDAR_HEIGHT, Calibration
 
 LidarColoring = Literal["height", "intensity"]
 HEIGHT_RANGE = (0.0, 3.0)
@@ -114,11 +118,13 @@ def ego_segments(ground_z: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class CameraPose:
-    """A camera placement in the LiDAR frame."""
+    """A camera placement in the LiDAR frame; ``fov``: vertical field of view (radians), None to
+    keep the browser's."""
 
     position: tuple[float, float, float]
     look_at: tuple[float, float, float]
     up: tuple[float, float, float] = (0.0, 0.0, 1.0)
+    fov: float | None = None
 
 
 def bev_pose(ground_z: float, centre_x: float = 25.6, height: float = 70.0) -> CameraPose:
@@ -135,11 +141,59 @@ def chase_pose(ground_z: float) -> CameraPose:
     return CameraPose((-14.0, 0.0, ground_z + 9.0), (18.0, 0.0, ground_z))
 
 
+def camera_view_pose(
+    calib: Calibration, image_height: float | None = None, distance: float = 10.0
+) -> CameraPose:
+    """The frame's camera as a viewpoint of the 3D view (LiDAR frame).
+
+    The position is the projection centre of ``P2 · R0_rect · Tr_velo_to_cam`` (the point it
+    maps to ``(0, 0, 0)``), the view looks along the rectified camera's optical axis (+z) to a
+    point ``distance`` metres ahead, ``up`` is the camera's -y, and the vertical field of view is
+    ``2 atan(H / 2 / fy)`` for an image ``H = image_height`` pixels tall (``2 cy`` from P2's
+    principal point when None).
+    """
+    m = calib.velo_to_img[:3]
+    centre = -np.linalg.solve(m[:, :3], m[:, 3])
+    rot = calib.velo_to_cam[:3, :3]
+    forward = rot.T @ np.array([0.0, 0.0, 1.0])
+    up = rot.T @ np.array([0.0, -1.0, 0.0])
+    forward /= np.linalg.norm(forward)
+    up /= np.linalg.norm(up)
+    fy = float(calib.P2[1, 1])
+    height = float(image_height) if image_height else 2.0 * float(calib.P2[1, 2])
+    fov = 2.0 * math.atan(height / (2.0 * abs(fy))) if fy else math.radians(50.0)
+    target = centre + distance * forward
+    return CameraPose(
+        tuple(float(v) for v in centre),  # type: ignore[arg-type]
+        tuple(float(v) for v in target),  # type: ignore[arg-type]
+        tuple(float(v) for v in up),  # type: ignore[arg-type]
+        fov,
+    )
+
+
 def apply_pose(camera: viser.CameraHandle, pose: CameraPose) -> None:
     """Move one browser's camera (``look_at`` last: setting ``position`` drags it along)."""
     camera.up_direction = pose.up
+    if pose.fov is not None:
+        camera.fov = pose.fov
     camera.position = pose.position
     camera.look_at = pose.look_at
+
+
+class CameraViewpoint(Protocol):
+    """What the View tab needs of the camera panel (:class:`app.camera_panel.CameraPanel`)."""
+
+    def view_pose(self) -> CameraPose | None:
+        """The "Camera" preset of the frame shown (None: no frame)."""
+        ...
+
+    def set_velocity_range(self, velocity_range: float) -> None:
+        """Follow the radar colour scale (m/s)."""
+        ...
+
+
+PRESETS = ("BEV", "Chase", "Camera")
+"""The camera presets of the View tab."""
 
 
 @dataclass(frozen=True)
@@ -331,15 +385,21 @@ class ViewPanel:
         client: viser.ClientHandle,
         lock: AbstractContextManager,
         ground_z: Callable[[], float],
+        viewpoint: CameraViewpoint | None = None,
     ) -> None:
         """Apply every settings change to ``view`` (holding ``lock``, the browser's drawing lock)
-        and the camera presets to ``client.camera`` (``ground_z()``: the ground on screen)."""
+        and the camera presets to ``client.camera`` (``ground_z()``: the ground on screen;
+        ``viewpoint``: the camera panel, which gives the "Camera" preset and follows the radar
+        colour scale). Leaving the "Camera" preset restores the browser's field of view."""
+        saved_fov: list[float] = []
 
         def apply_settings(_: viser.GuiEvent) -> None:
             settings = self.settings()
             with lock, client.atomic():
                 view.apply(settings)
                 self.update_legends(settings)
+                if viewpoint is not None:
+                    viewpoint.set_velocity_range(settings.velocity_range)
 
         for handle in self.inputs():
             handle.on_update(apply_settings)
@@ -347,7 +407,18 @@ class ViewPanel:
         @self.camera.on_click
         def _(event: viser.GuiEvent) -> None:
             ground = ground_z()
-            pose = bev_pose(ground) if event.target.value == "BEV" else chase_pose(ground)
+            choice = event.target.value
+            if choice == "Camera":
+                with lock:
+                    pose = viewpoint.view_pose() if viewpoint is not None else None
+                if pose is None:
+                    return
+                if not saved_fov:
+                    saved_fov.append(float(client.camera.fov))
+            else:
+                pose = bev_pose(ground) if choice == "BEV" else chase_pose(ground)
+                if saved_fov:
+                    pose = replace(pose, fov=saved_fov.pop())
             apply_pose(client.camera, pose)
 
 
@@ -360,7 +431,9 @@ def build_view_panel(gui: viser.GuiApi, settings: ViewSettings | None = None) ->
     """Add the View widgets to ``gui`` (in the current container) and return their handles."""
     s = settings or ViewSettings()
     coloring_label = next(k for k, v in LIDAR_COLORING_LABELS.items() if v == s.lidar_coloring)
-    camera = gui.add_button_group("Camera", ("BEV", "Chase"), hint="Camera presets")
+    camera = gui.add_button_group(
+        "Camera", PRESETS, hint="Viewpoints: bird's eye, behind the car, the frame's camera"
+    )
     lidar_coloring = gui.add_dropdown(
         "LiDAR colour", tuple(LIDAR_COLORING_LABELS), initial_value=coloring_label
     )

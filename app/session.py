@@ -29,7 +29,10 @@ there. What a tab may use:
 - ``session.add_frame_listener(fn)`` and ``session.add_answer_listener(fn)``: ``fn(session)`` is
   called (in a worker thread, holding ``session.lock``) after a new frame or a new answer is drawn;
 - ``session.notify(title, body)``, ``session.report_error(title, error)``: messages in this browser;
-- ``session.lock``: hold it while drawing into ``client.scene`` from a worker thread.
+- ``session.lock``: hold it while drawing into ``client.scene`` from a worker thread;
+- ``session.set_camera_layer(name, layer)``: boxes drawn into the camera panel
+  (:class:`app.camera_panel.CameraPanel`, an :class:`app.camera_image.BoxLayer`; None removes
+  them); the session itself draws the layers ``gt`` and ``pred``.
 
 Scene-tree names used here (avoid them): ``/scene/...``, ``/pred/...``, ``/gt/...``, ``/heatmap``.
 An exception raised by a tab's ``build`` is logged and shown in the tab; the app keeps running.
@@ -47,10 +50,11 @@ from dataclasses import dataclass
 import viser
 
 from app.boxes_view import GT_STYLE, PRED_STYLE, BoxesView, best_iou, box_label
+from app.camera_image import BoxLayer
+from app.camera_panel import CameraPanel
 from app.engine import Answer, GroundingEngine, Predictions
 from app.heatmap_view import HeatmapView
 from app.navigation import (
-    PREVIOUS,
     Frame,
     FrameLoadError,
     NavigationError,
@@ -70,11 +74,7 @@ from app.query_panel import (
     results_markdown,
     submitted_prompt,
 )
-from app.scene_view import (
-    SceneView,
-    ViewPanel,
-    build_view_panel,
-)
+from app.scene_view import SceneView, ViewPanel, build_view_panel
 from app.text import md_text
 from scenes.root import Sample
 
@@ -146,6 +146,7 @@ class ClientSession:
         self.nav: NavigationPanel | None = None
         self.query: QueryPanel | None = None
         self.view: ViewPanel | None = None
+        self.camera: CameraPanel | None = None
         self.tabs: dict[str, viser.GuiTabHandle] = {}
         """The extra tabs by label (see :meth:`build_gui`)."""
         self.closed = False
@@ -227,9 +228,11 @@ class ClientSession:
             )
         with tabs.add_tab("View", icon=viser.Icon.EYE):
             self.view = build_view_panel(gui, self.scene_view.settings)
-        self._wire_navigation(self.nav)
+        self.nav.wire(self.step, self.go_to)
         self._wire_query(self.query)
-        self.view.wire(self.scene_view, self.client, self.lock, self._ground_z)
+        self.camera = CameraPanel(gui, self.scene_view.settings.velocity_range)
+        self.camera.wire(self.lock, lambda exc: self.report_error("Camera panel", exc))
+        self.view.wire(self.scene_view, self.client, self.lock, self._ground_z, self.camera)
         for extra in extra_tabs:
             tab = tabs.add_tab(extra.label, icon=extra.icon)
             self.tabs[extra.label] = tab
@@ -242,20 +245,6 @@ class ClientSession:
                         f"The {md_text(extra.name)} failed: "
                         f"{md_text(f'{type(exc).__name__}: {exc}')}"
                     )
-
-    def _wire_navigation(self, nav: NavigationPanel) -> None:
-        @nav.step.on_click
-        def _(event: viser.GuiEvent) -> None:
-            self.step(-1 if event.target.value == PREVIOUS else 1)
-
-        @nav.frame_number.on_update
-        def _(event: viser.GuiEvent) -> None:
-            if event.client is None:  # Set by the server (a frame shown), not typed.
-                return
-            value = nav.frame_number.value
-            if value is None:
-                return
-            self.go_to(int(round(value)) - 1)
 
     def _wire_query(self, q: QueryPanel) -> None:
         @q.prompt.on_update
@@ -308,11 +297,26 @@ class ClientSession:
         def _(_: viser.GuiEvent) -> None:
             with self.lock:
                 self.gt_view.visible = q.show_gt.value
+            self._with_camera(lambda camera: camera.set_layer_visible("gt", q.show_gt.value))
 
     # ------------------------------------------------------------------ frames
 
     def _ground_z(self) -> float:
         return self.frame.ground_z if self.frame is not None else self.scene_view.ground_z
+
+    def _with_camera(self, fn: Callable[[CameraPanel], None]) -> None:
+        """``fn(camera panel)`` holding the lock; an error becomes a notification."""
+        try:
+            with self.lock:
+                if self.camera is not None and not self.closed:
+                    fn(self.camera)
+        except Exception as exc:
+            self.report_error("Camera panel", exc)
+
+    def set_camera_layer(self, name: str, layer: BoxLayer | None) -> None:
+        """Draw ``layer`` (None: nothing) as the camera panel's box layer ``name`` (see
+        :data:`app.camera_panel.LAYER_ORDER`); redrawn only when it changed."""
+        self._with_camera(lambda camera: camera.set_layer(name, layer))
 
     def frame_shown(self, frame: Frame) -> None:
         """The shared frame moved (called by the navigator): draw it here; a failure is shown in
@@ -346,6 +350,7 @@ class ClientSession:
                 if self.nav is not None:
                     self.nav.frame_number.value = frame.index + 1
                     self.nav.info.content = frame_markdown(frame, len(self.navigator))
+            self._with_camera(lambda camera: camera.show_frame(sample))
             self._call(self._frame_listeners)
 
     def split_changed(self) -> None:
@@ -461,6 +466,7 @@ class ClientSession:
                 pred.heatmaps, pred.grid, request.frame.ground_z, self.query.opacity.value
             )
         self.answer = answer
+        self._with_camera(lambda camera: camera.show_predictions(pred, labels))
         self.history.add(request.prompt)
         self.query.history.options = self.history.options()
         self.query.history.value = self.history.items[0]

@@ -281,3 +281,15 @@ def chromium() -> str:
 @pytest.fixture(name="chromium_args", scope="session")
 def _chromium_args() -> list[str]:
     return list(CHROMIUM_ARGS)
+
+
+# ---------------------------------------------------------------------------- View-of-Delft roots
+
+
+@pytest.fixture(name="write_vod_root", scope="session")
+def _write_vod_root() -> Callable[..., Path]:
+    """``write_vod_root(path, frames=3, seed=0, radar_folder="radar", images=True, splits=None)``:
+    a small root in the View-of-Delft release layout (:mod:`tests.vod_fixtures`)."""
+    from tests.vod_fixtures import write_vod_root
+
+    return write_vod_root
