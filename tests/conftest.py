@@ -10,6 +10,8 @@ Fixtures (test modules take them by name; none imports another test module):
 - ``write_tiny_root(path, frames=3, seed=0) -> path``: a tiny Talk2Radar root (flat ground, one
   car-sized cluster around ``gt_box`` per frame, sparse radar); ``gt_box``: that car's box.
 - ``torch_threads(count)``: a context manager running torch with ``count`` threads.
+- ``serve_app(root, model, **config)``: a context manager serving the app on a free port (started
+  and warmed up; stopped on exit).
 - ``ws_client(port)``: a :class:`BrowserLikeClient` speaking viser's websocket protocol.
 - ``chromium``: Debian's Chromium (the test skips without it); ``chromium_args``: its flags.
 """
@@ -92,6 +94,21 @@ def torch_threads(count: int) -> Iterator[None]:
         torch.set_num_threads(old)
 
 
+@contextlib.contextmanager
+def serve_app(root: Path, model: object, timeout: float = 60.0, **config: object) -> Iterator:
+    """The app serving ``root`` with ``model`` on a free port (``AppConfig(port=0, **config)``),
+    started and warmed up; stopped on exit."""
+    from app import AppConfig, Talk2PCApp
+
+    app = Talk2PCApp(root, model, AppConfig(port=0, **config))  # type: ignore[arg-type]
+    app.start()
+    try:
+        app.wait_ready(timeout=timeout)
+        yield app
+    finally:
+        app.stop()
+
+
 @pytest.fixture(name="write_tiny_root", scope="session")
 def _write_tiny_root() -> Callable[..., Path]:
     return write_tiny_root
@@ -105,6 +122,11 @@ def _gt_box() -> np.ndarray:
 @pytest.fixture(name="torch_threads", scope="session")
 def _torch_threads() -> Callable[[int], contextlib.AbstractContextManager[None]]:
     return torch_threads
+
+
+@pytest.fixture(name="serve_app", scope="session")
+def _serve_app() -> Callable[..., contextlib.AbstractContextManager]:
+    return serve_app
 
 
 # ---------------------------------------------------------------------------- websocket client

@@ -71,20 +71,14 @@ def test_option_parsing() -> None:
 
 
 @pytest.fixture(scope="module")
-def annotating_app(tmp_path_factory, write_tiny_root, torch_threads):
-    from app import AppConfig, Talk2PCApp
+def annotating_app(tmp_path_factory, write_tiny_root, torch_threads, serve_app):
     from model import build_model
 
     root = write_tiny_root(tmp_path_factory.mktemp("annotate") / "root")
     with torch_threads(1):
         model = build_model("small", text_encoder="gru", head__score_threshold=0.0).eval()
-        app = Talk2PCApp(root, model, AppConfig(port=0))
-        app.start()
-        try:
-            app.wait_ready(timeout=60)
+        with serve_app(root, model) as app:
             yield app
-        finally:
-            app.stop()
 
 
 def _connect(app, ws_client):

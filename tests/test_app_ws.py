@@ -15,20 +15,14 @@ from tests.markdown_helpers import assert_only_text
 
 
 @pytest.fixture(scope="module")
-def running_app(tmp_path_factory, write_tiny_root, torch_threads):
-    from app import AppConfig, Talk2PCApp
+def running_app(tmp_path_factory, write_tiny_root, torch_threads, serve_app):
     from model import build_model
 
     root = write_tiny_root(tmp_path_factory.mktemp("ws") / "root")
     with torch_threads(1):
         model = build_model("small").eval()
-        app = Talk2PCApp(root, model, AppConfig(port=0, model_note="test note"))
-        app.start()
-        try:
-            app.wait_ready(timeout=60)
+        with serve_app(root, model, model_note="test note") as app:
             yield app
-        finally:
-            app.stop()
 
 
 def _connected(app, ws_client, timeout: float = 15.0):

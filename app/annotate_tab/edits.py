@@ -7,13 +7,14 @@ and redraws only the :class:`~app.annotate_tab.panel.Part` s that show what it c
 from __future__ import annotations
 
 import asyncio
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import viser
 
 from annotate import (
     BoxRegion,
+    Draft,
     DraftError,
     FitError,
     default_box,
@@ -245,18 +246,17 @@ class DraftEdits:
 
     def undo(self) -> None:
         """Take back the last edit; the box it changed (if still there) becomes selected."""
-        p = self.panel
-        with p.session.lock:
-            before = p.editor.draft
-            p.select_changed(before, p.editor.undo())
-            p.refresh(Part.DRAFT)
+        self._travel(self.panel.editor.undo)
 
     def redo(self) -> None:
         """Re-apply the last undone edit; the box it changed becomes selected."""
+        self._travel(self.panel.editor.redo)
+
+    def _travel(self, step: Callable[[], Draft]) -> None:
         p = self.panel
         with p.session.lock:
             before = p.editor.draft
-            p.select_changed(before, p.editor.redo())
+            p.select_changed(before, step())
             p.refresh(Part.DRAFT)
 
     def new_pair(self) -> None:
