@@ -160,11 +160,6 @@ def test_user_errors_are_one_line_and_exit_2(tiny_root: Path, tmp_path: Path, la
         assert line.startswith("error: ") and message in line, (argv, line)
 
 
-@pytest.mark.xfail(
-    strict=True,
-    reason="model.checkpoint.read_checkpoint passes torch.load's multi-line message on: the "
-    "'one-line error' of a corrupt --checkpoint is five lines (issue 12 report)",
-)
 def test_a_corrupt_checkpoint_is_one_line(tiny_root: Path, tmp_path: Path, capsys) -> None:
     import launch
 
