@@ -18,8 +18,7 @@ import os
 from pathlib import Path
 
 from annotate.errors import StoreError, one_line, operation_error
-from annotate.tree import fsync_dir
-from scenes.kitti import atomic_write_text
+from scenes.durable import atomic_write_text, fsync_dir
 from scenes.textfile import read_text_file
 
 log = logging.getLogger(__name__)
@@ -42,7 +41,8 @@ class Journals:
         return self.pending_dir / f"{op}.json"
 
     def write(self, journal: dict) -> None:
-        """Write a journal (atomically, its folder fsynced) before its operation starts.
+        """Write a journal (atomically, its folder fsynced: :func:`scenes.durable.atomic_write_text`)
+        before its operation starts.
 
         Raises:
             SaveError, DiskFullError: it could not be written (nothing was saved).
@@ -51,7 +51,6 @@ class Journals:
             atomic_write_text(self.path(journal["op"]), json.dumps(journal))
         except Exception as exc:
             raise operation_error(exc, "starting the operation", "nothing was saved") from exc
-        fsync_dir(self.pending_dir)
 
     def remove(self, op: str) -> None:
         """Remove a finished operation's journal; a failure is only logged (the operation is

@@ -1,8 +1,9 @@
 """The manifest: ``annotations/manifest.jsonl``, one JSON line per change of a saved pair.
 
-Lines are appended with ``O_APPEND`` and fsynced (:func:`append_manifest_line`); a failed append
-is truncated back, and a torn last line (a kill in the middle of a write) is skipped by the reader
-(:func:`read_manifest`) and terminated before the next append. Edits and deletions record the
+Lines are appended with ``O_APPEND`` and fsynced (:func:`scenes.durable.append_line`, called in one
+place: :meth:`Manifest.append`); a failed append is truncated back, and a torn last line (a kill in
+the middle of a write) is skipped by the reader (:func:`read_manifest`, over
+:func:`scenes.durable.read_json_lines`) and terminated before the next append. Edits and deletions record the
 previous prompt and label text, so every version of a pair stays in the manifest. The line format
 is described in ``docs/ANNOTATION.md``; :class:`Manifest` is the store's view of the file (records,
 a pair's history and version, the listed pairs).
@@ -10,16 +11,15 @@ a pair's history and version, the listed pairs).
 
 from __future__ import annotations
 
-import contextlib
 import enum
 import json
-import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from annotate.errors import fs_errors
-from scenes.root import format_id
+from scenes.durable import append_line, read_json_lines
+from scenes.layout import format_id
 
 MANIFEST_FORMAT = 1
 """Version of the manifest line format (the ``format`` field)."""
@@ -125,46 +125,14 @@ class ManifestLog:
 def read_manifest(path: str | Path) -> ManifestLog:
     """Read a manifest (a missing file is empty). Unreadable lines (a torn last line after a kill)
     are skipped and reported in :attr:`ManifestLog.skipped`, never fatal."""
-    path = Path(path)
-    if not path.is_file():
-        return ManifestLog(())
-    records, skipped = [], []
-    with open(path, encoding="utf-8", errors="replace") as handle:
-        for lineno, line in enumerate(handle, start=1):
-            if not line.strip():
-                continue
-            try:
-                records.append(ManifestRecord.from_json(json.loads(line)))
-            except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
-                skipped.append((lineno, f"{path}:{lineno}: unreadable manifest line ({exc})"))
-    return ManifestLog(tuple(records), tuple(skipped))
-
-
-def append_manifest_line(path: Path, line: str) -> None:
-    """Append one line to a JSON Lines file (O_APPEND, fsync).
-
-    A missing newline at the end of the file (a torn line) is added first, so the new line stands
-    alone; if the write fails the file is truncated back to its former size.
-    """
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd = os.open(path, os.O_RDWR | os.O_APPEND | os.O_CREAT, 0o644)
-    try:
-        size = os.fstat(fd).st_size
-        prefix = b""
-        if size and os.pread(fd, 1, size - 1) != b"\n":
-            prefix = b"\n"
-        data = prefix + line.encode("utf-8") + b"\n"
-        try:
-            view = memoryview(data)
-            while view:
-                view = view[os.write(fd, view) :]
-            os.fsync(fd)
-        except BaseException:
-            with contextlib.suppress(OSError):
-                os.ftruncate(fd, size)
-            raise
-    finally:
-        os.close(fd)
+    log = read_json_lines(path, ManifestRecord.from_json)
+    return ManifestLog(
+        tuple(record for _, record in log.entries),
+        tuple(
+            (lineno, f"{log.path}:{lineno}: unreadable manifest line ({why})")
+            for lineno, why in log.unreadable
+        ),
+    )
 
 
 @dataclass(frozen=True)
@@ -184,8 +152,7 @@ class PairInfo:
 class Manifest:
     """The manifest of one store (``path``): reading it and appending to it.
 
-    Every append goes through :meth:`append`, which calls this module's
-    :func:`append_manifest_line` (the one place a manifest line is written).
+    Every append goes through :meth:`append` (the one place a manifest line is written).
     """
 
     def __init__(self, path: Path) -> None:
@@ -236,7 +203,7 @@ class Manifest:
 
     def append(self, record: Mapping[str, object]) -> None:
         """Append one record (:meth:`ManifestRecord.to_json`)."""
-        append_manifest_line(self.path, json.dumps(record))
+        append_line(self.path, json.dumps(record))
 
 
 def last_source(history: Sequence[ManifestRecord]) -> dict:
@@ -264,7 +231,6 @@ __all__ = [
     "ManifestLog",
     "ManifestRecord",
     "PairInfo",
-    "append_manifest_line",
     "conflict_message",
     "last_source",
     "read_manifest",

@@ -1,35 +1,32 @@
-"""What a saved pair's text files hold, the same for a create and an update.
+"""What a saved pair's files hold, the same for a create and an update.
 
-The prompt file is the stripped prompt and a line break; ``label_2`` lines have
-:data:`LABEL_DECIMALS` decimals (as :class:`scenes.root.Talk2RadarWriter` writes them); the sidecar
-(:func:`pair_meta`) holds the prompt's type tags, the draft boxes as actors and the annotation
-facts. A test saves one pair both ways and compares the bytes.
+The text of the files is :func:`scenes.writer.sample_text` (the one function that turns a sample
+into its files, for the writer's creates and the store's edits); this module adds what only a
+saved pair has: its sidecar (:func:`pair_meta`: the prompt's type tags, the draft boxes as actors
+and the annotation facts), and the image size its 2D boxes are clipped to
+(:func:`frame_image_size`). A test saves one pair both ways and compares the bytes.
 """
 
 from __future__ import annotations
 
-import json
-from collections.abc import Sequence
-
 from annotate.draft import Draft
+from annotate.errors import StoreError
 from annotate.manifest import ManifestRecord
 from annotate.suggest import SuggestConfig, scene_actors
-from scenes.kitti import ObjectLabel, format_label_line
+from scenes.imagefile import ImageError
 from scenes.prompts import infer_tags
-from scenes.root import Sample, SampleMeta
-
-LABEL_DECIMALS = 6
-"""Decimals of the numbers in written ``label_2`` lines (as :class:`Talk2RadarWriter`)."""
+from scenes.root import Sample
+from scenes.sample_meta import SampleMeta
 
 
-def label_text(labels: Sequence[ObjectLabel]) -> str:
-    """The ``label_2`` file of ``labels``."""
-    return "".join(format_label_line(lab, LABEL_DECIMALS) + "\n" for lab in labels)
-
-
-def meta_text(meta: SampleMeta) -> str:
-    """The sidecar file of ``meta``."""
-    return json.dumps(meta.to_json(), indent=1)
+def frame_image_size(sample: Sample) -> tuple[int, int]:
+    """The image size the pair's 2D boxes are clipped to: the frame's camera image's, VoD's
+    without one (:attr:`scenes.root.Sample.image_size`); an unreadable image is a
+    :class:`~annotate.errors.StoreError` naming the file."""
+    try:
+        return sample.image_size
+    except ImageError as exc:
+        raise StoreError(str(exc)) from exc
 
 
 def pair_meta(draft: Draft, sample: Sample, record: ManifestRecord) -> SampleMeta:
@@ -66,4 +63,4 @@ def pair_meta(draft: Draft, sample: Sample, record: ManifestRecord) -> SampleMet
     )
 
 
-__all__ = ["LABEL_DECIMALS", "label_text", "meta_text", "pair_meta"]
+__all__ = ["frame_image_size", "pair_meta"]

@@ -1,22 +1,33 @@
 """The frame a new pair is annotated on: :class:`SourceFrame`, and its sensors written once.
 
-A frame read from a Talk2Radar root is linked, not rewritten (its sensor files are hard-linked or
-copied into the pair's sample); a frame held only in memory gets its sensors written once under
-``<root>/sources/<key>-<hash>/`` (:func:`write_source`), reused by every pair made on it.
+A frame read from a Talk2Radar root is linked, not rewritten (its sensor files and its camera image
+are hard-linked or copied into the pair's sample); a frame held only in memory gets its sensors
+written once under ``<root>/sources/<key>-<hash>/`` (:func:`write_source`), reused by every pair
+made on it. Paths come from :mod:`scenes.layout`.
 """
 
 from __future__ import annotations
 
 import hashlib
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from annotate.tree import RootFiles
 from scenes.calib import vod_radar_calibration
-from scenes.root import Sample, SensorFiles, Talk2RadarRoot, Talk2RadarWriter, format_id
+from scenes.durable import link_or_copy
+from scenes.layout import (
+    CALIB,
+    SOURCE_IMAGE,
+    SOURCE_SENSORS,
+    VELODYNE,
+    format_id,
+    sample_file,
+    source_dir,
+)
+from scenes.root import Sample, Talk2RadarRoot
+from scenes.writer import SensorFiles, Talk2RadarWriter
 
 
 @dataclass(frozen=True)
@@ -43,7 +54,8 @@ class SourceFrame:
     def from_root(
         root: Talk2RadarRoot | str | Path, sample_id: str | int, sample: Sample | None = None
     ) -> SourceFrame:
-        """A frame of a Talk2Radar root; its sensor files are linked, not rewritten.
+        """A frame of a Talk2Radar root; its sensor files (and its camera image
+        ``image_2/<id>.jpg`` or ``.png``, where it has one) are linked, not rewritten.
 
         ``sample`` is the frame already loaded from that root (read again when None).
         """
@@ -52,13 +64,13 @@ class SourceFrame:
         sample = sample if sample is not None else r.load(sid)
         files = None
         if r.radar_dir is not None:
-            path = RootFiles.sample_file
             files = SensorFiles(
                 folder=r.path,
-                lidar_bin=path(r.lidar_dir, "velodyne", sid, "bin"),
-                radar_bin=path(r.radar_dir, "velodyne", sid, "bin"),
-                lidar_calib=path(r.lidar_dir, "calib", sid),
-                radar_calib=path(r.radar_dir, "calib", sid),
+                lidar_bin=sample_file(r.lidar_dir, VELODYNE, sid),
+                radar_bin=sample_file(r.radar_dir, VELODYNE, sid),
+                lidar_calib=sample_file(r.lidar_dir, CALIB, sid),
+                radar_calib=sample_file(r.radar_dir, CALIB, sid),
+                image=r.image_path(sid),
             )
         return SourceFrame(f"{r.path.name}/{sid}", sample, files, str(r.path.resolve()), sid)
 
@@ -73,7 +85,8 @@ class SourceFrame:
 
 
 def write_source(writer: Talk2RadarWriter, source: SourceFrame) -> SensorFiles:
-    """Write an in-memory frame's sensors under ``<root>/sources/`` once (reused when present)."""
+    """Write an in-memory frame's sensors under ``<root>/sources/`` once (reused when present);
+    its camera image file, where it has one, is linked there too."""
     sample = source.sample
     radar_calib = sample.radar_calib if sample.radar_calib is not None else vod_radar_calibration()
     digest = hashlib.sha1(usedforsecurity=False)
@@ -81,13 +94,21 @@ def write_source(writer: Talk2RadarWriter, source: SourceFrame) -> SensorFiles:
     digest.update(np.ascontiguousarray(sample.radar, dtype="<f4").tobytes())
     digest.update(sample.calib.to_text().encode())
     digest.update(radar_calib.to_text().encode())
+    if sample.image_path is not None:
+        digest.update(sample.image_path.read_bytes())
     safe = re.sub(r"[^A-Za-z0-9_.-]+", "_", source.key).strip("._")[:60] or "frame"
     key = f"{safe}-{digest.hexdigest()[:10]}"
-    folder = writer.root / "sources" / key
-    names = ("lidar.bin", "radar.bin", "lidar_calib.txt", "radar_calib.txt")
-    if all((folder / n).is_file() for n in names):
-        return SensorFiles(folder, *(folder / n for n in names))
-    return writer.write_sensors(key, sample.lidar, sample.radar, sample.calib, radar_calib)
+    folder = source_dir(writer.root, key)
+    if all((folder / name).is_file() for name in SOURCE_SENSORS):
+        files = SensorFiles.in_folder(folder)
+    else:
+        files = writer.write_sensors(key, sample.lidar, sample.radar, sample.calib, radar_calib)
+    if sample.image_path is None:
+        return files
+    image = folder / f"{Path(SOURCE_IMAGE).stem}{sample.image_path.suffix}"
+    if not image.is_file():
+        link_or_copy(sample.image_path, image)
+    return replace(files, image=image)
 
 
 __all__ = ["SourceFrame", "write_source"]

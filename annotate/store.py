@@ -1,20 +1,24 @@
 """Saved prompt-to-box pairs in a Talk2Radar root: create, reopen, edit, delete, never lose one.
 
 Each saved pair is one new sample of the root (the Talk2Radar unit: one frame's sensors, one prompt,
-the boxes it refers to), written with the pieces of :class:`scenes.root.Talk2RadarWriter`:
-sensor files hard-linked (or copied) from the source frame, calibration, ``label_2`` in the camera
-frame with projected 2D boxes, ``prompt/<id>.txt`` in the LiDAR and the radar tree, and the
-``meta/<id>.json`` sidecar (type tags, actors with velocities, annotator). The id becomes visible by
+the boxes it refers to), written with the pieces of :class:`scenes.writer.Talk2RadarWriter`:
+sensor files and camera image hard-linked (or copied) from the source frame, calibration,
+``label_2`` in the camera frame with projected 2D boxes, ``prompt/<id>.txt`` in the LiDAR and the
+radar tree, and the ``meta/<id>.json`` sidecar (type tags, actors with velocities, annotator). A
+create and an edit make the text of these files with the same function
+(:func:`scenes.writer.sample_text`), the 2D boxes clipped to the frame's image size. The id becomes visible by
 being appended to ``ImageSets/<split>.txt``; every change is recorded as one JSON line in
 ``<root>/annotations/manifest.jsonl`` (see ``docs/ANNOTATION.md`` for the format).
 
 The parts: :mod:`annotate.manifest` (the manifest), :mod:`annotate.journal` (journals of
 interrupted operations), :mod:`annotate.transaction` (locking, the commit point, undo and
 completion: the consistency rules), :mod:`annotate.tree` (the root's split lists and sample
-files), :mod:`annotate.errors`. This module is the public face: :class:`AnnotationStore`.
+files), :mod:`annotate.source` (the frame a pair is made on), :mod:`annotate.pair_files` (a pair's
+sidecar), :mod:`annotate.errors`. This module is the public face: :class:`AnnotationStore`.
 
-- **Atomic files.** Every file is written to a temporary file, fsynced and renamed over the target;
-  a reader sees the old or the new content, never a part.
+- **Atomic files.** Every file is written to a temporary file, fsynced and renamed over the target,
+  its folder fsynced (:mod:`scenes.durable`); a reader sees the old or the new content, never a
+  part.
 - **Ids.** Allocated under the lock, above the highest id in any ImageSets list, sample folder,
   sidecar, the manifest and pending or set-aside journals, so concurrent clients always get
   distinct ids and no id is ever reused.
@@ -49,20 +53,18 @@ from annotate.manifest import (
     conflict_message,
     last_source,
 )
-from annotate.pair_files import label_text, meta_text, pair_meta
+from annotate.pair_files import frame_image_size, pair_meta
 from annotate.source import SourceFrame, write_source
 from annotate.transaction import Transactions
-from annotate.tree import RootFiles, replace_all
+from annotate.tree import RootFiles
 from annotate.validation import Issue, ValidationConfig, validate
 from scenes.actors import CLASSES
 from scenes.calib import read_calib
-from scenes.kitti import ObjectLabel, boxes_to_labels, labels_to_boxes
-from scenes.root import (
-    RADAR_FOLDERS,
-    Talk2RadarRoot,
-    Talk2RadarWriter,
-    format_id,
-)
+from scenes.durable import replace_files
+from scenes.kitti import ObjectLabel, labels_to_boxes
+from scenes.layout import CALIB, RADAR_FOLDERS, format_id, radar_folders_in, sample_file
+from scenes.root import Sample, Talk2RadarRoot
+from scenes.writer import SampleText, Talk2RadarWriter, sample_text
 
 _SPLIT_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}")
 
@@ -118,7 +120,7 @@ class AnnotationStore:
         self.splits: tuple[str, ...] = tuple(DEFAULT_SPLITS if splits is None else splits)
         for name in self.splits:
             _check_split_name(name)
-        present = [name for name in RADAR_FOLDERS if (self.path / name).is_dir()]
+        present = radar_folders_in(self.path)
         if radar_folder is None:
             radar_folder = present[0] if present else RADAR_FOLDERS[0]
         elif present and radar_folder != present[0]:
@@ -190,7 +192,7 @@ class AnnotationStore:
         sid = format_id(sample_id)
         if not self.splits_of(sid):
             raise StoreError(f"sample {sid} is not listed in any split of {self.path} (deleted?)")
-        calib = read_calib(self.files.sample_file(self.lidar_dir, "calib", sid))
+        calib = read_calib(sample_file(self.lidar_dir, CALIB, sid))
         boxes, classes = labels_to_boxes(self.files.read_labels(sid), calib)
         prompt = self.files.read_prompt(sid) or ""
         return Draft.from_boxes(
@@ -240,20 +242,17 @@ class AnnotationStore:
         annotator = _clean_annotator(annotator)
         report = validate(draft, self.validation, source.sample.calib)
         report.raise_if_invalid()
-        prompt = draft.prompt.strip()
-        boxes, classes = draft.box_array, draft.classes
-        calib = source.sample.calib
-        labels = boxes_to_labels(boxes, list(classes), calib)
+        sample = source.sample
+        text = self._text(draft, sample)
         with self.transactions.transaction(f"saving a new pair in {self.path}") as tx:
             sid = format_id(self._next_id())
             record = self._record(
-                Action.CREATE, sid, 1, annotator, (split,), draft, labels, source.describe()
+                Action.CREATE, sid, 1, annotator, (split,), draft, text, source.describe()
             )
-            meta = pair_meta(draft, source.sample, record)
+            text = text.with_meta(pair_meta(draft, sample, record))
             tx.begin(_journal(record), f"saving pair {sid}")
             files = source.files if source.files is not None else write_source(self.writer, source)
-            self.writer.write_sample(sid, files, boxes, classes, prompt, meta, calib=calib)
-            self.files.sync_sample_dirs(self.writer.trees)
+            self.writer.write_sample_text(sid, files, text)
             self.files.add_to_split(sid, split)
             self.manifest.append(record.to_json())
         return SaveResult(sid, 1, record, report.warnings)
@@ -274,32 +273,25 @@ class AnnotationStore:
             raise ValueError("this draft is not an opened pair (sample_id is None): use create()")
         sid = format_id(draft.sample_id)
         annotator = _clean_annotator(annotator)
-        calib_path = self.files.sample_file(self.lidar_dir, "calib", sid)
+        calib_path = sample_file(self.lidar_dir, CALIB, sid)
         if not calib_path.is_file():
             raise StoreError(f"sample {sid} has no calibration file {calib_path}")
-        calib = read_calib(calib_path)
-        report = validate(draft, self.validation, calib)
+        report = validate(draft, self.validation, read_calib(calib_path))
         report.raise_if_invalid()
-        prompt = draft.prompt.strip()
-        boxes, classes = draft.box_array, draft.classes
         with self.transactions.transaction(f"saving the edit of pair {sid}") as tx:
             splits, current = self._listed_version(sid, draft.base_version, "(deleted?); not saved")
-            kept = [lab for lab in self.files.read_labels(sid) if lab.name.lower() not in _METRIC]
-            labels = boxes_to_labels(boxes, list(classes), calib) + kept
-            record = self._record(Action.EDIT, sid, current + 1, annotator, splits, draft, labels)
             sample = Talk2RadarRoot(self.path, radar=self.writer.radar_folder).load(sid)
-            meta = pair_meta(draft, sample, record)
-            targets: list[tuple[Path, str]] = [(self.files.meta_file(sid), meta_text(meta))]
-            for folder, text in (("prompt", prompt + "\n"), ("label_2", record.label_text)):
-                for tree in self.writer.trees:
-                    targets.append((self.files.sample_file(tree, folder, sid), str(text)))
+            kept = [lab for lab in self.files.read_labels(sid) if lab.name.lower() not in _METRIC]
+            text = self._text(draft, sample, kept)
+            record = self._record(Action.EDIT, sid, current + 1, annotator, splits, draft, text)
+            text = text.with_meta(pair_meta(draft, sample, record))
+            targets = self.writer.text_files(sid, text)
             journal = _journal(record)
             journal["restore"] = {
                 str(path.relative_to(self.path)): self.files.read_text(path) for path, _ in targets
             }
             tx.begin(journal, f"saving the edit of pair {sid}")
-            replace_all(targets, record.op)
-            self.files.sync_sample_dirs(self.writer.trees)
+            replace_files(targets)
             self.manifest.append(record.to_json())
         return SaveResult(sid, current + 1, record, report.warnings)
 
@@ -347,6 +339,16 @@ class AnnotationStore:
 
     # ---------------------------------------------------------------- internals
 
+    @staticmethod
+    def _text(draft: Draft, sample: Sample, kept: Sequence[ObjectLabel] = ()) -> SampleText:
+        """The pair's files without the sidecar (:func:`scenes.writer.sample_text`): the draft's
+        boxes in the frame's calibration, clipped to its image size (:func:`frame_image_size`),
+        then the ``kept`` labels."""
+        size = frame_image_size(sample)
+        return sample_text(
+            draft.box_array, draft.classes, draft.prompt, sample.calib, size, kept=kept
+        )
+
     def _record(
         self,
         action: Action,
@@ -355,7 +357,7 @@ class AnnotationStore:
         annotator: str,
         splits: tuple[str, ...],
         draft: Draft | None = None,
-        labels: Sequence[ObjectLabel] = (),
+        text: SampleText | None = None,
         source: dict | None = None,
     ) -> ManifestRecord:
         """The manifest line of an operation (a new ``op`` id, the clock's time). An edit or a
@@ -370,13 +372,13 @@ class AnnotationStore:
             }
             source = last_source(self.history(sid))
         content: dict = {}
-        if draft is not None:
+        if draft is not None and text is not None:
             content = {
                 "prompt": draft.prompt.strip(),
                 "boxes": tuple(tuple(float(v) for v in b) for b in draft.box_array),
                 "classes": draft.classes,
                 "refers_to_nothing": draft.refers_to_nothing,
-                "label_text": label_text(labels),
+                "label_text": text.label,
             }
         return ManifestRecord(
             action=action,

@@ -46,8 +46,9 @@ from annotate.errors import (
 )
 from annotate.journal import Journals
 from annotate.manifest import Manifest
-from annotate.tree import RootFiles, fsync_dir, holds, replace_all
-from scenes.root import format_id
+from annotate.tree import RootFiles, holds
+from scenes.durable import fsync_dir, replace_files
+from scenes.layout import format_id
 
 try:  # POSIX only; elsewhere the in-process lock alone serialises writers.
     import fcntl
@@ -211,7 +212,7 @@ class Transactions:
                     path.unlink(missing_ok=True)
                 elif not holds(path, str(text)):  # unchanged files need no writing back
                     targets.append((path, str(text)))
-            replace_all(targets, op)
+            replace_files(targets)
             files.remove_temporaries(sid)
             return "rolled back"
         if action == "delete":

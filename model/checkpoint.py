@@ -10,7 +10,8 @@ File content (a ``torch.save`` of plain types, readable with ``torch.load(weight
 - ``metadata`` holds what the caller passes to :func:`save_checkpoint` (e.g. the training data's
   description, the epoch, the metric on it); it must be JSON-serialisable plain data.
 - Writing goes to a temporary file in the target directory, which is flushed and fsynced, then
-  renamed over the target (``os.replace``), so a crash never leaves a half-written checkpoint.
+  renamed over the target (``os.replace``) and the directory fsynced
+  (:func:`scenes.durable.atomic_file`), so a crash never leaves a half-written checkpoint.
 - Loading fails with :class:`CheckpointError` naming the path when the file is missing, corrupt or
   of another format, and naming the field when the stored config does not match this code's
   :class:`model.config.ModelConfig` (an unknown, missing or mistyped field) or a weight is missing,
@@ -21,7 +22,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -29,6 +29,7 @@ import torch
 
 from model.config import ConfigError, ModelConfig
 from model.tpcnet import TPCNet
+from scenes.durable import atomic_file
 
 FORMAT = "talk2pc-tpcnet"
 FORMAT_VERSION = 1
@@ -58,28 +59,8 @@ def save_checkpoint(path: str | os.PathLike[str], model: TPCNet, **metadata: Any
         "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
         "metadata": metadata,
     }
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            torch.save(payload, fh)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    try:
-        dir_fd = os.open(path.parent, os.O_RDONLY)
-    except OSError:
-        return path
-    try:
-        os.fsync(dir_fd)
-    except OSError:
-        pass
-    finally:
-        os.close(dir_fd)
+    with atomic_file(path) as fh:
+        torch.save(payload, fh)
     return path
 
 

@@ -1,4 +1,5 @@
-"""Camera image files (``image_2/<id>.jpg``): a strict reader and an atomic JPEG writer.
+"""Camera image files (``image_2/<id>.jpg``): a strict reader, a header-only size reader and an
+atomic JPEG writer.
 
 Images are ``(H, W, 3)`` uint8 RGB arrays, row 0 at the top. Pixel ``(row j, column i)`` covers
 ``[i, i + 1) x [j, j + 1)`` in image coordinates (its centre is at ``(i + 0.5, j + 0.5)``), the
@@ -8,16 +9,15 @@ convention under which ``P2`` projects and :func:`scenes.calib.boxes_2d` clips t
 from __future__ import annotations
 
 import io
-import os
-import threading
 import warnings
 from pathlib import Path
 
 import numpy as np
 from PIL import Image
 
-IMAGE_SUFFIXES = (".jpg", ".png")
-"""Image file extensions a root may use, in the order they are looked for (VoD uses ``.jpg``)."""
+from scenes.calib import IMAGE_SIZE
+from scenes.durable import atomic_write_bytes
+from scenes.textfile import read_file_bytes
 
 PRINCIPAL_POINT_TOLERANCE = 0.05
 """An image whose size puts P2's principal point further than this fraction of the width (height)
@@ -35,12 +35,7 @@ def read_image(path: str | Path) -> np.ndarray:
         ImageError: the file is missing or unreadable, not an image, corrupt or truncated.
     """
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError as exc:
-        raise ImageError(f"{path}: image file not found") from exc
-    except OSError as exc:
-        raise ImageError(f"{path}: cannot read the image file ({exc.strerror or exc})") from exc
+    raw = read_file_bytes(path, "image file", ImageError)
     if not raw:
         raise ImageError(f"{path}: the image file is empty")
     try:
@@ -50,6 +45,22 @@ def read_image(path: str | Path) -> np.ndarray:
     except (OSError, ValueError, SyntaxError, Image.DecompressionBombError) as exc:
         raise ImageError(f"{path}: corrupt or truncated image ({exc})") from exc
     return np.asarray(rgb, dtype=np.uint8).copy()
+
+
+def read_image_size(path: str | Path) -> tuple[int, int]:
+    """``(width, height)`` of an image file, from its header only (nothing is decoded).
+
+    Raises:
+        ImageError: the file is missing or unreadable, or not an image.
+    """
+    path = Path(path)
+    try:
+        with Image.open(path) as img:
+            return (int(img.size[0]), int(img.size[1]))
+    except FileNotFoundError as exc:
+        raise ImageError(f"{path}: image file not found") from exc
+    except (OSError, ValueError, SyntaxError, Image.DecompressionBombError) as exc:
+        raise ImageError(f"{path}: unreadable image header ({exc})") from exc
 
 
 def check_principal_point(
@@ -89,17 +100,21 @@ def encode_jpeg(image: np.ndarray, quality: int = 90) -> bytes:
 
 
 def write_jpeg(path: str | Path, image: np.ndarray, quality: int = 90) -> None:
-    """Write ``image`` (``(H, W, 3)`` uint8) as a JPEG atomically: temporary file, fsync, rename."""
+    """Write ``image`` (``(H, W, 3)`` uint8) as a JPEG atomically
+    (:func:`scenes.durable.atomic_write_bytes`)."""
     path = Path(path)
     data = encode_jpeg(image, quality)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
-    try:
-        with open(tmp, "wb") as handle:
-            handle.write(data)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    atomic_write_bytes(path, data)
+
+
+def label_image_size(image: Path | None, known: tuple[int, int] | None = None) -> tuple[int, int]:
+    """The one rule for the image size the 2D boxes of ``label_2`` are clipped to: ``known`` (the
+    size of an image just written), else the size of the frame's camera image ``image`` (read from
+    its header), else VoD's 1936 x 1216 (a frame without an image).
+
+    Raises:
+        ImageError: ``image`` is unreadable.
+    """
+    if known is not None:
+        return known
+    return read_image_size(image) if image is not None else IMAGE_SIZE

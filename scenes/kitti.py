@@ -9,8 +9,6 @@ classes: :func:`labels_to_boxes` leaves them out.
 
 from __future__ import annotations
 
-import os
-import threading
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +25,7 @@ from scenes.calib import (
     boxes_camera_to_lidar,
     boxes_lidar_to_camera,
 )
+from scenes.durable import atomic_write_text
 from scenes.textfile import read_text_file
 
 MAX_ABS_VALUE = 1e6
@@ -141,26 +140,15 @@ def read_label_file(path: str | Path) -> list[ObjectLabel]:
     return labels
 
 
-def atomic_write_text(path: str | Path, text: str) -> None:
-    """Write ``text`` to ``path`` atomically: temporary file in the same folder, fsync, rename."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
-    try:
-        with open(tmp, "w") as handle:
-            handle.write(text)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+def label_file_text(labels: Sequence[ObjectLabel], decimals: int = 4) -> str:
+    """The text of a label file: :func:`format_label_line` of each label, each ended by a line
+    break (empty for no labels)."""
+    return "".join(format_label_line(lab, decimals) + "\n" for lab in labels)
 
 
 def write_label_file(path: str | Path, labels: Sequence[ObjectLabel], decimals: int = 4) -> None:
-    """Write labels atomically, one line each (an empty file for no labels)."""
-    text = "".join(format_label_line(lab, decimals) + "\n" for lab in labels)
-    atomic_write_text(path, text)
+    """Write labels atomically (:func:`scenes.durable.atomic_write_text`), one line each."""
+    atomic_write_text(path, label_file_text(labels, decimals))
 
 
 def labels_to_boxes(

@@ -4,11 +4,12 @@ infinite coordinate, is an error naming the file (and the first bad point)."""
 
 from __future__ import annotations
 
-import os
-import threading
 from pathlib import Path
 
 import numpy as np
+
+from scenes.durable import atomic_write_bytes
+from scenes.textfile import read_file_bytes
 
 LIDAR_FEATURES = 4
 RADAR_FEATURES = 7
@@ -21,14 +22,7 @@ class PointCloudError(ValueError):
 def read_points(path: str | Path, num_features: int) -> np.ndarray:
     """Read ``(N, num_features)`` float32 points."""
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError as exc:
-        raise PointCloudError(f"{path}: point-cloud file not found") from exc
-    except OSError as exc:  # a folder, a symlink loop, no permission
-        raise PointCloudError(
-            f"{path}: cannot read the point-cloud file ({exc.strerror or exc})"
-        ) from exc
+    raw = read_file_bytes(path, "point-cloud file", PointCloudError)
     record = 4 * num_features
     if len(raw) % record:
         raise PointCloudError(
@@ -53,18 +47,9 @@ def validate_points(points: np.ndarray, num_features: int, source: str = "<point
 
 
 def write_points(path: str | Path, points: np.ndarray) -> None:
-    """Write points atomically (temporary file, fsync, rename) as little-endian float32."""
+    """Write points atomically (:func:`scenes.durable.atomic_write_bytes`) as little-endian
+    float32."""
     path = Path(path)
     pts = np.ascontiguousarray(points, dtype="<f4")
     validate_points(pts, pts.shape[1] if pts.ndim == 2 else -1, source=str(path))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
-    try:
-        with open(tmp, "wb") as handle:
-            handle.write(pts.tobytes())
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    atomic_write_bytes(path, pts.tobytes())

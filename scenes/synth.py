@@ -38,8 +38,6 @@ Weather: ``clear`` (default), ``rain``, ``fog``, or ``mixed`` (60 / 20 / 20 % pe
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
 import time
 from collections.abc import Sequence
@@ -51,8 +49,10 @@ from tqdm import tqdm
 
 from scenes.calib import Calibration, sensor_to_lidar
 from scenes.camera import CameraConfig
+from scenes.durable import append_json_line, drop_torn_tail, read_json_lines
+from scenes.layout import LABEL, LIDAR_FOLDER, sample_file
 from scenes.prompts import PHRASINGS
-from scenes.root import SampleMeta, Talk2RadarWriter
+from scenes.sample_meta import SampleMeta
 from scenes.synth_frame import (
     MIXED,
     MIXED_WEATHER,
@@ -66,6 +66,7 @@ from scenes.synth_frame import (
     world_streams,
 )
 from scenes.weather import WEATHERS
+from scenes.writer import Talk2RadarWriter
 
 __all__ = [  # with the settings and one frame from scenes.synth_frame, re-exported
     "CAMERA_SCALES",
@@ -188,52 +189,52 @@ class GenerationReport:
     splits: dict[str, list[str]]
 
 
+def _manifest_line(value: object) -> dict:
+    """A manifest line: the settings (line 1) or a world entry; KeyError / TypeError / ValueError
+    for anything else."""
+    if not isinstance(value, dict) or not ("settings" in value or "world" in value):
+        raise ValueError("neither the settings nor a world entry")
+    if "settings" not in value:
+        int(value["world"])
+    return value
+
+
 def _read_manifest(out: Path, settings: SynthSettings) -> dict[int, dict]:
-    """World entries of the manifest (creating it, with the settings line, when absent)."""
+    """World entries of the manifest (creating it, with the settings line, when absent). A torn
+    last line (an interrupted append) is cut off: that world is redone."""
     path = out / MANIFEST
     if not path.is_file():
-        if (out / "lidar").exists():
+        if (out / LIDAR_FOLDER).exists():
             raise SynthError(
                 f"{out}: holds a Talk2Radar root without {MANIFEST}; refusing to write into it"
             )
-        path.write_text(json.dumps({"settings": settings.key()}) + "\n")
+        append_json_line(path, {"settings": settings.key()})
         return {}
-    lines = path.read_text().splitlines()
-    try:
-        recorded = json.loads(lines[0])["settings"]
-    except (IndexError, json.JSONDecodeError, KeyError, TypeError) as exc:
-        raise SynthError(f"{path}:1: unreadable manifest ({exc}); delete the folder") from exc
+    log = read_json_lines(path, _manifest_line)
+    first = log.entries[0] if log.entries else None
+    if first is None or first[0] != 1 or "settings" not in first[1]:
+        why = log.unreadable[0][1] if log.unreadable else "no settings line"
+        raise SynthError(f"{path}:1: unreadable manifest ({why}); delete the folder")
+    recorded = first[1]["settings"]
     if recorded != settings.key():
         raise SynthError(
             f"{path}: generated with {recorded}, now asked for {settings.key()}; "
             "use another --out or delete this one"
         )
+    for lineno, why in log.unreadable:
+        if lineno != log.last_line:  # only the last line can be torn by an interruption
+            raise SynthError(f"{path}:{lineno}: unreadable manifest line ({why})")
+    drop_torn_tail(log)
     worlds: dict[int, dict] = {}
-    for lineno, line in enumerate(lines[1:], start=2):
-        try:
-            entry = json.loads(line)
-            worlds[int(entry["world"])] = entry
-        except (json.JSONDecodeError, KeyError, TypeError, ValueError) as exc:
-            if lineno == len(lines):  # torn by an interruption: dropped, that world is redone
-                path.write_text("".join(f"{kept}\n" for kept in lines[:-1]))
-                break
-            raise SynthError(f"{path}:{lineno}: unreadable manifest line ({exc})") from exc
+    for lineno, entry in log.entries[1:]:
+        if "world" not in entry:
+            raise SynthError(f"{path}:{lineno}: unreadable manifest line (a second settings line)")
+        worlds[int(entry["world"])] = entry
     return worlds
 
 
-def _append_manifest(out: Path, entry: dict) -> None:
-    with open(out / MANIFEST, "a") as handle:
-        handle.write(json.dumps(entry) + "\n")
-        handle.flush()
-        os.fsync(handle.fileno())
-
-
 def _complete_on_disk(writer: Talk2RadarWriter, ids: Sequence[str]) -> bool:
-    return all(
-        (tree / "training" / "label_2" / f"{sid}.txt").is_file()
-        for tree in writer.trees
-        for sid in ids
-    )
+    return all(sample_file(tree, LABEL, sid).is_file() for tree in writer.trees for sid in ids)
 
 
 def generate_root(
@@ -292,7 +293,7 @@ def generate_root(
                 "available": len(frame.prompts),
             }
             manifest[world_index] = entry
-            _append_manifest(out, entry)
+            append_json_line(out / MANIFEST, entry)
             generated += 1
         empty_run = 0 if ids else empty_run + 1
         if empty_run >= max_empty_worlds:

@@ -12,6 +12,7 @@ import numpy as np
 
 from scenes.calib import Calibration, vod_lidar_calibration, vod_radar_calibration
 from scenes.camera import CameraConfig, render_image
+from scenes.layout import RADAR_FOLDER_OF_SCANS
 from scenes.lidar_sim import LidarConfig, LidarScan, simulate_lidar
 from scenes.projection import scale_calibration
 from scenes.prompts import PHRASINGS, Prompt, PromptConfig, generate_prompts
@@ -19,8 +20,8 @@ from scenes.radar_sim import RadarConfig, RadarScan, simulate_radar
 from scenes.weather import WEATHERS, Weather
 from scenes.world import RayCaster, World, WorldConfig, generate_world
 
-RADAR_FOLDER = {1: "radar", 3: "radar_3frames", 5: "radar_5frames"}
-"""Radar tree name per number of accumulated scans (as VoD)."""
+RADAR_FOLDER = RADAR_FOLDER_OF_SCANS
+"""Radar tree per number of accumulated scans (:data:`scenes.layout.RADAR_FOLDER_OF_SCANS`)."""
 MIXED = "mixed"
 MIXED_WEATHER = (("clear", 0.6), ("rain", 0.2), ("fog", 0.2))
 

@@ -30,6 +30,7 @@ from scenes import Actor, SampleMeta, Talk2RadarRoot, Talk2RadarWriter, read_lab
 from scenes.boxes import wrap_yaw
 from scenes.calib import vod_lidar_calibration, vod_radar_calibration
 from scenes.pointcloud import read_points
+from scenes.projection import scale_calibration
 
 CAR = (12.0, 3.0, -0.95, 4.2, 1.8, 1.5, 0.4)
 PED = (20.0, -5.0, -0.85, 0.7, 0.6, 1.7, -2.9)
@@ -42,15 +43,17 @@ def _draft(prompt: str = "the car and the pedestrian ahead") -> Draft:
 
 @pytest.fixture
 def source_root(tmp_path: Path) -> Path:
-    """A small Talk2Radar root with frames 3 and 7 (VoD-like calibration)."""
+    """A small Talk2Radar root with frames 3 (with a VoD-size camera image) and 7 (without one),
+    VoD-like calibration."""
     rng = np.random.default_rng(0)
     path = tmp_path / "source"
     writer = Talk2RadarWriter(path)
     for frame in (3, 7):
         lidar = rng.uniform(-10, 30, (300, 4)).astype(np.float32)
         radar = rng.uniform(-10, 30, (30, 7)).astype(np.float32)
+        image = np.full((1216, 1936, 3), 90, np.uint8) if frame == 3 else None
         files = writer.write_sensors(
-            f"w{frame}", lidar, radar, vod_lidar_calibration(), vod_radar_calibration()
+            f"w{frame}", lidar, radar, vod_lidar_calibration(), vod_radar_calibration(), image
         )
         actors = (Actor(0, "Car", CAR, [3.0, 0.0]), Actor(1, "Cyclist", CYC, [0.0, 2.0]))
         meta = SampleMeta(tags=frozenset({"class"}), actors=actors, referent_ids=(0,), world_id=5)
@@ -120,10 +123,13 @@ def test_round_trip_through_talk2radar_root(source_root: Path, out_root: Path) -
         assert 0 <= left < right <= 1936 and 0 <= top < bottom <= 1216
         # Bottom centre in the camera frame: LiDAR z - h/2, seen from a camera 0.46 m lower.
         assert labels[0].location[1] == pytest.approx(-(CAR[2] - CAR[5] / 2) - 0.46, abs=1e-5)
-    # Sensors are hard links of the source frame's files, not copies.
-    a = source_root / "lidar" / "training" / "velodyne" / "00003.bin"
-    b = out_root / "lidar" / "training" / "velodyne" / "00000.bin"
-    assert a.stat().st_ino == b.stat().st_ino
+    # Sensors and the camera image are hard links of the source frame's files, not copies.
+    for folder, name in (("velodyne", "{}.bin"), ("image_2", "{}.jpg")):
+        for tree in ("lidar", "radar_5frames"):
+            a = source_root / tree / "training" / folder / name.format("00003")
+            b = out_root / tree / "training" / folder / name.format("00000")
+            assert a.stat().st_ino == b.stat().st_ino
+    assert sample.image_path is not None and sample.image_size == (1936, 1216)
 
     (record,) = read_manifest(store.manifest_path).records
     assert record.action is Action.CREATE and record.annotator == "Ada Lovelace"
@@ -424,7 +430,7 @@ def test_manifest_failure_after_the_commit_is_completed_later(
     def broken(path, line):
         raise OSError(errno.EIO, "simulated I/O error")
 
-    monkeypatch.setattr(manifest_module, "append_manifest_line", broken)
+    monkeypatch.setattr(manifest_module, "append_line", broken)
     with pytest.raises(SaveError, match="resolved the next time the store opens"):
         store.create(_draft(), source)
     monkeypatch.undo()
@@ -680,7 +686,7 @@ def test_full_disk_during_an_edit_is_disk_full_until_space_is_freed(
     sid = store.create(_draft("old prompt"), source).sample_id
     prompt_path = out_root / "lidar" / "training" / "prompt" / f"{sid}.txt"
     disk = {"full": False}
-    real_fsync, real_append = os.fsync, manifest_module.append_manifest_line
+    real_fsync, real_append = os.fsync, manifest_module.append_line
 
     def fsync(fd: int) -> None:
         if disk["full"]:
@@ -692,10 +698,10 @@ def test_full_disk_during_an_edit_is_disk_full_until_space_is_freed(
         real_append(path, line)
 
     monkeypatch.setattr(os, "fsync", fsync)
-    monkeypatch.setattr(manifest_module, "append_manifest_line", append)
+    monkeypatch.setattr(manifest_module, "append_line", append)
     with pytest.raises(DiskFullError):
         store.update(store.open(sid).set_prompt("new prompt"))
-    monkeypatch.setattr(manifest_module, "append_manifest_line", real_append)
+    monkeypatch.setattr(manifest_module, "append_line", real_append)
     # The old files cannot be written back yet: every later call says so, as a store error.
     for attempt in (
         lambda: store.create(_draft("another"), source),
@@ -773,3 +779,30 @@ def test_create_and_update_write_the_same_files(source_root: Path, tmp_path: Pat
     assert a == b
     assert meta_a["extra"].pop("version") == 1 and meta_b["extra"].pop("version") == 2
     assert meta_a == meta_b
+
+
+def test_2d_boxes_are_clipped_to_the_frames_image_in_create_and_update(tmp_path: Path) -> None:
+    """A frame with a half-size camera image (P2 scaled to match): a pair made on it links the
+    image, and both its create and its update clip the 2D boxes to 968 x 608, not VoD's size."""
+    lidar_calib = scale_calibration(vod_lidar_calibration(), 0.5)
+    radar_calib = scale_calibration(vod_radar_calibration(), 0.5)
+    writer = Talk2RadarWriter(tmp_path / "half")
+    image = np.full((608, 968, 3), 60, np.uint8)
+    points = np.zeros((10, 4), np.float32), np.zeros((0, 7), np.float32)
+    files = writer.write_sensors("w0", *points, lidar_calib, radar_calib, image)
+    writer.write_sample(0, files, np.array([CAR]), ["Car"], "the car", calib=lidar_calib)
+    writer.write_image_sets({"train": [0]})
+    edge = (9.0, -5.0, -0.9, 4.0, 1.8, 1.5, 0.1)  # half out of the image on the right
+    store = AnnotationStore(tmp_path / "out")
+    draft = Draft().set_prompt("the car on the right").add_box(edge, "Car")
+    sid = store.create(draft, SourceFrame.from_root(tmp_path / "half", 0)).sample_id
+    saved = Talk2RadarRoot(tmp_path / "out").load(sid)
+    assert saved.image_size == (968, 608)
+    source_image = tmp_path / "half" / "sources" / "w0" / "image.jpg"
+    assert saved.image_path.stat().st_ino == source_image.stat().st_ino
+    created = saved.labels[0].bbox
+    assert created[2] == 968.0 and 0 < created[0] < 968  # clipped at the image's right edge
+    store.update(store.open(sid).set_prompt("the car at the right edge"))
+    updated = Talk2RadarRoot(tmp_path / "out").load(sid).labels[0].bbox
+    assert updated[2] == 968.0  # the reopened box went through label_2's 6 decimals
+    np.testing.assert_allclose(updated, created, atol=1e-3)

@@ -66,6 +66,22 @@ def test_round_trip(trained: TPCNet, tmp_path: Path) -> None:
     assert [p.name for p in path.parent.iterdir()] == ["model.pt"]
 
 
+def test_a_failed_save_keeps_the_old_checkpoint(
+    trained: TPCNet, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    path = save_checkpoint(tmp_path / "model.pt", trained, **META)
+    before = path.read_bytes()
+
+    def full_disk(obj: Any, handle: Any) -> None:
+        handle.write(b"half a checkpoint")
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(torch, "save", full_disk)
+    with pytest.raises(OSError, match="No space"):
+        save_checkpoint(path, trained, **{**META, "epoch": 9})
+    assert path.read_bytes() == before and [p.name for p in tmp_path.iterdir()] == ["model.pt"]
+
+
 def test_frozen_text_encoder_is_not_stored(tmp_path: Path) -> None:
     model = build_model("small")
     path = save_checkpoint(tmp_path / "m.pt", model)

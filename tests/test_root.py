@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from scenes import Actor, SampleMeta, Talk2RadarRoot, Talk2RadarWriter
+from scenes import Actor, SampleMeta, Talk2RadarRoot, Talk2RadarWriter, layout
 from scenes.calib import CalibrationError, vod_lidar_calibration, vod_radar_calibration
 from scenes.kitti import LabelError
 from scenes.pointcloud import PointCloudError, read_points
-from scenes.root import RootError
+from scenes.root import RootError, sample_text
 
 BOXES = np.array([[12.0, 3.0, -0.9, 4.2, 1.8, 1.5, 0.4], [20.0, -5.0, -0.85, 0.7, 0.6, 1.7, -2.9]])
 
@@ -43,6 +43,41 @@ def test_round_trip(root):
     assert sample.prompt == "the car and the pedestrian"
     assert sample.meta.tags == {"class", "motion"} and sample.meta.actors[1].cls == "Pedestrian"
     assert r.load(2).prompt == "the car"
+
+
+def test_the_layout_names_every_file_the_writer_writes(root):
+    """Every file of the written root is one the layout names (so the annotation store's rollback,
+    which deletes exactly those, misses none), and the writer's text is :func:`sample_text`'s."""
+    path, _, _ = root
+    writer = Talk2RadarWriter(path)
+    named: set = set()
+    for sid in ("00001", "00002"):
+        for tree in writer.trees:
+            named |= {layout.sample_file(tree, f, sid, suffix) for f, suffix in layout.SAMPLE_FILES}
+        named.add(layout.meta_file(path, sid))
+    for tree in writer.trees:
+        named |= {layout.split_file(tree, split) for split in ("train", "test")}
+    named |= {layout.source_dir(path, "w00000") / name for name in layout.SOURCE_SENSORS}
+    on_disk = {p for p in path.rglob("*") if p.is_file()}
+    assert on_disk <= named and len(on_disk) == 2 * 2 * 4 + 2 + 4 + 4
+    sample = Talk2RadarRoot(path).load(1)
+    text = sample_text(
+        BOXES,
+        ["Car", "Pedestrian"],
+        " the car and the pedestrian",
+        sample.calib,
+        sample.image_size,
+        sample.meta,
+    )
+    for file, content in writer.text_files("00001", text):
+        assert file.read_text() == content
+    assert [f.parent.name for f, _ in writer.text_files("00001", text)] == [
+        "meta",
+        "prompt",
+        "prompt",
+        "label_2",
+        "label_2",  # the label last: the sample is complete
+    ]
 
 
 def test_radar_on_disk_is_in_radar_frame(root):

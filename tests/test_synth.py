@@ -141,6 +141,22 @@ def test_other_settings_are_refused_and_bad_arguments_are_errors(root_dir, tmp_p
         generate_root(tmp_path / "real", 2)
 
 
+def test_an_unreadable_manifest_line_before_the_last_is_an_error_naming_it(tmp_path):
+    settings = SynthSettings(seed=3)
+    out = tmp_path / "broken"
+    out.mkdir()
+    world = {"world": 0, "first_id": 0, "ids": [], "available": 0}
+    lines = [{"settings": settings.key()}, "not json", world]
+    (out / MANIFEST).write_text(
+        "".join(f"{json.dumps(x) if x != 'not json' else x}\n" for x in lines)
+    )
+    with pytest.raises(SynthError, match=r"synth_manifest\.jsonl:2: unreadable manifest line"):
+        generate_root(out, 1, settings)
+    (out / MANIFEST).write_text("{}\n")
+    with pytest.raises(SynthError, match=r":1: unreadable manifest \(neither the settings nor"):
+        generate_root(out, 1, settings)
+
+
 def test_single_scan_fog_root(tmp_path):
     report = generate_root(
         tmp_path / "fog",
