@@ -1,5 +1,5 @@
 """Serve the Talk2PC app: ``python launch.py [--data ROOT] [--checkpoint PATH] [--host 127.0.0.1]
-[--port 8080] [--device cpu|cuda] [--split test] [--threads 1]``.
+[--port 8080] [--device cpu|cuda] [--split SPLIT] [--threads 1] [--pairs DIR]``.
 
 - No ``--data``: a small deterministic synthetic set is generated once into ``data/default``
   (``python -m scenes.synth --out data/default --frames 60 --seed 0``, about 10 s) and served;
@@ -7,8 +7,17 @@
 - No ``--checkpoint``: the bundled ``checkpoints/tpcnet-small.pt``. Where it does not exist yet, a
   freshly initialised small model is served with a warning in the log and in every browser panel
   ("untrained model: boxes are meaningless").
-- A ``--checkpoint`` or ``--data`` that is missing or invalid, an unknown split, a split where no
-  frame loads, ``--device cuda`` without CUDA, a ``--port`` outside 0..65535, a ``--host`` that is
+- ``--data`` may be a Talk2Radar root or a View-of-Delft root as released (``lidar/`` and
+  ``radar/``, ``radar_3frames/`` or ``radar_5frames/``, no ``prompt/`` folder, ImageSets in the
+  LiDAR tree). Without ``--split`` the first of ``test``, ``val``, ``train`` (then the others) whose
+  frames all have their files is served (VoD's ``test`` frames are not in ``training/``).
+- Annotation saves pairs into ``--pairs DIR``; by default into the served root when it has
+  prompts (a Talk2Radar root), else into the sibling folder ``<ROOT>-talk2radar`` (created when
+  the first pair is saved), so a release's own files are never touched
+  (:func:`app.server.default_pairs_root`).
+- A ``--checkpoint`` or ``--data`` that is missing or invalid, an unknown split, a root without
+  ImageSets lists, a split listing frames whose sensor, calib or label files are missing (the
+  message names the first such file), a split where no frame loads, ``--device cuda`` without CUDA, a ``--port`` outside 0..65535, a ``--host`` that is
   not an address of this machine, or a server that does not listen within 20 s: a one-line error
   on stderr and exit code 2, within seconds (the host and port are checked before anything else).
 
@@ -69,7 +78,19 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
     p.add_argument("--host", default="127.0.0.1", help="interface to bind (default 127.0.0.1)")
     p.add_argument("--port", type=int, default=8080, help="port (default 8080; 0 = any free)")
     p.add_argument("--device", default="cpu", choices=("cpu", "cuda"), help="model device")
-    p.add_argument("--split", default="test", help="ImageSets split to browse (default test)")
+    p.add_argument(
+        "--split",
+        default=None,
+        help="ImageSets split to browse (default: the first of test, val, train whose frames "
+        "all have their files)",
+    )
+    p.add_argument(
+        "--pairs",
+        type=Path,
+        default=None,
+        help="where annotation saves prompt-to-box pairs, a Talk2Radar root (default: the "
+        "served root when it has prompts, else <ROOT>-talk2radar beside it)",
+    )
     p.add_argument(
         "--threads",
         type=int,
@@ -108,20 +129,102 @@ def ensure_default_data(
     return out
 
 
-def open_root(path: Path, split: str) -> Talk2RadarRoot:
-    """Open a root and check the split; :class:`LaunchError` otherwise."""
+SPLIT_PREFERENCE = ("test", "val", "train")
+"""Splits tried, in order, when ``--split`` is not given (then the others, sorted)."""
+
+
+def missing_files(root: Talk2RadarRoot, split: str) -> list[str]:
+    """One message per frame of ``split`` that lacks a file the reader needs (LiDAR points and
+    calib, label_2, the radar tree's points and calib), naming the first missing file."""
+    from scenes.root import format_id
+
+    trees = [(root.lidar_dir, ("velodyne", "calib", "label_2"))]
+    if root.radar_dir is not None:
+        trees.append((root.radar_dir, ("velodyne", "calib")))
+    out = []
+    for sid in root.ids(split):
+        sid = format_id(sid)
+        for tree, folders in trees:
+            gone = [
+                tree / "training" / folder / f"{sid}.{'bin' if folder == 'velodyne' else 'txt'}"
+                for folder in folders
+            ]
+            gone = [f for f in gone if not (f.exists() or f.is_symlink())]
+            if gone:
+                out.append(f"{gone[0]}: missing {gone[0].parent.name} file for sample {sid}")
+                break
+    return out
+
+
+def _split_problem(root: Talk2RadarRoot, split: str) -> str | None:
+    """Why ``split`` cannot be served (None: it can)."""
+    from scenes.root import RootError
+
+    try:
+        ids = root.ids(split)
+        missing = missing_files(root, split)
+    except RootError as exc:
+        return str(exc)
+    if not ids:
+        return f"{root.path}: split {split!r} lists no frame (splits: {root.splits()})"
+    if missing:
+        listed = root.lidar_dir / "ImageSets" / f"{split}.txt"
+        return (
+            f"{missing[0]} ({len(missing)} of the {len(ids)} frames listed in {listed} miss files)"
+        )
+    return None
+
+
+def open_root(path: Path, split: str | None) -> Talk2RadarRoot:
+    """Open a root and check ``split`` (None: only that the root has a split list).
+
+    Raises:
+        LaunchError: not a root, no ImageSets list, an unknown or empty split, or a split listing
+            frames whose files are missing (the message names the first such file).
+    """
     from scenes.root import RootError, Talk2RadarRoot
 
     if not path.is_dir():
         raise LaunchError(f"--data {path}: no such folder")
     try:
         root = Talk2RadarRoot(path)
-        ids = root.ids(split)
+        present = root.splits()
     except RootError as exc:
         raise LaunchError(str(exc)) from exc
-    if not ids:
-        raise LaunchError(f"{path}: split {split!r} lists no frame (splits: {root.splits()})")
+    if not present:
+        raise LaunchError(
+            f"{root.lidar_dir / 'ImageSets'}: no split list (<split>.txt with one frame id a "
+            "line); write one, e.g. all.txt listing the ids of lidar/training/velodyne, and pass "
+            "--split all"
+        )
+    if split is not None:
+        problem = _split_problem(root, split)
+        if problem is not None:
+            raise LaunchError(problem)
     return root
+
+
+def choose_split(root: Talk2RadarRoot, split: str | None) -> str:
+    """``split`` when given (checked by :func:`open_root`), else the first of
+    :data:`SPLIT_PREFERENCE` (then the other lists, sorted) whose frames all have their files.
+
+    Raises:
+        LaunchError: no split can be served (the first candidate's problem is named).
+    """
+    if split is not None:
+        return split
+    present = root.splits()
+    candidates = [s for s in SPLIT_PREFERENCE if s in present]
+    candidates += [s for s in present if s not in SPLIT_PREFERENCE]
+    problems = []
+    for candidate in candidates:
+        problem = _split_problem(root, candidate)
+        if problem is None:
+            if problems:
+                log.info("serving split %r (%s)", candidate, "; ".join(problems))
+            return candidate
+        problems.append(f"{candidate!r}: {problem}")
+    raise LaunchError(f"no split can be served; {problems[0]}")
 
 
 def load_model(checkpoint: Path | None, device: str, threads: int = 1) -> tuple[TPCNet, str | None]:
@@ -171,6 +274,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         check_listen_address(args.host, args.port)
         data = args.data if args.data is not None else ensure_default_data()
         root = open_root(data, args.split)
+        split = choose_split(root, args.split)
         model, note = load_model(args.checkpoint, args.device, args.threads)
     except (LaunchError, ServerStartError) as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -179,7 +283,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("Interrupted.", file=sys.stderr)
         return 130
 
-    config = AppConfig(host=args.host, port=args.port, split=args.split, model_note=note)
+    config = AppConfig(
+        host=args.host, port=args.port, split=split, model_note=note, pairs_root=args.pairs
+    )
     try:
         app = Talk2PCApp(root, model, config)
         app.start()
@@ -194,7 +300,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     # job of a non-interactive shell), and it never interrupts the main thread mid-statement.
     signal.signal(signal.SIGINT, lambda *_: stop.set())
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    print(f"Talk2PC is serving {len(app.frames)} frames of {data} at {app.url}", flush=True)
+    print(
+        f"Talk2PC is serving {len(app.frames)} frames of {data} at {app.url} (split {split!r})",
+        flush=True,
+    )
+    print(f"Annotation saves pairs into {app.annotations.path}", flush=True)
     print("Press Ctrl-C to stop.", flush=True)
     try:
         while not stop.wait(0.5):

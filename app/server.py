@@ -132,6 +132,8 @@ class AppConfig:
         dark_mode: viser's dark theme (points read better on it).
         start_timeout: Seconds :meth:`Talk2PCApp.start` waits for viser to listen before it
             raises :class:`ServerStartError`.
+        pairs_root: Where the Annotate tab saves pairs (a Talk2Radar root, created when
+            missing); None: :func:`default_pairs_root`.
     """
 
     host: str = "127.0.0.1"
@@ -145,6 +147,28 @@ class AppConfig:
     warm_up: bool = True
     dark_mode: bool = True
     start_timeout: float = 20.0
+    pairs_root: Path | None = None
+
+
+PAIRS_SUFFIX = "-talk2radar"
+"""Name suffix of the folder beside a root without prompts where its pairs are saved."""
+
+
+def has_prompts(root: Talk2RadarRoot) -> bool:
+    """Whether ``root`` is a Talk2Radar root with prompts (``lidar/training/prompt/``); a
+    View-of-Delft root as released has none."""
+    return (root.lidar_dir / "training" / "prompt").is_dir()
+
+
+def default_pairs_root(root: Talk2RadarRoot) -> Path:
+    """Where pairs annotated on ``root`` are saved by default: into ``root`` itself when it is a
+    Talk2Radar root with prompts (the pairs join its splits), else into the sibling folder
+    ``<root>-talk2radar``, so that a release's own files (View-of-Delft's ``label_2``,
+    ``ImageSets``) are never touched."""
+    if has_prompts(root):
+        return root.path
+    path = root.path.resolve() if root.path.name in ("", ".", "..") else root.path
+    return path.with_name(path.name + PAIRS_SUFFIX)
 
 
 class Talk2PCApp:
@@ -177,7 +201,12 @@ class Talk2PCApp:
         )
         self.score_threshold = initial_threshold(model, DEFAULT_SCORE_THRESHOLD)
         self.model_note = self.config.model_note
-        self.annotations = AnnotationHub(root.path)
+        pairs = self.config.pairs_root
+        self.annotations = AnnotationHub(
+            Path(pairs) if pairs is not None else default_pairs_root(root),
+            radar_folder=root.radar_folder,
+            served=root,
+        )
         self.server: viser.ViserServer | None = None
         self.sessions: dict[int, ClientSession] = {}
         self._startup: list[Future] = []

@@ -120,8 +120,10 @@ def test_place_two_boxes_type_prompt_save_and_find_the_sample(annotating_app, ws
             lambda: "/annotate/gizmo/selected/edges" in client.nodes, 5, "the selected box"
         )
 
-        client.set("New box class", "Pedestrian")
-        client.pump_until(lambda: panel.w.new_class.value == "Pedestrian", 5, "the class")
+        client.set("Box", "(none)")  # one Class control: with no box selected it sets the next
+        client.pump_until(lambda: panel.selected is None, 5, "no box selected")
+        client.set("Class", "Pedestrian")
+        client.pump_until(lambda: panel.w.cls.value == "Pedestrian", 5, "the class")
         client.click_ground(10.0, -2.0, ground)
         client.pump_until(lambda: len(panel.draft.boxes) == 2, 5, "the second box")
         second = panel.draft.boxes[1]
@@ -324,8 +326,8 @@ def test_fit_to_points_and_use_predictions(annotating_app, ws_client, gt_box) ->
         # The frame's car: points filling gt_box's extent shifted by 2 m per frame, axis-aligned
         # (write_tiny_root draws them between the box's min and max corners: yaw 0).
         car = gt_box + np.array([2.0 * app.frame.index, 0, 0, 0, 0, 0, -gt_box[6]])
-        client.set("New box class", "Car")
-        client.pump_until(lambda: panel.w.new_class.value == "Car", 5, "the class")
+        client.set("Class", "Car")
+        client.pump_until(lambda: panel.w.cls.value == "Car", 5, "the class")
         client.click_ground(car[0] + 0.1, car[1], panel.frame.ground_z)
         client.pump_until(lambda: len(panel.draft.boxes) == 1, 5, "a rough box")
         client.click("Fit to points")

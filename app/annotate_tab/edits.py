@@ -2,6 +2,11 @@
 
 Each action changes the panel's state through the :class:`annotate.DraftEditor` (one undo step)
 and redraws only the :class:`~app.annotate_tab.panel.Part` s that show what it changed.
+
+A click in the 3D view selects the draft box under it, else adds the ready-made box under it,
+else places a new box of the *Class*; a box that could not be saved where it would go (outside
+the annotated range or the camera's view, :func:`annotate.validate`'s position and image rules)
+is not placed or added, and a notification says why at once.
 """
 
 from __future__ import annotations
@@ -23,10 +28,15 @@ from annotate import (
     proposals,
     scene_objects,
     suggest_prompt,
+    validate,
 )
-from app.annotate_tab.formatting import option_index
+from app.annotate_tab.formatting import option_index, option_ready_index, placement_problem
 from app.annotate_tab.panel import AnnotationPanel, Part
 from app.annotate_tab.view import box_at, box_tag, ground_hit, wxyz_to_yaw
+from app.query_panel import submitted_prompt
+
+PLACEMENT_FIELDS = (".position", ".image")
+"""Validation fields of a box that say it cannot be saved where it is."""
 
 
 class DraftEdits:
@@ -71,10 +81,34 @@ class DraftEdits:
                 p.selected = draft.boxes[index].box_id
                 p.refresh(Part.SELECTION)
                 return
-            cls = p.w.new_class.value
-            box = default_box(cls, hit[0], hit[1], p.frame.ground_z)
-            p.selected = p.editor.add_box(box, cls)
-            p.refresh(Part.DRAFT)
+            ready = box_at(p.ready_boxes, *hit) if p.offers_ready() else None
+            if ready is not None:
+                self._add(p.ready_boxes[ready], p.ready_classes[ready], "ready-made box")
+                return
+            cls = p.w.cls.value
+            self._add(default_box(cls, hit[0], hit[1], p.frame.ground_z), cls, "box")
+
+    def _add(self, box: Sequence[float], cls: str, what: str) -> None:
+        """Add a box to the draft and select it, unless it could not be saved where it is
+        (then say why). Holds the session's lock."""
+        p = self.panel
+        assert p.frame is not None
+        report = validate(Draft().add_box(box, cls), p.config(), p.frame.sample.calib)
+        problems = [i.message for i in report.errors if i.field.endswith(PLACEMENT_FIELDS)]
+        if problems:
+            p.notify(f"No {what} placed there", placement_problem(problems) + ".")
+            return
+        p.selected = p.editor.add_box(box, cls)
+        p.refresh(Part.DRAFT)
+
+    def add_ready(self) -> None:
+        """Add the ready-made box chosen in *Object* to the draft."""
+        p = self.panel
+        with p.session.lock:
+            index = option_ready_index(p.w.ready.value)
+            if p.frame is None or index is None or index >= len(p.ready_boxes):
+                return
+            self._add(p.ready_boxes[index], p.ready_classes[index], "ready-made box")
 
     async def on_gizmo(self, event: viser.TransformControlsEvent) -> None:
         """A gizmo drag (on the event loop, in message order): one undo step per drag."""
@@ -112,11 +146,15 @@ class DraftEdits:
             p.refresh(Part.SELECTION)
 
     def set_class(self) -> None:
+        """*Class*: the selected box's class (an undo step), and the next new box's."""
         p = self.panel
         with p.session.lock:
-            if p.selected is not None:
+            if p.selected is None:
+                return
+            index = p.editor.draft.index_of(p.selected)
+            if p.editor.draft.boxes[index].cls != p.w.cls.value:
                 p.editor.set_class(p.selected, p.w.cls.value)
-            p.refresh(Part.DRAFT)
+                p.refresh(Part.DRAFT, skip=p.w.cls)
 
     def resize(self, source: viser.GuiNumberHandle) -> None:
         p = self.panel
@@ -140,11 +178,20 @@ class DraftEdits:
                 p.editor.rotate_box(p.selected, yaw, merge_key=("yaw", p.selected))
             p.refresh(Part.DRAFT, skip=p.w.yaw)
 
-    def set_prompt(self) -> None:
+    def set_prompt(self) -> bool:
+        """*Pair prompt* changed; returns whether Enter was pressed (a line break in the value:
+        the field is multi-line, see :mod:`app.query_panel`), which the line break's removal
+        and the save follow (:meth:`app.annotate_tab.pairs.PairActions.submit`)."""
         p = self.panel
         with p.session.lock:
-            p.editor.set_prompt(p.w.prompt.value)
+            value = p.w.prompt.value
+            entered = submitted_prompt(value)
+            if entered is not None:
+                p.w.prompt.value = entered  # the browser's field loses the line break
+                p.accept_edit(p.w.prompt)
+            p.editor.set_prompt(entered if entered is not None else value)
             p.refresh(Part.TEXT, skip=p.w.prompt)
+            return entered is not None
 
     def set_nothing(self) -> None:
         p = self.panel

@@ -21,6 +21,9 @@ NO_BOX = "(none)"
 NO_PAIRS = "(no saved pairs)"
 """The *Pair* dropdown's only option while the root has no saved pair."""
 
+NO_READY = "(none left)"
+"""The *Object* dropdown's only option when every ready-made box is in the draft."""
+
 RECENT_PAIRS = 8
 """Saved pairs shown in the table under the *Pair* dropdown (the most recent)."""
 
@@ -44,6 +47,23 @@ def option_index(option: str) -> int | None:
     if head.startswith("#") and head[1:].isdigit():
         return int(head[1:]) - 1
     return None
+
+
+def ready_option(index: int, cls: str, box: Sequence[float]) -> str:
+    """The *Object* dropdown entry of ready-made box ``index``: ``"3. Car · 15.1 m"``."""
+    return f"{index + 1}. {cls} · {float(np.hypot(box[0], box[1])):.1f} m"
+
+
+def option_ready_index(option: str) -> int | None:
+    """The 0-based index of a :func:`ready_option` entry (None for :data:`NO_READY`)."""
+    head = option.split(".", 1)[0]
+    return int(head) - 1 if head.isdigit() else None
+
+
+def placement_problem(messages: Sequence[str]) -> str:
+    """Validation messages about one box (``"box 1 of 1 (Car): centre x = ..."``) as one
+    sentence without the box's name."""
+    return "; ".join(m.split(": ", 1)[1] if m.startswith("box 1 of 1") else m for m in messages)
 
 
 def pair_option(pair: PairInfo) -> str:
@@ -86,12 +106,12 @@ def evidence_markdown(
 
 
 def checks_markdown(report: ValidationReport) -> str:
-    """What validation says about the draft, shown above *Save pair*."""
+    """What validation says about the draft, shown under *Save pair* (why it is disabled)."""
     lines = []
     if report.ok:
-        lines.append("**Ready to save.**")
+        lines.append("**Ready to save** (*Save pair*, or Enter in *Pair prompt*).")
     else:
-        lines.append("**Before saving:**")
+        lines.append("**Save pair is disabled until:**")
         lines += [f"- {md_text(m)}" for m in report.messages()]
     warnings = report.messages(Severity.WARNING)
     if warnings:
@@ -126,6 +146,8 @@ def status_markdown(
     visible: bool,
     pristine: bool,
     unavailable: str | None = None,
+    saving_to: Path | None = None,
+    last_saved: str | None = None,
 ) -> str:
     """The line at the top of the tab: what is being edited, whether its frame is on screen,
     what *Undo* and *Redo* would do.
@@ -137,10 +159,21 @@ def status_markdown(
         visible: Whether the draft's frame is on screen.
         pristine: Whether the draft holds nothing worth keeping (:func:`annotate.is_pristine`).
         unavailable: Why saving is unavailable (None: the store is open).
+        saving_to: The folder pairs are saved into when it is not the served root (None: the
+            served root).
+        last_saved: What the last save of this browser wrote (``"pair 00061 (version 1) in
+            train"``), or None.
     """
     lines = []
     if unavailable is not None:
         lines.append(f"**Saving is unavailable:** {md_text(unavailable)}")
+    if last_saved is not None:
+        lines.append(f"**Saved {md_text(last_saved)}.**")
+    if saving_to is not None:
+        lines.append(
+            f"Pairs are saved into {md_text(saving_to)} (a Talk2Radar root beside the served "
+            "one, whose files are not touched)."
+        )
     if draft.sample_id is not None:
         lines.append(
             f"**Editing pair {md_text(draft.sample_id)}** (version {draft.base_version}); "

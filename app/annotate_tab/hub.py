@@ -5,6 +5,10 @@ app and forgotten with it (:meth:`AnnotationHub.close` in ``app.stop``): nothing
 level, so a second app in the same process (a test, a restarted server) opens its own store.
 The store is opened when the first tab asks for it, so serving a root writes nothing into it
 before someone opens the Annotate tab.
+
+The store's root is the served root (a Talk2Radar root with prompts) or another folder
+(:func:`app.server.default_pairs_root`: beside a View-of-Delft root as released; ``--pairs``):
+:attr:`AnnotationHub.separate` says which, and the tab says where pairs go.
 """
 
 from __future__ import annotations
@@ -17,6 +21,7 @@ from typing import Protocol
 
 from annotate import AnnotationStore, StoreError
 from app.session import ClientSession
+from scenes.root import Talk2RadarRoot
 
 log = logging.getLogger(__name__)
 
@@ -34,11 +39,19 @@ class AnnotationHub:
     """The store of one served root and the open Annotate tabs (see the module docstring).
 
     Args:
-        path: The served root.
+        path: The root pairs are saved into.
+        radar_folder: The radar tree written there (the served root's, so that a pair's radar
+            file keeps its tree name: ``radar`` is a single scan; a store root that has another
+            tree is refused with a message naming both); None: the store's default.
+        served: The root being served (None: ``path``).
     """
 
-    def __init__(self, path: Path) -> None:
+    def __init__(
+        self, path: Path, radar_folder: str | None = None, served: Talk2RadarRoot | None = None
+    ) -> None:
         self.path = Path(path)
+        self.radar_folder = radar_folder
+        self.served_path = served.path if served is not None else self.path
         self._store: AnnotationStore | None = None
         self._error: str | None = None
         self._opened = False
@@ -52,10 +65,15 @@ class AnnotationHub:
                 return
             self._opened = True
             try:
-                self._store = AnnotationStore(self.path)
+                self._store = AnnotationStore(self.path, radar_folder=self.radar_folder)
             except (OSError, StoreError, ValueError) as exc:
                 self._error = f"{type(exc).__name__}: {exc}"
                 log.error("annotation store of %s unavailable: %s", self.path, self._error)
+
+    @property
+    def separate(self) -> bool:
+        """Whether pairs go into another folder than the served root."""
+        return self.path.resolve() != Path(self.served_path).resolve()
 
     @property
     def store(self) -> AnnotationStore | None:

@@ -28,8 +28,20 @@ class PairActions:
     def __init__(self, panel: AnnotationPanel) -> None:
         self.panel = panel
 
+    def submit(self) -> None:
+        """Enter in *Pair prompt*: save when nothing blocks it, else say what does."""
+        p = self.panel
+        with p.session.lock:
+            report = p.report
+        if report.ok and p.store is not None:
+            self.save()
+        else:
+            reasons = report.messages() or [str(p.hub.error)]
+            p.notify("Not saved yet", "\n".join(reasons))
+
     def save(self) -> None:
-        """Save the draft (a new pair, or a new version of the reopened pair)."""
+        """Save the draft (a new pair, or a new version of the reopened pair); the panel's
+        status line then names the pair written, and the box fields are cleared."""
         p = self.panel
         store = p.store
         with p.session.lock:
@@ -67,6 +79,7 @@ class PairActions:
             "client %s: saved pair %s v%d", p.session.client_id, result.sample_id, result.version
         )
         with p.session.lock:
+            p.last_saved = f"pair {result.sample_id} ({where}) in {', '.join(result.record.splits)}"
             p.editor.reset()
             p.selected = None
             p.bind_to_screen()

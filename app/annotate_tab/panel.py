@@ -8,6 +8,11 @@ change the state and then ask for the :class:`Part` s that depend on what they c
 redraws the boxes nor recounts the points in them; selecting a box redraws the boxes and the
 evidence table but does not revalidate. The per-box evidence (:func:`annotate.box_evidence`, over
 every LiDAR point of the frame) is computed again only when the boxes or the frame changed.
+
+Ready-made boxes: on a root without prompts (a View-of-Delft root as released), ``label_2``
+lists every object of the frame; its metric-class boxes that are not in the draft yet (no draft
+box overlaps them by :data:`annotate.DUPLICATE_IOU` in bird's eye view) are offered
+(:attr:`AnnotationPanel.ready_boxes`), drawn in the 3D view and listed under *Object*.
 """
 
 from __future__ import annotations
@@ -25,24 +30,28 @@ from annotate import (
     Draft,
     DraftEditor,
     ValidationConfig,
+    ValidationReport,
     box_evidence,
     changed_box,
     is_pristine,
+    proposals,
     validate,
 )
 from app.annotate_tab.formatting import (
     NO_BOX,
     NO_PAIRS,
+    NO_READY,
     box_option,
     checks_markdown,
     evidence_markdown,
     option_pair_id,
     pair_option,
     pairs_markdown,
+    ready_option,
     status_markdown,
 )
 from app.annotate_tab.hub import AnnotationHub
-from app.annotate_tab.view import DraftView
+from app.annotate_tab.view import DraftView, draft_layer
 from app.annotate_tab.widgets import AnnotationWidgets, build_annotation_widgets
 from app.session import ClientSession
 from app.text import md_text
@@ -54,7 +63,8 @@ class Part(enum.Flag):
     """The parts of the tab that :meth:`AnnotationPanel.refresh` brings up to date."""
 
     VIEW = enum.auto()
-    """The draft boxes and the gizmo in the 3D view, the *Box* list and the selected box's inputs."""
+    """The draft boxes and the gizmo in the 3D view and the camera panel, the *Box* list and the
+    selected box's inputs, the ready-made boxes."""
     EVIDENCE = enum.auto()
     """The evidence table (its numbers are recomputed only when the boxes or the frame changed)."""
     SENTENCE = enum.auto()
@@ -122,6 +132,13 @@ class AnnotationPanel:
         self.w: AnnotationWidgets = build_annotation_widgets(session.client.gui)
         self.pair_ids: tuple[str, ...] = ()
         """The sample ids listed in *Pair*, in order."""
+        self.ready_boxes: np.ndarray = np.zeros((0, 7))
+        """``(R, 7)`` the ready-made boxes offered now (LiDAR frame), in *Object* order."""
+        self.ready_classes: tuple[str, ...] = ()
+        self.report: ValidationReport = ValidationReport()
+        """The draft's last validation (what *Save pair*'s state shows)."""
+        self.last_saved: str | None = None
+        """What this browser's last save wrote, shown in the status line."""
         self._shown: dict[int, object] = {}
         """The value the server last wrote into each edit widget (by ``id``), see :meth:`_show`."""
         self._evidence: tuple[DraftFrame, tuple[object, ...], tuple[BoxEvidence, ...]] | None
@@ -137,6 +154,15 @@ class AnnotationPanel:
     @property
     def draft(self) -> Draft:
         return self.editor.draft
+
+    def config(self) -> ValidationConfig:
+        """The rules the store checks before saving."""
+        return self.store.validation if self.store is not None else ValidationConfig()
+
+    def offers_ready(self) -> bool:
+        """Whether the draft's frame offers ready-made boxes (its root has no prompts, so its
+        label_2 lists every object) and is on screen."""
+        return self.frame is not None and self.frame.sample.prompt is None and self.on_screen()
 
     def on_screen(self) -> bool:
         """Whether the frame on screen is the draft's frame."""
@@ -178,6 +204,10 @@ class AnnotationPanel:
             with self.session.client.atomic():
                 if parts & Part.VIEW:
                     self.view.show(draft, self.selected, visible)
+                    self._show_ready(draft)
+                    self.session.set_camera_layer(
+                        "draft", draft_layer(draft, self.selected, visible)
+                    )
                 if parts & Part.STATUS:
                     w.status.content = self._status(draft, visible)
                     w.back.visible = (
@@ -209,7 +239,32 @@ class AnnotationPanel:
             visible,
             is_pristine(draft),
             unavailable=self.hub.error if self.store is None else None,
+            saving_to=self.hub.path if self.hub.separate else None,
+            last_saved=self.last_saved,
         )
+
+    def _show_ready(self, draft: Draft) -> None:
+        """The ready-made boxes not in the draft: in the 3D view and the *Object* list."""
+        w = self.w
+        offered = self.offers_ready()
+        if offered and self.frame is not None:
+            sample = self.frame.sample
+            boxes, classes, _ = proposals(
+                sample.boxes, sample.classes, draft.box_array, limit=10**6
+            )
+        else:
+            boxes, classes = np.zeros((0, 7)), ()
+        self.ready_boxes, self.ready_classes = boxes, classes
+        self.view.show_ready(boxes, classes)
+        options = tuple(
+            ready_option(i, c, b) for i, (c, b) in enumerate(zip(classes, boxes, strict=True))
+        )
+        previous = w.ready.value
+        w.ready.options = options or (NO_READY,)
+        w.ready.value = previous if previous in options else (options or (NO_READY,))[0]
+        for handle in w.ready_inputs():
+            handle.visible = offered
+        w.add_ready.disabled = not options
 
     def _show_boxes(self, draft: Draft, skip: object | None) -> None:
         """The *Box* list and the selected box's inputs (disabled while none is selected)."""
@@ -224,7 +279,7 @@ class AnnotationPanel:
         else:
             w.box.value = NO_BOX
         for handle in w.box_inputs():
-            handle.disabled = selected is None
+            handle.visible = selected is not None
         if selected is None:
             return
         length, width, height, yaw = selected.box[3:]
@@ -240,11 +295,12 @@ class AnnotationPanel:
                 self._show(handle, round(float(value), 4))
 
     def _show_checks(self, draft: Draft) -> None:
+        """Validate the draft; *Save pair* is enabled only when nothing blocks saving."""
         w = self.w
         calib = self.frame.sample.calib if self.frame is not None else None
-        config = self.store.validation if self.store is not None else ValidationConfig()
-        w.checks.content = checks_markdown(validate(draft, config, calib))
-        w.save.disabled = self.store is None or self.frame is None
+        self.report = validate(draft, self.config(), calib)
+        w.checks.content = checks_markdown(self.report)
+        w.save.disabled = self.store is None or self.frame is None or not self.report.ok
         w.split.disabled = draft.sample_id is not None
 
     def _box_evidence(self, draft: Draft) -> tuple[BoxEvidence, ...]:

@@ -66,14 +66,26 @@ def _wire(panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions) -> None
 
     on_user(w.box, edits.select_from_list)
     on_user(w.cls, edits.set_class)
+
+    @w.prompt.on_update
+    def _(event: viser.GuiEvent) -> None:
+        if not _from_browser(event):
+            return
+        with panel.session.lock:
+            panel.accept_edit(w.prompt)
+            entered = [False]
+            panel.guarded(lambda: entered.__setitem__(0, edits.set_prompt()))
+        if entered[0]:  # Enter: save outside the session's lock (the store's work)
+            panel.guarded(pairs.submit)
+
     for handle in (w.length, w.width, w.height):
         on_user(handle, lambda h=handle: edits.resize(h))
     on_user(w.yaw, edits.set_yaw)
-    on_user(w.prompt, edits.set_prompt)
     on_user(w.nothing, edits.set_nothing)
     on_click(w.fit, edits.fit_selected)
     on_click(w.delete, edits.delete_selected)
     on_click(w.use_predictions, edits.use_predictions)
+    on_click(w.add_ready, edits.add_ready)
     on_click(w.suggest, edits.suggest)
     on_click(w.save, pairs.save)
     on_click(w.open_pair, pairs.open_selected_pair)

@@ -14,6 +14,12 @@ Per browser (``client.scene``), under ``/annotate``:
 - ``/annotate/gizmo/selected/...``: the selected box, thicker and in :data:`SELECTED_COLOR`, as a
   child of the gizmo in the gizmo's frame: dragging the gizmo moves and turns the box in the
   browser at once, with no round trip to the server.
+- ``/annotate/ready/...``: the ready-made boxes (the frame's label_2 objects not in the draft,
+  offered on roots without prompts), thin, in :data:`READY_COLOR`, labelled ``"+ Car"``: a click
+  on one adds it to the draft.
+
+The camera panel gets the draft as its ``draft`` layer (:func:`draft_layer`): the same colours
+and ``"#2 Car"`` labels.
 
 Ground clicks: viser reports a click as a ray (origin and direction, world = LiDAR frame);
 :func:`ground_hit` intersects it with the horizontal plane ``z = ground_z``.
@@ -29,6 +35,7 @@ import viser
 
 from annotate import Draft
 from app.boxes_view import BoxesView, BoxStyle
+from app.camera_image import BoxLayer
 from scenes.boxes import points_in_boxes
 
 DRAFT_COLOR = (235, 235, 255)
@@ -42,6 +49,14 @@ DRAFT_STYLE = BoxStyle(thickness=2.5, color=DRAFT_COLOR, label_anchor="bottom-ce
 
 SELECTED_STYLE = BoxStyle(thickness=4.5, color=SELECTED_COLOR, label_anchor="bottom-center")
 """How the selected draft box is drawn."""
+
+READY_COLOR = (190, 150, 255)
+"""Ready-made boxes (lavender: unlike every class, GT, draft and radar colour)."""
+
+READY_STYLE = BoxStyle(
+    thickness=1.5, color=READY_COLOR, label_anchor="bottom-center", label_lift=0.1, max_labels=40
+)
+"""How ready-made boxes are drawn."""
 
 PREFIX = "/annotate"
 """Scene-tree prefix of every node of the annotation mode."""
@@ -141,6 +156,16 @@ def box_tag(index: int, cls: str) -> str:
     return f"#{index + 1} {cls}"
 
 
+def draft_layer(draft: Draft, selected_id: int | None, visible: bool = True) -> BoxLayer | None:
+    """The draft as the camera panel's layer (None when hidden or empty): near-white boxes, the
+    selected one gold, each labelled ``"#2 Car"``."""
+    if not visible or not draft.boxes:
+        return None
+    colors = tuple(SELECTED_COLOR if b.box_id == selected_id else DRAFT_COLOR for b in draft.boxes)
+    tags = tuple(box_tag(i, b.cls) for i, b in enumerate(draft.boxes))
+    return BoxLayer(draft.box_array, colors, tags, width=2)
+
+
 class DraftView:
     """The draft boxes and the gizmo of one browser (see the module docstring).
 
@@ -162,6 +187,7 @@ class DraftView:
             visible=False,
         )
         self.selected = BoxesView(scene, f"{PREFIX}/gizmo/selected", SELECTED_STYLE)
+        self.ready = BoxesView(scene, f"{PREFIX}/ready", READY_STYLE)
         self.gizmo_box_id: int | None = None
         """The draft box the gizmo holds (None: hidden)."""
 
@@ -192,8 +218,16 @@ class DraftView:
         self.gizmo.visible = True
         self.gizmo_box_id = selected_id
 
+    def show_ready(self, boxes: np.ndarray, classes: Sequence[str]) -> None:
+        """Draw the ready-made boxes ``(R, 7)`` (none: remove them)."""
+        if len(boxes):
+            self.ready.show(boxes, classes, [f"+ {c}" for c in classes])
+        else:
+            self.ready.clear()
+
     def clear(self) -> None:
         """Remove the boxes and hide the gizmo."""
+        self.ready.clear()
         self.others.clear()
         self.selected.clear()
         self.gizmo.visible = False

@@ -1,8 +1,10 @@
 """The widgets of the Annotate tab: built once per browser, in the tab's container.
 
-:func:`build_annotation_widgets` adds them in the order a person uses them (status, placing, the
-*Boxes* folder with the evidence table, *Sentence*, *Save*, *Saved pairs*) and returns their
-handles (:class:`AnnotationWidgets`); what they do is wired by :mod:`app.annotate_tab.tab`.
+:func:`build_annotation_widgets` adds them in the order a person uses them (status, *Pair
+prompt*, *Save pair* with why it is disabled, *Draft*, placing and the one *Class* control, the
+*Boxes* folder with the ready-made boxes and the evidence table, *Sentence*, *Save options*,
+*Saved pairs*) and returns their handles (:class:`AnnotationWidgets`); what they do is wired by
+:mod:`app.annotate_tab.tab`.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ from dataclasses import dataclass
 import viser
 
 from annotate import DEFAULT_SPLITS
-from app.annotate_tab.formatting import NO_BOX, NO_PAIRS
+from app.annotate_tab.formatting import NO_BOX, NO_PAIRS, NO_READY
 from scenes.actors import CLASSES
 
 SPLITS = DEFAULT_SPLITS
@@ -34,34 +36,39 @@ class AnnotationWidgets:
 
     status: viser.GuiMarkdownHandle
     back: viser.GuiButtonHandle
+    prompt: viser.GuiTextHandle
+    save: viser.GuiButtonHandle
+    checks: viser.GuiMarkdownHandle
+    draft: viser.GuiButtonGroupHandle
     place: viser.GuiCheckboxHandle
-    new_class: viser.GuiDropdownHandle
-    box: viser.GuiDropdownHandle
     cls: viser.GuiDropdownHandle
+    box: viser.GuiDropdownHandle
     length: viser.GuiNumberHandle
     width: viser.GuiNumberHandle
     height: viser.GuiNumberHandle
     yaw: viser.GuiNumberHandle
     fit: viser.GuiButtonHandle
     delete: viser.GuiButtonHandle
+    ready: viser.GuiDropdownHandle
+    add_ready: viser.GuiButtonHandle
     use_predictions: viser.GuiButtonHandle
     evidence: viser.GuiMarkdownHandle
-    prompt: viser.GuiTextHandle
     suggest: viser.GuiButtonHandle
     nothing: viser.GuiCheckboxHandle
     split: viser.GuiDropdownHandle
     annotator: viser.GuiTextHandle
-    checks: viser.GuiMarkdownHandle
-    save: viser.GuiButtonHandle
-    draft: viser.GuiButtonGroupHandle
     pair: viser.GuiDropdownHandle
     open_pair: viser.GuiButtonHandle
     delete_pair: viser.GuiButtonHandle
     pairs: viser.GuiMarkdownHandle
 
     def box_inputs(self) -> tuple[viser.GuiInputHandle, ...]:
-        """The inputs that edit the selected box (disabled while none is selected)."""
-        return (self.cls, self.length, self.width, self.height, self.yaw, self.fit, self.delete)
+        """The inputs that edit the selected box (hidden while none is selected)."""
+        return (self.length, self.width, self.height, self.yaw, self.fit, self.delete)
+
+    def ready_inputs(self) -> tuple[viser.GuiInputHandle, ...]:
+        """The ready-made boxes' inputs (shown where the frame offers label_2 objects)."""
+        return (self.ready, self.add_ready)
 
 
 UNDO, REDO, NEW_PAIR = "Undo", "Redo", "New pair"
@@ -69,20 +76,39 @@ UNDO, REDO, NEW_PAIR = "Undo", "Redo", "New pair"
 
 
 def build_annotation_widgets(gui: viser.GuiApi) -> AnnotationWidgets:
-    """Add the Annotate tab's widgets to ``gui`` (in the current container)."""
+    """Add the Annotate tab's widgets to ``gui`` (in the current container).
+
+    Order: what is used on every pair first, so that *Save pair* and the reason it is disabled
+    are in sight without scrolling (1400 x 860 px): status, *Pair prompt*, *Save pair*, the
+    checks, *Draft*, placing (*Click to place*, the one *Class*), then the folders.
+    """
     status = gui.add_markdown("Loading...")
     back = gui.add_button("Back to the draft's frame", icon=viser.Icon.ARROW_BACK, visible=False)
+    prompt = gui.add_text(
+        "Pair prompt",
+        "",
+        multiline=True,
+        hint="The sentence that refers to the boxes. Enter saves the pair when it is ready; "
+        "Esc (or Tab) leaves the field",
+    )
+    save = gui.add_button("Save pair", color="green", icon=viser.Icon.DEVICE_FLOPPY, disabled=True)
+    checks = gui.add_markdown("")
+    draft = gui.add_button_group("Draft", (UNDO, REDO, NEW_PAIR))
     place = gui.add_checkbox(
         "Click to place",
         True,
         hint="A click on the ground places a box of the class below; a click on a draft box "
-        "selects it",
+        "selects it; a click on a ready-made box adds it",
     )
-    new_class = gui.add_dropdown("New box class", CLASSES, initial_value=CLASSES[0])
+    cls = gui.add_dropdown(
+        "Class",
+        CLASSES,
+        initial_value=CLASSES[0],
+        hint="The selected box's class, and the class of the next box placed",
+    )
     with gui.add_folder("Boxes"):
         box = gui.add_dropdown("Box", (NO_BOX,), initial_value=NO_BOX)
-        cls = gui.add_dropdown("Class", CLASSES, initial_value=CLASSES[0], disabled=True)
-        size = {"min": 0.1, "max": 20.0, "step": 0.05, "disabled": True}
+        size = {"min": 0.1, "max": 20.0, "step": 0.05, "visible": False}
         length = gui.add_number("Length (m)", 4.2, hint="Along the heading", **size)
         width = gui.add_number("Width (m)", 1.8, **size)
         height = gui.add_number("Height (m)", 1.5, hint="The bottom stays on the ground", **size)
@@ -92,16 +118,30 @@ def build_annotation_widgets(gui: viser.GuiApi) -> AnnotationWidgets:
             min=-180.0,
             max=180.0,
             step=1.0,
-            disabled=True,
+            visible=False,
             hint="Counter-clockwise from forward (+x); the gizmo's ring turns it too",
         )
         fit = gui.add_button(
             "Fit to points",
             icon=viser.Icon.BOX_MODEL,
-            disabled=True,
+            visible=False,
             hint="Fit centre, size and yaw to the LiDAR points in and around the box",
         )
-        delete = gui.add_button("Delete box", icon=viser.Icon.TRASH, disabled=True)
+        delete = gui.add_button("Delete box", icon=viser.Icon.TRASH, visible=False)
+        ready = gui.add_dropdown(
+            "Object",
+            (NO_READY,),
+            initial_value=NO_READY,
+            visible=False,
+            hint="The frame's labelled objects (label_2) not in the draft yet",
+        )
+        add_ready = gui.add_button(
+            "Add object",
+            icon=viser.Icon.PLUS,
+            visible=False,
+            hint="Adds the chosen labelled object to the draft (a click on it in the 3D view "
+            "does the same)",
+        )
         use_predictions = gui.add_button(
             "Use predictions",
             icon=viser.Icon.WAND,
@@ -110,19 +150,15 @@ def build_annotation_widgets(gui: viser.GuiApi) -> AnnotationWidgets:
         )
         evidence = gui.add_markdown("")
     with gui.add_folder("Sentence"):
-        prompt = gui.add_text("Pair prompt", "", hint="The sentence that refers to the boxes")
         suggest = gui.add_button(
             "Suggest", icon=viser.Icon.BULB, hint="Write a Talk2Radar-style prompt for the boxes"
         )
         nothing = gui.add_checkbox(
             "Refers to nothing", False, hint="The prompt describes no object of this frame"
         )
-    with gui.add_folder("Save"):
+    with gui.add_folder("Save options"):
         split = gui.add_dropdown("Split", SPLITS, initial_value=SPLITS[0])
         annotator = gui.add_text("Annotator", "", hint="Your name, recorded with the pair")
-        checks = gui.add_markdown("")
-        save = gui.add_button("Save pair", color="green", icon=viser.Icon.DEVICE_FLOPPY)
-        draft = gui.add_button_group("Draft", (UNDO, REDO, NEW_PAIR))
     with gui.add_folder("Saved pairs"):
         pair = gui.add_dropdown("Pair", (NO_PAIRS,), initial_value=NO_PAIRS)
         open_pair = gui.add_button("Open pair", icon=viser.Icon.FOLDER_OPEN, disabled=True)
@@ -131,26 +167,27 @@ def build_annotation_widgets(gui: viser.GuiApi) -> AnnotationWidgets:
     return AnnotationWidgets(
         status=status,
         back=back,
+        prompt=prompt,
+        save=save,
+        checks=checks,
+        draft=draft,
         place=place,
-        new_class=new_class,
-        box=box,
         cls=cls,
+        box=box,
         length=length,
         width=width,
         height=height,
         yaw=yaw,
         fit=fit,
         delete=delete,
+        ready=ready,
+        add_ready=add_ready,
         use_predictions=use_predictions,
         evidence=evidence,
-        prompt=prompt,
         suggest=suggest,
         nothing=nothing,
         split=split,
         annotator=annotator,
-        checks=checks,
-        save=save,
-        draft=draft,
         pair=pair,
         open_pair=open_pair,
         delete_pair=delete_pair,

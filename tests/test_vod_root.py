@@ -1,0 +1,211 @@
+"""View-of-Delft roots as they come (issue 13, parts 4 and 5): ``launch.py`` opens the release
+layout and chooses a split it can serve, annotation saves pairs into a Talk2Radar root beside the
+release without touching it, the frame's label_2 objects are offered as ready-made boxes, and the
+Annotate tab's ergonomics (Enter saves, Save disabled with its reason, placements refused at
+once, one Class control, the saved id in the panel). Fixtures: ``write_vod_root``
+(:mod:`tests.vod_fixtures`)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import launch
+from app.server import default_pairs_root
+from scenes.root import Talk2RadarRoot
+
+
+def _files(root: Path) -> dict[str, tuple[int, int]]:
+    out = {}
+    for folder, _, names in os.walk(root):
+        for name in names:
+            path = Path(folder) / name
+            st = path.stat()
+            out[str(path.relative_to(root))] = (st.st_size, st.st_mtime_ns)
+    return out
+
+
+# ---------------------------------------------------------------------------- launch
+
+
+def test_launch_chooses_a_split_it_can_serve(tmp_path, write_vod_root) -> None:
+    root = write_vod_root(tmp_path / "vod", frames=3, splits={"val": [0, 1, 2], "train": [0]})
+    opened = launch.open_root(root, None)
+    assert opened.radar_folder == "radar" and opened.splits() == ["train", "val"]
+    assert launch.choose_split(opened, None) == "val"  # no test list: the next preference
+    # VoD's test frames live in testing/, not training/: "test" is skipped, not served broken.
+    (root / "lidar" / "ImageSets" / "test.txt").write_text("00007\n00008\n")
+    assert launch.choose_split(launch.open_root(root, None), None) == "val"
+    with pytest.raises(launch.LaunchError) as info:
+        launch.open_root(root, "test")
+    message = str(info.value)
+    assert "velodyne/00007.bin: missing velodyne file for sample 00007" in message
+    assert "2 of the 2 frames listed in" in message and "test.txt" in message
+
+
+def test_launch_errors_name_the_file_and_exit_2(tmp_path, write_vod_root, capsys) -> None:
+    root = write_vod_root(tmp_path / "vod", frames=2)
+    (root / "radar" / "training" / "calib" / "00000.txt").unlink()  # in every split
+    code = launch.main(["--data", str(root), "--split", "val", "--port", "0"])
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert code == 2 and err.startswith("error: ")
+    assert "radar/training/calib/00000.txt: missing calib file for sample 00000" in err
+    # Without --split: no split is complete (train and val list frame 0), the first is named.
+    code = launch.main(["--data", str(root), "--port", "0"])
+    assert code == 2 and "no split can be served" in capsys.readouterr().err
+    bare = write_vod_root(tmp_path / "bare", frames=1, splits={})
+    code = launch.main(["--data", str(bare), "--port", "0"])
+    err = capsys.readouterr().err
+    assert code == 2 and "no split list" in err and "ImageSets" in err
+
+
+def test_pairs_of_a_root_without_prompts_go_beside_it(tmp_path, write_vod_root) -> None:
+    vod = Talk2RadarRoot(write_vod_root(tmp_path / "vod", frames=1))
+    assert default_pairs_root(vod) == tmp_path / "vod-talk2radar"
+    from tests.conftest import write_tiny_root
+
+    tiny = Talk2RadarRoot(write_tiny_root(tmp_path / "tiny", frames=1))
+    assert default_pairs_root(tiny) == tiny.path  # a Talk2Radar root keeps its pairs
+
+
+# ---------------------------------------------------------------------------- in the app
+
+
+@pytest.fixture(scope="module")
+def vod_app(tmp_path_factory, write_vod_root, torch_threads):
+    from app import AppConfig, Talk2PCApp
+    from model import build_model
+
+    root = write_vod_root(tmp_path_factory.mktemp("vod-app") / "vod", frames=2)
+    with torch_threads(1):
+        model = build_model("small", text_encoder="gru", head__score_threshold=0.0).eval()
+        app = Talk2PCApp(root, model, AppConfig(port=0, split="val", warm_up=False))
+        app.start()
+        try:
+            app.wait_ready(timeout=60)
+            yield app
+        finally:
+            app.stop()
+
+
+def _connect(app, ws_client):
+    before = set(app.sessions)
+    client = ws_client(app.port)
+    client.pump_until(
+        lambda: "/scene/lidar" in client.nodes and "Save pair" in client.gui, 15, "the tab"
+    )
+    session = app.sessions[(set(app.sessions) - before).pop()]
+    panel = next(p for p in app.annotations.panels() if p.session is session)
+    client.pump_until(lambda: panel.frame is not None, 5, "the draft's frame")
+    return client, panel
+
+
+def _notified(client, title: str) -> str:
+    client.pump_until(lambda: any(t == title for t, _ in client.notifications), 10, title)
+    return next(b for t, b in client.notifications if t == title)
+
+
+def test_ready_made_boxes_enter_saves_beside_the_release(vod_app, ws_client) -> None:
+    app = vod_app
+    root = app.frames.root.path
+    release = _files(root)
+    pairs_root = root.with_name("vod-talk2radar")
+    client, panel = _connect(app, ws_client)
+    try:
+        sample = panel.frame.sample
+        assert sample.prompt is None and len(sample.boxes) == 4  # label_2: every object
+        status = panel.w.status.content
+        assert "Pairs are saved into" in status and "vod\\-talk2radar" in status
+        # The metric objects are offered: in the 3D view and in the Object list.
+        client.pump_until(lambda: "/annotate/ready/edges" in client.nodes, 5, "ready boxes")
+        assert client.dropdown("Object") == (
+            "1. Car · 15.1 m",
+            "2. Pedestrian · 10.4 m",
+            "3. Cyclist · 20.6 m",
+            "4. Car · 60.0 m",
+        )
+        assert panel.w.ready.visible  # shown on a root without prompts
+        assert panel.w.save.disabled  # nothing to save yet, and the reason is shown
+        assert "Save pair is disabled until" in panel.w.checks.content
+
+        # A click on the car adds its label_2 box to the draft (not a default-sized box).
+        car = sample.boxes[0]
+        client.click_ground(car[0] + 0.5, car[1], panel.frame.ground_z)
+        client.pump_until(lambda: len(panel.draft.boxes) == 1, 5, "the car added")
+        np.testing.assert_allclose(panel.draft.boxes[0].box, car, atol=1e-9)
+        assert panel.draft.boxes[0].cls == "Car" and len(panel.ready_boxes) == 3
+        client.pump_until(lambda: len(client.dropdown("Object")) == 3, 5, "the list updated")
+        # The draft is drawn into the camera panel too.
+        layer = panel.session.camera.layer("draft")
+        assert layer is not None and np.array_equal(layer.boxes, panel.draft.box_array)
+        # The far car (60 m) cannot be saved: adding it is refused at once.
+        client.set("Object", next(o for o in client.dropdown("Object") if "60.0 m" in o))
+        client.click("Add object")
+        body = _notified(client, "No ready-made box placed there")
+        assert "centre x = 60.00 m is outside the annotated range" in body
+        assert len(panel.draft.boxes) == 1
+
+        # Enter in an invalid draft says why; Enter in a valid one saves.
+        assert panel.w.save.disabled
+        client.set("Pair prompt", "\n")
+        assert "the prompt is empty" in _notified(client, "Not saved yet")
+        client.set("Pair prompt", "the car ahead on the left")
+        client.pump_until(lambda: not panel.w.save.disabled, 5, "Save enabled")
+        assert "Ready to save" in panel.w.checks.content
+        client.set("Pair prompt", "the car ahead on the left\n")
+        client.pump_until(lambda: "Saved pair 00000" in panel.w.status.content, 10, "the id shown")
+        assert panel.last_saved == "pair 00000 (new pair) in train"
+        assert not panel.draft.boxes and not panel.w.length.visible  # the box fields are cleared
+        assert panel.w.prompt.value == ""
+    finally:
+        client.close()
+    # The release is untouched; the pair is a Talk2Radar sample beside it, image and radar tree
+    # included.
+    assert _files(root) == release
+    saved = Talk2RadarRoot(pairs_root).load("00000")
+    assert saved.prompt == "the car ahead on the left" and saved.classes == ("Car",)
+    np.testing.assert_allclose(saved.boxes[0], car, atol=1e-4)
+    assert saved.image_path is not None and saved.image.shape == (1216, 1936, 3)
+    assert Talk2RadarRoot(pairs_root).radar_folder == "radar"
+    assert len(app.frames) == 2  # the served split is the release's
+
+
+def test_placements_outside_the_range_are_refused_at_once(vod_app, ws_client) -> None:
+    client, panel = _connect(vod_app, ws_client)
+    try:
+        ground = panel.frame.ground_z
+        client.click_ground(55.0, -12.0, ground)
+        body = _notified(client, "No box placed there")
+        assert "centre x = 55.00 m is outside the annotated range [0, 51.2] m" in body
+        client.click_ground(4.0, 15.0, ground)  # in range, but beside the car: not in the image
+        client.pump_until(
+            lambda: sum(t == "No box placed there" for t, _ in client.notifications) == 2,
+            10,
+            "the second refusal",
+        )
+        assert "outside the camera image" in client.notifications[-1][1]
+        assert not panel.draft.boxes
+    finally:
+        client.close()
+
+
+def test_one_class_control_sets_the_selected_box_and_the_next(vod_app, ws_client) -> None:
+    client, panel = _connect(vod_app, ws_client)
+    try:
+        ground = panel.frame.ground_z
+        client.click_ground(30.0, 0.0, ground)
+        client.pump_until(lambda: panel.w.length.visible, 5, "a car, its fields shown")
+        assert panel.draft.boxes[0].cls == "Car"
+        client.set("Class", "Cyclist")  # the selected box becomes a cyclist ...
+        client.pump_until(lambda: panel.draft.boxes[0].cls == "Cyclist", 5, "the class")
+        client.click_ground(35.0, 4.0, ground)  # ... and so does the next box
+        client.pump_until(lambda: panel.w.box.value.startswith("#2"), 5, "the next box shown")
+        assert panel.draft.boxes[1].cls == "Cyclist"
+        client.set("Box", panel.w.box.options[1])  # selecting a box shows its class
+        client.pump_until(lambda: panel.selected == panel.draft.boxes[0].box_id, 5, "selected")
+        assert panel.w.cls.value == "Cyclist"
+    finally:
+        client.close()
