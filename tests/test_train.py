@@ -121,6 +121,8 @@ def test_torchrun_two_gloo_processes(tiny_root, tmp_path):
         str(_free_port()),
         "-m",
         "model.train",
+        "--grounding",
+        "tpcnet",
         "--data",
         str(tiny_root),
         "--out",
