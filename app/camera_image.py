@@ -27,7 +27,7 @@ from scenes.projection import project_box_edges, project_points
 DISPLAY_WIDTH = 968
 """Width (px) of the displayed image: VoD's 1936 x 1216 image halved."""
 
-LABEL_FONT_SIZE = 13
+LABEL_FONT_SIZE = 18
 """Pixel size of the box labels drawn on the image."""
 
 LIDAR_DOT = 2

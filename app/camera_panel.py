@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from contextlib import AbstractContextManager
 from pathlib import Path
 
@@ -57,7 +57,7 @@ log = logging.getLogger(__name__)
 LAYER_ORDER = ("gt", "pred", "ready", "draft")
 """Layers drawn bottom to top; other names are drawn after these, in the order they were set."""
 
-PANEL_WIDTH = 500
+PANEL_WIDTH = 560
 """Initial width (px) of the floating camera window."""
 
 JPEG_QUALITY = 85
@@ -66,19 +66,26 @@ JPEG_QUALITY = 85
 MAX_PREDICTED = 30
 """Predicted boxes drawn at most (the best scores; the 3D view draws them all)."""
 
+MAX_LABELLED = 10
+"""Predicted boxes labelled at most (the best scores), so that labels do not hide the image."""
+
 
 def gt_layer(sample: Sample) -> BoxLayer:
     """The sample's ground truth: thin green wireframes, no labels."""
     k = len(sample.boxes)
-    return BoxLayer(sample.boxes, (GT_COLOR,) * k, ("",) * k, width=1)
+    return BoxLayer(sample.boxes, (GT_COLOR,) * k, ("",) * k, width=2)
 
 
-def prediction_layer(pred: Predictions, labels: Sequence[str]) -> BoxLayer:
-    """The best :data:`MAX_PREDICTED` boxes of an answer in their class colours, each with its
-    label (``"Car 0.87"``)."""
+def prediction_layer(pred: Predictions) -> BoxLayer:
+    """The best :data:`MAX_PREDICTED` boxes of an answer in their class colours, the best
+    :data:`MAX_LABELLED` labelled with class and score (``"Car 0.87"``)."""
     k = min(len(pred.boxes), MAX_PREDICTED)
     colors = tuple(class_color(c) for c in pred.classes[:k])
-    return BoxLayer(np.asarray(pred.boxes)[:k], colors, tuple(labels[:k]), width=2)
+    labels = tuple(
+        f"{c} {float(s):.2f}" if i < MAX_LABELLED else ""
+        for i, (c, s) in enumerate(zip(pred.classes[:k], pred.scores[:k], strict=True))
+    )
+    return BoxLayer(np.asarray(pred.boxes)[:k], colors, labels, width=3)
 
 
 def image_note(sample: Sample) -> str:
@@ -170,9 +177,9 @@ class CameraPanel:
         self.image.visible = self.camera is not None
         self.redraw()
 
-    def show_predictions(self, pred: Predictions, labels: Sequence[str]) -> None:
-        """Draw an answer's boxes (layer ``pred``) with their labels."""
-        self.set_layer("pred", prediction_layer(pred, labels))
+    def show_predictions(self, pred: Predictions) -> None:
+        """Draw an answer's boxes (layer ``pred``, :func:`prediction_layer`)."""
+        self.set_layer("pred", prediction_layer(pred))
 
     def view_pose(self) -> CameraPose | None:
         """The 3D view's "Camera" preset for the frame shown: the camera's pose and vertical

@@ -43,6 +43,7 @@ import viser
 
 from app.annotate_tab import AnnotationHub, build_annotation_tab
 from app.engine import GroundingEngine, GroundingModel, initial_threshold
+from app.keys import add_escape_leaves_fields
 from app.navigation import (
     Frame,
     FrameLoadError,
@@ -348,6 +349,7 @@ class Talk2PCApp:
             self.sessions[client.client_id] = session
             self.navigator.subscribe(session)
             try:
+                add_escape_leaves_fields(client.gui)
                 session.build_gui(self._extra_tabs())
                 if self.frame is not None:
                     session.show_frame(self.frame)

@@ -466,7 +466,7 @@ class ClientSession:
                 pred.heatmaps, pred.grid, request.frame.ground_z, self.query.opacity.value
             )
         self.answer = answer
-        self._with_camera(lambda camera: camera.show_predictions(pred, labels))
+        self._with_camera(lambda camera: camera.show_predictions(pred))
         self.history.add(request.prompt)
         self.query.history.options = self.history.options()
         self.query.history.value = self.history.items[0]

@@ -155,3 +155,34 @@ def main() -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+@pytest.mark.browser
+def test_browser_camera_panel_shows_projected_boxes(
+    tmp_path, chromium, write_vod_root, torch_threads
+) -> None:
+    """On a View-of-Delft-layout root: the camera panel shows the image with the answer, the
+    ground truth and the draft projected (screenshot ``artifacts/camera-browser.png``; the docs'
+    ``docs/images/camera.png`` comes from ``python -m tests.camera_shot``); *Save pair* is in
+    sight at 1400 x 860 and disabled for an empty draft; Esc leaves *Pair prompt*; Enter saves."""
+    from app import AppConfig, Talk2PCApp
+    from model import build_model
+    from scenes.root import Talk2RadarRoot
+    from tests.camera_shot import drive_camera
+
+    root = write_vod_root(tmp_path / "vod", frames=1, splits={"val": [0]})
+    with torch_threads(1):
+        model = build_model("small", text_encoder="gru", head__score_threshold=0.0).eval()
+        app = Talk2PCApp(root, model, AppConfig(port=0, split="val", warm_up=False)).start()
+        try:
+            shot = ARTIFACTS / "camera-browser.png"
+            run = drive_camera(app, chromium, shot, "the car ahead", "the pedestrian on the right")
+            assert run.save_bottom <= 860 and run.save_disabled
+            assert run.focus_after_escape == "BODY"
+            assert run.shown_width == 968  # VoD's 1936 px image, halved
+            assert shot.is_file() and shot.stat().st_size > 20_000
+            pairs = Talk2RadarRoot(tmp_path / "vod-talk2radar").load(run.sample_id)
+            assert pairs.prompt == "the pedestrian on the right"
+            assert pairs.classes == ("Pedestrian",)
+        finally:
+            app.stop()

@@ -121,9 +121,9 @@ def test_ready_made_boxes_enter_saves_beside_the_release(vod_app, ws_client) -> 
         assert "Pairs are saved into" in status and "vod\\-talk2radar" in status
         # The metric objects are offered: in the 3D view and in the Object list.
         client.pump_until(lambda: "/annotate/ready/edges" in client.nodes, 5, "ready boxes")
-        assert client.dropdown("Object") == (
-            "1. Car · 15.1 m",
-            "2. Pedestrian · 10.4 m",
+        assert client.dropdown("Object") == (  # nearest first
+            "1. Pedestrian · 10.4 m",
+            "2. Car · 15.1 m",
             "3. Cyclist · 20.6 m",
             "4. Car · 60.0 m",
         )

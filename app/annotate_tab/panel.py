@@ -12,7 +12,8 @@ every LiDAR point of the frame) is computed again only when the boxes or the fra
 Ready-made boxes: on a root without prompts (a View-of-Delft root as released), ``label_2``
 lists every object of the frame; its metric-class boxes that are not in the draft yet (no draft
 box overlaps them by :data:`annotate.DUPLICATE_IOU` in bird's eye view) are offered
-(:attr:`AnnotationPanel.ready_boxes`), drawn in the 3D view and listed under *Object*.
+(:attr:`AnnotationPanel.ready_boxes`), drawn in the 3D view and listed under *Object*, nearest
+first.
 """
 
 from __future__ import annotations
@@ -252,6 +253,8 @@ class AnnotationPanel:
             boxes, classes, _ = proposals(
                 sample.boxes, sample.classes, draft.box_array, limit=10**6
             )
+            order = np.argsort(np.hypot(boxes[:, 0], boxes[:, 1]), kind="stable")
+            boxes, classes = boxes[order], tuple(classes[i] for i in order)
         else:
             boxes, classes = np.zeros((0, 7)), ()
         self.ready_boxes, self.ready_classes = boxes, classes

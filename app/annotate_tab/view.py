@@ -163,7 +163,7 @@ def draft_layer(draft: Draft, selected_id: int | None, visible: bool = True) -> 
         return None
     colors = tuple(SELECTED_COLOR if b.box_id == selected_id else DRAFT_COLOR for b in draft.boxes)
     tags = tuple(box_tag(i, b.cls) for i, b in enumerate(draft.boxes))
-    return BoxLayer(draft.box_array, colors, tags, width=2)
+    return BoxLayer(draft.box_array, colors, tags, width=3)
 
 
 class DraftView:
