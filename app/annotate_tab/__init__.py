@@ -18,33 +18,50 @@ The parts:
   :mod:`~app.annotate_tab.view`: the widgets, the text they show, the draft boxes and the gizmo in
   ``client.scene``; :mod:`~app.annotate_tab.tab` wires them together.
 
-Pairs are saved into the root being served; after a save or a deletion the split is re-read
-(:meth:`app.navigation.Navigator.reload`) and every browser's list of saved pairs is refreshed.
+Pairs are saved into the root being served when it is a Talk2Radar root with prompts, else
+beside it (:func:`app.server.default_pairs_root`, ``launch.py --pairs``); the status line says
+where. After a save or a deletion into the served root its split is re-read
+(:meth:`app.navigation.Navigator.reload`); every browser's list of saved pairs is refreshed.
 
-Using it with the mouse only:
+Using it (a one-box pair: a click and the sentence; see docs/ANNOTATION.md):
 
-- **Click the ground** (with *Click to place* on) to place a box of the *New box class* at its
-  typical size (:func:`annotate.default_box`) standing on the frame's ground estimate; the new box
-  is selected. A click inside a draft box's footprint selects that box instead.
+- **Click the ground** (with *Click to place* on) to place a box of the *Class* at its typical
+  size (:func:`annotate.default_box`) standing on the frame's ground estimate; the new box is
+  selected. A click inside a draft box's footprint selects that box instead; a click on a
+  ready-made box (below) adds it. A box that could not be saved where it would go (outside the
+  annotated range or the camera's view) is not placed: a notification says why at once.
+- **Ready-made boxes**: on a root without prompts (View-of-Delft as released) the frame's
+  label_2 objects of the metric classes that are not in the draft are drawn (``"+ Car"``) and
+  listed under *Object* (nearest first); *Add object* or a click on one adds it.
+- **One Class control**: *Class* is the selected box's class (changing it changes the box) and
+  the class of the next box placed; selecting a box shows its class.
 - **Drag the gizmo** of the selected box: its arrows and square move it on the ground, its ring
   turns it (yaw). One drag is one undo step (:class:`annotate.DraftEditor`'s ``merge_key``).
-- *Box* picks the selected box; *Class*, *Length*, *Width*, *Height*, *Yaw (deg)* edit it (the
-  bottom stays on the ground when the height changes); *Fit to points* fits it to the LiDAR
-  points around it (:func:`annotate.fit_box`); *Delete box* removes it. *Use predictions* turns
-  the boxes of the last answer (Query tab) on this frame into draft boxes.
+- *Box* picks the selected box; *Length*, *Width*, *Height*, *Yaw (deg)* edit it (the bottom
+  stays on the ground when the height changes); *Fit to points* fits it to the LiDAR points
+  around it (:func:`annotate.fit_box`); *Delete box* removes it. These are shown only while a box
+  is selected. *Use predictions* turns the boxes of the last answer (Query tab) on this frame into
+  draft boxes.
 - The evidence table gives, per box, the LiDAR and radar points inside, the mean compensated
   radial velocity and what its sign means, and the distance (:func:`annotate.box_evidence`).
-- *Pair prompt* holds the sentence; *Suggest* writes one from the boxes
-  (:func:`annotate.suggest_prompt`), to edit; *Refers to nothing* marks a prompt with no referent.
-- *Save pair* writes the pair (split and annotator name beside it); problems found by
-  :func:`annotate.validate` are listed under it before saving and shown as a notification with
-  the exact messages when saving is refused. *Draft*: Undo, Redo, New pair.
-- *Saved pairs* lists the pairs of the root (re-read on every page load); *Open pair* reopens
+- *Pair prompt* (at the top, beside *Save pair*) holds the sentence; **Enter** in it saves the
+  pair when nothing blocks it (else a notification lists what does); **Esc** leaves the field
+  (:mod:`app.keys`), so the next click or hotkey does not type. *Suggest* writes a sentence from
+  the boxes (:func:`annotate.suggest_prompt`), to edit; *Refers to nothing* marks a prompt with no
+  referent.
+- *Save pair* is disabled, with what :func:`annotate.validate` still objects to listed under it,
+  until the draft can be saved; after a save the status line names the pair written and the box
+  fields are hidden (a new, empty draft). *Save options*: the split and the annotator's name.
+  *Draft*: Undo, Redo, New pair.
+- *Saved pairs* lists the pairs of the store (re-read on every page load); *Open pair* reopens
   one into the draft (saving then writes a new version), *Delete pair* removes it (after a
   confirmation).
+- The draft is drawn into the camera panel too (its ``draft`` layer,
+  :func:`~app.annotate_tab.view.draft_layer`).
 
 Hotkeys: viser 1.1.1 has experimental commands (``gui.add_command``) with hotkeys, also listed in
-its command palette (Ctrl/Cmd+K). :data:`~app.annotate_tab.widgets.HOTKEYS` registers Undo, Redo, Delete box and Save pair.
+its command palette (Ctrl/Cmd+K). :data:`~app.annotate_tab.widgets.HOTKEYS` registers Undo, Redo,
+Delete box and Save pair; they act while no text field has the focus (Esc leaves one).
 
 The frame of a draft. Navigation is shared by every browser, so the frame on screen can change
 under a draft. A draft belongs to the frame it was started on (for a reopened pair: the pair's
