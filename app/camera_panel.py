@@ -8,9 +8,8 @@ the control panel is open. It shows:
   :data:`app.camera_image.DISPLAY_WIDTH` pixels;
 - box layers drawn as 3D wireframes (:class:`app.camera_image.BoxLayer`), in the order of
   :data:`LAYER_ORDER`: the ground truth (thin, green, unlabelled), the current answer (class
-  colours, score labels), the ready-made objects offered by the Annotate tab, and the annotation
-  draft on top (near-white, the selected box gold); extensions set their own layers by name
-  (:meth:`CameraPanel.set_layer`);
+  colours, score labels) and the annotation draft on top (near-white, the selected box gold);
+  extensions set their own layers by name (:meth:`CameraPanel.set_layer`);
 - optionally (*LiDAR on image*, *Radar on image*) the LiDAR points coloured by depth (red near,
   violet far) and the radar points by compensated radial velocity (the 3D view's map and scale).
 
@@ -54,7 +53,7 @@ from scenes.root import Sample
 
 log = logging.getLogger(__name__)
 
-LAYER_ORDER = ("gt", "pred", "ready", "draft")
+LAYER_ORDER = ("gt", "pred", "draft")
 """Layers drawn bottom to top; other names are drawn after these, in the order they were set."""
 
 PANEL_WIDTH = 560

@@ -209,3 +209,37 @@ def test_one_class_control_sets_the_selected_box_and_the_next(vod_app, ws_client
         assert panel.w.cls.value == "Cyclist"
     finally:
         client.close()
+
+
+def test_a_pair_saved_beside_reopens_on_its_source_frame(vod_app, ws_client) -> None:
+    """The pair's id belongs to the pairs root: reopening it shows the served frame it was
+    annotated on, never the served sample that happens to share its id."""
+    app = vod_app
+    store = app.annotations.store
+    next_id = max((int(p.sample_id) for p in store.pairs()), default=-1) + 1
+    source = 1 if next_id == 0 else 0  # a served frame whose id is not the pair's
+    other = 1 - source
+    app.go_to(source)
+    client, panel = _connect(app, ws_client)
+    try:
+        client.pump_until(lambda: panel.frame.name == f"0000{source}", 5, "the source frame")
+        client.pump_until(lambda: len(client.dropdown("Object")) == 4, 5, "the objects")
+        client.click("Add object")  # the nearest: the pedestrian
+        client.pump_until(lambda: len(panel.draft.boxes) == 1, 5, "the pedestrian")
+        client.set("Pair prompt", "the pedestrian on the right\n")
+        client.pump_until(lambda: panel.last_saved is not None, 10, "the save")
+        sid = panel.last_saved.split()[1]
+        assert sid == f"{next_id:05d}" != f"0000{source}"
+        assert store.history(sid)[-1].source["sample_id"] == f"0000{source}"
+        app.go_to(other)
+        client.pump_until(lambda: panel.session.frame.index == other, 5, "another frame")
+        client.pump_until(lambda: any(o.startswith(sid) for o in client.dropdown("Pair")), 5, "")
+        client.set("Pair", next(o for o in client.dropdown("Pair") if o.startswith(sid)))
+        client.click("Open pair")
+        client.pump_until(lambda: panel.draft.sample_id == sid, 5, "the pair opened")
+        assert panel.frame.sample_ids == frozenset({f"0000{source}"})
+        client.pump_until(lambda: panel.session.frame.index == source, 5, "its frame shown")
+        assert panel.draft.classes == ("Pedestrian",)
+    finally:
+        app.go_to(0)
+        client.close()

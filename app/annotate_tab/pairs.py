@@ -14,6 +14,7 @@ from annotate import ConflictError, SourceFrame, StoreError, ValidationError, is
 from app.annotate_tab.formatting import option_pair_id
 from app.annotate_tab.panel import AnnotationPanel, DraftFrame
 from app.scene_view import estimate_ground_z
+from scenes.root import Talk2RadarRoot
 
 log = logging.getLogger(__name__)
 
@@ -118,19 +119,22 @@ class PairActions:
             self.open_pair(sid)
 
     def open_pair(self, sample_id: str) -> None:
-        """Reopen a saved pair for editing and show its frame."""
+        """Reopen a saved pair for editing and show its frame. A pair saved beside the served
+        root is read from the store's root, and its frame on screen is the served root's sample
+        it was annotated on (its own id means nothing there)."""
         p = self.panel
         store = p.store
         if store is None:
             return
         root = p.navigator.frames.root
+        separate = p.hub.separate
         try:
             draft = store.open(sample_id)
-            sample = root.load(sample_id)
+            sample = (Talk2RadarRoot(store.path) if separate else root).load(sample_id)
         except (StoreError, OSError, ValueError) as exc:
             p.notify(f"Cannot open pair {sample_id}", str(exc), color="red")
             return
-        ids = {sample_id}
+        ids = set() if separate else {sample_id}
         history = store.history(sample_id)
         source = dict(history[-1].source) if history else {}
         same_root = bool(source.get("root")) and (
