@@ -47,7 +47,9 @@ def save_checkpoint(path: str | os.PathLike[str], model: TPCNet, **metadata: Any
     """
     path = Path(path)
     try:
-        json.dumps(metadata)
+        # The round trip turns float subclasses (numpy scalars) into plain floats, which
+        # ``torch.load(weights_only=True)`` accepts; anything not JSON is refused.
+        metadata = json.loads(json.dumps(metadata))
     except (TypeError, ValueError) as exc:
         raise CheckpointError(
             f"checkpoint metadata for {path} is not plain JSON data: {exc}"

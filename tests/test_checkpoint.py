@@ -145,3 +145,16 @@ def test_metadata_must_be_plain_data(trained: TPCNet, tmp_path: Path) -> None:
     with pytest.raises(CheckpointError, match="metadata"):
         save_checkpoint(tmp_path / "m.pt", trained, when=object())
     assert not list(tmp_path.iterdir())
+
+
+def test_numpy_scalars_in_metadata_load_back_with_weights_only(tmp_path):
+    import numpy as np
+
+    from model import build_model
+    from model.checkpoint import load_checkpoint, save_checkpoint
+
+    path = save_checkpoint(
+        tmp_path / "m.pt", build_model("small"), operating_threshold=np.float64(0.45)
+    )
+    meta = load_checkpoint(path).checkpoint_metadata
+    assert meta["operating_threshold"] == 0.45 and type(meta["operating_threshold"]) is float
