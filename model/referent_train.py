@@ -36,8 +36,9 @@ from torch import Tensor
 from model.decode import decode
 from model.grounder import SceneCandidates, stack_candidates
 from model.losses import LossTerms, grounding_loss
-from model.referent import referent_loss
+from model.referent import CandidateBatch, referent_loss
 from model.targets import anchor_points, collate_targets, draw_targets
+from model.text import TextFeatures
 from model.tpcnet import TPCNet, as_points
 from scenes.actors import CLASSES, Actor
 from scenes.frame_dataset import FrameDataset, FrameItem
@@ -146,6 +147,33 @@ def training_candidates(
     return boxes, labels, scores, ids
 
 
+def _prompt_losses(
+    model: TPCNet,
+    scenes: Sequence[SceneCandidates],
+    rows: Sequence[int],
+    text: TextFeatures,
+    targets: Sequence[np.ndarray],
+) -> tuple[Tensor, Tensor]:
+    """Referent losses of ``N`` prompts: prompt ``i`` asks about ``scenes[rows[i]]``, its encoded
+    text is row ``i`` of ``text`` and ``targets[i]`` marks its referents among that scene's
+    candidates (``(K_scene,)`` float32). Returns :func:`model.referent.referent_loss`."""
+    device = model.device
+    batch = stack_candidates(scenes).index(torch.tensor(list(rows)))
+    batch = CandidateBatch(
+        batch.geometry.to(device),
+        batch.fused.to(device),
+        None if batch.lidar is None else batch.lidar.to(device),
+        None if batch.radar is None else batch.radar.to(device),
+        batch.padding.to(device),
+    )
+    assert model.referent is not None
+    logits = model.referent(batch, text.tokens, text.numbers, text.padding_mask)
+    target = torch.zeros_like(logits)
+    for i, t in enumerate(targets):
+        target[i, : len(t)] = torch.from_numpy(t).to(device)
+    return referent_loss(logits, target, batch.padding)
+
+
 def _prompt_config(phrasing: str) -> PromptConfig:
     if "phrasing" in PromptConfig.__dataclass_fields__:
         return PromptConfig(phrasing=phrasing)
@@ -210,13 +238,7 @@ def referent_step(
     if prefetch is not None:
         prefetch(texts)
     text = model.text_encoder(texts)
-    batch = stack_candidates(scenes).index(torch.tensor(rows, device=device))
-    assert model.referent is not None
-    logits = model.referent(batch, text.tokens, text.numbers, text.padding_mask)
-    target = torch.zeros_like(logits)
-    for i, t in enumerate(target_rows):
-        target[i, : len(t)] = torch.from_numpy(t).to(device)
-    bce, listwise = referent_loss(logits, target, batch.padding)
+    bce, listwise = _prompt_losses(model, scenes, rows, text, target_rows)
     total = det.total + cfg.referent_weight * (bce + cfg.listwise_weight * listwise)
     return ReferentLoss(total, det, bce, listwise, len(texts))
 
@@ -354,20 +376,7 @@ def cached_referent_step(
     if not texts:
         return ReferentLoss(zero, LossTerms(zero, zero, zero), zero, zero, 0)
     text = bank.features(texts, device)
-    batch = stack_candidates(chosen).index(torch.tensor(rows))
-    batch = type(batch)(
-        batch.geometry.to(device),
-        batch.fused.to(device),
-        None if batch.lidar is None else batch.lidar.to(device),
-        None if batch.radar is None else batch.radar.to(device),
-        batch.padding.to(device),
-    )
-    assert model.referent is not None
-    logits = model.referent(batch, text.tokens, text.numbers, text.padding_mask)
-    target = torch.zeros_like(logits)
-    for i, t in enumerate(targets):
-        target[i, : len(t)] = torch.from_numpy(t).to(device)
-    bce, listwise = referent_loss(logits, target, batch.padding)
+    bce, listwise = _prompt_losses(model, chosen, rows, text, targets)
     total = cfg.referent_weight * (bce + cfg.listwise_weight * listwise)
     return ReferentLoss(total, LossTerms(zero, zero, zero), bce, listwise, len(texts))
 

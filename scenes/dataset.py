@@ -41,6 +41,18 @@ class AugmentConfig:
     lidar_keep_min: float = 0.8
     shuffle_points: bool = True
 
+    def thin_and_shuffle(
+        self, lidar: np.ndarray, radar: np.ndarray, rng: np.random.Generator
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The LiDAR dropout and the point shuffling (after the flip): ``(N, 4)``, ``(M, 7)``."""
+        if self.lidar_keep_min < 1.0 and len(lidar):
+            keep = rng.uniform(self.lidar_keep_min, 1.0)
+            lidar = lidar[rng.random(len(lidar)) < keep]
+        if self.shuffle_points:
+            lidar = lidar[rng.permutation(len(lidar))]
+            radar = radar[rng.permutation(len(radar))]
+        return lidar, radar
+
     def __post_init__(self) -> None:
         if not 0.0 <= self.flip_probability <= 1.0:
             raise ValueError(f"flip_probability must be in [0, 1], got {self.flip_probability}")
@@ -152,12 +164,7 @@ class GroundingDataset(Dataset):
             if rng.random() < self.augment.flip_probability:
                 lidar, radar, boxes, prompt = flip_sample(lidar, radar, boxes, prompt)
                 flipped = True
-            if self.augment.lidar_keep_min < 1.0 and len(lidar):
-                keep = rng.uniform(self.augment.lidar_keep_min, 1.0)
-                lidar = lidar[rng.random(len(lidar)) < keep]
-            if self.augment.shuffle_points:
-                lidar = lidar[rng.permutation(len(lidar))]
-                radar = radar[rng.permutation(len(radar))]
+            lidar, radar = self.augment.thin_and_shuffle(lidar, radar, rng)
         return GroundingItem(
             sample_id=sample.sample_id,
             lidar=torch.from_numpy(np.ascontiguousarray(lidar, dtype=np.float32)),

@@ -175,12 +175,7 @@ class FrameDataset(Dataset):
                 flipped = True
             if self.sensors is not None:
                 lidar, radar = self.sensors.apply(lidar, radar, rng)
-            if self.augment.lidar_keep_min < 1.0 and len(lidar):
-                keep = rng.uniform(self.augment.lidar_keep_min, 1.0)
-                lidar = lidar[rng.random(len(lidar)) < keep]
-            if self.augment.shuffle_points:
-                lidar = lidar[rng.permutation(len(lidar))]
-                radar = radar[rng.permutation(len(radar))]
+            lidar, radar = self.augment.thin_and_shuffle(lidar, radar, rng)
         return FrameItem(sample.sample_id, lidar, radar, actors, flipped)
 
 
