@@ -116,6 +116,84 @@ def _run_browser_test(root: Path, chromium: str) -> None:
         app.stop()
 
 
+def _exactly_answered_attribute_prompt(root: Path, model) -> tuple[int, str, int] | None:
+    """``(frame index, prompt, referents)`` of the first test-split sample whose prompt names an
+    attribute, whose frame holds same-class actors that are *not* referents (so a class-only
+    answer would be wrong), and which the model, called directly, answers with exactly the
+    referent set at its operating threshold."""
+    from model.grounding_metrics import PromptBoxes, prompt_outcome
+    from model.predict import operating_threshold
+    from scenes.root import Talk2RadarRoot
+
+    r = Talk2RadarRoot(root)
+    threshold = operating_threshold(model)
+    for index, sid in enumerate(r.ids("test")):
+        sample = r.load(sid)
+        if not sample.meta or not (sample.meta.tags - {"class"}) or not len(sample.boxes):
+            continue
+        cls = set(sample.classes)
+        others = [
+            a
+            for a in sample.meta.actors
+            if a.cls in cls and a.actor_id not in sample.meta.referent_ids and 0 < a.box[0] < 50
+        ]
+        if not others:
+            continue
+        pred = model.ground(model.encode_scene(sample.lidar, sample.radar), sample.prompt)
+        outcome = prompt_outcome(
+            sid,
+            (),
+            PromptBoxes.make(pred.boxes, pred.classes, pred.scores),
+            PromptBoxes.make(sample.boxes, sample.classes),
+            threshold,
+        )
+        if outcome.exact:
+            return index, sample.prompt, len(sample.boxes)
+    return None
+
+
+@pytest.mark.browser
+@pytest.mark.slow
+def test_browser_attribute_prompt_boxes_only_the_referents(tmp_path) -> None:
+    """With the shipped checkpoint, a typed attribute prompt boxes its referents and none of the
+    other objects of the same class."""
+    chromium = find_chromium()
+    if chromium is None:
+        pytest.skip("no Chromium found (/usr/bin/chromium): install Debian's `chromium` package")
+    from app import AppConfig, Talk2PCApp
+    from model.checkpoint import load_checkpoint
+    from scenes.synth import SynthSettings, generate_root
+
+    root = tmp_path / "root"
+    generate_root(root, 16, SynthSettings(seed=404), split_fractions=(0.0, 0.0, 1.0))
+    model = load_checkpoint(REPO / "checkpoints" / "tpcnet-small.pt")
+    assert model.cfg.grounding == "referent"
+    found = _exactly_answered_attribute_prompt(root, model)
+    assert found is not None, "the shipped checkpoint answered no attribute prompt exactly"
+    index, prompt, referents = found
+    app = Talk2PCApp(root, model, AppConfig(port=0, split="test")).start()
+    try:
+        app.wait_ready(timeout=120)
+        assert app.go_to(index) is not None
+        seen = []
+
+        def answered() -> bool:
+            seen.extend(
+                s
+                for s in app.sessions.values()
+                if s.answer is not None and s.answer.prompt == prompt
+            )
+            return bool(seen)
+
+        drive(app.url, ARTIFACTS / "app-referents.png", prompt, chromium, wait_answer=answered)
+        assert seen, "the server never drew an answer for the typed prompt"
+        answer = seen[0].answer
+        assert len(answer.predictions.boxes) == referents
+        assert seen[0].pred_view.count == referents
+    finally:
+        app.stop()
+
+
 def main() -> int:
     """Write the documentation screenshot (see the module docstring)."""
     import launch
