@@ -58,6 +58,8 @@ _TENS = {
     "ninety": 90,
 }
 _SCALES = {"hundred": 100, "thousand": 1000}
+_QUANTITIES = {"dozen": 12.0, "couple": 2.0, "half": 0.5}
+"""Words that are a number alone or after "a"."""
 _WORD = re.compile(r"[A-Za-z]+|\d+(?:[.,]\d+)?")
 
 
@@ -75,8 +77,7 @@ def number_spans(text: str) -> list[tuple[int, int, float]]:
 
     Digits (``20``, ``2.5``, ``2,5``, ``10m``: the digits of a digit-unit word) and runs of number
     words (``twenty five``, ``twenty-five``, ``two and a half``, ``two point five``, ``a hundred``,
-    ``half a``,
-    ``a dozen``, ``a couple of``). A lone "a" or "and" is never a number.
+    ``half a``, ``a dozen``, ``a couple of``). A lone "a" or "and" is never a number.
     """
     tokens = [(m.start(), m.end(), m.group()) for m in _WORD.finditer(text)]
     spans: list[tuple[int, int, float]] = []
@@ -99,25 +100,13 @@ def number_spans(text: str) -> list[tuple[int, int, float]]:
             spans.append((start, end, value))
             i = j
             continue
-        if low == "dozen" or (
-            low == "a" and i + 1 < len(tokens) and tokens[i + 1][2].lower() == "dozen"
-        ):
-            j = i + 1 if low == "dozen" else i + 2
-            spans.append((start, tokens[j - 1][1], 12.0))
-            i = j
-            continue
-        if low == "couple" or (
-            low == "a" and i + 1 < len(tokens) and tokens[i + 1][2].lower() == "couple"
-        ):
-            j = i + 1 if low == "couple" else i + 2
-            spans.append((start, tokens[j - 1][1], 2.0))
-            i = j
-            continue
-        if low == "half" or (
-            low == "a" and i + 1 < len(tokens) and tokens[i + 1][2].lower() == "half"
-        ):
-            j = i + 1 if low == "half" else i + 2
-            spans.append((start, tokens[j - 1][1], 0.5))
+        # "dozen" / "a dozen", "couple" / "a couple", "half" / "a half"
+        quantity = low if low in _QUANTITIES else None
+        if low == "a" and i + 1 < len(tokens) and tokens[i + 1][2].lower() in _QUANTITIES:
+            quantity = tokens[i + 1][2].lower()
+        if quantity is not None:
+            j = i + 1 if low == quantity else i + 2
+            spans.append((start, tokens[j - 1][1], _QUANTITIES[quantity]))
             i = j
             continue
         value_of_first = _word_value(low)
