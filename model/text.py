@@ -231,22 +231,17 @@ class MiniLMTextEncoder(nn.Module):
             self._cache.move_to_end(prompt)
             self.cache_hits += 1
             return cached
+        entry = encode_minilm_batched([prompt], self.max_tokens)[0]
+        self._remember(prompt, entry)
+        return entry
+
+    def _remember(self, prompt: str, entry: tuple[Tensor, Tensor, bool]) -> None:
+        """Count a cache miss and keep ``entry`` in the LRU (when the cache is on)."""
         self.cache_misses += 1
-        ids, numbers, truncated = tokenize_with_numbers(prompt, self.max_tokens)
-        model = load_minilm()
-        with torch.inference_mode():
-            input_ids = torch.tensor([ids], dtype=torch.long)
-            out = model(input_ids=input_ids, attention_mask=torch.ones_like(input_ids))
-        entry = (
-            out.last_hidden_state[0].detach().clone().float(),
-            torch.from_numpy(numbers),
-            truncated,
-        )
         if self.cache_size > 0:
             self._cache[prompt] = entry
             if len(self._cache) > self.cache_size:
                 self._cache.popitem(last=False)
-        return entry
 
     def prefetch(self, prompts: Sequence[str], chunk: int = 64) -> None:
         """Encode the uncached ``prompts`` with :func:`encode_minilm_batched` (about 4x less time
@@ -255,11 +250,7 @@ class MiniLMTextEncoder(nn.Module):
         for prompt, entry in zip(
             todo, encode_minilm_batched(todo, self.max_tokens, chunk), strict=True
         ):
-            self.cache_misses += 1
-            if self.cache_size > 0:
-                self._cache[prompt] = entry
-                if len(self._cache) > self.cache_size:
-                    self._cache.popitem(last=False)
+            self._remember(prompt, entry)
 
     def forward(self, prompts: Sequence[str]) -> TextFeatures:
         """Encode ``B`` prompts -> :class:`TextFeatures` with ``D = 384``."""
