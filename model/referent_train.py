@@ -174,12 +174,6 @@ def _prompt_losses(
     return referent_loss(logits, target, batch.padding)
 
 
-def _prompt_config(phrasing: str) -> PromptConfig:
-    if "phrasing" in PromptConfig.__dataclass_fields__:
-        return PromptConfig(phrasing=phrasing)
-    return PromptConfig()
-
-
 def referent_step(
     model: TPCNet,
     frames: Sequence[FrameItem],
@@ -210,7 +204,7 @@ def referent_step(
     with torch.no_grad():
         dets = decode(out, model.head_grid, model.cfg.head, model.cfg.referent.candidate_threshold)
         heat = torch.sigmoid(out.heatmap.detach()).float().cpu().numpy()
-    pcfg = prompt_config or _prompt_config(cfg.phrasing)
+    pcfg = prompt_config or PromptConfig(phrasing=cfg.phrasing)
     scenes, texts, rows, target_rows = [], [], [], []
     for b, frame in enumerate(frames):
         if not actors[b]:
@@ -308,7 +302,7 @@ def cache_scenes(
     from model.text import encode_minilm_batched
 
     model.eval()
-    pcfg = _prompt_config(phrasing)
+    pcfg = PromptConfig(phrasing=phrasing)
     scenes = []
     with torch.no_grad():
         for i in tqdm(range(len(dataset)), desc="cache scenes", disable=not progress):

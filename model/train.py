@@ -45,6 +45,7 @@ from model.referent_train import (
 )
 from model.targets import collate_targets, draw_targets
 from scenes.dataset import AugmentConfig, GroundingBatch, GroundingDataset, collate
+from scenes.durable import atomic_file
 from scenes.frame_dataset import FrameDataset, SensorAugment
 from scenes.root import Talk2RadarRoot
 
@@ -294,12 +295,15 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
             return
         meta = dict(metadata, step=state.step, epoch=state.epoch, val_mAP_3d=state.last_map)
         save_checkpoint(out / "last.pt", model, **meta)
-        tmp = out / ".train_state.pt.tmp"
-        torch.save(
-            {"config": asdict(cfg), "state": asdict(state), "optimizer": optimizer.state_dict()},
-            tmp,
-        )
-        os.replace(tmp, out / "train_state.pt")
+        with atomic_file(out / "train_state.pt") as handle:
+            torch.save(
+                {
+                    "config": asdict(cfg),
+                    "state": asdict(state),
+                    "optimizer": optimizer.state_dict(),
+                },
+                handle,
+            )
         if best:
             save_checkpoint(out / "best.pt", model, **meta)
 
