@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from model.grounding_metrics import PromptBoxes, prompt_outcome
 from model.predict import iterate_predictions
@@ -67,14 +68,13 @@ def choose_threshold(
 
 
 def calibrate(
-    checkpoint: str | Path, data: str | Path, split: str = "val", limit: int = 0
+    model: torch.nn.Module, data: str | Path, split: str = "val", limit: int = 0
 ) -> Calibration:
-    """Ground every prompt of ``split`` with the checkpoint and choose its threshold."""
-    from model.checkpoint import load_checkpoint
+    """Ground every prompt of ``split`` with ``model`` (a loaded checkpoint) and choose its
+    threshold."""
     from model.predict import decode_threshold
     from scenes.root import Talk2RadarRoot
 
-    model = load_checkpoint(checkpoint)
     root = Talk2RadarRoot(data)
     ids = root.ids(split)[: limit or None]
     answers = []
@@ -100,7 +100,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from scenes.root import RootError
 
     try:
-        cal = calibrate(a.checkpoint, a.data, a.split, a.limit)
+        model = load_checkpoint(a.checkpoint)
+        cal = calibrate(model, a.data, a.split, a.limit)
         for t, f1, exact in cal.curve:
             mark = "  <- chosen" if t == cal.threshold else ""
             print(f"threshold {t:.3f}: set F1 {f1:5.1f}  exact-set {exact:5.1f}{mark}")
@@ -109,7 +110,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{cal.exact_set:.1f} on {cal.prompts} prompts of {a.data} {a.split})"
         )
         if not a.dry_run:
-            model = load_checkpoint(a.checkpoint)
             meta = dict(model.checkpoint_metadata)
             meta["operating_threshold"] = cal.threshold
             meta["operating_threshold_source"] = {

@@ -1,0 +1,46 @@
+"""The operating threshold: chosen by mean set F1 on a split, stored in the checkpoint."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from model.calibrate import choose_threshold, main
+from model.grounding_metrics import PromptBoxes
+from model.predict import operating_threshold
+
+CAR = np.array([[15.0, 0.0, -0.9, 4.0, 1.8, 1.5, 0.0]])
+OTHER = np.array([[25.0, 5.0, -0.9, 4.0, 1.8, 1.5, 0.0]])
+
+
+def _answer(scores: tuple[float, float]) -> tuple[PromptBoxes, PromptBoxes]:
+    """The referent scored ``scores[0]``, a wrong car ``scores[1]``."""
+    predicted = PromptBoxes.make(np.r_[CAR, OTHER], ["Car", "Car"], np.array(scores))
+    return predicted, PromptBoxes.make(CAR, ["Car"])
+
+
+def test_choose_threshold_keeps_the_referents_and_drops_the_rest():
+    # Referents at 0.8 and 0.7, wrong boxes at 0.5 and 0.3: any threshold in (0.5, 0.7] is exact.
+    cal = choose_threshold([_answer((0.8, 0.5)), _answer((0.7, 0.3))], (0.2, 0.4, 0.6, 0.75, 0.9))
+    assert cal.threshold == 0.6 and cal.set_f1 == pytest.approx(100.0)
+    assert cal.exact_set == pytest.approx(100.0) and cal.prompts == 2
+    curve = {t: (f1, exact) for t, f1, exact in cal.curve}
+    assert curve[0.2] == pytest.approx((100 * 2 / 3, 0.0))  # both boxes kept: F1 2/3
+    assert curve[0.75][1] == pytest.approx(50.0)  # the 0.7 referent lost
+    with pytest.raises(ValueError, match="no prompts"):
+        choose_threshold([])
+
+
+def test_command_writes_the_threshold_into_the_checkpoint(tmp_path: Path, write_tiny_root):
+    from model import build_model
+    from model.checkpoint import load_checkpoint, save_checkpoint
+
+    root = write_tiny_root(tmp_path / "root", frames=2)
+    path = save_checkpoint(tmp_path / "m.pt", build_model("small", text_encoder="gru"), step=3)
+    assert main(["--data", str(root), "--checkpoint", str(path), "--split", "test"]) == 0
+    meta = load_checkpoint(path).checkpoint_metadata
+    assert meta["step"] == 3  # the rest of the metadata is kept
+    source = meta["operating_threshold_source"]
+    assert source["split"] == "test" and source["prompts"] == 2
+    assert operating_threshold(load_checkpoint(path)) == meta["operating_threshold"]
+    assert main(["--data", str(root / "nowhere"), "--checkpoint", str(path)]) == 2
