@@ -114,6 +114,7 @@ STATIC_COLOURS = _rgb(
     (0.22, 0.22, 0.28),  # CLOTHING (panniers; people use CLOTHES)
     (0.85, 0.66, 0.55),  # SKIN
     (0.12, 0.12, 0.13),  # BIKE_FRAME (parked bicycles; ridden ones use BIKE_FRAMES)
+    (0.14, 0.14, 0.16),  # CLOTHING_DARK (people use CLOTHES: near-infrared darkness is not colour)
 )
 """Display RGB in ``[0, 1]`` per :class:`~scenes.world.Mat` (before shading)."""
 
@@ -211,6 +212,7 @@ def face_colours(
     table[:n_actors, Mat.PAINT_DARK] = CAR_DARK[paint % len(CAR_DARK)]
     table[:n_actors, Mat.PAINT_LIGHT] = CAR_LIGHT[paint % len(CAR_LIGHT)]
     table[:n_actors, Mat.CLOTHING] = CLOTHES[picks[:, 1] % len(CLOTHES)]
+    table[:n_actors, Mat.CLOTHING_DARK] = table[:n_actors, Mat.CLOTHING]
     table[:n_actors, Mat.SKIN] = SKINS[picks[:, 2] % len(SKINS)]
     table[:n_actors, Mat.BIKE_FRAME] = BIKE_FRAMES[picks[:, 3] % len(BIKE_FRAMES)]
     owner = np.where(mesh.owner >= 0, mesh.owner, n_actors)

@@ -30,6 +30,14 @@ class SynthError(ValueError):
     """Bad generation settings or an output folder that cannot be resumed."""
 
 
+GENERATOR_VERSION = 2
+"""Bumped whenever the same settings start to give other worlds or sensor data. Recorded in the
+manifest, so that an interrupted root is never finished with another generator's worlds (a root
+written before versions were recorded counts as version 1). 2: issue 14's second calibration
+(the HDL-64's 50 m range for a 10 % target, 0.08 degree azimuth step, dark clothing, lead-car gaps,
+turning cyclists)."""
+
+
 @dataclass(frozen=True)
 class SynthSettings:
     """What determines the generated content (``--frames`` and the splits do not).
@@ -77,6 +85,7 @@ class SynthSettings:
             "weather": self.weather,
             "radar_scans": self.radar_scans,
             "prompts_per_world": self.prompts_per_world,
+            "generator": GENERATOR_VERSION,
             # Only when not the default, so roots written before the option resume as before.
             **({"phrasing": self.phrasing} if self.phrasing != "train" else {}),
             # Only with a camera: a root without images records what it did before cameras.

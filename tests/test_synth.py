@@ -23,6 +23,7 @@ from scenes.synth import (
     sensed_actor_ids,
     world_streams,
 )
+from scenes.synth_frame import GENERATOR_VERSION
 
 FRAMES = 5
 
@@ -139,6 +140,17 @@ def test_other_settings_are_refused_and_bad_arguments_are_errors(root_dir, tmp_p
     (tmp_path / "real" / "lidar").mkdir(parents=True)
     with pytest.raises(SynthError, match="without"):
         generate_root(tmp_path / "real", 2)
+
+
+def test_a_root_of_another_generator_version_is_not_resumed(tmp_path):
+    settings = SynthSettings(seed=3, camera=None)
+    out = tmp_path / "old"
+    out.mkdir()
+    old_key = {k: v for k, v in settings.key().items() if k != "generator"}  # version 1 roots
+    (out / MANIFEST).write_text(json.dumps({"settings": old_key}) + "\n")
+    with pytest.raises(SynthError, match="generated with"):
+        generate_root(out, 1, settings)
+    assert settings.key()["generator"] == GENERATOR_VERSION
 
 
 def test_an_unreadable_manifest_line_before_the_last_is_an_error_naming_it(tmp_path):

@@ -33,6 +33,7 @@ class Mat(enum.IntEnum):
     CLOTHING = 17
     SKIN = 18
     BIKE_FRAME = 19
+    CLOTHING_DARK = 20
 
 
 @dataclass(frozen=True)
@@ -76,6 +77,7 @@ MATERIALS: tuple[Material, ...] = (
     Material(0.40, radar_rcs=-20.0, radar_prob=0.05),  # CLOTHING (panniers)
     Material(0.50),  # SKIN
     Material(0.45, radar_rcs=-12.0, radar_prob=0.3),  # BIKE_FRAME (parked bicycles)
+    Material(0.12, radar_rcs=-20.0, radar_prob=0.05),  # CLOTHING_DARK (dark coats, jeans)
 )
 """Material properties indexed by :class:`Mat`."""
 

@@ -21,6 +21,12 @@ from scenes.world.road import Road
 
 EGO_FOOTPRINT = np.array([-0.6, 0.0, 4.6, 1.9, 0.0])
 """The ego vehicle's BEV box ``(x, y, l, w, yaw)`` around the LiDAR (kept free of actors)."""
+EGO_FRONT = EGO_FOOTPRINT[0] + EGO_FOOTPRINT[2] / 2
+"""x (m) of the ego's front bumper."""
+LEAD_CAR_MIN_U = 8.0
+LEAD_CAR_GAP = (1.5, 6.0)
+"""A car drawn in the ego lane closer than ``LEAD_CAR_MIN_U`` is moved to a bumper-to-bumper gap
+drawn from ``LEAD_CAR_GAP`` (m) ahead of the ego."""
 
 
 @dataclass(frozen=True)
@@ -43,8 +49,10 @@ def _car_candidate(road: Road, u: float, rng: np.random.Generator) -> _Candidate
         return _Candidate("Car", u, s, flip + rng.normal(0, 0.03), 0.0)
     if r < 0.65:
         lane = int(rng.integers(0, len(road.right.lane_centres)))
-        if lane == road.ego_lane:
-            u = max(u, 8.0)
+        if lane == road.ego_lane and u < LEAD_CAR_MIN_U:
+            # The car ahead in the ego lane: its centre is the ego's front bumper, half a car and a
+            # bumper-to-bumper gap ahead (queues at lights and slow city traffic: 1.5-6 m).
+            u = EGO_FRONT + 2.2 + rng.uniform(*LEAD_CAR_GAP)
         speed = 0.0 if rng.random() < 0.1 else rng.uniform(2.0, 15.0)
         s = road.right.lane_centres[lane] + rng.normal(0, 0.15)
         return _Candidate("Car", u, s, rng.normal(0, 0.02), speed)
@@ -71,12 +79,16 @@ def _pedestrian_candidate(road: Road, u: float, rng: np.random.Generator) -> _Ca
 def _cyclist_candidate(road: Road, u: float, rng: np.random.Generator) -> _Candidate:
     r = rng.random()
     speed = rng.uniform(2.0, 7.0)
-    if r < 0.2:  # crossing (junctions, exits)
+    if r < 0.25:  # crossing (junctions, exits)
         s = rng.uniform(road.right.carriageway_edge + 1.0, road.left.carriageway_edge - 1.0)
         yaw = (np.pi / 2 if rng.random() < 0.5 else -np.pi / 2) + rng.normal(0, 0.1)
         return _Candidate("Cyclist", u, s, yaw, min(speed, 5.0))
     side = road.right if rng.random() < 0.6 else road.left
     with_traffic = 0.0 if side.sign < 0 else np.pi
+    if r < 0.35:  # turning in or out at a junction, obliquely across the carriageway's edge
+        s = side.carriageway_edge - side.sign * rng.uniform(0.8, 2.5)
+        turn = rng.uniform(0.4, 1.1) * (1.0 if rng.random() < 0.5 else -1.0)
+        return _Candidate("Cyclist", u, s, with_traffic + turn, min(speed, 5.0))
     if side.bike_path is not None:
         a, b = side.bike_path
         s = rng.uniform(a + 0.4, b - 0.4)
