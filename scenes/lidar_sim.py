@@ -7,9 +7,10 @@ Sensor
     -24.9 degrees). The spin is sampled every ``azimuth_step_deg`` (0.08 degrees, about 290,000
     rays per revolution: about 41,000 returns in the camera's field of view, within 20 % of
     View-of-Delft's ~34,300, and the per-object counts of ``docs/SENSOR_STATS.md``), but only over
-    the forward sector ``|azimuth| <= azimuth_half_fov_deg``, which
-    holds the annotated area (x in [0, 51.2] m) and the camera's view (+-32 degrees): the rest of
-    the spin would be cropped away anyway. Points come from one spin at ``t = 0`` (no motion skew).
+    the forward half ``|azimuth| <= azimuth_half_fov_deg`` (90 degrees): everything a model's grid
+    can hold (``x >= 0``, up to +-90 degrees beside the ego at short range), as a real 360-degree
+    scan has it; the rear half would be cropped away anyway. Points come from one spin at ``t = 0``
+    (no motion skew).
 
 Return model
     A return of a surface of reflectivity ``rho`` at range ``r`` and incidence ``theta`` carries a
@@ -71,7 +72,7 @@ class LidarConfig:
     lower_block: tuple[float, float] = (-8.87, -24.9)
     beams_per_block: int = 32
     azimuth_step_deg: float = 0.08
-    azimuth_half_fov_deg: float = 45.0
+    azimuth_half_fov_deg: float = 90.0
     min_range: float = 1.0
     max_range: float = 120.0
     range_noise: float = 0.02

@@ -34,8 +34,8 @@ GENERATOR_VERSION = 2
 """Bumped whenever the same settings start to give other worlds or sensor data. Recorded in the
 manifest, so that an interrupted root is never finished with another generator's worlds (a root
 written before versions were recorded counts as version 1). 2: issue 14's second calibration
-(the HDL-64's 50 m range for a 10 % target, 0.08 degree azimuth step, dark clothing, lead-car gaps,
-turning cyclists)."""
+(the HDL-64's 50 m range for a 10 % target, 0.08 degree azimuth step over the whole forward half
+instead of +-45 degrees, dark clothing, lead-car gaps, turning cyclists)."""
 
 
 @dataclass(frozen=True)

@@ -71,9 +71,10 @@ def test_beam_layout_is_hdl64_like():
     dirs = ray_directions()
     np.testing.assert_allclose(np.linalg.norm(dirs, axis=1), 1.0)
     azimuth = np.degrees(np.arctan2(dirs[:, 1], dirs[:, 0]))
-    assert np.abs(azimuth).max() <= 45.0 + 1e-9
+    assert np.abs(azimuth).max() <= 90.0 + 1e-9  # the forward half: all of a model's grid (x >= 0)
+    assert np.abs(azimuth).max() >= 90.0 - 1e-6
     step = LidarConfig().azimuth_step_deg
-    assert len(dirs) == 64 * len(np.arange(-45.0, 45.0 + 1e-9, step))
+    assert len(dirs) == 64 * len(np.arange(-90.0, 90.0 + 1e-9, step))
 
 
 def test_lidar_points_of_an_isolated_box_lie_on_its_surface():
