@@ -13,8 +13,9 @@ the augmented actors: the left-right flip mirrors points and actors (``y -> -y``
 sensor augmentations of :class:`SensorAugment` (:mod:`scenes.augment`) make the model robust to what
 still differs between the synthetic and the real sensors: intensity gain and offset, random and
 beam-wise LiDAR dropout, radar point count, RCS offset, and single-scan radar (real roots often come
-with the single-scan ``radar`` tree only). They change what the sensors report, never where things
-are. Nothing rescales distances.
+with the single-scan ``radar`` tree only). They change what the sensors report; the one exception,
+a mounting-height offset, moves the whole scene in z (points and actors alike), which no prompt
+speaks of. Nothing rescales distances.
 """
 
 from __future__ import annotations
@@ -43,6 +44,10 @@ class SensorAugment:
         radar_keep: Range of the kept fraction.
         p_rcs: Probability of a common RCS offset of up to 3 dB.
         p_single_scan: Probability of keeping only the newest radar scan (``time == 0``).
+        p_mount: Probability of a mounting-height offset: the whole scene (both clouds and every
+            actor box) moves by a uniform ``+-mount_shift`` metres in z, so that the detector does
+            not rely on the generator's exact LiDAR height (1.70 m) when a real car's differs.
+        mount_shift: Largest offset (m).
     """
 
     p_intensity: float = 0.5
@@ -52,6 +57,14 @@ class SensorAugment:
     radar_keep: tuple[float, float] = (0.5, 1.0)
     p_rcs: float = 0.3
     p_single_scan: float = 0.25
+    p_mount: float = 0.5
+    mount_shift: float = 0.2
+
+    def mount_offset(self, rng: np.random.Generator) -> float:
+        """The z offset (m) of one item: 0, or uniform in ``+-mount_shift`` with ``p_mount``."""
+        if rng.random() < self.p_mount:
+            return float(rng.uniform(-self.mount_shift, self.mount_shift))
+        return 0.0
 
     def apply(
         self, lidar: np.ndarray, radar: np.ndarray, rng: np.random.Generator
@@ -97,6 +110,13 @@ def flip_actor(actor: Actor) -> Actor:
     box[6] = wrap_yaw(-box[6])
     vel = actor.velocity * np.array([1.0, -1.0])
     return Actor(actor.actor_id, actor.cls, box, vel)
+
+
+def shift_actor(actor: Actor, dz: float) -> Actor:
+    """The actor moved by ``dz`` metres in z (a mounting-height offset)."""
+    box = actor.box.copy()
+    box[2] += dz
+    return Actor(actor.actor_id, actor.cls, box, actor.velocity)
 
 
 def scene_ids(root: Talk2RadarRoot, split: str) -> list[str]:
@@ -175,8 +195,14 @@ class FrameDataset(Dataset):
                 flipped = True
             if self.sensors is not None:
                 lidar, radar = self.sensors.apply(lidar, radar, rng)
+                dz = self.sensors.mount_offset(rng)
+                if dz:
+                    lidar, radar = lidar.copy(), radar.copy()
+                    lidar[:, 2] += dz
+                    radar[:, 2] += dz
+                    actors = tuple(shift_actor(a, dz) for a in actors)
             lidar, radar = self.augment.thin_and_shuffle(lidar, radar, rng)
         return FrameItem(sample.sample_id, lidar, radar, actors, flipped)
 
 
-__all__ = ["FrameDataset", "FrameItem", "SensorAugment", "flip_actor", "scene_ids"]
+__all__ = ["FrameDataset", "FrameItem", "SensorAugment", "flip_actor", "scene_ids", "shift_actor"]

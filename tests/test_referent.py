@@ -22,7 +22,8 @@ from model.referent import CandidateBatch, ReferentStage, referent_loss
 from model.referent_train import ReferentTrainConfig, referent_step
 from model.text import tokenize_with_numbers
 from scenes.actors import Actor
-from scenes.frame_dataset import FrameDataset, flip_actor, scene_ids
+from scenes.dataset import AugmentConfig
+from scenes.frame_dataset import FrameDataset, SensorAugment, flip_actor, scene_ids
 from scenes.root import Talk2RadarRoot
 from scenes.synth import SynthSettings, generate_root
 
@@ -144,6 +145,29 @@ def test_frame_dataset_one_item_per_scene_and_flip(tiny_root):
     assert f.radial_velocity == pytest.approx(a.radial_velocity)
     item = FrameDataset(root, "train")[0]
     assert item.actors and item.lidar.shape[1] == 4 and item.radar.shape[1] == 7
+
+
+def test_mount_height_offset_moves_points_and_actors_together(tiny_root):
+    root = Talk2RadarRoot(tiny_root)
+    plain = FrameDataset(root, "train")[0]
+    only_mount = SensorAugment(
+        p_intensity=0.0,
+        p_beams=0.0,
+        p_radar_subsample=0.0,
+        p_rcs=0.0,
+        p_single_scan=0.0,
+        p_mount=1.0,
+        mount_shift=0.2,
+    )
+    no_geometry = AugmentConfig(flip_probability=0.0, lidar_keep_min=1.0, shuffle_points=False)
+    moved = FrameDataset(root, "train", no_geometry, only_mount, seed=3)[0]
+    dz = moved.lidar[:, 2] - plain.lidar[:, 2]
+    assert 0.0 < abs(dz[0]) <= 0.2 and np.allclose(dz, dz[0], atol=1e-5)
+    np.testing.assert_allclose(moved.radar[:, 2] - plain.radar[:, 2], dz[0], atol=1e-5)
+    for a, b in zip(plain.actors, moved.actors, strict=True):
+        assert b.box[2] - a.box[2] == pytest.approx(dz[0], abs=1e-5)
+        np.testing.assert_array_equal(b.box[[0, 1, 3, 4, 5, 6]], a.box[[0, 1, 3, 4, 5, 6]])
+    assert SensorAugment(p_mount=0.0).mount_offset(np.random.default_rng(0)) == 0.0
 
 
 def test_referent_step_learns_on_a_fixed_batch(tiny_root):
