@@ -33,6 +33,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
@@ -101,7 +102,7 @@ def voxelize(
     points, col, row, batch = points[inside], col[inside], row[inside], batch[inside]
     keys_of_point = (batch * ny + row) * nx + col
     # One stable sort groups the points by pillar and keeps their input order within a pillar.
-    order = torch.argsort(keys_of_point, stable=True)
+    order = _stable_order(keys_of_point, len(clouds) * ny * nx)
     keys, pillar_sorted, counts = torch.unique_consecutive(
         keys_of_point[order], return_inverse=True, return_counts=True
     )
@@ -115,6 +116,21 @@ def voxelize(
         counts=counts.clamp(max=max_points),
         batch_size=len(clouds),
     )
+
+
+_RADIX_KEYS = 1 << 16
+"""Key spaces up to this size are sorted as uint16 (NumPy's stable sort of 16-bit integers is a
+radix sort, about 5x faster than ``torch.argsort(stable=True)`` on the 130,000 points of a
+forward half-scan; one 160 x 160 grid has 25,600 keys)."""
+
+
+def _stable_order(keys: Tensor, key_space: int) -> Tensor:
+    """``(N,)`` int64 permutation that sorts ``keys (N,)`` (values in ``[0, key_space)``) stably:
+    the same permutation either way, by a radix sort on the CPU when the keys fit 16 bits."""
+    if keys.device.type == "cpu" and key_space <= _RADIX_KEYS:
+        order = np.argsort(keys.numpy().astype(np.uint16), kind="stable")
+        return torch.from_numpy(order.astype(np.int64))
+    return torch.argsort(keys, stable=True)
 
 
 def _batch_norm_points(bn: nn.BatchNorm1d, x: Tensor) -> Tensor:

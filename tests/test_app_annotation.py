@@ -533,6 +533,23 @@ def test_browser_makes_a_two_box_pair_with_the_mouse(
             app.stop()
 
 
+def describable_cars(sample) -> list:
+    """Two cars 10-32 m ahead that *Suggest* can single out with a sentence (else one such car):
+    the screenshot should show a suggested prompt, not the *No suggestion* notice."""
+    import itertools
+
+    from annotate.suggest import scene_objects, suggest_prompt
+
+    cars = [a for a in sample.meta.actors if a.cls == "Car" and 10.0 < a.box[0] < 32.0]
+    scene = scene_objects(sample)
+    for group in [*itertools.combinations(cars, 2), *((c,) for c in cars)]:
+        boxes = np.stack([a.box for a in group])
+        rng = np.random.default_rng(1)
+        if suggest_prompt(boxes, ["Car"] * len(group), scene, sample.radar, rng).text:
+            return list(group)
+    raise SystemExit(f"frame {sample.sample_id}: no car 10-32 m ahead that a sentence singles out")
+
+
 def main() -> int:
     """Write ``docs/images/annotate.png``: a two-car pair made with the mouse on the first test
     frame of a copy of the default data (the default data itself is not written to)."""
@@ -559,9 +576,8 @@ def main() -> int:
         app = Talk2PCApp(launch.open_root(root, "test"), model, config).start()
         try:
             app.wait_ready(timeout=120)
-            actors = app.frame.sample.meta.actors
-            cars = [a for a in actors if a.cls == "Car" and 10.0 < a.box[0] < 32.0]
-            targets = [(float(a.box[0]), float(a.box[1]), True) for a in cars[:2]]
+            chosen = describable_cars(app.frame.sample)
+            targets = [(float(a.box[0]), float(a.box[1]), True) for a in chosen]
             ground = app.frame.ground_z
 
             def close_up(panel: AnnotationPanel) -> None:

@@ -7,6 +7,7 @@ import logging
 import math
 import sys
 
+import numpy as np
 import pytest
 import torch
 from torch.utils.flop_counter import FlopCounterMode
@@ -43,7 +44,7 @@ from model.dggf import (
 )
 from model.fpn import SecondFpn
 from model.grid import BevGrid
-from model.pillars import PillarEncoder, voxelize
+from model.pillars import PillarEncoder, _stable_order, voxelize
 from model.text import (
     BiGRUTextEncoder,
     EmptyPromptError,
@@ -187,6 +188,15 @@ def test_pillar_point_cap_keeps_first_points_and_batches_separate() -> None:
     assert pillars.keys.tolist()[1] - pillars.keys.tolist()[0] == 160 * 160  # same cell, batch 1
     kept_first = pillars.points[pillars.pillar_of_point == 0, 3]
     assert sorted(kept_first.tolist()) == list(range(32))
+
+
+@pytest.mark.parametrize("key_space", [25_600, 65_536, 102_400])
+def test_stable_order_is_the_stable_argsort(key_space: int) -> None:
+    gen = torch.Generator().manual_seed(key_space)
+    keys = torch.randint(0, 300, (5000,), generator=gen) * (key_space // 300)  # many duplicates
+    np.testing.assert_array_equal(
+        _stable_order(keys, key_space).numpy(), torch.argsort(keys, stable=True).numpy()
+    )
 
 
 def test_pillar_encoder_trains_with_a_single_point() -> None:
