@@ -533,17 +533,26 @@ def test_browser_makes_a_two_box_pair_with_the_mouse(
             app.stop()
 
 
-def describable_cars(sample) -> list:
-    """Two cars 10-32 m ahead that *Suggest* can single out with a sentence (else one such car):
-    the screenshot should show a suggested prompt, not the *No suggestion* notice."""
+def describable_cars(sample, ground_z: float) -> list:
+    """Two cars 10-32 m ahead that *Suggest* can single out with a sentence once their boxes are
+    placed by a ground click and *Fit to points*, as the screenshot makes them (else one such
+    car): the picture should show a suggested prompt, not the *No suggestion* notice."""
     import itertools
 
+    from annotate.fitting import BoxRegion, FitError, fit_box
     from annotate.suggest import scene_objects, suggest_prompt
+
+    def fitted(actor) -> np.ndarray:
+        rough = np.array(default_box("Car", actor.box[0], actor.box[1], ground_z))
+        try:
+            return np.asarray(fit_box(sample.lidar, BoxRegion(rough)).box)
+        except FitError:
+            return rough
 
     cars = [a for a in sample.meta.actors if a.cls == "Car" and 10.0 < a.box[0] < 32.0]
     scene = scene_objects(sample)
     for group in [*itertools.combinations(cars, 2), *((c,) for c in cars)]:
-        boxes = np.stack([a.box for a in group])
+        boxes = np.stack([fitted(a) for a in group])
         rng = np.random.default_rng(1)
         if suggest_prompt(boxes, ["Car"] * len(group), scene, sample.radar, rng).text:
             return list(group)
@@ -576,7 +585,7 @@ def main() -> int:
         app = Talk2PCApp(launch.open_root(root, "test"), model, config).start()
         try:
             app.wait_ready(timeout=120)
-            chosen = describable_cars(app.frame.sample)
+            chosen = describable_cars(app.frame.sample, app.frame.ground_z)
             targets = [(float(a.box[0]), float(a.box[1]), True) for a in chosen]
             ground = app.frame.ground_z
 
