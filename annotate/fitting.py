@@ -17,10 +17,23 @@ Steps of :func:`fit_box` (all in the LiDAR frame):
    One side of a minimum-area enclosing rectangle is collinear with a hull edge, so trying each
    hull edge's direction (the rotating-calipers candidates, evaluated at once with NumPy) finds it.
    Near-ties (an L-shaped scan of two sides) go to the rectangle whose edges the points hug.
-5. Orientation: the length runs along the longer side; of the two headings along it, the one
-   nearer ``prior_yaw`` is kept (default: the rough box's yaw, or 0 = facing away from the ego
-   vehicle for a disk). Points cannot tell an object's front from its back.
-6. Height: from the ground (``extend_to_ground``, objects stand on the ground; else from the lowest
+5. Class prior (:func:`complete_rectangle`; only with ``cls``, of a class with a typical size in
+   :data:`annotate.draft.DEFAULT_SIZES` and a minimum in ``FitConfig.class_min_sizes``): an object
+   seen from one side shows one face, a thin slab. When the rectangle is below the class's minimum
+   along a side, the hidden part is completed. (a) Orientation: when the short side is under
+   ``degenerate_fraction`` of the typical width, the long side is a face: the object's length (a
+   car's side) or its width (a car's rear, a cyclist head-on), whichever typical size it is nearer
+   to in ratio (log); its width only if at most ``1 + width_tolerance`` times the typical width.
+   For a car (4.2 x 1.8 m) a face of at most 2.16 m (the ratio alone: sqrt(4.2 * 1.8) = 2.75 m) is
+   its width; the length then runs across it. (b) Size: each side below the minimum grows to it AWAY from the
+   sensor (the LiDAR origin): the side's end nearer the sensor, what was seen, stays at the points
+   (a side with the sensor between its ends grows about its middle). A side the points show at
+   least the minimum long is kept (never inflated). Without ``cls``: skipped.
+6. Orientation: the length runs along the rectangle's length axis (the longer side, unless step 5
+   turned it); of the two headings along it, the one nearer ``prior_yaw`` is kept (default: the
+   rough box's yaw, or 0 = facing away from the ego vehicle for a disk). Points cannot tell an
+   object's front from its back.
+7. Height: from the ground (``extend_to_ground``, objects stand on the ground; else from the lowest
    kept point) to the highest kept point. Sizes are at least ``min_size``.
 
 Too few points after these steps raise :class:`FitError` with the count and what to change.
@@ -28,10 +41,12 @@ Too few points after these steps raise :class:`FitError` with the count and what
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from annotate.draft import DEFAULT_SIZES
 from scenes.boxes import points_in_boxes, wrap_yaw
 
 
@@ -89,6 +104,17 @@ class FitConfig:
         min_points: Fewest points a fit needs.
         min_size: Smallest length, width and height of a fitted box (m).
         extend_to_ground: Let the box reach down to the ground.
+        class_min_sizes: ``(class, min_length, min_width)``, metres: the plausible minimum BEV
+            size per class, below which a fit with ``cls`` completes the hidden part (step 5);
+            the one home of these minima (typical sizes: :data:`annotate.draft.DEFAULT_SIZES`).
+            Car 3.5 x 1.5 (a small city car; synthetic cars are 3.5-5.0 x 1.6-2.0), Pedestrian
+            0.4 x 0.4 (a child's footprint), Cyclist 1.5 x 0.5 (a bicycle, a rider's shoulders).
+        degenerate_fraction: A short side under this fraction of the class's typical width means
+            one face was seen; its orientation then follows the typical length and width.
+        width_tolerance: That face is the object's width only if at most ``1 + width_tolerance``
+            times the typical width (a cyclist's 1 m side is not its 0.7 m width).
+        grow_to_typical: Grow a side below the minimum to the typical size instead (it is known
+            to be partly hidden); off: a completed side is never longer than the minimum.
     """
 
     ground_percentile: float = 5.0
@@ -99,6 +125,14 @@ class FitConfig:
     min_points: int = 5
     min_size: float = 0.1
     extend_to_ground: bool = True
+    class_min_sizes: tuple[tuple[str, float, float], ...] = (
+        ("Car", 3.5, 1.5),
+        ("Pedestrian", 0.4, 0.4),
+        ("Cyclist", 1.5, 0.5),
+    )
+    degenerate_fraction: float = 0.6
+    width_tolerance: float = 0.2
+    grow_to_typical: bool = False
 
     def __post_init__(self) -> None:
         if not 0.0 <= self.ground_percentile <= 100.0:
@@ -109,6 +143,31 @@ class FitConfig:
             raise ValueError(f"FitConfig: cluster_gap must be positive, got {self.cluster_gap}")
         if self.min_points < 1 or self.min_size <= 0 or self.max_height <= 0:
             raise ValueError("FitConfig: min_points, min_size and max_height must be positive")
+        if not 0.0 < self.degenerate_fraction <= 1.0:
+            raise ValueError(
+                f"FitConfig: degenerate_fraction {self.degenerate_fraction} not in (0, 1]"
+            )
+        if not self.width_tolerance >= 0.0:
+            raise ValueError(f"FitConfig: width_tolerance must be >= 0, got {self.width_tolerance}")
+        names = [entry[0] if len(entry) == 3 else None for entry in self.class_min_sizes]
+        for k, entry in enumerate(self.class_min_sizes):
+            sizes = entry[1:] if len(entry) == 3 else ()
+            if not isinstance(names[k], str) or not all(
+                isinstance(v, int | float) and math.isfinite(v) and v > 0 for v in sizes
+            ):
+                raise ValueError(
+                    f"FitConfig: class_min_sizes[{k}] must be (class, min_length > 0, "
+                    f"min_width > 0), got {entry!r}"
+                )
+            if names[k] in names[:k]:
+                raise ValueError(f"FitConfig: class_min_sizes[{k}]: class {names[k]!r} repeated")
+
+    def class_minimum(self, cls: str) -> tuple[float, float] | None:
+        """The plausible minimum ``(length, width)`` of ``cls`` in metres, or None if unknown."""
+        sizes = {
+            name: (float(length), float(width)) for name, length, width in self.class_min_sizes
+        }
+        return sizes.get(cls)
 
 
 @dataclass(frozen=True)
@@ -120,17 +179,24 @@ class FitResult:
         num_points: Points the rectangle was fitted to.
         ground_z: Ground height used (m).
         used: ``(N,)`` bool mask over the input points: the points the box was fitted to.
+        completed: The class prior grew or turned the rectangle the points show (step 5).
     """
 
     box: np.ndarray
     num_points: int
     ground_z: float
     used: np.ndarray
+    completed: bool = False
 
 
 @dataclass(frozen=True)
 class Rectangle:
-    """A BEV rectangle: ``centre (2,)``, ``length >= width`` and ``yaw`` of the length axis."""
+    """A BEV rectangle: ``centre (2,)``, ``length``, ``width`` and ``yaw`` of the length axis.
+
+    :func:`min_area_rectangle` returns ``length >= width``; :func:`complete_rectangle` returns the
+    object's length along ``yaw`` (longer than the width for every class of
+    :data:`annotate.draft.DEFAULT_SIZES`).
+    """
 
     centre: np.ndarray
     length: float
@@ -217,12 +283,84 @@ def min_area_rectangle(
     yaw = float(angles[best])
     if width > length:
         length, width, yaw = width, length, yaw + np.pi / 2.0
+    return Rectangle(centre, max(length, min_size), max(width, min_size), _half_turn(yaw))
+
+
+def _half_turn(yaw: float) -> float:
+    """``yaw`` as an axis direction in ``[-pi/2, pi/2)`` (a heading and its opposite are one)."""
     yaw = float(wrap_yaw(yaw))
     if yaw >= np.pi / 2.0 - 1e-12:
         yaw -= np.pi
     elif yaw < -np.pi / 2.0:
         yaw += np.pi
-    return Rectangle(centre, max(length, min_size), max(width, min_size), yaw)
+    return yaw
+
+
+def _grown_offset(size: float, target: float, sensor: float) -> float:
+    """Shift of a side's middle as it grows from ``size`` to ``target`` away from ``sensor`` (the
+    sensor's coordinate along the side, relative to its middle)."""
+    if target <= size:
+        return 0.0
+    half = size / 2.0
+    if sensor <= -half:  # the sensor is before the low end: keep it, grow the high end
+        return target / 2.0 - half
+    if sensor >= half:
+        return half - target / 2.0
+    return 0.0  # the sensor is between the ends: grow about the middle
+
+
+def complete_rectangle(
+    rect: Rectangle,
+    typical: tuple[float, float],
+    minimum: tuple[float, float],
+    *,
+    degenerate_fraction: float = 0.6,
+    width_tolerance: float = 0.2,
+    grow_to_typical: bool = False,
+    sensor: tuple[float, float] = (0.0, 0.0),
+) -> tuple[Rectangle, bool]:
+    """Complete the hidden part of an object seen from one side (module docstring, step 5).
+
+    Args:
+        rect: The rectangle the points show (``length >= width >= 0``, ``length > 0``), BEV.
+        typical: The class's typical ``(length, width)`` in metres.
+        minimum: The class's plausible minimum ``(length, width)`` in metres.
+        degenerate_fraction, width_tolerance, grow_to_typical: As in :class:`FitConfig`.
+        sensor: The sensor's BEV position (the LiDAR origin).
+
+    Returns:
+        The completed rectangle (its ``length`` along ``yaw`` in ``[-pi/2, pi/2)``, the object's
+        length axis) and whether it differs from ``rect``; ``rect`` itself when it is at least the
+        minimum along both sides. The result encloses ``rect``, and a side's end nearer the sensor
+        stays where it was.
+    """
+    length_t, width_t = typical
+    min_length, min_width = minimum
+    if not (rect.length >= rect.width >= 0 and rect.length > 0 and min(typical) > 0):
+        raise ValueError(
+            f"complete_rectangle: need length > 0, width >= 0 and a positive typical size, got "
+            f"{rect.length} x {rect.width} m and {typical}"
+        )
+    if rect.length >= min_length and rect.width >= min_width:
+        return rect, False
+    face = rect.length
+    # The long side is the face seen; is it the object's width (the length runs across it)?
+    swap = (
+        rect.width < degenerate_fraction * width_t
+        and face <= width_t * (1.0 + width_tolerance)
+        and abs(math.log(face / width_t)) < abs(math.log(face / length_t))
+    )
+    yaw = rect.yaw + math.pi / 2.0 if swap else rect.yaw
+    along, across = (rect.width, rect.length) if swap else (rect.length, rect.width)
+    goal_length, goal_width = (length_t, width_t) if grow_to_typical else (min_length, min_width)
+    new_along = max(along, goal_length) if along < min_length else along
+    new_across = max(across, goal_width) if across < min_width else across
+    c, s = math.cos(yaw), math.sin(yaw)
+    to_sensor = np.asarray(sensor, dtype=np.float64) - rect.centre
+    du = _grown_offset(along, new_along, float(to_sensor[0] * c + to_sensor[1] * s))
+    dv = _grown_offset(across, new_across, float(-to_sensor[0] * s + to_sensor[1] * c))
+    centre = rect.centre + np.array([du * c - dv * s, du * s + dv * c])
+    return Rectangle(centre, new_along, new_across, _half_turn(yaw)), True
 
 
 def _in_region(xy: np.ndarray, region: Region, grow: float = 0.0) -> np.ndarray:
@@ -270,6 +408,7 @@ def fit_box(
     *,
     ground_z: float | None = None,
     prior_yaw: float | None = None,
+    cls: str | None = None,
     config: FitConfig | None = None,
 ) -> FitResult:
     """Fit a box to the LiDAR points in ``region`` (see the module docstring).
@@ -279,6 +418,9 @@ def fit_box(
         region: Where the object is: a rough :class:`BoxRegion` or a :class:`DiskRegion`.
         ground_z: Ground height (m) when known; else estimated.
         prior_yaw: Heading to stay close to; default the rough box's yaw, or 0 for a disk.
+        cls: The object's class: with a typical size (:data:`annotate.draft.DEFAULT_SIZES`) and a
+            minimum (``config.class_min_sizes``), a rectangle below the minimum is completed away
+            from the sensor (step 5). None (or another class): the points alone decide.
         config: Parameters (default :class:`FitConfig()`).
 
     Raises:
@@ -317,6 +459,22 @@ def fit_box(
                 f"a fit needs at least {cfg.min_points}"
             )
     rect = min_area_rectangle(xy[used], cfg.min_size)
+    completed = False
+    minimum = cfg.class_minimum(cls) if cls is not None else None
+    if minimum is not None and cls in DEFAULT_SIZES:
+        seen = min_area_rectangle(xy[used])  # not widened to min_size: the faces at the points
+        if seen.length > 0:
+            full, completed = complete_rectangle(
+                seen,
+                DEFAULT_SIZES[cls][:2],
+                minimum,
+                degenerate_fraction=cfg.degenerate_fraction,
+                width_tolerance=cfg.width_tolerance,
+                grow_to_typical=cfg.grow_to_typical,
+            )
+            if completed:
+                size = max(full.length, cfg.min_size), max(full.width, cfg.min_size)
+                rect = Rectangle(full.centre, *size, full.yaw)
     if prior_yaw is None:
         prior_yaw = region.box[6] if isinstance(region, BoxRegion) else 0.0
     yaw = rect.yaw
@@ -336,4 +494,6 @@ def fit_box(
             wrap_yaw(yaw),
         ]
     )
-    return FitResult(box=box, num_points=int(used.sum()), ground_z=ground_z, used=used)
+    return FitResult(
+        box=box, num_points=int(used.sum()), ground_z=ground_z, used=used, completed=completed
+    )

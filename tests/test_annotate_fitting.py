@@ -22,8 +22,9 @@ from annotate import (
     scene_actors,
     suggest_prompt,
 )
+from annotate.fitting import Rectangle, complete_rectangle
 from scenes import Actor
-from scenes.boxes import wrap_yaw
+from scenes.boxes import points_in_boxes, wrap_yaw
 from scenes.prompts import resolve
 
 GROUND = -1.7
@@ -279,3 +280,183 @@ def test_suggestion_reasons() -> None:
     s = suggest_prompt(row[[0, 2]], ["Car", "Car"], [middle], None, rng)
     assert s.text is None and "no sentence" in s.reason
     assert "class 'Truck'" in suggest_prompt(car[None], ["Truck"], [], None, rng).reason
+
+
+# ------------------------------------------------------------------------------------ class prior
+
+
+def _face(
+    start: tuple[float, float], end: tuple[float, float], rng: np.random.Generator, n: int = 400
+) -> np.ndarray:
+    """Points ``(n, 3)`` on a vertical face from BEV ``start`` to ``end``, 0.25-1.65 m above ground."""
+    t = rng.uniform(0.0, 1.0, n)
+    xy = np.asarray(start) + t[:, None] * (np.asarray(end) - np.asarray(start))
+    xy += rng.normal(0.0, 0.01, xy.shape)
+    return np.c_[xy, GROUND + rng.uniform(0.25, 1.65, n)]
+
+
+def _with_ground(obj: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """``obj`` plus a 0.25 m ground grid around it, with an intensity column: ``(N, 4)`` float32."""
+    centre = obj[:, :2].mean(axis=0)
+    gx, gy = np.meshgrid(np.arange(-5, 5, 0.25) + centre[0], np.arange(-5, 5, 0.25) + centre[1])
+    ground = np.c_[gx.ravel(), gy.ravel(), GROUND + rng.normal(0, 0.01, gx.size)]
+    pts = np.concatenate([obj, ground])
+    return np.c_[pts, rng.uniform(0, 255, len(pts))].astype(np.float32)
+
+
+def _check_completion(points: np.ndarray, result, n_object: int) -> None:
+    """The box holds every object point, and along each axis its end nearer the sensor (origin)
+    lies at the points: nothing was added on the side that was seen."""
+    assert result.used[:n_object].all() and not result.used[n_object:].any()
+    obj = points[:n_object, :3].astype(np.float64)
+    grown = result.box.copy()
+    grown[3:6] += 1e-6
+    assert points_in_boxes(obj, grown[None])[:, 0].all()
+    x, y, _, length, width, _, yaw = result.box
+    c, s = math.cos(yaw), math.sin(yaw)
+    d = obj[:, :2] - [x, y]
+    local = np.c_[d[:, 0] * c + d[:, 1] * s, -d[:, 0] * s + d[:, 1] * c]
+    sensor = np.array([-x * c - y * s, x * s - y * c])
+    for axis, half in ((0, length / 2), (1, width / 2)):
+        if sensor[axis] < -half:
+            assert local[:, axis].min() == pytest.approx(-half, abs=1e-6)
+        elif sensor[axis] > half:
+            assert local[:, axis].max() == pytest.approx(half, abs=1e-6)
+
+
+@pytest.mark.parametrize("bearing_deg", [0.0, 30.0])
+def test_car_seen_from_behind_is_completed_away_from_the_sensor(bearing_deg: float) -> None:
+    # The rear face only: 1.8 m wide, facing the origin 9 m away along the bearing.
+    rng = np.random.default_rng(10)
+    b = math.radians(bearing_deg)
+    ray, across = np.array([math.cos(b), math.sin(b)]), np.array([-math.sin(b), math.cos(b)])
+    mid = 9.0 * ray
+    obj = _face(tuple(mid - 0.9 * across), tuple(mid + 0.9 * across), rng)
+    points = _with_ground(obj, rng)
+    region = BoxRegion((*(mid + 0.8 * ray), GROUND + 0.75, 4.2, 1.8, 1.5, 0.0))  # a ground click
+
+    slab = fit_box(points, region, ground_z=GROUND)  # the points alone: a slab turned across
+    assert slab.box[3] == pytest.approx(1.8, abs=0.03) and slab.box[4] <= 0.1 + 1e-9
+    assert abs(wrap_yaw(2.0 * (slab.box[6] - b - math.pi / 2))) < 0.02 and not slab.completed
+
+    result = fit_box(points, region, ground_z=GROUND, cls="Car")
+    assert result.completed
+    # The 1.8 m face is the width; the length runs away from the sensor, to the car's minimum.
+    np.testing.assert_allclose(result.box[3:5], [3.5, 1.8], atol=0.03)
+    assert result.box[6] == pytest.approx(b, abs=0.02)  # the heading nearest prior_yaw = 0
+    np.testing.assert_allclose(result.box[:2], mid + 1.75 * ray, atol=0.06)
+    assert result.box[5] == pytest.approx(slab.box[5]) and result.box[2] == slab.box[2]
+    _check_completion(points, result, len(obj))
+    behind = fit_box(points, region, ground_z=GROUND, cls="Car", prior_yaw=b + math.pi)
+    assert behind.box[6] == pytest.approx(wrap_yaw(b + math.pi), abs=0.02)
+    np.testing.assert_allclose(behind.box[:5], result.box[:5], atol=1e-9)
+    # Typical instead of minimum: the same near face, the length of DEFAULT_SIZES.
+    typical = fit_box(
+        points, region, ground_z=GROUND, cls="Car", config=FitConfig(grow_to_typical=True)
+    )
+    np.testing.assert_allclose(typical.box[3:5], [4.2, 1.8], atol=0.03)
+    np.testing.assert_allclose(typical.box[:2], mid + 2.1 * ray, atol=0.06)
+    _check_completion(points, typical, len(obj))
+
+
+def test_car_seen_from_the_side_keeps_its_length_and_grows_its_width() -> None:
+    # A car crossing 9 m ahead: its left side only, 4.3 m long, along y at x = 9.
+    rng = np.random.default_rng(11)
+    obj = _face((9.0, -2.15), (9.0, 2.15), rng)
+    points = _with_ground(obj, rng)
+    region = DiskRegion((9.5, 0.0), 3.0)
+    result = fit_box(points, region, ground_z=GROUND, cls="Car")
+    assert result.completed
+    np.testing.assert_allclose(result.box[3:5], [4.3, 1.5], atol=0.03)  # length as seen
+    assert abs(wrap_yaw(2.0 * (result.box[6] - math.pi / 2))) < 0.02  # along the side
+    np.testing.assert_allclose(result.box[:2], [9.75, 0.0], atol=0.06)  # grown to x = 10.5
+    _check_completion(points, result, len(obj))
+
+
+def test_an_l_shaped_scan_is_not_inflated() -> None:
+    rng = np.random.default_rng(12)
+    rear = _face((9.0, -0.95), (9.0, 0.95), rng)
+    # The whole right side seen: both sides already exceed the car's minimum.
+    whole = np.concatenate([rear, _face((9.0, -0.95), (13.5, -0.95), rng)])
+    points = _with_ground(whole, rng)
+    region = BoxRegion((11.2, 0.0, -0.95, 4.2, 1.8, 1.5, 0.0))
+    plain = fit_box(points, region, ground_z=GROUND)
+    result = fit_box(points, region, ground_z=GROUND, cls="Car")
+    assert not result.completed
+    np.testing.assert_array_equal(result.box, plain.box)
+    np.testing.assert_allclose(result.box[3:5], [4.5, 1.9], atol=0.04)
+    # 2.5 m of the side seen (the rest hidden): the length grows away from the sensor, the
+    # 1.9 m the points show across it stays 1.9 m.
+    part = np.concatenate([rear, _face((9.0, -0.95), (11.5, -0.95), rng)])
+    points = _with_ground(part, rng)
+    result = fit_box(points, region, ground_z=GROUND, cls="Car")
+    assert result.completed
+    np.testing.assert_allclose(result.box[3:5], [3.5, 1.9], atol=0.04)
+    assert abs(wrap_yaw(2.0 * result.box[6])) < 0.02
+    assert result.box[0] == pytest.approx(9.0 + 1.75, abs=0.03)
+    _check_completion(points, result, len(part))
+
+
+def test_pedestrian_and_cyclist_priors() -> None:
+    rng = np.random.default_rng(13)
+    # A pedestrian seen from the front 8 m ahead: 0.5 m wide, 0.15 m deep.
+    body = np.c_[
+        rng.uniform(8.0, 8.15, 300), rng.uniform(-0.25, 0.25, 300), rng.uniform(-1.4, 0.0, 300)
+    ]
+    points = _with_ground(body, rng)
+    region = DiskRegion((8.2, 0.0), 1.0)
+    result = fit_box(points, region, ground_z=GROUND, cls="Pedestrian")
+    assert result.completed
+    np.testing.assert_allclose(sorted(result.box[3:5]), [0.4, 0.5], atol=0.02)
+    _check_completion(points, result, len(body))
+    assert result.box[:2] == pytest.approx([8.2, 0.0], abs=0.02)  # grown to x = 8.4
+    # A cyclist head-on 10 m ahead (0.6 m wide): the length runs away from the sensor.
+    rider = np.c_[
+        rng.uniform(10.0, 10.3, 300), rng.uniform(-0.3, 0.3, 300), rng.uniform(-1.4, 0.0, 300)
+    ]
+    points = _with_ground(rider, rng)
+    result = fit_box(points, DiskRegion((10.5, 0.0), 1.5), ground_z=GROUND, cls="Cyclist")
+    np.testing.assert_allclose(result.box[[0, 3, 4]], [10.75, 1.5, 0.6], atol=0.02)
+    assert abs(wrap_yaw(2.0 * result.box[6])) < 0.02
+    _check_completion(points, result, len(rider))
+    # Its side seen crossing (1 m: frame and rider, the wheels too sparse): wider than a
+    # cyclist's width may be, so it is the length, not turned.
+    side = np.c_[
+        rng.uniform(12.0, 12.25, 300), rng.uniform(-0.5, 0.5, 300), rng.uniform(-1.4, 0.0, 300)
+    ]
+    points = _with_ground(side, rng)
+    result = fit_box(points, DiskRegion((12.5, 0.0), 1.5), ground_z=GROUND, cls="Cyclist")
+    np.testing.assert_allclose(result.box[3:5], [1.5, 0.5], atol=0.02)
+    assert abs(wrap_yaw(2.0 * (result.box[6] - math.pi / 2))) < 0.1
+
+
+def test_without_a_known_class_the_fit_is_unchanged() -> None:
+    rng = np.random.default_rng(14)
+    obj = _face((9.0, -0.9), (9.0, 0.9), rng)
+    points = _with_ground(obj, rng)
+    region = BoxRegion((9.8, 0.0, -0.95, 4.2, 1.8, 1.5, 0.0))
+    plain = fit_box(points, region)
+    for cls in (None, "Truck"):  # no class, or one without a typical size and minimum
+        other = fit_box(points, region, cls=cls)
+        np.testing.assert_array_equal(other.box, plain.box)
+        assert not other.completed
+    no_minimum = FitConfig(class_min_sizes=(("Pedestrian", 0.4, 0.4),))
+    assert not fit_box(points, region, cls="Car", config=no_minimum).completed
+
+
+def test_complete_rectangle_by_hand_and_bad_configs() -> None:
+    # The sensor between the two ends of a side: it grows about its middle.
+    rect = Rectangle(np.array([0.0, 5.0]), 1.0, 0.2, 0.0)
+    out, done = complete_rectangle(rect, (0.7, 0.7), (0.4, 0.4))
+    assert done and (out.length, out.width) == pytest.approx((1.0, 0.4))
+    np.testing.assert_allclose(out.centre, [0.0, 4.9 + 0.2])  # near edge y = 4.9 kept
+    big = Rectangle(np.array([5.0, 0.0]), 4.0, 1.6, 0.3)
+    assert complete_rectangle(big, (4.2, 1.8), (3.5, 1.5)) == (big, False)
+    with pytest.raises(ValueError, match="need length > 0, width >= 0"):
+        complete_rectangle(Rectangle(np.zeros(2), 0.0, 0.0, 0.0), (4.2, 1.8), (3.5, 1.5))
+    with pytest.raises(ValueError, match=r"class_min_sizes\[1\] must be"):
+        FitConfig(class_min_sizes=(("Car", 3.5, 1.5), ("Van", -1.0, 1.0)))
+    with pytest.raises(ValueError, match=r"class_min_sizes\[1\]: class 'Car' repeated"):
+        FitConfig(class_min_sizes=(("Car", 3.5, 1.5), ("Car", 3.0, 1.5)))
+    with pytest.raises(ValueError, match="degenerate_fraction"):
+        FitConfig(degenerate_fraction=0.0)

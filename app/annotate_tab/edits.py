@@ -207,17 +207,25 @@ class DraftEdits:
                 return
             draft = p.editor.draft
             index = draft.index_of(p.selected)
+            selected = draft.boxes[index]
             try:
-                result = fit_box(p.frame.sample.lidar, BoxRegion(draft.boxes[index].box))
+                # The class's size prior completes an object seen from one side only.
+                result = fit_box(p.frame.sample.lidar, BoxRegion(selected.box), cls=selected.cls)
             except (FitError, ValueError) as exc:
                 p.notify("Cannot fit the box", str(exc))
                 return
             p.editor.set_box(p.selected, result.box, label=f"fit {box_tag(index, '')}".strip())
             length, width, height = result.box[3:6]
+            hidden = (
+                f" The points show part of it; the box was completed to a {selected.cls}'s "
+                "plausible size, away from the sensor."
+                if result.completed
+                else ""
+            )
             p.notify(
                 "Box fitted",
-                f"{box_tag(index, draft.boxes[index].cls)} fitted to {result.num_points} LiDAR "
-                f"points: {length:.2f} x {width:.2f} x {height:.2f} m.",
+                f"{box_tag(index, selected.cls)} fitted to {result.num_points} LiDAR "
+                f"points: {length:.2f} x {width:.2f} x {height:.2f} m.{hidden}",
                 color="green",
             )
             p.refresh(Part.DRAFT)
