@@ -28,6 +28,8 @@ from scenes.boxes import points_in_boxes, wrap_yaw
 from scenes.prompts import resolve
 
 GROUND = -1.7
+MINIMUM = FitConfig(grow_to_typical=False)
+"""Completion to the class minimum only (the default grows a hidden side to the typical size)."""
 TRUE_BOX = np.array([15.0, 3.0, GROUND + 0.75, 4.5, 1.9, 1.5, 0.6])
 
 
@@ -339,7 +341,7 @@ def test_car_seen_from_behind_is_completed_away_from_the_sensor(bearing_deg: flo
     assert slab.box[3] == pytest.approx(1.8, abs=0.03) and slab.box[4] <= 0.1 + 1e-9
     assert abs(wrap_yaw(2.0 * (slab.box[6] - b - math.pi / 2))) < 0.02 and not slab.completed
 
-    result = fit_box(points, region, ground_z=GROUND, cls="Car")
+    result = fit_box(points, region, ground_z=GROUND, cls="Car", config=MINIMUM)
     assert result.completed
     # The 1.8 m face is the width; the length runs away from the sensor, to the car's minimum.
     np.testing.assert_allclose(result.box[3:5], [3.5, 1.8], atol=0.03)
@@ -347,13 +349,13 @@ def test_car_seen_from_behind_is_completed_away_from_the_sensor(bearing_deg: flo
     np.testing.assert_allclose(result.box[:2], mid + 1.75 * ray, atol=0.06)
     assert result.box[5] == pytest.approx(slab.box[5]) and result.box[2] == slab.box[2]
     _check_completion(points, result, len(obj))
-    behind = fit_box(points, region, ground_z=GROUND, cls="Car", prior_yaw=b + math.pi)
+    behind = fit_box(
+        points, region, ground_z=GROUND, cls="Car", config=MINIMUM, prior_yaw=b + math.pi
+    )
     assert behind.box[6] == pytest.approx(wrap_yaw(b + math.pi), abs=0.02)
     np.testing.assert_allclose(behind.box[:5], result.box[:5], atol=1e-9)
     # Typical instead of minimum: the same near face, the length of DEFAULT_SIZES.
-    typical = fit_box(
-        points, region, ground_z=GROUND, cls="Car", config=FitConfig(grow_to_typical=True)
-    )
+    typical = fit_box(points, region, ground_z=GROUND, cls="Car")  # the default
     np.testing.assert_allclose(typical.box[3:5], [4.2, 1.8], atol=0.03)
     np.testing.assert_allclose(typical.box[:2], mid + 2.1 * ray, atol=0.06)
     _check_completion(points, typical, len(obj))
@@ -365,7 +367,7 @@ def test_car_seen_from_the_side_keeps_its_length_and_grows_its_width() -> None:
     obj = _face((9.0, -2.15), (9.0, 2.15), rng)
     points = _with_ground(obj, rng)
     region = DiskRegion((9.5, 0.0), 3.0)
-    result = fit_box(points, region, ground_z=GROUND, cls="Car")
+    result = fit_box(points, region, ground_z=GROUND, cls="Car", config=MINIMUM)
     assert result.completed
     np.testing.assert_allclose(result.box[3:5], [4.3, 1.5], atol=0.03)  # length as seen
     assert abs(wrap_yaw(2.0 * (result.box[6] - math.pi / 2))) < 0.02  # along the side
@@ -381,7 +383,7 @@ def test_an_l_shaped_scan_is_not_inflated() -> None:
     points = _with_ground(whole, rng)
     region = BoxRegion((11.2, 0.0, -0.95, 4.2, 1.8, 1.5, 0.0))
     plain = fit_box(points, region, ground_z=GROUND)
-    result = fit_box(points, region, ground_z=GROUND, cls="Car")
+    result = fit_box(points, region, ground_z=GROUND, cls="Car", config=MINIMUM)
     assert not result.completed
     np.testing.assert_array_equal(result.box, plain.box)
     np.testing.assert_allclose(result.box[3:5], [4.5, 1.9], atol=0.04)
@@ -389,7 +391,7 @@ def test_an_l_shaped_scan_is_not_inflated() -> None:
     # 1.9 m the points show across it stays 1.9 m.
     part = np.concatenate([rear, _face((9.0, -0.95), (11.5, -0.95), rng)])
     points = _with_ground(part, rng)
-    result = fit_box(points, region, ground_z=GROUND, cls="Car")
+    result = fit_box(points, region, ground_z=GROUND, cls="Car", config=MINIMUM)
     assert result.completed
     np.testing.assert_allclose(result.box[3:5], [3.5, 1.9], atol=0.04)
     assert abs(wrap_yaw(2.0 * result.box[6])) < 0.02
@@ -405,7 +407,7 @@ def test_pedestrian_and_cyclist_priors() -> None:
     ]
     points = _with_ground(body, rng)
     region = DiskRegion((8.2, 0.0), 1.0)
-    result = fit_box(points, region, ground_z=GROUND, cls="Pedestrian")
+    result = fit_box(points, region, ground_z=GROUND, cls="Pedestrian", config=MINIMUM)
     assert result.completed
     np.testing.assert_allclose(sorted(result.box[3:5]), [0.4, 0.5], atol=0.02)
     _check_completion(points, result, len(body))
@@ -415,7 +417,9 @@ def test_pedestrian_and_cyclist_priors() -> None:
         rng.uniform(10.0, 10.3, 300), rng.uniform(-0.3, 0.3, 300), rng.uniform(-1.4, 0.0, 300)
     ]
     points = _with_ground(rider, rng)
-    result = fit_box(points, DiskRegion((10.5, 0.0), 1.5), ground_z=GROUND, cls="Cyclist")
+    result = fit_box(
+        points, DiskRegion((10.5, 0.0), 1.5), ground_z=GROUND, cls="Cyclist", config=MINIMUM
+    )
     np.testing.assert_allclose(result.box[[0, 3, 4]], [10.75, 1.5, 0.6], atol=0.02)
     assert abs(wrap_yaw(2.0 * result.box[6])) < 0.02
     _check_completion(points, result, len(rider))
@@ -425,7 +429,9 @@ def test_pedestrian_and_cyclist_priors() -> None:
         rng.uniform(12.0, 12.25, 300), rng.uniform(-0.5, 0.5, 300), rng.uniform(-1.4, 0.0, 300)
     ]
     points = _with_ground(side, rng)
-    result = fit_box(points, DiskRegion((12.5, 0.0), 1.5), ground_z=GROUND, cls="Cyclist")
+    result = fit_box(
+        points, DiskRegion((12.5, 0.0), 1.5), ground_z=GROUND, cls="Cyclist", config=MINIMUM
+    )
     np.testing.assert_allclose(result.box[3:5], [1.5, 0.5], atol=0.02)
     assert abs(wrap_yaw(2.0 * (result.box[6] - math.pi / 2))) < 0.1
 

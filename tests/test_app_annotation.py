@@ -545,7 +545,7 @@ def describable_cars(sample, ground_z: float) -> list:
     def fitted(actor) -> np.ndarray:
         rough = np.array(default_box("Car", actor.box[0], actor.box[1], ground_z))
         try:
-            return np.asarray(fit_box(sample.lidar, BoxRegion(rough)).box)
+            return np.asarray(fit_box(sample.lidar, BoxRegion(rough), cls="Car").box)
         except FitError:
             return rough
 
