@@ -99,8 +99,9 @@ def voxelize(
         & (row >= 0)
         & (row < ny)
     )
-    points, col, row, batch = points[inside], col[inside], row[inside], batch[inside]
-    keys_of_point = (batch * ny + row) * nx + col
+    # One index of the points in range (cheaper than masking four tensors), gathered once at the end.
+    selected = torch.nonzero(inside).squeeze(1)
+    keys_of_point = ((batch * ny + row) * nx + col).index_select(0, selected)
     # One stable sort groups the points by pillar and keeps their input order within a pillar.
     order = _stable_order(keys_of_point, len(clouds) * ny * nx)
     keys, pillar_sorted, counts = torch.unique_consecutive(
@@ -110,7 +111,7 @@ def voxelize(
     rank = torch.arange(order.numel(), device=device) - starts[pillar_sorted]
     kept = rank < max_points
     return Pillars(
-        points=points[order[kept]],
+        points=points.index_select(0, selected[order[kept]]),
         pillar_of_point=pillar_sorted[kept],
         keys=keys,
         counts=counts.clamp(max=max_points),
@@ -212,8 +213,10 @@ class PillarEncoder(nn.Module):
         ny, nx = self.grid.shape
         channels = self.out_channels
         device = self.linear.weight.device
+        # The canvas is built channel-major, ``(C, B * H * W)``: for one cloud (the app) the final
+        # ``(B, C, H, W)`` is then a view, with no transposing copy of the whole grid.
         if pillars.keys.numel() == 0:
-            canvas = torch.zeros(pillars.batch_size * ny * nx, channels, device=device)
+            canvas = torch.zeros(channels, pillars.batch_size * ny * nx, device=device)
         else:
             h = self.linear(self.point_features(pillars))
             h = torch.relu(_batch_norm_points(self.norm, h))
@@ -221,7 +224,7 @@ class PillarEncoder(nn.Module):
             pooled = torch.zeros(pillars.keys.numel(), channels, device=device, dtype=h.dtype)
             pooled = pooled.scatter_reduce(0, index, h, reduce="amax", include_self=False)
             canvas = torch.zeros(
-                pillars.batch_size * ny * nx, channels, device=device, dtype=h.dtype
+                channels, pillars.batch_size * ny * nx, device=device, dtype=h.dtype
             )
-            canvas = canvas.index_copy(0, pillars.keys, pooled)
-        return canvas.view(pillars.batch_size, ny, nx, channels).permute(0, 3, 1, 2).contiguous()
+            canvas.index_copy_(1, pillars.keys, pooled.t())
+        return canvas.view(channels, pillars.batch_size, ny, nx).permute(1, 0, 2, 3).contiguous()
