@@ -31,6 +31,20 @@ def test_choose_threshold_keeps_the_referents_and_drops_the_rest():
         choose_threshold([])
 
 
+def test_choose_threshold_takes_the_highest_of_a_plateau():
+    # 200 prompts: the referent always at 0.9; a wrong box at 0.3 in one prompt (a 0.17-point F1
+    # cost at thresholds <= 0.3), the referent of another at 0.5 (lost above 0.5: 0.5 points).
+    answers = [_answer((0.9, 0.1)) for _ in range(198)]
+    answers += [_answer((0.9, 0.3)), _answer((0.5, 0.1))]
+    cal = choose_threshold(answers, (0.2, 0.4, 0.6, 0.8))
+    curve = {t: f1 for t, f1, _ in cal.curve}
+    assert curve[0.4] == pytest.approx(100.0) and curve[0.6] == pytest.approx(99.5)
+    assert curve[0.2] < curve[0.4]
+    assert cal.threshold == 0.8  # 0.6 and 0.8 lose 0.5 points: within the plateau, the highest
+    lost = answers + [_answer((0.5, 0.1))] * 2  # now 1.5 points lost above 0.5: outside it
+    assert choose_threshold(lost, (0.2, 0.4, 0.6, 0.8)).threshold == 0.4
+
+
 def test_command_writes_the_threshold_into_the_checkpoint(tmp_path: Path, write_tiny_root):
     from model import build_model
     from model.checkpoint import load_checkpoint, save_checkpoint
