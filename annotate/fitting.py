@@ -25,9 +25,9 @@ Steps of :func:`fit_box` (all in the LiDAR frame):
    car's side) or its width (a car's rear, a cyclist head-on), whichever typical size it is nearer
    to in ratio (log); its width only if at most ``1 + width_tolerance`` times the typical width.
    For a car (4.2 x 1.8 m) a face of at most 2.16 m (the ratio alone: sqrt(4.2 * 1.8) = 2.75 m) is
-   its width; the length then runs across it. (b) Size: each side below the minimum grows to it AWAY from the
-   sensor (the LiDAR origin): the side's end nearer the sensor, what was seen, stays at the points
-   (a side with the sensor between its ends grows about its middle). A side the points show at
+   its width; the length then runs across it. (b) Size: each side below the minimum grows to it
+   AWAY from the sensor (the LiDAR origin): the side's end nearer the sensor, what was seen, stays
+   at the points (a side with the sensor between its ends grows about its middle). A side the points show at
    least the minimum long is kept (never inflated). Without ``cls``: skipped.
 6. Orientation: the length runs along the rectangle's length axis (the longer side, unless step 5
    turned it); of the two headings along it, the one nearer ``prior_yaw`` is kept (default: the
@@ -283,7 +283,12 @@ def min_area_rectangle(
     yaw = float(angles[best])
     if width > length:
         length, width, yaw = width, length, yaw + np.pi / 2.0
-    return Rectangle(centre, max(length, min_size), max(width, min_size), _half_turn(yaw))
+    return _at_least(Rectangle(centre, length, width, _half_turn(yaw)), min_size)
+
+
+def _at_least(rect: Rectangle, min_size: float) -> Rectangle:
+    """``rect`` with sides shorter than ``min_size`` widened to it about the centre."""
+    return Rectangle(rect.centre, max(rect.length, min_size), max(rect.width, min_size), rect.yaw)
 
 
 def _half_turn(yaw: float) -> float:
@@ -313,10 +318,8 @@ def complete_rectangle(
     rect: Rectangle,
     typical: tuple[float, float],
     minimum: tuple[float, float],
+    config: FitConfig,
     *,
-    degenerate_fraction: float = 0.6,
-    width_tolerance: float = 0.2,
-    grow_to_typical: bool = False,
     sensor: tuple[float, float] = (0.0, 0.0),
 ) -> tuple[Rectangle, bool]:
     """Complete the hidden part of an object seen from one side (module docstring, step 5).
@@ -325,7 +328,7 @@ def complete_rectangle(
         rect: The rectangle the points show (``length >= width >= 0``, ``length > 0``), BEV.
         typical: The class's typical ``(length, width)`` in metres.
         minimum: The class's plausible minimum ``(length, width)`` in metres.
-        degenerate_fraction, width_tolerance, grow_to_typical: As in :class:`FitConfig`.
+        config: Its ``degenerate_fraction``, ``width_tolerance`` and ``grow_to_typical``.
         sensor: The sensor's BEV position (the LiDAR origin).
 
     Returns:
@@ -346,13 +349,14 @@ def complete_rectangle(
     face = rect.length
     # The long side is the face seen; is it the object's width (the length runs across it)?
     swap = (
-        rect.width < degenerate_fraction * width_t
-        and face <= width_t * (1.0 + width_tolerance)
+        rect.width < config.degenerate_fraction * width_t
+        and face <= width_t * (1.0 + config.width_tolerance)
         and abs(math.log(face / width_t)) < abs(math.log(face / length_t))
     )
     yaw = rect.yaw + math.pi / 2.0 if swap else rect.yaw
     along, across = (rect.width, rect.length) if swap else (rect.length, rect.width)
-    goal_length, goal_width = (length_t, width_t) if grow_to_typical else (min_length, min_width)
+    goal = (length_t, width_t) if config.grow_to_typical else (min_length, min_width)
+    goal_length, goal_width = goal
     new_along = max(along, goal_length) if along < min_length else along
     new_across = max(across, goal_width) if across < min_width else across
     c, s = math.cos(yaw), math.sin(yaw)
@@ -458,23 +462,14 @@ def fit_box(
                 f"the largest group of points in {where} has only {int(used.sum())} point(s); "
                 f"a fit needs at least {cfg.min_points}"
             )
-    rect = min_area_rectangle(xy[used], cfg.min_size)
+    seen = min_area_rectangle(xy[used])  # not yet widened to min_size: the faces at the points
+    rect = _at_least(seen, cfg.min_size)
     completed = False
     minimum = cfg.class_minimum(cls) if cls is not None else None
-    if minimum is not None and cls in DEFAULT_SIZES:
-        seen = min_area_rectangle(xy[used])  # not widened to min_size: the faces at the points
-        if seen.length > 0:
-            full, completed = complete_rectangle(
-                seen,
-                DEFAULT_SIZES[cls][:2],
-                minimum,
-                degenerate_fraction=cfg.degenerate_fraction,
-                width_tolerance=cfg.width_tolerance,
-                grow_to_typical=cfg.grow_to_typical,
-            )
-            if completed:
-                size = max(full.length, cfg.min_size), max(full.width, cfg.min_size)
-                rect = Rectangle(full.centre, *size, full.yaw)
+    if minimum is not None and cls in DEFAULT_SIZES and seen.length > 0:
+        full, completed = complete_rectangle(seen, DEFAULT_SIZES[cls][:2], minimum, cfg)
+        if completed:
+            rect = _at_least(full, cfg.min_size)
     if prior_yaw is None:
         prior_yaw = region.box[6] if isinstance(region, BoxRegion) else 0.0
     yaw = rect.yaw

@@ -453,13 +453,15 @@ def test_without_a_known_class_the_fit_is_unchanged() -> None:
 def test_complete_rectangle_by_hand_and_bad_configs() -> None:
     # The sensor between the two ends of a side: it grows about its middle.
     rect = Rectangle(np.array([0.0, 5.0]), 1.0, 0.2, 0.0)
-    out, done = complete_rectangle(rect, (0.7, 0.7), (0.4, 0.4))
+    out, done = complete_rectangle(rect, (0.7, 0.7), (0.4, 0.4), MINIMUM)
     assert done and (out.length, out.width) == pytest.approx((1.0, 0.4))
     np.testing.assert_allclose(out.centre, [0.0, 4.9 + 0.2])  # near edge y = 4.9 kept
     big = Rectangle(np.array([5.0, 0.0]), 4.0, 1.6, 0.3)
-    assert complete_rectangle(big, (4.2, 1.8), (3.5, 1.5)) == (big, False)
+    assert complete_rectangle(big, (4.2, 1.8), (3.5, 1.5), FitConfig()) == (big, False)
     with pytest.raises(ValueError, match="need length > 0, width >= 0"):
-        complete_rectangle(Rectangle(np.zeros(2), 0.0, 0.0, 0.0), (4.2, 1.8), (3.5, 1.5))
+        complete_rectangle(
+            Rectangle(np.zeros(2), 0.0, 0.0, 0.0), (4.2, 1.8), (3.5, 1.5), FitConfig()
+        )
     with pytest.raises(ValueError, match=r"class_min_sizes\[1\] must be"):
         FitConfig(class_min_sizes=(("Car", 3.5, 1.5), ("Van", -1.0, 1.0)))
     with pytest.raises(ValueError, match=r"class_min_sizes\[1\]: class 'Car' repeated"):
