@@ -18,9 +18,10 @@ Return model
     root softens Lambert's law, which real grazing returns from roads do not follow strictly). It is
     detected when this, jittered by log-normal speckle, exceeds the power of a 10 % target at normal
     incidence at ``reference_range`` in clear air (50 m: the HDL-64 data sheet's range for a 10 %
-    target; dark clothes, about 12 %, thin out beyond 30 m as in View-of-Delft's scans). Then: random dropout (sensor, weather and
-    material), Gaussian range noise (2 cm), material depth jitter (foliage), the maximum range, and
-    weather backscatter (a spurious weak return a few metres out, replacing the true one).
+    target; dark clothes, about 12 %, thin out beyond 30 m as in View-of-Delft's scans). Then:
+    random dropout (sensor, weather and material), Gaussian range noise (2 cm), material depth
+    jitter (foliage), the maximum range, and weather backscatter (a spurious weak return a few
+    metres out, replacing the true one).
 
 Intensity
     ``255 * min(1, gain * (rho * (floor + (1 - floor) cos theta))**gamma) * exp(-2 * extinction *
