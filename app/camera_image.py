@@ -22,7 +22,7 @@ from PIL import Image, ImageDraw
 
 from app.colors import RGB, depth_colors, label_font, velocity_colors
 from scenes.calib import Calibration
-from scenes.projection import project_box_edges, project_points
+from scenes.projection import project_box_edges, project_points, scale_calibration
 
 DISPLAY_WIDTH = 968
 """Width (px) of the displayed image: VoD's 1936 x 1216 image halved."""
@@ -57,20 +57,6 @@ class CameraImage:
         return int(self.image.shape[1]), int(self.image.shape[0])
 
 
-def scaled_calibration(calib: Calibration, sx: float, sy: float) -> Calibration:
-    """``calib`` for an image resized by ``sx`` horizontally and ``sy`` vertically: the first
-    two rows of every ``P`` scaled (exact under the continuous pixel convention)."""
-    rows = np.diag([sx, sy, 1.0])
-    return Calibration(
-        P2=rows @ calib.P2,
-        R0_rect=calib.R0_rect,
-        Tr_velo_to_cam=calib.Tr_velo_to_cam,
-        P0=rows @ calib.P0,
-        P1=rows @ calib.P1,
-        P3=rows @ calib.P3,
-    )
-
-
 def display_image(
     image: np.ndarray, calib: Calibration, max_width: int = DISPLAY_WIDTH
 ) -> CameraImage:
@@ -92,7 +78,7 @@ def display_image(
         small = pil.resize(size, Image.Resampling.BILINEAR, reducing_gap=2.0)
     out = np.asarray(small, dtype=np.uint8)
     sx, sy = out.shape[1] / width, out.shape[0] / height
-    return CameraImage(out, scaled_calibration(calib, sx, sy), (width, height))
+    return CameraImage(out, scale_calibration(calib, sx, sy), (width, height))
 
 
 @dataclass(frozen=True)

@@ -48,11 +48,14 @@ def image_size_at(scale: float) -> tuple[int, int]:
     return round(width), round(height)
 
 
-def scale_calibration(calib: Calibration, scale: float) -> Calibration:
-    """The calibration of the image resized by ``scale``: the first two rows of ``P0..P3`` times
-    ``scale`` (exact under the continuous pixel convention: ``u' = scale · u``); ``R0_rect`` and
+def scale_calibration(
+    calib: Calibration, scale: float, scale_y: float | None = None
+) -> Calibration:
+    """The calibration of the image resized by ``scale`` (horizontally; vertically by ``scale_y``,
+    default the same): the first two rows of ``P0..P3`` times those factors (exact under the
+    continuous pixel convention: ``u' = scale · u``, ``v' = scale_y · v``); ``R0_rect`` and
     ``Tr_velo_to_cam`` unchanged."""
-    rows = np.diag([scale, scale, 1.0])
+    rows = np.diag([scale, scale if scale_y is None else scale_y, 1.0])
     return Calibration(
         P2=rows @ calib.P2,
         R0_rect=calib.R0_rect,

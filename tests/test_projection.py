@@ -63,6 +63,8 @@ def test_scaled_calibration_scales_pixels_exactly():
     pts = np.stack([_at(10.0, 1.0, 1.0), _at(7.0, -3.0, 0.2)])
     full = project_points(pts, CALIB).uv
     np.testing.assert_allclose(project_points(pts, half, (968, 608)).uv, full / 2, atol=1e-9)
+    squeezed = scale_calibration(CALIB, 0.5, 0.25)  # a display resize that is not uniform
+    np.testing.assert_allclose(project_points(pts, squeezed).uv, full * [0.5, 0.25], atol=1e-9)
     for bad in (0.3, 0.0, -1.0):
         with pytest.raises(ValueError, match="scale"):
             image_size_at(bad)
