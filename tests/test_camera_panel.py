@@ -107,8 +107,7 @@ def test_camera_view_pose_is_the_vod_camera() -> None:
 
 
 @pytest.fixture(scope="module")
-def vod_app(tmp_path_factory, write_vod_root, torch_threads):
-    from app import AppConfig, Talk2PCApp
+def vod_app(tmp_path_factory, write_vod_root, torch_threads, serve_app):
     from model import build_model
 
     root = write_vod_root(tmp_path_factory.mktemp("camera") / "vod", frames=3)
@@ -116,13 +115,8 @@ def vod_app(tmp_path_factory, write_vod_root, torch_threads):
     (root / "lidar" / "training" / "image_2" / "00002.jpg").write_bytes(b"\xff\xd8 broken")
     with torch_threads(1):
         model = build_model("small", text_encoder="gru", head__score_threshold=0.0).eval()
-        app = Talk2PCApp(root, model, AppConfig(port=0, split="val", warm_up=False))
-        app.start()
-        try:
-            app.wait_ready(timeout=60)
+        with serve_app(root, model, split="val", warm_up=False) as app:
             yield app
-        finally:
-            app.stop()
 
 
 def _connect(app, ws_client):

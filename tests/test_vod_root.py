@@ -75,20 +75,14 @@ def test_pairs_of_a_root_without_prompts_go_beside_it(tmp_path, write_vod_root) 
 
 
 @pytest.fixture(scope="module")
-def vod_app(tmp_path_factory, write_vod_root, torch_threads):
-    from app import AppConfig, Talk2PCApp
+def vod_app(tmp_path_factory, write_vod_root, torch_threads, serve_app):
     from model import build_model
 
     root = write_vod_root(tmp_path_factory.mktemp("vod-app") / "vod", frames=2)
     with torch_threads(1):
         model = build_model("small", text_encoder="gru", head__score_threshold=0.0).eval()
-        app = Talk2PCApp(root, model, AppConfig(port=0, split="val", warm_up=False))
-        app.start()
-        try:
-            app.wait_ready(timeout=60)
+        with serve_app(root, model, split="val", warm_up=False) as app:
             yield app
-        finally:
-            app.stop()
 
 
 def _connect(app, ws_client):
