@@ -414,7 +414,11 @@ class TPCNet(nn.Module):
                 neck = self.neck(list(stages))
                 out = self.head(neck)
                 dets = decode(
-                    out, self.head_grid, self.cfg.head, self.cfg.referent.candidate_threshold
+                    out,
+                    self.head_grid,
+                    self.cfg.head,
+                    self.cfg.referent.candidate_threshold,
+                    limit=self.cfg.referent.max_candidates,
                 )[0]
                 keep = slice(0, self.cfg.referent.max_candidates)
                 maps = SceneMaps(
