@@ -17,7 +17,8 @@ Conventions:
 - Token features include the [CLS] and [SEP] positions; ``padding_mask`` is True at padding.
 - MiniLM is run one prompt at a time (no padding inside the transformer), so a prompt's features
   never depend on the other prompts of its batch; they are cached per distinct prompt in an LRU of
-  ``cache_size`` entries, on the CPU. The frozen weights live in one process-wide instance (loaded
+  ``cache_size`` entries, on the CPU. At inference its forward pass is :class:`MiniLMForward`
+  (the same arithmetic as ``transformers``' ``BertModel``, with less around it). The frozen weights live in one process-wide instance (loaded
   on first use, a few seconds) that is *not* registered as a submodule: it is not in the
   ``state_dict`` and so not in checkpoints.
 - The Bi-GRU packs the sequences, so its outputs do not depend on padding either.
@@ -35,6 +36,7 @@ from typing import Any
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from torch import Tensor, nn
 from torch.nn.utils.rnn import pack_padded_sequence, pad_packed_sequence
 
@@ -132,6 +134,81 @@ def load_minilm() -> nn.Module:
     return model
 
 
+class MiniLMForward:
+    """The frozen MiniLM's forward pass written out from its weights, for inference.
+
+    The same arithmetic as ``transformers``' ``BertModel`` (embeddings ``(word + token type) +
+    position``, layer norm; per layer: self-attention, output projection, residual and layer
+    norm, GELU feed-forward, residual and layer norm; ``last_hidden_state``), with less around
+    it: the query, key and value projections as one matrix product, PyTorch's fused
+    ``scaled_dot_product_attention``, no pooler (its output is not used), no mask for a single
+    prompt, no dropout modules, no per-call mask preparation. Outputs equal ``BertModel``'s to
+    float rounding (the fused projection may round differently), not bit for bit.
+
+    Args:
+        bert: The loaded ``BertModel`` (:func:`load_minilm`); its weights are shared, not copied,
+            except the concatenated query/key/value projection.
+    """
+
+    def __init__(self, bert: nn.Module) -> None:
+        cfg = bert.config
+        emb = bert.embeddings
+        self.dim = int(cfg.hidden_size)
+        self.heads = int(cfg.num_attention_heads)
+        self.eps = float(cfg.layer_norm_eps)
+        self.scale = (self.dim // self.heads) ** -0.5
+        self.word = emb.word_embeddings.weight
+        self.token_type = emb.token_type_embeddings.weight[0]
+        self.position = emb.position_embeddings.weight
+        self.norm = (emb.LayerNorm.weight, emb.LayerNorm.bias)
+        self.layers = []
+        for layer in bert.encoder.layer:
+            att = layer.attention
+            q, k, v = att.self.query, att.self.key, att.self.value
+            self.layers.append(
+                (
+                    torch.cat([q.weight, k.weight, v.weight]).contiguous(),
+                    torch.cat([q.bias, k.bias, v.bias]).contiguous(),
+                    att.output.dense.weight,
+                    att.output.dense.bias,
+                    (att.output.LayerNorm.weight, att.output.LayerNorm.bias),
+                    layer.intermediate.dense.weight,
+                    layer.intermediate.dense.bias,
+                    layer.output.dense.weight,
+                    layer.output.dense.bias,
+                    (layer.output.LayerNorm.weight, layer.output.LayerNorm.bias),
+                )
+            )
+
+    def _norm(self, x: Tensor, params: tuple[Tensor, Tensor]) -> Tensor:
+        return F.layer_norm(x, (self.dim,), params[0], params[1], self.eps)
+
+    def __call__(self, ids: Tensor, valid: Tensor | None = None) -> Tensor:
+        """Token features ``(B, L, 384)`` of token ids ``(B, L)``; ``valid`` ``(B, L)`` bool marks
+        the real tokens (None: all are; padding rows' features are meaningless)."""
+        with torch.inference_mode():
+            b, length = ids.shape
+            x = F.embedding(ids, self.word) + self.token_type
+            x = self._norm(x + self.position[:length], self.norm)
+            mask = None if valid is None else valid[:, None, None, :]
+            heads, width = self.heads, self.dim // self.heads
+            for wqkv, bqkv, wo, bo, norm1, wi, bi, wf, bf, norm2 in self.layers:
+                qkv = F.linear(x, wqkv, bqkv).view(b, length, 3, heads, width)
+                q, k, v = qkv.permute(2, 0, 3, 1, 4).unbind(0)  # (B, heads, L, width) each
+                a = F.scaled_dot_product_attention(q, k, v, attn_mask=mask, scale=self.scale)
+                a = a.transpose(1, 2).reshape(b, length, self.dim)
+                x = self._norm(F.linear(a, wo, bo) + x, norm1)
+                h = F.gelu(F.linear(x, wi, bi))
+                x = self._norm(F.linear(h, wf, bf) + x, norm2)
+            return x
+
+
+@lru_cache(maxsize=1)
+def load_minilm_forward() -> MiniLMForward:
+    """:class:`MiniLMForward` of the process-wide MiniLM (loaded once)."""
+    return MiniLMForward(load_minilm())
+
+
 def tokenize(prompt: str, max_tokens: int) -> tuple[list[int], bool]:
     """Token ids of one validated prompt with [CLS]/[SEP], at most ``max_tokens``; and whether it
     was truncated (logged as a warning)."""
@@ -156,6 +233,9 @@ def tokenize_with_numbers(prompt: str, max_tokens: int) -> tuple[list[int], np.n
 
 def _pad(features: Sequence[Tensor], device: torch.device) -> tuple[Tensor, Tensor]:
     """Stack ``(n_b, D)`` features into ``(B, L, D)`` + padding mask ``(B, L)``."""
+    if len(features) == 1:  # nothing to pad: a view
+        f = features[0].to(device=device, dtype=torch.get_default_dtype())
+        return f[None], torch.zeros(1, f.shape[0], dtype=torch.bool, device=device)
     length = max(f.shape[0] for f in features)
     dim = features[0].shape[1]
     tokens = torch.zeros(len(features), length, dim, device=device)
@@ -175,19 +255,21 @@ def encode_minilm_batched(
     features equal the one-at-a-time ones to float rounding (padding is masked out of the
     attention), not bit for bit.
     """
-    model = load_minilm()
+    forward = load_minilm_forward()
     out: list[tuple[Tensor, Tensor, bool]] = []
     for start in range(0, len(prompts), chunk):
         part = prompts[start : start + chunk]
         encoded = [tokenize_with_numbers(p, max_tokens) for p in part]
-        length = max(len(ids) for ids, _, _ in encoded)
-        input_ids = torch.zeros(len(part), length, dtype=torch.long)
-        attention = torch.zeros(len(part), length, dtype=torch.long)
-        for b, (ids, _, _) in enumerate(encoded):
-            input_ids[b, : len(ids)] = torch.tensor(ids)
-            attention[b, : len(ids)] = 1
-        with torch.inference_mode():
-            hidden = model(input_ids=input_ids, attention_mask=attention).last_hidden_state
+        if len(encoded) == 1:  # no padding, no mask
+            hidden = forward(torch.tensor([encoded[0][0]], dtype=torch.long))
+        else:
+            length = max(len(ids) for ids, _, _ in encoded)
+            input_ids = torch.zeros(len(part), length, dtype=torch.long)
+            valid = torch.zeros(len(part), length, dtype=torch.bool)
+            for b, (ids, _, _) in enumerate(encoded):
+                input_ids[b, : len(ids)] = torch.tensor(ids)
+                valid[b, : len(ids)] = True
+            hidden = forward(input_ids, valid)
         for b, (ids, numbers, truncated) in enumerate(encoded):
             out.append(
                 (hidden[b, : len(ids)].clone().float(), torch.from_numpy(numbers), truncated)
