@@ -35,6 +35,7 @@ from torch import Tensor
 
 from model.decode import decode
 from model.grounder import SceneCandidates, stack_candidates
+from model.labelled import anchor_scores
 from model.losses import LossTerms, grounding_loss
 from model.referent import CandidateBatch, referent_loss
 from model.targets import anchor_points, collate_targets, draw_targets
@@ -93,20 +94,6 @@ def in_grid_actors(actors: Sequence[Actor], model: TPCNet) -> list[Actor]:
     return [a for a, ok in zip(actors, inside, strict=True) if ok and a.cls in CLASSES]
 
 
-def _anchor_scores(heat: np.ndarray, boxes: np.ndarray, labels: np.ndarray, model: TPCNet):
-    """Detector score of each box: the 3x3 max of its class heatmap around its anchor cell."""
-    if len(boxes) == 0:
-        return np.zeros(0)
-    _, h, w = heat.shape
-    cells = np.floor(model.head_grid.xy_to_cell(anchor_points(boxes, model.cfg.head.anchor)))
-    out = np.zeros(len(boxes))
-    for i, ((c, r), lab) in enumerate(zip(cells.astype(int), labels, strict=True)):
-        r0, r1, c0, c1 = max(r - 1, 0), min(r + 2, h), max(c - 1, 0), min(c + 2, w)
-        if r0 < r1 and c0 < c1:
-            out[i] = float(heat[lab, r0:r1, c0:c1].max())
-    return out
-
-
 def training_candidates(
     actors: Sequence[Actor],
     detections_boxes: np.ndarray,
@@ -131,7 +118,7 @@ def training_candidates(
         boxes[:, :2] += rng.normal(0.0, cfg.jitter_xy, (len(boxes), 2))
         boxes[:, 3:6] *= np.exp(rng.normal(0.0, cfg.jitter_size, (len(boxes), 3)))
         boxes[:, 6] += rng.normal(0.0, cfg.jitter_yaw, len(boxes))
-    scores = _anchor_scores(heat, boxes, labels, model)
+    scores = anchor_scores(heat, boxes, labels, model.head_grid, model.cfg.head.anchor)
     false = []
     for i, (box, lab) in enumerate(zip(detections_boxes, detections_labels, strict=True)):
         same = [a for a in actors if CLASSES.index(a.cls) == lab]
