@@ -92,6 +92,13 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         "served root when it has prompts, else <ROOT>-talk2radar beside it)",
     )
     p.add_argument(
+        "--scene-labels",
+        type=Path,
+        default=None,
+        help="the View-of-Delft root whose label_2 lists every object of the served frames: the "
+        "Query tab then offers Candidates: Labelled boxes (a VoD root opened directly is its own)",
+    )
+    p.add_argument(
         "--threads",
         type=int,
         default=1,
@@ -284,7 +291,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
 
     config = AppConfig(
-        host=args.host, port=args.port, split=split, model_note=note, pairs_root=args.pairs
+        host=args.host,
+        port=args.port,
+        split=split,
+        model_note=note,
+        pairs_root=args.pairs,
+        scene_labels=args.scene_labels,
     )
     try:
         app = Talk2PCApp(root, model, config)
