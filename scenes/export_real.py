@@ -1,0 +1,366 @@
+"""A synthetic root as the real releases come: ``python -m scenes.export_real --source SYNTH_ROOT
+--t2r OUT_T2R --vod OUT_VOD [--splits train val test] [--radar radar|radar_3frames|radar_5frames|both]``.
+
+``SYNTH_ROOT`` is a root written by ``python -m scenes.synth`` (with its ``meta/`` sidecars). The
+export writes the same frames twice, each tree as its release has it, so that every path that
+trains, evaluates or annotates on real data can be run without the real data:
+
+``OUT_T2R``: a Talk2Radar tree (spec §1.2)
+    ``lidar/`` and the radar trees, each with ``ImageSets/`` and
+    ``training/{velodyne,calib,label_2,prompt,image_2}``: **one prompt per frame** (the first
+    sample of each synthetic world; the world's other prompts are left out and counted), its
+    ``label_2`` = that prompt's referents only (the source sample's label file), and no Talk2PC
+    file at all: no ``meta/``, no ``sources/``, no manifest.
+``OUT_VOD``: a View-of-Delft tree (:mod:`scenes.vod_writer`)
+    the same frame ids, ``lidar/`` and the radar trees with ``ImageSets/`` and
+    ``training/{velodyne,calib,image_2,label_2}``, no ``prompt/``; ``label_2`` lists every object
+    of the frame that View-of-Delft would annotate (within 50 m and in the camera's view) under
+    VoD's class names, parked bicycles, racks, mopeds and the riders of cyclists included
+    (:mod:`scenes.vod_labels`). VoD withholds its test labels; the export writes them for every
+    split, so that grounding over labelled boxes can be measured on a test root.
+
+Both trees carry the lists ``train``, ``val``, ``test`` (those of ``--splits``) and, as VoD,
+``train_val`` (train then val) where both are exported.
+
+Radar trees (``--radar``): by default the source's tree (``radar_5frames`` for ``scenes.synth``'s
+default 5 scans), hard-linked. ``radar`` (one scan) and ``radar_3frames`` are taken from a source
+with more scans by keeping its newest scans (the points whose ``time`` is ``0``, or ``0, -1,
+-2``): each accumulated scan is simulated on its own, so the newest one *is* a single scan.
+``both`` writes ``radar`` and ``radar_5frames``. A tree of more scans than the source has is
+refused.
+
+Sensor files and camera images are hard links to the source's (copies across filesystems:
+:func:`scenes.durable.link_or_copy`); text files are written atomically. Resumable: a frame whose
+label files exist in every tree, with its LiDAR file linked to the source's, is skipped; the
+ImageSets lists are written last. Errors are one line, ``error: ...``, exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from tqdm import tqdm
+
+from scenes.calib import read_calib
+from scenes.imagefile import label_image_size
+from scenes.kitti import label_file_text, read_label_file
+from scenes.layout import (
+    CALIB,
+    LABEL,
+    LIDAR_FOLDER,
+    META,
+    PROMPT,
+    RADAR_FOLDERS,
+    SCANS_OF_RADAR_FOLDER,
+    SOURCES,
+    TRAIN_VAL,
+    VELODYNE,
+    RootError,
+    sample_dir,
+    sample_file,
+)
+from scenes.pointcloud import RADAR_FEATURES, read_points, write_points
+from scenes.root import Talk2RadarRoot
+from scenes.vod_labels import frame_labels, frame_objects
+from scenes.vod_writer import VodWriter
+from scenes.writer import LABEL_DECIMALS, SampleText, SensorFiles, Talk2RadarWriter
+
+__all__ = ["RADAR_CHOICES", "SPLITS", "ExportReport", "export", "main", "source_frames"]
+
+SPLITS = ("train", "val", "test")
+"""The splits exported by default (the source's lists of these names)."""
+RADAR_CHOICES: dict[str, tuple[str, ...]] = {
+    "radar": ("radar",),
+    "radar_3frames": ("radar_3frames",),
+    "radar_5frames": ("radar_5frames",),
+    "both": ("radar", "radar_5frames"),
+}
+"""``--radar`` values and the radar trees each writes."""
+TIME = 6
+"""Column of a radar point's scan index (``0`` newest, ``-1``, ``-2``, ... older)."""
+
+
+@dataclass(frozen=True)
+class ExportReport:
+    """What :func:`export` did.
+
+    Attributes:
+        splits: Split name -> exported frame ids (``train_val`` included where written).
+        written: Frames written by this run.
+        skipped: Frames already complete from an earlier run.
+        dropped_prompts: Source samples left out (a world's prompts after its first).
+        objects: VoD class -> count of ``label_2`` lines of the exported frames (VoD tree).
+        referents: Class -> count of ``label_2`` lines of the Talk2Radar tree.
+        radar_folders: The radar trees written.
+        seconds: Wall time.
+    """
+
+    splits: dict[str, list[str]]
+    written: int
+    skipped: int
+    dropped_prompts: int
+    objects: dict[str, int]
+    referents: dict[str, int]
+    radar_folders: tuple[str, ...]
+    seconds: float
+
+    @property
+    def frames(self) -> int:
+        """Frames exported (each once, whatever the lists)."""
+        return self.written + self.skipped
+
+
+def source_frames(root: Talk2RadarRoot, splits: Sequence[str]) -> tuple[list[tuple[str, str]], int]:
+    """``(split, id)`` of the first sample of each synthetic world in the source's lists
+    ``splits``, in list order, and the number of samples left out (the worlds' other prompts).
+
+    Raises:
+        RootError: a missing list or sidecar (the export needs ``scenes.synth``'s sidecars).
+    """
+    frames: list[tuple[str, str]] = []
+    seen: set[int] = set()
+    dropped = 0
+    for split in splits:
+        for sid in root.ids(split):
+            meta = root.load_meta(sid)
+            if meta is None:
+                raise RootError(
+                    f"{root.path / META / (sid + '.json')}: missing sidecar; the export needs a "
+                    "root written by scenes.synth (its sidecars list every object of the frame)"
+                )
+            if meta.world_id >= 0 and meta.world_id in seen:
+                dropped += 1
+                continue
+            seen.add(meta.world_id)
+            frames.append((split, sid))
+    return frames, dropped
+
+
+def _check_output(path: Path, source: Path, forbidden: Sequence[str]) -> None:
+    """Refuse an output that is the source, or holds something an export did not write."""
+    if path.resolve() == source.resolve():
+        raise RootError(f"{path}: is the source root; choose another output folder")
+    if not path.exists():
+        return
+    if not path.is_dir():
+        raise RootError(f"{path}: exists and is not a folder")
+    names = {p.name for p in path.iterdir()}
+    if names and (LIDAR_FOLDER not in names or names & set(forbidden)):
+        raise RootError(
+            f"{path}: exists and is neither empty nor an earlier export (it holds "
+            f"{', '.join(sorted(names)[:4])}); choose another output folder"
+        )
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
+def export(
+    source: str | Path,
+    t2r: str | Path | None,
+    vod: str | Path | None,
+    splits: Sequence[str] = SPLITS,
+    radar: str | None = None,
+    progress: bool = False,
+) -> ExportReport:
+    """Write the real-format trees of the synthetic root ``source`` (see the module docstring).
+
+    Args:
+        t2r, vod: Output folders (new, empty, or an earlier export to complete); None writes
+            none of that tree (at least one is needed).
+        splits: Source lists to export.
+        radar: A key of :data:`RADAR_CHOICES`, or None for the source's radar tree.
+
+    Raises:
+        RootError: a bad source or output folder, or an impossible radar tree.
+        ValueError: a malformed file of the source (named).
+    """
+    start = time.perf_counter()
+    source = Path(source)
+    if t2r is None and vod is None:
+        raise RootError("nothing to write: give --t2r, --vod or both")
+    if t2r is not None and vod is not None and Path(t2r).resolve() == Path(vod).resolve():
+        raise RootError(f"{t2r}: --t2r and --vod must be different folders")
+    root = Talk2RadarRoot(source, radar="auto")
+    if root.radar_dir is None or root.radar_folder is None:
+        raise RootError(f"{source}: no radar tree ({', '.join(RADAR_FOLDERS)})")
+    source_scans = SCANS_OF_RADAR_FOLDER[root.radar_folder]
+    folders = RADAR_CHOICES[radar] if radar is not None else (root.radar_folder,)
+    for folder in folders:
+        if SCANS_OF_RADAR_FOLDER[folder] > source_scans:
+            raise RootError(
+                f"{source}: --radar {folder} needs {SCANS_OF_RADAR_FOLDER[folder]} radar scans; "
+                f"the source has {source_scans} ({root.radar_folder}/)"
+            )
+    if t2r is not None:
+        _check_output(Path(t2r), source, (META, SOURCES))
+    if vod is not None:
+        _check_output(Path(vod), source, (META, SOURCES))
+        if sample_dir(Path(vod) / LIDAR_FOLDER, PROMPT).exists():
+            raise RootError(f"{vod}: holds prompts; not a View-of-Delft export")
+    frames, dropped = source_frames(root, splits)
+    if not frames:
+        raise RootError(f"{source}: its lists {list(splits)} hold no sample")
+
+    vod_writer = VodWriter(vod, folders) if vod is not None else None
+    t2r_writers = [Talk2RadarWriter(t2r, f) for f in folders] if t2r is not None else []
+    objects: Counter[str] = Counter()
+    referents: Counter[str] = Counter()
+    written = skipped = 0
+    for _split, sid in tqdm(frames, desc="export", unit="frame", disable=not progress):
+        lidar_bin = sample_file(root.lidar_dir, VELODYNE, sid)
+        meta_path = root.path / META / f"{sid}.json"
+        meta = root.load_meta(sid)
+        assert meta is not None  # source_frames checked it
+        calib = read_calib(sample_file(root.lidar_dir, CALIB, sid))
+        image = root.image_path(sid)
+        size = label_image_size(image)
+        labels = frame_labels(frame_objects(meta, str(meta_path)), calib, size)
+        referred = read_label_file(sample_file(root.lidar_dir, LABEL, sid))
+        objects.update(lab.name for lab in labels)
+        referents.update(lab.name for lab in referred)
+        label_files = [] if vod_writer is None else vod_writer.label_files(sid)
+        out_lidar = (
+            [] if vod_writer is None else [sample_file(vod_writer.lidar_tree, VELODYNE, sid)]
+        )
+        for writer in t2r_writers:
+            label_files += [sample_file(tree, LABEL, sid) for tree in writer.trees]
+            out_lidar.append(sample_file(writer.trees[0], VELODYNE, sid))
+        if all(p.is_file() for p in label_files) and all(
+            _same_file(p, lidar_bin) for p in out_lidar
+        ):
+            skipped += 1
+            continue
+        files = SensorFiles(
+            folder=root.lidar_dir,
+            lidar_bin=lidar_bin,
+            radar_bin=sample_file(root.radar_dir, VELODYNE, sid),
+            lidar_calib=sample_file(root.lidar_dir, CALIB, sid),
+            radar_calib=sample_file(root.radar_dir, CALIB, sid),
+            image=image,
+        )
+        text = SampleText(
+            label=label_file_text(referred, LABEL_DECIMALS),
+            prompt=(root.load_prompt(sid) or "") + "\n",
+        )
+        for k, folder in enumerate(folders):
+            radar_files = _radar_files(files, sid, folder, source_scans, vod_writer, t2r_writers, k)
+            if vod_writer is not None:
+                vod_writer.link_sensors(sid, radar_files, folder)
+            if t2r_writers:
+                t2r_writers[k].write_sample_text(sid, radar_files, text)
+        if vod_writer is not None:
+            vod_writer.write_labels(sid, labels)
+        written += 1
+
+    lists = {split: [sid for s, sid in frames if s == split] for split in splits}
+    if "train" in lists and "val" in lists:
+        lists[TRAIN_VAL] = lists["train"] + lists["val"]
+    if vod_writer is not None:
+        vod_writer.write_image_sets(lists)
+    for writer in t2r_writers:
+        writer.write_image_sets(lists)
+    return ExportReport(
+        splits=lists,
+        written=written,
+        skipped=skipped,
+        dropped_prompts=dropped,
+        objects=dict(sorted(objects.items())),
+        referents=dict(sorted(referents.items())),
+        radar_folders=folders,
+        seconds=time.perf_counter() - start,
+    )
+
+
+def _radar_files(
+    files: SensorFiles,
+    sid: str,
+    folder: str,
+    source_scans: int,
+    vod_writer: VodWriter | None,
+    t2r_writers: Sequence[Talk2RadarWriter],
+    index: int,
+) -> SensorFiles:
+    """``files`` with the radar points of tree ``folder``: the source's file where it has that
+    many scans, else its newest scans written once into the first output (and linked from there
+    into the other)."""
+    scans = SCANS_OF_RADAR_FOLDER[folder]
+    if scans == source_scans:
+        return files
+    points = read_points(files.radar_bin, RADAR_FEATURES)
+    points = points[points[:, TIME] > -scans + 0.5]
+    if vod_writer is not None:
+        path = vod_writer.write_radar(sid, folder, points)
+    else:
+        path = sample_file(t2r_writers[index].trees[1], VELODYNE, sid)
+        write_points(path, points)
+    return replace(files, radar_bin=path)
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m scenes.export_real",
+        description="Write a synthetic root (scenes.synth) as the real releases come: a "
+        "Talk2Radar tree (one prompt per frame, label_2 = its referents, no sidecar) and a "
+        "View-of-Delft tree (label_2 = every annotated object of the frame, VoD class names).",
+    )
+    p.add_argument("--source", required=True, type=Path, help="a root written by scenes.synth")
+    p.add_argument("--t2r", type=Path, help="output folder of the Talk2Radar tree")
+    p.add_argument("--vod", type=Path, help="output folder of the View-of-Delft tree")
+    p.add_argument(
+        "--splits",
+        nargs="+",
+        default=list(SPLITS),
+        metavar="SPLIT",
+        help="source lists to export (default: train val test)",
+    )
+    p.add_argument(
+        "--radar",
+        choices=sorted(RADAR_CHOICES),
+        help="radar trees to write (default: the source's; both = radar and radar_5frames)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        report = export(
+            args.source, args.t2r, args.vod, args.splits, args.radar, progress=not args.quiet
+        )
+    except ValueError as exc:
+        print(f"error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"error: {exc.filename or args.source}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+    counts = ", ".join(f"{k} {len(v)}" for k, v in report.splits.items())
+    objects = ", ".join(f"{k} {v}" for k, v in report.objects.items())
+    print(
+        f"{report.frames} frames ({report.written} written, {report.skipped} already complete) "
+        f"in {report.seconds:.1f} s; lists: {counts}; radar trees: {', '.join(report.radar_folders)}"
+        f"; {report.dropped_prompts} further prompts of the same worlds left out "
+        f"(one prompt per frame)"
+    )
+    if args.vod is not None:
+        print(f"{args.vod}: View-of-Delft labels: {objects}")
+    if args.t2r is not None:
+        referents = ", ".join(f"{k} {v}" for k, v in report.referents.items())
+        print(f"{args.t2r}: Talk2Radar referents: {referents}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
