@@ -25,7 +25,8 @@ Both trees carry the lists ``train``, ``val``, ``test`` (those of ``--splits``) 
 Radar trees (``--radar``): by default the source's tree (``radar_5frames`` for ``scenes.synth``'s
 default 5 scans), hard-linked. ``radar`` (one scan) and ``radar_3frames`` are taken from a source
 with more scans by keeping its newest scans (the points whose ``time`` is ``0``, or ``0, -1,
--2``): each accumulated scan is simulated on its own, so the newest one *is* a single scan.
+-2``): each accumulated scan is simulated on its own, newest first, so the newest one *is* a
+single scan (byte for byte the file ``scenes.synth --radar-scans 1`` writes for the same seed).
 ``both`` writes ``radar`` and ``radar_5frames``. A tree of more scans than the source has is
 refused.
 

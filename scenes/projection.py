@@ -1,5 +1,6 @@
 """LiDAR-frame geometry into the camera image: points to pixels, 3D box wireframes to 2D line
-segments, and the calibration of a resized image.
+segments, which boxes the camera sees (:func:`in_camera_view`), and the calibration of a resized
+image.
 
 Conventions
     Inputs are in the LiDAR (sensor) frame of a :class:`~scenes.calib.Calibration` (x forward,
