@@ -319,3 +319,24 @@ def test_the_newest_scan_is_the_single_scan_generation(tmp_path):
     export(tmp_path / "s5", None, tmp_path / "vod", splits=("train",), radar="radar")
     single = (tmp_path / "s1/radar/training/velodyne/00000.bin").read_bytes()
     assert (tmp_path / "vod/radar/training/velodyne/00000.bin").read_bytes() == single
+
+
+def test_the_training_frames_read_the_exported_pair(real_format_roots):
+    """The referent path's labels source (scenes.frame_dataset) on the pair: one frame per sample,
+    the given prompt, its referents found among the View-of-Delft objects, never a sidecar."""
+    from scenes.frame_dataset import FrameDataset
+
+    t2r, vod = real_format_roots
+    frames = FrameDataset(t2r, "train", scene_labels=SceneLabels(vod))
+    root = Talk2RadarRoot(t2r)
+    assert frames.source == "labels" and frames.ids == root.ids("train")
+    for index, sid in enumerate(frames.ids):
+        item, sample = frames[index], root.load(sid)
+        assert item.from_labels and len(item.given) == 1 and item.given[0].text == sample.prompt
+        metric = SceneLabels(vod).load(sid).metric()[0]
+        assert len(item.actors) == len(metric) and item.region is not None
+        assert 1 <= len(item.given[0].referent_ids) <= len(sample.boxes)
+        by_id = {a.actor_id: a for a in item.actors}
+        chosen = np.array([by_id[i].box for i in item.given[0].referent_ids])
+        for box in chosen:
+            assert np.min(np.abs(sample.boxes - box).max(axis=1)) < 2e-3
