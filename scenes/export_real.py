@@ -51,7 +51,7 @@ from tqdm import tqdm
 
 from scenes.calib import read_calib
 from scenes.imagefile import label_image_size
-from scenes.kitti import label_file_text, read_label_file
+from scenes.kitti import ObjectLabel, label_file_text, read_label_file
 from scenes.layout import (
     CALIB,
     LABEL,
@@ -64,6 +64,7 @@ from scenes.layout import (
     TRAIN_VAL,
     VELODYNE,
     RootError,
+    meta_file,
     sample_dir,
     sample_file,
 )
@@ -133,7 +134,7 @@ def source_frames(root: Talk2RadarRoot, splits: Sequence[str]) -> tuple[list[tup
             meta = root.load_meta(sid)
             if meta is None:
                 raise RootError(
-                    f"{root.path / META / (sid + '.json')}: missing sidecar; the export needs a "
+                    f"{meta_file(root.path, sid)}: missing sidecar; the export needs a "
                     "root written by scenes.synth (its sidecars list every object of the frame)"
                 )
             if meta.world_id >= 0 and meta.world_id in seen:
@@ -214,64 +215,38 @@ def export(
     if not frames:
         raise RootError(f"{source}: its lists {list(splits)} hold no sample")
 
-    vod_writer = VodWriter(vod, folders) if vod is not None else None
-    t2r_writers = [Talk2RadarWriter(t2r, f) for f in folders] if t2r is not None else []
+    outputs = _Outputs(
+        VodWriter(vod, folders) if vod is not None else None,
+        tuple(Talk2RadarWriter(t2r, f) for f in folders) if t2r is not None else (),
+        source_scans,
+    )
     objects: Counter[str] = Counter()
     referents: Counter[str] = Counter()
     written = skipped = 0
     for _split, sid in tqdm(frames, desc="export", unit="frame", disable=not progress):
-        lidar_bin = sample_file(root.lidar_dir, VELODYNE, sid)
-        meta_path = root.path / META / f"{sid}.json"
+        files = _source_files(root, sid)
         meta = root.load_meta(sid)
         assert meta is not None  # source_frames checked it
-        calib = read_calib(sample_file(root.lidar_dir, CALIB, sid))
-        image = root.image_path(sid)
-        size = label_image_size(image)
-        labels = frame_labels(frame_objects(meta, str(meta_path)), calib, size)
+        calib = read_calib(files.lidar_calib)
+        vod_objects = frame_objects(meta, str(meta_file(root.path, sid)))
+        labels = frame_labels(vod_objects, calib, label_image_size(files.image))
         referred = read_label_file(sample_file(root.lidar_dir, LABEL, sid))
         objects.update(lab.name for lab in labels)
         referents.update(lab.name for lab in referred)
-        label_files = [] if vod_writer is None else vod_writer.label_files(sid)
-        out_lidar = (
-            [] if vod_writer is None else [sample_file(vod_writer.lidar_tree, VELODYNE, sid)]
-        )
-        for writer in t2r_writers:
-            label_files += [sample_file(tree, LABEL, sid) for tree in writer.trees]
-            out_lidar.append(sample_file(writer.trees[0], VELODYNE, sid))
-        if all(p.is_file() for p in label_files) and all(
-            _same_file(p, lidar_bin) for p in out_lidar
-        ):
+        if outputs.complete(sid, files.lidar_bin):
             skipped += 1
             continue
-        files = SensorFiles(
-            folder=root.lidar_dir,
-            lidar_bin=lidar_bin,
-            radar_bin=sample_file(root.radar_dir, VELODYNE, sid),
-            lidar_calib=sample_file(root.lidar_dir, CALIB, sid),
-            radar_calib=sample_file(root.radar_dir, CALIB, sid),
-            image=image,
-        )
-        text = SampleText(
-            label=label_file_text(referred, LABEL_DECIMALS),
-            prompt=(root.load_prompt(sid) or "") + "\n",
-        )
-        for k, folder in enumerate(folders):
-            radar_files = _radar_files(files, sid, folder, source_scans, vod_writer, t2r_writers, k)
-            if vod_writer is not None:
-                vod_writer.link_sensors(sid, radar_files, folder)
-            if t2r_writers:
-                t2r_writers[k].write_sample_text(sid, radar_files, text)
-        if vod_writer is not None:
-            vod_writer.write_labels(sid, labels)
+        prompt = root.load_prompt(sid)
+        if prompt is None:
+            raise RootError(f"{root.path}: has no prompt folder; not a root of scenes.synth")
+        text = SampleText(label_file_text(referred, LABEL_DECIMALS), prompt + "\n")
+        outputs.write(sid, files, text, labels)
         written += 1
 
     lists = {split: [sid for s, sid in frames if s == split] for split in splits}
     if "train" in lists and "val" in lists:
         lists[TRAIN_VAL] = lists["train"] + lists["val"]
-    if vod_writer is not None:
-        vod_writer.write_image_sets(lists)
-    for writer in t2r_writers:
-        writer.write_image_sets(lists)
+    outputs.write_image_sets(lists)
     return ExportReport(
         splits=lists,
         written=written,
@@ -284,29 +259,79 @@ def export(
     )
 
 
-def _radar_files(
-    files: SensorFiles,
-    sid: str,
-    folder: str,
-    source_scans: int,
-    vod_writer: VodWriter | None,
-    t2r_writers: Sequence[Talk2RadarWriter],
-    index: int,
-) -> SensorFiles:
-    """``files`` with the radar points of tree ``folder``: the source's file where it has that
-    many scans, else its newest scans written once into the first output (and linked from there
-    into the other)."""
-    scans = SCANS_OF_RADAR_FOLDER[folder]
-    if scans == source_scans:
-        return files
-    points = read_points(files.radar_bin, RADAR_FEATURES)
-    points = points[points[:, TIME] > -scans + 0.5]
-    if vod_writer is not None:
-        path = vod_writer.write_radar(sid, folder, points)
-    else:
-        path = sample_file(t2r_writers[index].trees[1], VELODYNE, sid)
-        write_points(path, points)
-    return replace(files, radar_bin=path)
+def _source_files(root: Talk2RadarRoot, sid: str) -> SensorFiles:
+    """The sensor files and camera image of source sample ``sid``."""
+    assert root.radar_dir is not None  # export checked it
+    return SensorFiles(
+        folder=root.lidar_dir,
+        lidar_bin=sample_file(root.lidar_dir, VELODYNE, sid),
+        radar_bin=sample_file(root.radar_dir, VELODYNE, sid),
+        lidar_calib=sample_file(root.lidar_dir, CALIB, sid),
+        radar_calib=sample_file(root.radar_dir, CALIB, sid),
+        image=root.image_path(sid),
+    )
+
+
+@dataclass(frozen=True)
+class _Outputs:
+    """The trees one export writes: the View-of-Delft tree (or None) and one Talk2Radar writer
+    per radar tree (none without ``--t2r``; they share the LiDAR tree)."""
+
+    vod: VodWriter | None
+    t2r: tuple[Talk2RadarWriter, ...]
+    source_scans: int
+
+    @property
+    def folders(self) -> tuple[str, ...]:
+        if self.vod is not None:
+            return self.vod.radar_folders
+        return tuple(w.radar_folder for w in self.t2r)
+
+    def complete(self, sid: str, lidar_bin: Path) -> bool:
+        """Whether frame ``sid`` is complete from an earlier run: its label files exist in every
+        tree (they are written last) and its LiDAR files are links to ``lidar_bin``."""
+        labels = [] if self.vod is None else self.vod.label_files(sid)
+        lidar = [] if self.vod is None else [sample_file(self.vod.lidar_tree, VELODYNE, sid)]
+        for writer in self.t2r:
+            labels += [sample_file(tree, LABEL, sid) for tree in writer.trees]
+            lidar.append(sample_file(writer.trees[0], VELODYNE, sid))
+        return all(p.is_file() for p in labels) and all(_same_file(p, lidar_bin) for p in lidar)
+
+    def write(
+        self, sid: str, files: SensorFiles, text: SampleText, labels: Sequence[ObjectLabel]
+    ) -> None:
+        """Write frame ``sid`` into every tree: sensor links (radar cut to each tree's scans),
+        then the Talk2Radar text files and the View-of-Delft labels."""
+        for k, folder in enumerate(self.folders):
+            radar_files = self._radar_files(files, sid, folder, k)
+            if self.vod is not None:
+                self.vod.link_sensors(sid, radar_files, folder)
+            if self.t2r:
+                self.t2r[k].write_sample_text(sid, radar_files, text)
+        if self.vod is not None:
+            self.vod.write_labels(sid, labels)
+
+    def write_image_sets(self, lists: dict[str, list[str]]) -> None:
+        if self.vod is not None:
+            self.vod.write_image_sets(lists)
+        for writer in self.t2r:
+            writer.write_image_sets(lists)
+
+    def _radar_files(self, files: SensorFiles, sid: str, folder: str, k: int) -> SensorFiles:
+        """``files`` with the radar points of tree ``folder``: the source's file where it has
+        that many scans, else its newest scans, written once into the first output (and linked
+        from there into the other)."""
+        scans = SCANS_OF_RADAR_FOLDER[folder]
+        if scans == self.source_scans:
+            return files
+        points = read_points(files.radar_bin, RADAR_FEATURES)
+        points = points[points[:, TIME] > -scans + 0.5]
+        if self.vod is not None:
+            path = self.vod.write_radar(sid, folder, points)
+        else:
+            path = sample_file(self.t2r[k].trees[1], VELODYNE, sid)
+            write_points(path, points)
+        return replace(files, radar_bin=path)
 
 
 def _parser() -> argparse.ArgumentParser:
