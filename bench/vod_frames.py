@@ -11,10 +11,11 @@ radar accumulates 5 scans. The frames here are the generator's worlds sensed as 
 - only worlds whose counts fall in :data:`LIDAR_POINTS` and :data:`RADAR_POINTS` (the issue's
   ranges) and that have prompts are kept, in world order.
 
-Each kept frame is written by :func:`bench.vod_layout.write_vod_frame` (the VoD layout of the
-tests' fixtures: radar stored in the radar frame, a ``radar`` tree for the single scan) into a
-folder, and read back through :class:`scenes.root.Talk2RadarRoot`, as the app and
-``model.evaluate`` read a VoD root. The prompts come from the generator (a VoD root has none).
+Each kept frame is written by :class:`scenes.vod_writer.VodWriter` (the one writer of the VoD
+layout, as the tests' fixtures write theirs: radar stored in the radar frame, a ``radar`` tree for
+the single scan, label_2 with the world's actors) into a folder, and read back through
+:class:`scenes.root.Talk2RadarRoot`, as the app and ``model.evaluate`` read a VoD root. The
+prompts come from the generator (a VoD root has none).
 """
 
 from __future__ import annotations
@@ -24,11 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
-from bench.vod_layout import write_image_sets, write_vod_frame
 from scenes.calib import sensor_to_lidar, vod_lidar_calibration, vod_radar_calibration
+from scenes.kitti import boxes_to_labels
 from scenes.lidar_sim import LidarConfig
 from scenes.root import Talk2RadarRoot, format_id
 from scenes.synth_frame import SynthSettings, synthesize
+from scenes.vod_writer import VodWriter
 
 LIDAR_POINTS = (167_000, 189_000)
 """LiDAR points per frame (inclusive) of View-of-Delft's frames (issue 20)."""
@@ -81,6 +83,7 @@ def vod_frames(
     settings = SynthSettings(
         seed=seed, radar_scans=1, prompts_per_world=prompts, camera=None, lidar=FULL_SPIN
     )
+    writer = VodWriter(out, (RADAR_TREE,))
     kept: dict[str, tuple[str, ...]] = {}
     for index in range(max_worlds):
         if len(kept) == count:
@@ -93,24 +96,15 @@ def vod_frames(
             continue
         actors = frame.world.actors
         boxes = np.array([a.box for a in actors], dtype=np.float64).reshape(-1, 7)
-        write_vod_frame(
-            out,
-            index,
-            lidar,
-            radar,
-            lidar_calib,
-            radar_calib,
-            boxes,
-            [a.cls for a in actors],
-            radar_folder=RADAR_TREE,
-        )
+        writer.write_sensors(index, lidar, {RADAR_TREE: radar}, lidar_calib, radar_calib)
+        writer.write_labels(index, boxes_to_labels(boxes, [a.cls for a in actors], lidar_calib))
         kept[format_id(index)] = tuple(p.text for p in frame.prompts)
     if len(kept) < count:
         raise RuntimeError(
             f"only {len(kept)} of the first {max_worlds} worlds have VoD's point counts "
             f"(LiDAR {LIDAR_POINTS}, radar {RADAR_POINTS}); {count} were asked for"
         )
-    write_image_sets(out, RADAR_TREE, {"val": list(kept)})
+    writer.write_image_sets({"val": list(kept)})
     root = Talk2RadarRoot(out, radar=RADAR_TREE)
     frames = []
     for sid, texts in kept.items():
