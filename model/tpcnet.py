@@ -168,8 +168,9 @@ def as_points(points: PointsLike, num_features: int, name: str) -> Tensor:
         return tensor.reshape(0, num_features)
     if tensor.dim() != 2 or tensor.shape[1] != num_features:
         raise ValueError(f"{name} must have shape (N, {num_features}), got {tuple(tensor.shape)}")
-    finite = torch.isfinite(tensor).all(dim=1)
-    if not bool(finite.all()):
+    # One sum is finite exactly when every value is (or it overflowed: then look row by row).
+    if not bool(torch.isfinite(tensor.sum())) and not bool(torch.isfinite(tensor).all()):
+        finite = torch.isfinite(tensor).all(dim=1)
         row = int(torch.nonzero(~finite)[0, 0])
         raise NonFiniteInputError(
             f"{name} has NaN or inf values (first at row {row}: {tensor[row].tolist()}); "
