@@ -113,26 +113,32 @@ def _box_pairs(
         ``margin`` (the x range each box searched in a cloud sorted by x, which the features
         were defined and the model trained with; it clips the grown box's corners).
 
-    One pass over the cloud: a 1 m grid of cells, each box marking the cells under its bounding
-    square (half-width ``hypot(l/2 + margin, w/2 + margin)`` plus 1 mm, which holds the grown
-    footprint at any yaw), and each point in a marked cell paired with the boxes marking it; only
-    those pairs get the exact test, in float64. The cells are found in the points' own precision:
-    a point of a footprint is at least 1 mm inside its square, far more than float32 rounding.
+    One pass over the cloud: a grid of :data:`_CELL` cells, each box marking the cells under the
+    axis-aligned bounding box of its grown footprint (cut to its x range, plus 1 mm), and each
+    point in a marked cell paired with the boxes marking it; only those pairs get the exact test,
+    in float64. The cells are found in the points' own precision: a point of a footprint is at
+    least 1 mm inside its marked rectangle, far more than float32 rounding.
     """
     k = len(boxes)
     empty = np.zeros(0, dtype=np.int64)
     if k == 0 or len(points) == 0:
         return empty, empty
-    half = np.hypot(boxes[:, 3] / 2 + margin, boxes[:, 4] / 2 + margin) + 1e-3
-    x0 = float((boxes[:, 0] - half).min())
-    y0 = float((boxes[:, 1] - half).min())
-    c0 = np.floor(boxes[:, 0] - half - x0).astype(np.int64)
-    c1 = np.floor(boxes[:, 0] + half - x0).astype(np.int64)
-    r0 = np.floor(boxes[:, 1] - half - y0).astype(np.int64)
-    r1 = np.floor(boxes[:, 1] + half - y0).astype(np.int64)
+    cos, sin = np.cos(boxes[:, 6]), np.sin(boxes[:, 6])
+    # Half-extents of each grown footprint's axis-aligned bounding box, and of its x range
+    # (below), plus 1 mm.
+    length, width = boxes[:, 3] / 2 + margin, boxes[:, 4] / 2 + margin
+    r = 0.5 * np.hypot(boxes[:, 3], boxes[:, 4]) + margin
+    ex = np.minimum(np.abs(length * cos) + np.abs(width * sin), r) + 1e-3
+    ey = np.abs(length * sin) + np.abs(width * cos) + 1e-3
+    x0 = float((boxes[:, 0] - ex).min())
+    y0 = float((boxes[:, 1] - ey).min())
+    c0 = np.floor((boxes[:, 0] - ex - x0) / _CELL).astype(np.int64)
+    c1 = np.floor((boxes[:, 0] + ex - x0) / _CELL).astype(np.int64)
+    r0 = np.floor((boxes[:, 1] - ey - y0) / _CELL).astype(np.int64)
+    r1 = np.floor((boxes[:, 1] + ey - y0) / _CELL).astype(np.int64)
     cols, rows = int(c1.max()) + 1, int(r1.max()) + 1
-    # One read of each strided column, then contiguous arithmetic.
-    fx, fy = points[:, 0] - x0, points[:, 1] - y0
+    # One read of each strided column, then contiguous arithmetic (in the points' precision).
+    fx, fy = (points[:, 0] - x0) / _CELL, (points[:, 1] - y0) / _CELL
     cand = np.flatnonzero((fx >= 0) & (fx < cols) & (fy >= 0) & (fy < rows))
     col = np.minimum(fx[cand].astype(np.int64), cols - 1)
     row = np.minimum(fy[cand].astype(np.int64), rows - 1)
@@ -155,7 +161,6 @@ def _box_pairs(
     box = box_of_cell[slot + np.arange(total)]
     # The exact test (the same arithmetic as a box against each of its points).
     p = np.asarray(points[point, :3], dtype=np.float64)
-    cos, sin = np.cos(boxes[:, 6]), np.sin(boxes[:, 6])
     dx, dy = p[:, 0] - boxes[box, 0], p[:, 1] - boxes[box, 1]
     c, s = cos[box], sin[box]
     lx, ly = dx * c + dy * s, -dx * s + dy * c
@@ -166,14 +171,30 @@ def _box_pairs(
         keep &= np.abs(p[:, 2] - boxes[box, 2]) <= (boxes[:, 5] / 2 + margin)[box]
     # And within ``r`` of the centre along x, ``r`` = half the box's diagonal + margin (less than
     # the grown box's half-diagonal: the features were defined, and the model trained, so).
-    r = 0.5 * np.hypot(boxes[:, 3], boxes[:, 4]) + margin
     keep &= (p[:, 0] >= (boxes[:, 0] - r)[box]) & (p[:, 0] < (boxes[:, 0] + r)[box])
     box, point = box[keep], point[keep]
-    # Pairs are in point order; sort by x (stable: ties keep the point order; the points' own
-    # precision gives the same order), then by box.
-    by_x = np.argsort(points[point, 0], kind="stable")
-    by_box = by_x[np.argsort(box[by_x].astype(np.int16 if k < 2**15 else np.int64), kind="stable")]
-    return box[by_box], point[by_box]
+    order = _by_box_then_x(box, point, points[point, 0], k, len(points))
+    return box[order], point[order]
+
+
+_CELL = 0.5
+"""Side (m) of the cells that pair points with boxes (:func:`_box_pairs`)."""
+
+
+def _by_box_then_x(box: np.ndarray, point: np.ndarray, x: np.ndarray, k: int, n: int) -> np.ndarray:
+    """The permutation that sorts pairs (given in ascending ``point`` order) by box, then x, then
+    point: one sort of unique 64-bit keys where they fit (float32 x: its bits in an
+    order-preserving form, -0.0 as +0.0), else two stable sorts."""
+    box_bits, point_bits = max(k - 1, 1).bit_length(), max(n - 1, 1).bit_length()
+    if x.dtype == np.float32 and box_bits + 32 + point_bits <= 64:
+        bits = (x + np.float32(0.0)).view(np.uint32)  # x + 0 turns -0.0 into +0.0
+        ordered = np.where(bits >> 31, ~bits, bits | np.uint32(1 << 31)).astype(np.uint64)
+        key = (box.astype(np.uint64) << np.uint64(32 + point_bits)) | (
+            ordered << np.uint64(point_bits)
+        )
+        return np.argsort(key | point.astype(np.uint64))
+    by_x = np.argsort(x, kind="stable")
+    return by_x[np.argsort(box[by_x].astype(np.int16 if k < 2**15 else np.int64), kind="stable")]
 
 
 def _segments(box: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
