@@ -9,7 +9,8 @@ timed calls, each beside the rate measured just before it.
   convolutions and attention; element-wise work, pooling and softmax count 0) of the very calls
   that are timed: ``encode_scene`` split by stage through the modules that run it, and ``ground``
   of the referent path as its two networks, the text encoder (every prompt new to it) and the
-  referent stage.
+  referent stage (counted in its module form: PyTorch's fused attention fast path, which its
+  inference may take, hides its attention from the counter).
 - The floor of a call is ``FLOPs / rate``; its ratio is ``time / floor``. The ratios of a call
   use the rate measured just before it; medians are taken over calls.
 """
@@ -93,7 +94,10 @@ def ground_flops(model: TPCNet, features: SceneFeatures, prompt: str) -> dict[st
         with torch.no_grad():
             text = model.text_encoder([prompt])
             text_flops = count_flops(lambda: model.text_encoder([prompt])).total
-            ref = count_flops(lambda: model.refer(objects, text)).total if len(objects) else 0
+            # Counted on the stage's module form (gradients on: no fused fast path, whose
+            # attention the counter does not see), so that every implementation has one floor.
+            with torch.enable_grad():
+                ref = count_flops(lambda: model.refer(objects, text)).total if len(objects) else 0
     finally:
         text_cache(model, old)
     return {"text": text_flops, "referent": ref, "decode": 0, "total": text_flops + ref}
