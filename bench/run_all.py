@@ -37,8 +37,11 @@ from bench.common import (
     read_result,
 )
 
-BENCHMARKS = ("latency", "fusion_cost", "graph_cost", "model_size", "train_throughput")
+BENCHMARKS = ("latency", "floor", "fusion_cost", "graph_cost", "model_size", "train_throughput")
 """Benchmarks of this package, in the order of the document (``bench/<name>.py``)."""
+MANUAL = ("eval_throughput",)
+"""Benchmarks whose sections come from their stored results only: they compare with an older
+checkout given on their command line (run them by hand with the command in their section)."""
 
 SYNTH = "synth"
 SYNTH_SCRIPT = REPO / "bench" / "bench_synth.py"
@@ -239,7 +242,7 @@ def render(
         parts += ["", "### Failed in this run", ""]
         parts += [f"- `{name}`: {why}" for name, why in failures.items()]
     parts.append("")
-    for name in BENCHMARKS:
+    for name in (*BENCHMARKS, *MANUAL):
         if name in results:
             section = results[name].to_markdown()
             if name in failures:
@@ -260,9 +263,9 @@ def _anchor(title: str) -> str:
 
 
 def load_results(directory: Path = RESULTS_DIR) -> dict[str, BenchResult]:
-    """The results of :data:`BENCHMARKS` present in ``directory``."""
+    """The results of :data:`BENCHMARKS` and :data:`MANUAL` present in ``directory``."""
     out = {}
-    for name in BENCHMARKS:
+    for name in (*BENCHMARKS, *MANUAL):
         path = directory / f"{name}.json"
         if path.is_file():
             out[name] = read_result(path)
@@ -282,7 +285,7 @@ def main(argv: list[str] | None = None) -> int:
         help="run only these; the document keeps the others' previous results",
     )
     parser.add_argument(
-        "--threads", type=int, help="torch threads of every benchmark (default: theirs, 1)"
+        "--threads", type=int, help="torch threads of every benchmark (default: theirs: 1, floor 2)"
     )
     parser.add_argument(
         "--no-run", action="store_true", help="only rebuild docs/PERFORMANCE.md from the results"
