@@ -85,6 +85,26 @@ MISS_NOTES: dict[str, str] = {
         "quadratic cost the FLOP ratio shows. Fix, if the measured ratio matters more than "
         "bounded memory: a larger `mhca_chunk`."
     ),
+    "`encode_scene` time / FLOP floor": (
+        "**`encode_scene` against its FLOP floor.** The floor section's stage tables say where "
+        "the time above the floor goes: the pillar encoders (no FLOPs to speak of: grouping "
+        "~190k points into pillars, one pass over the cloud), BACA's attention (skinny matrix "
+        "products and softmaxes over `L x 144` scores, bound by memory, not arithmetic), "
+        "decoding and candidate description (no FLOPs: peaks, NMS, point evidence). With two "
+        "threads on shared cores each operation also waits for the slower thread; the same "
+        "benchmark with `--threads 1` shows the single-core ratio."
+    ),
+    "`ground` (new prompt) time / FLOP floor": (
+        "**`ground` against its FLOP floor.** MiniLM for one prompt is 15-30 matrix rows "
+        "against 42 MB of weights read once per prompt: bound by memory bandwidth more than by "
+        "arithmetic; the referent stage is some 60 small operations whose overhead exceeds "
+        "their FLOPs."
+    ),
+    "`model.evaluate` prompts/s": (
+        "**Evaluation throughput.** The evaluation section times the whole command; with the "
+        "cores shared, each run's start-up, reading and metrics are as slow as the load makes "
+        "them."
+    ),
     "KNN / DGGF": (
         "**Graph cost.** The model's default form of DGGF's graph (`dynamic_max_relative`, "
         "a grouped pairwise maximum, chosen for the speed of the training step) is slower "
