@@ -123,8 +123,9 @@ def _import_transformers() -> Any:
     return transformers
 
 
-_LOADING = threading.Lock()
-"""Held while the process-wide tokenizer or weights load, so that a background warm-up and a
+_TOKENIZER_LOADING = threading.Lock()
+_WEIGHTS_LOADING = threading.Lock()
+"""Held while the process-wide tokenizer (weights) load, so that a background warm-up and a
 first prompt load them once."""
 
 
@@ -147,7 +148,7 @@ def load_tokenizer() -> Any:
     """The MiniLM tokenizer, a ``tokenizers.Tokenizer`` of the package's ``tokenizer.json``
     (process-wide, loaded once, offline): the same ids and offsets as ``transformers``'
     tokenizer of that file, without importing ``transformers``."""
-    with _LOADING:
+    with _TOKENIZER_LOADING:
         return _tokenizer()
 
 
@@ -259,7 +260,7 @@ def _minilm_forward() -> MiniLMForward:
 
 def load_minilm_forward() -> MiniLMForward:
     """:class:`MiniLMForward` of the package's weights (process-wide, loaded once, offline)."""
-    with _LOADING:
+    with _WEIGHTS_LOADING:
         return _minilm_forward()
 
 
