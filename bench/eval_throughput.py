@@ -9,7 +9,7 @@ Workload: ``python -m scenes.synth --frames 300 --prompts-per-world 1 --seed 5 -
 (300 samples, one prompt per world: every sample is a scene to encode), written once into
 ``--root`` (default ``/tmp/talk2pc-eval-300``) with an ``all`` split listing every sample; the
 command timed is ``python -m model.evaluate --data ROOT --split all --out ... --json ...`` with the
-bundled checkpoint and torch's default threads.
+bundled checkpoint and torch's default threads (``--eval-threads N``: ``OMP_NUM_THREADS=N``).
 
 ``--baseline-code DIR``: also time the same command run from another checkout (the code before
 issue 20's changes: ``git archive <commit> | tar -x -C DIR``), alternating the two run by run so
@@ -19,6 +19,7 @@ that both see the same load; the table sets them side by side. ``--repeats`` run
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
 import tempfile
@@ -51,13 +52,19 @@ def ensure_root(root: Path, prompts: int = PROMPTS, seed: int = SEED) -> list[st
     return ids
 
 
-def time_evaluate(code: Path, root: Path) -> float:
-    """Wall-clock seconds of ``python -m model.evaluate`` on ``root`` run from checkout ``code``."""
+def time_evaluate(code: Path, root: Path, threads: int | None = None) -> float:
+    """Wall-clock seconds of ``python -m model.evaluate`` on ``root`` run from checkout ``code``
+    (``threads``: its torch threads, through ``OMP_NUM_THREADS``; None: torch's default)."""
+    env = dict(os.environ)
+    if threads is not None:
+        env["OMP_NUM_THREADS"] = str(threads)
     with tempfile.TemporaryDirectory(prefix="eval-throughput-") as tmp:
         cmd = [sys.executable, "-m", "model.evaluate", "--data", str(root), "--split", SPLIT]
         cmd += ["--out", str(Path(tmp) / "preds"), "--json", str(Path(tmp) / "eval.json")]
         t0 = time.perf_counter()
-        subprocess.run(cmd, cwd=code, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        subprocess.run(
+            cmd, cwd=code, env=env, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE
+        )
         return time.perf_counter() - t0
 
 
@@ -67,6 +74,7 @@ def run(
     root: Path = Path("/tmp/talk2pc-eval-300"),
     repeats: int | None = None,
     baseline_code: Path | None = None,
+    eval_threads: int | None = None,
 ) -> BenchResult:
     """Time the evaluation (see the module docstring)."""
     start = time.perf_counter()
@@ -77,7 +85,7 @@ def run(
     seconds: dict[str, list[float]] = {k: [] for k in codes}
     for r in range(n):
         for name in codes if r % 2 == 0 else list(codes)[::-1]:
-            seconds[name].append(time_evaluate(codes[name], root))
+            seconds[name].append(time_evaluate(codes[name], root, eval_threads))
     rows = []
     rate = {}
     for name, values in seconds.items():
@@ -114,8 +122,9 @@ def run(
         "listing all of them; runs alternate between the checkouts; the cores are shared with "
         "other jobs (load average above)."
     )
+    threads = "torch's default threads" if eval_threads is None else f"{eval_threads} thread(s)"
     table = Table(
-        "`python -m model.evaluate --data ROOT --split all` (whole process)",
+        f"`python -m model.evaluate --data ROOT --split all` (whole process, {threads})",
         ("code", "runs", "median s", "min s", "max s", "prompts/s (median)"),
         tuple(rows),
         ("Wall clock of the whole command: start-up, loading, every sample, metrics, files.",),
@@ -142,6 +151,12 @@ def options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--root", type=Path, default=Path("/tmp/talk2pc-eval-300"))
     parser.add_argument("--repeats", type=int, default=None, help="runs of each (default 3)")
     parser.add_argument("--baseline-code", type=Path, default=None, help="an older checkout")
+    parser.add_argument(
+        "--eval-threads",
+        type=int,
+        default=None,
+        help="torch threads of the timed commands (OMP_NUM_THREADS; default: torch's own)",
+    )
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -39,9 +39,10 @@ from bench.common import (
 
 BENCHMARKS = ("latency", "floor", "fusion_cost", "graph_cost", "model_size", "train_throughput")
 """Benchmarks of this package, in the order of the document (``bench/<name>.py``)."""
-MANUAL = ("eval_throughput",)
-"""Benchmarks whose sections come from their stored results only: they compare with an older
-checkout given on their command line (run them by hand with the command in their section)."""
+MANUAL = ("floor_1thread", "eval_throughput")
+"""Sections that come from their stored results only, run by hand with the command in their
+section: the floor benchmark on one thread (``python -m bench.floor --threads 1 --name
+floor_1thread``) and the evaluation throughput (it compares with an older checkout)."""
 
 SYNTH = "synth"
 SYNTH_SCRIPT = REPO / "bench" / "bench_synth.py"
