@@ -25,16 +25,18 @@ where. After a save or a deletion into the served root its split is re-read
 
 Using it (a one-box pair: a click and the sentence; see docs/ANNOTATION.md):
 
-- **Click the ground** (with *Click to place* on) to place a box of the *Class* at its typical
-  size (:func:`annotate.default_box`) standing on the frame's ground estimate; the new box is
-  selected. A click inside a draft box's footprint selects that box instead; a click on a
+- **Click the ground** (with *Click to place* on) to place a box of the *New box class* at its
+  typical size (:func:`annotate.default_box`) standing on the frame's ground estimate; the new box
+  is selected. A click inside a draft box's footprint selects that box instead; a click on a
   ready-made box (below) adds it. A box that could not be saved where it would go (outside the
   annotated range or the camera's view) is not placed: a notification says why at once.
 - **Ready-made boxes**: on a root without prompts (View-of-Delft as released) the frame's
   label_2 objects of the metric classes that are not in the draft are drawn (``"+ Car"``) and
   listed under *Object* (nearest first); *Add object* or a click on one adds it.
-- **One Class control**: *Class* is the selected box's class (changing it changes the box) and
-  the class of the next box placed; selecting a box shows its class.
+- **Two class controls**: *New box class* is the class of the next box placed and nothing else
+  (choosing it never changes a placed box: the box just placed stays selected, and an annotator
+  choosing the next class must not relabel it); *Change class* (Boxes folder, shown while a box
+  is selected) relabels the selected box, one undo step.
 - **Drag the gizmo** of the selected box: its arrows and square move it on the ground, its ring
   turns it (yaw). One drag is one undo step (:class:`annotate.DraftEditor`'s ``merge_key``).
 - *Box* picks the selected box; *Length*, *Width*, *Height*, *Yaw (deg)* edit it (the bottom

@@ -4,9 +4,9 @@ Each action changes the panel's state through the :class:`annotate.DraftEditor` 
 and redraws only the :class:`~app.annotate_tab.panel.Part` s that show what it changed.
 
 A click in the 3D view selects the draft box under it, else adds the ready-made box under it,
-else places a new box of the *Class*; a box that could not be saved where it would go (outside
-the annotated range or the camera's view, :func:`annotate.validate`'s position and image rules)
-is not placed or added, and a notification says why at once.
+else places a new box of the *New box class*; a box that could not be saved where it would go
+(outside the annotated range or the camera's view, :func:`annotate.validate`'s position and
+image rules) is not placed or added, and a notification says why at once.
 """
 
 from __future__ import annotations
@@ -34,6 +34,7 @@ from app.annotate_tab.formatting import option_index, option_ready_index, placem
 from app.annotate_tab.panel import AnnotationPanel, Part
 from app.annotate_tab.view import box_at, box_tag, ground_hit, wxyz_to_yaw
 from app.query_panel import submitted_prompt
+from scenes.actors import CLASSES
 
 PLACEMENT_FIELDS = (".position", ".image")
 """Validation fields of a box that say it cannot be saved where it is."""
@@ -145,16 +146,38 @@ class DraftEdits:
                 p.selected = draft.boxes[index].box_id
             p.refresh(Part.SELECTION)
 
-    def set_class(self) -> None:
-        """*Class*: the selected box's class (an undo step), and the next new box's."""
+    def change_class(self, cls: str) -> None:
+        """*Change class*: relabel the selected box as ``cls`` (one undo step). The only way a
+        placed box changes class; *New box class* never does."""
+        p = self.panel
+        if cls not in CLASSES:  # a forged message
+            return
+        with p.session.lock:
+            if p.selected is None:
+                p.notify("No box selected", "Select a box first (click it, or keys N / Shift+N).")
+                return
+            if p.editor.draft.get(p.selected).cls != cls:
+                p.editor.set_class(p.selected, cls)
+                p.refresh(Part.DRAFT)
+
+    def cycle_class(self, step: int = 1) -> None:
+        """Relabel the selected box as the next (``step=1``) or previous class of
+        :data:`scenes.CLASSES` (key C / Shift+C)."""
         p = self.panel
         with p.session.lock:
             if p.selected is None:
+                p.notify("No box selected", "Select a box first (click it, or keys N / Shift+N).")
                 return
-            index = p.editor.draft.index_of(p.selected)
-            if p.editor.draft.boxes[index].cls != p.w.cls.value:
-                p.editor.set_class(p.selected, p.w.cls.value)
-                p.refresh(Part.DRAFT, skip=p.w.cls)
+            current = p.editor.draft.get(p.selected).cls
+            index = CLASSES.index(current) if current in CLASSES else -step
+            self.change_class(CLASSES[(index + step) % len(CLASSES)])
+
+    def set_new_class(self, cls: str) -> None:
+        """*New box class* set from the keyboard (keys 1, 2, 3); placed boxes keep theirs."""
+        p = self.panel
+        with p.session.lock:
+            if cls in CLASSES:
+                p.w.cls.value = cls
 
     def resize(self, source: viser.GuiNumberHandle) -> None:
         p = self.panel

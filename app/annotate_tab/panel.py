@@ -56,7 +56,6 @@ from app.annotate_tab.view import DraftView, draft_layer
 from app.annotate_tab.widgets import AnnotationWidgets, build_annotation_widgets
 from app.session import ClientSession
 from app.text import md_text
-from scenes.actors import CLASSES
 from scenes.root import Sample
 
 
@@ -286,8 +285,6 @@ class AnnotationPanel:
         if selected is None:
             return
         length, width, height, yaw = selected.box[3:]
-        if selected.cls in CLASSES and w.cls is not skip:
-            self._show(w.cls, selected.cls)
         for handle, value in (
             (w.length, length),
             (w.width, width),

@@ -65,7 +65,11 @@ def _wire(panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions) -> None
         handle.on_click(lambda _event: panel.guarded(fn))
 
     on_user(w.box, edits.select_from_list)
-    on_user(w.cls, edits.set_class)
+
+    @w.relabel.on_click
+    def _(event: viser.GuiEvent) -> None:
+        cls = str(event.target.value)
+        panel.guarded(lambda: edits.change_class(cls))
 
     @w.prompt.on_update
     def _(event: viser.GuiEvent) -> None:
