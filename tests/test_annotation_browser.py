@@ -37,9 +37,7 @@ def test_browser_next_class_never_relabels_the_placed_box(
         model = build_model("small", text_encoder="gru").eval()
         with serve_app(root, model, warm_up=False) as app, sync_playwright() as p:
             store = app.annotations.store
-            browser = p.chromium.launch(
-                executable_path=chromium, headless=True, args=CHROMIUM_ARGS
-            )
+            browser = p.chromium.launch(executable_path=chromium, headless=True, args=CHROMIUM_ARGS)
             try:
                 page = browser.new_page(viewport={"width": 1400, "height": 860})
                 panel = open_annotate(page, app, TIMEOUT)
