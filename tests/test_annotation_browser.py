@@ -68,3 +68,75 @@ def test_browser_next_class_never_relabels_the_placed_box(
                 browser.close()
             (pair,) = store.pairs()
             assert sorted(_label_classes(store.path, pair.sample_id)) == ["Car", "Pedestrian"]
+
+
+@pytest.mark.browser
+def test_browser_every_step_but_the_ground_click_from_the_keyboard(
+    tmp_path, chromium, write_tiny_root, torch_threads, serve_app, gt_box
+) -> None:
+    """Two ground clicks, then only keys: the next class, relabel, select, move, turn, fit,
+    delete and undo, the sentence (P to write it, Esc to leave), the help (H) and the save."""
+    from playwright.sync_api import sync_playwright
+
+    from model import build_model
+
+    root = write_tiny_root(tmp_path / "root", frames=2)
+    with torch_threads(1):
+        model = build_model("small", text_encoder="gru").eval()
+        with serve_app(root, model, warm_up=False) as app, sync_playwright() as p:
+            store = app.annotations.store
+            browser = p.chromium.launch(executable_path=chromium, headless=True, args=CHROMIUM_ARGS)
+            try:
+                page = browser.new_page(viewport={"width": 1400, "height": 860})
+                panel = open_annotate(page, app, TIMEOUT)
+                ground = panel.frame.ground_z
+                car = gt_box[:2] + np.array([2.0 * app.frame.index, 0.0])
+                camera = panel.session.client.camera
+                page.mouse.click(*pixel_of(camera, (car[0] - 0.6, car[1] + 0.3, ground)))
+                poll(lambda: len(panel.draft.boxes) == 1, TIMEOUT, "the car")
+                keys = page.keyboard
+                keys.press("2")
+                poll(lambda: panel.w.cls.value == "Pedestrian", TIMEOUT, "key 2")
+                page.mouse.click(*pixel_of(camera, (10.0, -3.0, ground)))
+                poll(lambda: len(panel.draft.boxes) == 2, TIMEOUT, "the pedestrian")
+                keys.press("c")
+                poll(lambda: panel.draft.classes[1] == "Cyclist", TIMEOUT, "key C")
+                keys.press("Shift+C")
+                poll(lambda: panel.draft.classes == ("Car", "Pedestrian"), TIMEOUT, "Shift+C")
+
+                keys.press("n")  # wraps around to the car
+                first = panel.draft.boxes[0]
+                poll(lambda: panel.selected == first.box_id, TIMEOUT, "key N")
+                for _ in range(3):
+                    keys.press("ArrowUp")  # the chase view looks along +x
+                poll(lambda: panel.draft.boxes[0].box[0] > first.box[0] + 0.29, TIMEOUT, "Up")
+                assert panel.draft.boxes[0].box[0] == pytest.approx(first.box[0] + 0.3)
+                keys.press("q")
+                poll(lambda: panel.draft.boxes[0].box[6] > first.box[6], TIMEOUT, "key Q")
+                assert panel.draft.boxes[0].box[6] == pytest.approx(first.box[6] + np.radians(5))
+                keys.press("f")
+                poll(lambda: np.hypot(*(panel.draft.boxes[0].box[:2] - car)) < 0.15, TIMEOUT, "F")
+
+                keys.press("Shift+N")  # back to the pedestrian
+                poll(lambda: panel.selected == panel.draft.boxes[1].box_id, TIMEOUT, "Shift+N")
+                keys.press("Delete")
+                poll(lambda: len(panel.draft.boxes) == 1, TIMEOUT, "Delete")
+                keys.press("Control+z")
+                poll(lambda: len(panel.draft.boxes) == 2, TIMEOUT, "Ctrl+Z")
+
+                keys.press("h")
+                help_window = page.get_by_role("dialog")
+                help_window.wait_for(timeout=TIMEOUT * 1000)
+                assert "Ctrl/Cmd+Shift+S" in help_window.inner_text()  # the keys' table
+                page.get_by_role("button", name="Close").click()
+                keys.press("p")  # the cursor in Pair prompt: what follows is typed
+                keys.type("the car and the pedestrian ahead")
+                poll(lambda: panel.draft.prompt.endswith("ahead"), TIMEOUT, "the typed sentence")
+                keys.press("Escape")  # leave the field: the next key is a hotkey again
+                keys.press("Control+Shift+S")
+                poll(lambda: store.pairs(), TIMEOUT, "the save")
+            finally:
+                browser.close()
+            (pair,) = store.pairs()
+            assert pair.prompt == "the car and the pedestrian ahead"
+            assert sorted(_label_classes(store.path, pair.sample_id)) == ["Car", "Pedestrian"]

@@ -61,9 +61,10 @@ Using it (a one-box pair: a click and the sentence; see docs/ANNOTATION.md):
 - The draft is drawn into the camera panel too (its ``draft`` layer,
   :func:`~app.annotate_tab.view.draft_layer`).
 
-Hotkeys: viser 1.1.1 has experimental commands (``gui.add_command``) with hotkeys, also listed in
-its command palette (Ctrl/Cmd+K). :data:`~app.annotate_tab.widgets.HOTKEYS` registers Undo, Redo,
-Delete box and Save pair; they act while no text field has the focus (Esc leaves one).
+Keys (:mod:`~app.annotate_tab.keys`): every step of a pair but the ground click has a key
+(:data:`~app.annotate_tab.keys.KEYS`: viser 1.1.1's experimental commands, ``gui.add_command``,
+also listed in its command palette, Ctrl/Cmd+K; they act while no text field has the focus, Esc
+leaves one), P puts the cursor in *Pair prompt*, and the *Keys* folder and key H list them all.
 
 The frame of a draft. Navigation is shared by every browser, so the frame on screen can change
 under a draft. A draft belongs to the frame it was started on (for a reopened pair: the pair's

@@ -32,7 +32,7 @@ from annotate import (
 )
 from app.annotate_tab.formatting import option_index, option_ready_index, placement_problem
 from app.annotate_tab.panel import AnnotationPanel, Part
-from app.annotate_tab.view import box_at, box_tag, ground_hit, wxyz_to_yaw
+from app.annotate_tab.view import box_at, box_tag, ground_hit, screen_axes, wxyz_to_yaw
 from app.query_panel import submitted_prompt
 from scenes.actors import CLASSES
 
@@ -178,6 +178,65 @@ class DraftEdits:
         with p.session.lock:
             if cls in CLASSES:
                 p.w.cls.value = cls
+
+    def select_step(self, step: int) -> None:
+        """Select the next (``step=1``) or previous (``-1``) draft box in list order, wrapping
+        around; with none selected, the first or the last (keys N / Shift+N)."""
+        p = self.panel
+        with p.session.lock:
+            ids = p.editor.draft.box_ids
+            if not ids:
+                return
+            if p.selected in ids:
+                p.selected = ids[(ids.index(p.selected) + step) % len(ids)]
+            else:
+                p.selected = ids[0] if step > 0 else ids[-1]
+            p.refresh(Part.SELECTION)
+
+    def deselect(self) -> None:
+        """Select no box (key Esc)."""
+        p = self.panel
+        with p.session.lock:
+            if p.selected is not None:
+                p.selected = None
+                p.refresh(Part.SELECTION)
+
+    def move_on_screen(self, forward: float, right: float) -> None:
+        """Move the selected box ``forward`` m away from the viewer and ``right`` m to the right
+        on screen, along the nearest LiDAR axes (:func:`~app.annotate_tab.view.screen_axes`;
+        arrow keys). Consecutive moves of one box are one undo step."""
+        p = self.panel
+        with p.session.lock:
+            if p.selected is None:
+                return
+            camera = p.session.client.camera
+            (fx, fy), (rx, ry) = screen_axes(camera.position, camera.look_at)
+            x, y = p.editor.draft.get(p.selected).box[:2]
+            p.editor.move_box(
+                p.selected,
+                x + forward * fx + right * rx,
+                y + forward * fy + right * ry,
+                merge_key=("keys", "move", p.selected),
+            )
+            p.refresh(Part.DRAFT)
+
+    def turn(self, degrees: float) -> None:
+        """Turn the selected box by ``degrees`` counter-clockwise seen from above (keys Q, E,
+        R); consecutive turns of one box are one undo step."""
+        p = self.panel
+        with p.session.lock:
+            if p.selected is None:
+                return
+            yaw = p.editor.draft.get(p.selected).box[6] + float(np.radians(degrees))
+            p.editor.rotate_box(p.selected, yaw, merge_key=("keys", "turn", p.selected))
+            p.refresh(Part.DRAFT)
+
+    def toggle_nothing(self) -> None:
+        """Mark or unmark the prompt as referring to nothing (key 0)."""
+        p = self.panel
+        with p.session.lock:
+            p.editor.set_refers_to_nothing(not p.editor.draft.refers_to_nothing)
+            p.refresh(Part.TEXT)
 
     def resize(self, source: viser.GuiNumberHandle) -> None:
         p = self.panel

@@ -5,19 +5,25 @@ click, the gizmo and the hotkeys to the actions (:class:`~app.annotate_tab.edits
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable
 
 import viser
 
 from app.annotate_tab.edits import DraftEdits
 from app.annotate_tab.hub import AnnotationHub
+from app.annotate_tab.keys import (
+    MOVE_FAR,
+    MOVE_STEP,
+    add_help_folder,
+    add_prompt_key,
+    register_keys,
+    show_help,
+)
 from app.annotate_tab.pairs import PairActions
 from app.annotate_tab.panel import AnnotationPanel
-from app.annotate_tab.widgets import HOTKEYS, NEW_PAIR, REDO, UNDO
+from app.annotate_tab.widgets import NEW_PAIR, REDO, UNDO
 from app.session import ClientSession
-
-log = logging.getLogger(__name__)
+from scenes.actors import CLASSES
 
 
 def build_annotation_tab(session: ClientSession, hub: AnnotationHub) -> AnnotationPanel:
@@ -26,7 +32,7 @@ def build_annotation_tab(session: ClientSession, hub: AnnotationHub) -> Annotati
     edits = DraftEdits(panel)
     pairs = PairActions(panel)
     _wire(panel, edits, pairs)
-    _register_hotkeys(panel, edits, pairs)
+    _register_keys(panel, edits, pairs)
     hub.register(panel)
     panel.refresh_pairs()
     panel.refresh()
@@ -105,19 +111,44 @@ def _wire(panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions) -> None
             panel.guarded(action)
 
 
-def _register_hotkeys(panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions) -> None:
-    actions = {
+def _register_keys(panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions) -> None:
+    """The hotkeys of :data:`~app.annotate_tab.keys.KEYS`, the page-side key P and the help."""
+    gui = panel.session.client.gui
+    far, step = MOVE_FAR, MOVE_STEP
+    actions: dict[str, Callable[[], None]] = {
+        "add_ready": edits.add_ready,
+        "use_predictions": edits.use_predictions,
+        "select_next": lambda: edits.select_step(1),
+        "select_previous": lambda: edits.select_step(-1),
+        "deselect": edits.deselect,
+        "class_next": lambda: edits.cycle_class(1),
+        "class_previous": lambda: edits.cycle_class(-1),
+        "move_forward": lambda: edits.move_on_screen(step, 0.0),
+        "move_back": lambda: edits.move_on_screen(-step, 0.0),
+        "move_left": lambda: edits.move_on_screen(0.0, -step),
+        "move_right": lambda: edits.move_on_screen(0.0, step),
+        "move_forward_far": lambda: edits.move_on_screen(far, 0.0),
+        "move_back_far": lambda: edits.move_on_screen(-far, 0.0),
+        "move_left_far": lambda: edits.move_on_screen(0.0, -far),
+        "move_right_far": lambda: edits.move_on_screen(0.0, far),
+        "turn_left": lambda: edits.turn(5.0),
+        "turn_right": lambda: edits.turn(-5.0),
+        "turn_left_fine": lambda: edits.turn(1.0),
+        "turn_right_fine": lambda: edits.turn(-1.0),
+        "turn_quarter": lambda: edits.turn(90.0),
+        "turn_half": lambda: edits.turn(180.0),
+        "fit": edits.fit_selected,
+        "delete": edits.delete_selected,
+        "suggest": edits.suggest,
+        "nothing": edits.toggle_nothing,
+        "save": pairs.save,
         "undo": edits.undo,
         "redo": edits.redo,
-        "delete": edits.delete_selected,
-        "save": pairs.save,
+        "new_pair": edits.new_pair,
+        "help": lambda: show_help(gui),
     }
-    gui = panel.session.client.gui
-    for action, key, modifier, label in HOTKEYS:
-        try:
-            command = gui.add_command(label, hotkey=key, modifier=modifier)  # type: ignore[arg-type]
-        except Exception as exc:  # Experimental in viser 1.1.1: the panel works without.
-            log.warning("hotkey %s unavailable: %s", label, exc)
-            return
-        fn = actions[action]
-        command.on_trigger(lambda _event, fn=fn: panel.guarded(fn))
+    for i, cls in enumerate(CLASSES):
+        actions[f"new_class_{i}"] = lambda cls=cls: edits.set_new_class(cls)
+    register_keys(gui, actions, panel.guarded)
+    add_prompt_key(gui)
+    add_help_folder(gui)

@@ -21,14 +21,6 @@ SPLITS = DEFAULT_SPLITS
 """Splits offered when saving (the store's default, ``train``, is selected); the store refuses any
 other (a forged websocket message included)."""
 
-HOTKEYS: tuple[tuple[str, str, str | None, str], ...] = (
-    ("undo", "Z", "cmd/ctrl", "Annotate: undo"),
-    ("redo", "Z", "cmd/ctrl+shift", "Annotate: redo"),
-    ("delete", "delete", None, "Annotate: delete the selected box"),
-    ("save", "S", "cmd/ctrl+shift", "Annotate: save the pair"),
-)
-"""``(action, key, modifier, palette label)`` of the hotkeys."""
-
 
 @dataclass(frozen=True)
 class AnnotationWidgets:
@@ -83,6 +75,9 @@ class AnnotationWidgets:
 UNDO, REDO, NEW_PAIR = "Undo", "Redo", "New pair"
 """Buttons of the *Draft* group."""
 
+PAIR_PROMPT = "Pair prompt"
+"""The label of the sentence's field (the page-side key P finds the field by it)."""
+
 NEW_BOX_CLASS, CHANGE_CLASS = "New box class", "Change class"
 """Labels of the two class controls: the next box's class, and the selected box's relabel."""
 
@@ -101,7 +96,7 @@ def build_annotation_widgets(gui: viser.GuiApi) -> AnnotationWidgets:
     status = gui.add_markdown("Loading...")
     back = gui.add_button("Back to the draft's frame", icon=viser.Icon.ARROW_BACK, visible=False)
     prompt = gui.add_text(
-        "Pair prompt",
+        PAIR_PROMPT,
         "",
         multiline=True,
         hint="The sentence that refers to the boxes. Enter saves the pair when it is ready; "
