@@ -39,11 +39,19 @@ from model.checkpoint import load_checkpoint, save_checkpoint
 from model.losses import grounding_loss
 from model.referent_train import (
     ReferentTrainConfig,
+    TextBank,
     cache_scenes,
     cached_referent_step,
     referent_step,
 )
 from model.targets import collate_targets, draw_targets
+from model.training_data import (
+    DataSpecError,
+    MixedFrames,
+    RootSpec,
+    frame_dataset,
+    root_specs,
+)
 from scenes.dataset import AugmentConfig, GroundingBatch, GroundingDataset, collate
 from scenes.durable import atomic_file
 from scenes.frame_dataset import FrameDataset, SensorAugment
@@ -58,7 +66,7 @@ class TrainingError(RuntimeError):
 class TrainConfig:
     """Everything that defines a training run (stored in the checkpoints)."""
 
-    data: str
+    data: tuple[str, ...]
     out: str
     preset: str = "small"
     epochs: int = 20
@@ -91,8 +99,25 @@ class TrainConfig:
     freeze_scene: bool = False
     bank_prompts: int = 24
     scene_limit: int = 0
+    data_weights: tuple[float, ...] = ()
+    scene_labels: tuple[str, ...] = ()
+    init_detector: str | None = None
 
     def __post_init__(self) -> None:
+        for name in ("data", "data_weights", "scene_labels"):
+            value = getattr(self, name)
+            object.__setattr__(self, name, (value,) if isinstance(value, str) else tuple(value))
+        try:
+            self.roots()
+        except DataSpecError as exc:
+            raise TrainingError(str(exc)) from exc
+        if self.init and self.init_detector:
+            raise TrainingError("give --init or --init-detector, not both")
+        if self.grounding != "referent" and (len(self.data) > 1 or self.scene_labels):
+            raise TrainingError(
+                "several --data roots and --scene-labels are the referent path's; the paper's "
+                "path trains on one root's label_2 boxes"
+            )
         for name in ("epochs", "batch_size", "prompts_per_scene"):
             if getattr(self, name) < 1:
                 flag = "--" + name.replace("_", "-")
@@ -101,6 +126,10 @@ class TrainConfig:
             raise TrainingError(f"--grounding must be referent or tpcnet, got {self.grounding!r}")
         if Path(self.out).exists() and not Path(self.out).is_dir():
             raise TrainingError(f"--out {self.out} is a file; give a run folder")
+
+    def roots(self) -> tuple[RootSpec, ...]:
+        """The training roots (:func:`model.training_data.root_specs`)."""
+        return root_specs(self.data, self.data_weights, self.scene_labels)
 
     def model_overrides(self) -> dict[str, str]:
         """The ``build_model`` overrides given on the command line."""
@@ -161,15 +190,24 @@ def _targets(batch: GroundingBatch, model: torch.nn.Module, device: torch.device
     ).to(device)
 
 
-def init_from(model: torch.nn.Module, path: str) -> int:
+SCENE_MODULES = ("lidar.", "radar.", "fusion.", "neck.", "head.")
+"""Parameter-name prefixes of the scene encoder and detector (what ``--init-detector`` copies)."""
+
+
+def init_from(model: torch.nn.Module, path: str, prefixes: tuple[str, ...] = ()) -> int:
     """Copy every weight of the checkpoint at ``path`` whose name and shape match ``model``'s
     (e.g. the sensor branches, fusion, neck and head of a paper-path checkpoint into a referent
-    model); returns how many tensors were copied."""
+    model), only names starting with one of ``prefixes`` when given; returns how many tensors
+    were copied."""
     from model.checkpoint import read_checkpoint
 
     state = read_checkpoint(path)["state_dict"]
     own = model.state_dict()
-    same = {k: v for k, v in state.items() if k in own and own[k].shape == v.shape}
+    same = {
+        k: v
+        for k, v in state.items()
+        if k in own and own[k].shape == v.shape and (not prefixes or k.startswith(prefixes))
+    }
     if not same:
         raise TrainingError(f"{path}: no weight matches this model's names and shapes")
     model.load_state_dict(same, strict=False)
@@ -206,17 +244,28 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
         device = torch.device("cuda", int(os.environ.get("LOCAL_RANK", 0)))
         torch.cuda.set_device(device)
     torch.manual_seed(cfg.seed + rank)
-    root = Talk2RadarRoot(cfg.data, radar=None if cfg.radar_folder == "none" else cfg.radar_folder)
+    radar_folder = None if cfg.radar_folder == "none" else cfg.radar_folder
+    specs = cfg.roots()
+    root = Talk2RadarRoot(specs[0].path, radar=radar_folder, sidecar=specs[0].scene_labels is None)
     augment = AugmentConfig(flip_probability=cfg.flip_probability)
     referent = cfg.grounding == "referent"
-    dataset: GroundingDataset | FrameDataset
+    dataset: GroundingDataset | MixedFrames
+
+    def frames_of(spec: RootSpec, **kwargs: object) -> FrameDataset:
+        frames = frame_dataset(spec, cfg.train_split, **kwargs)
+        if cfg.freeze_scene and cfg.scene_limit:
+            frames.limit(cfg.scene_limit)  # the cached scenes (see below)
+        return frames
+
     if referent:
         if world > 1:
             raise TrainingError("the referent path trains in one process (no torchrun yet)")
         sensors = SensorAugment() if cfg.sensor_augment else None
-        dataset = FrameDataset(root, cfg.train_split, augment, sensors, seed=cfg.seed)
-        if cfg.freeze_scene and cfg.scene_limit:
-            dataset.ids = dataset.ids[: cfg.scene_limit]  # the cached scenes (see below)
+        dataset = MixedFrames(
+            [frames_of(spec, augment=augment, sensors=sensors, seed=cfg.seed) for spec in specs],
+            [spec.weight for spec in specs],
+            seed=cfg.seed,
+        )
     else:
         dataset = GroundingDataset(root, cfg.train_split, augment=augment, seed=cfg.seed)
     referent_cfg = ReferentTrainConfig(prompts_per_scene=cfg.prompts_per_scene)
@@ -237,6 +286,7 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
             "prompts_per_scene",
             "bank_prompts",
             "init",
+            "init_detector",
         }
         now = asdict(cfg)
         changed = sorted(k for k, v in saved["config"].items() if k not in free and now.get(k) != v)
@@ -250,6 +300,13 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
         if cfg.init:
             copied = init_from(model, cfg.init)
             print(f"initialised {copied} weight tensors from {cfg.init}", file=sys.stderr)
+        if cfg.init_detector:
+            copied = init_from(model, cfg.init_detector, SCENE_MODULES)
+            print(
+                f"initialised the scene encoder and detector ({copied} tensors) from "
+                f"{cfg.init_detector}; the referent stage starts from scratch",
+                file=sys.stderr,
+            )
         saved = None
     model.to(device)
     cached = None
@@ -259,16 +316,13 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
             p.requires_grad_(name.startswith("referent."))
         if cfg.text_encoder not in (None, "minilm"):
             raise TrainingError("--freeze-scene banks frozen MiniLM prompt features: use minilm")
-        scenes = FrameDataset(root, cfg.train_split)
-        if cfg.scene_limit:
-            scenes.ids = scenes.ids[: cfg.scene_limit]
-        cached, bank = cache_scenes(
-            model,
-            scenes,
-            cfg.bank_prompts,
-            seed=cfg.seed,
-            progress=rank == 0,
-        )
+        cached, bank = [], TextBank({})
+        for spec in specs:
+            part, part_bank = cache_scenes(
+                model, frames_of(spec), cfg.bank_prompts, seed=cfg.seed, progress=rank == 0
+            )
+            cached += part
+            bank.entries.update(part_bank.entries)
     params = [p for p in model.parameters() if p.requires_grad]
     optimizer = torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay)
     if saved is not None:
@@ -287,7 +341,11 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
         out.mkdir(parents=True, exist_ok=True)
     metadata = {
         "train_config": asdict(cfg),
-        "data": {"root": str(Path(cfg.data).resolve()), "train_samples": len(dataset)},
+        "data": {
+            "root": str(Path(specs[0].path).resolve()),
+            "roots": [str(Path(spec.path).resolve()) for spec in specs],
+            "train_samples": len(dataset),
+        },
     }
 
     def checkpoint(best: bool) -> None:
@@ -328,7 +386,7 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
                 group["lr"] = cosine_lr(state.step, total_steps, cfg.lr, cfg.warmup_steps)
             if cached is not None:
                 step_rng = np.random.default_rng((cfg.seed, 7, state.step))
-                picked = [cached[i] for i in indices]
+                picked = [cached[dataset.resolve(i)] for i in indices]
                 ref = cached_referent_step(model, picked, bank, step_rng, referent_cfg)
                 terms, total = ref.detection, ref.total
                 extra = {"bce": ref.bce.item(), "listwise": ref.listwise.item()}
@@ -404,7 +462,28 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
 def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     """Parse the command line into a :class:`TrainConfig` and the resume flag."""
     p = argparse.ArgumentParser(prog="python -m model.train", description=__doc__.split("\n")[0])
-    p.add_argument("--data", required=True, help="Talk2Radar root")
+    p.add_argument(
+        "--data",
+        required=True,
+        action="append",
+        help="Talk2Radar root; give it several times to train on several roots at once",
+    )
+    p.add_argument(
+        "--data-weight",
+        type=float,
+        action="append",
+        default=[],
+        help="referent path: times each frame of the matching --data root (in order) is seen "
+        "per epoch (default 1)",
+    )
+    p.add_argument(
+        "--scene-labels",
+        action="append",
+        default=[],
+        help="referent path: the View-of-Delft root whose label_2 lists every object of the "
+        "matching --data root's frames (in order; 'none' for a root without); such a root trains "
+        "on its labels and prompts only, never a sidecar",
+    )
     p.add_argument("--out", required=True, help="run folder, e.g. runs/NAME")
     p.add_argument("--preset", default="small", choices=["small", "paper"])
     p.add_argument("--epochs", type=int, default=20)
@@ -428,6 +507,11 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     )
     p.add_argument(
         "--init", help="copy matching weights from this checkpoint before training (new runs)"
+    )
+    p.add_argument(
+        "--init-detector",
+        help="copy only the scene encoder and detector from this checkpoint; the referent stage "
+        "starts from scratch (new runs)",
     )
     p.add_argument(
         "--prompts-per-scene",
@@ -485,7 +569,10 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     if a.threads:
         torch.set_num_threads(a.threads)
     cfg = TrainConfig(
-        data=a.data,
+        data=tuple(a.data),
+        data_weights=tuple(a.data_weight),
+        scene_labels=tuple(a.scene_labels),
+        init_detector=a.init_detector,
         out=a.out,
         preset=a.preset,
         epochs=a.epochs,

@@ -136,10 +136,14 @@ class Talk2RadarRoot:
         path: The root folder (containing ``lidar/`` and a radar tree).
         radar: Radar tree to read (``radar_5frames``, ``radar_3frames``, ``radar``), ``"auto"``
             for the first present in that order, or None to read no radar (empty ``(0, 7)``).
+        sidecar: Whether to read Talk2PC's ``meta/`` sidecars. False: nothing under ``meta/`` is
+            ever touched and :attr:`Sample.meta` is None, as on a real release (training and
+            evaluation on labels alone).
     """
 
-    def __init__(self, path: str | Path, radar: str | None = "auto") -> None:
+    def __init__(self, path: str | Path, radar: str | None = "auto", sidecar: bool = True) -> None:
         self.path = Path(path)
+        self.sidecar = sidecar
         self.lidar_dir = self.path / LIDAR_FOLDER
         if not self.lidar_dir.is_dir():
             raise RootError(f"{self.path}: not a Talk2Radar root (no {LIDAR_FOLDER}/ folder)")
@@ -216,6 +220,8 @@ class Talk2RadarRoot:
         Raises:
             RootError: the sidecar is unreadable, not UTF-8, not JSON or not a sidecar object.
         """
+        if not self.sidecar:
+            return None
         path = meta_file(self.path, format_id(sample_id))
         if not path.exists() and not path.is_symlink():
             return None
@@ -225,6 +231,34 @@ class Talk2RadarRoot:
         except (json.JSONDecodeError, RecursionError) as exc:
             raise RootError(f"{path}: invalid JSON: {exc}") from exc
         return SampleMeta.from_json(data, source=str(path))
+
+    def frame_key(self, sample_id: str | int) -> tuple[object, ...]:
+        """The identity of a sample's frame: ``(device, inode)`` of its LiDAR and radar point files
+        and of both calibrations (and the radar tree read). This is the one definition of "the
+        same frame" (training groups, prediction's scene cache, class prompts): samples of one
+        synthetic world, or annotated from one source frame, share these files as hard links; a
+        release's frames are each their own. It reads sensor files' metadata only, never a
+        sidecar; a copied root without hard links merely loses the sharing."""
+        sid = format_id(sample_id)
+        files = [
+            sample_file(self.lidar_dir, VELODYNE, sid),
+            sample_file(self.lidar_dir, CALIB, sid),
+        ]
+        if self.radar_dir is not None:
+            files += [
+                sample_file(self.radar_dir, VELODYNE, sid),
+                sample_file(self.radar_dir, CALIB, sid),
+            ]
+        key: list[object] = [self.radar_folder]
+        for path in files:
+            try:
+                stat = path.stat()
+            except OSError as exc:
+                raise RootError(
+                    f"{path}: cannot read the sensor file of sample {sid}: {exc}"
+                ) from exc
+            key.append((stat.st_dev, stat.st_ino))
+        return tuple(key)
 
     def image_path(self, sample_id: str | int) -> Path | None:
         """The camera image of a sample (``training/image_2/<id>.jpg``, or ``.png``, in the LiDAR
@@ -237,6 +271,13 @@ class Talk2RadarRoot:
                 if path.exists() or path.is_symlink():
                     return path  # something is there: read_image says what is wrong with it
         return None
+
+    def load_referents(self, sample_id: str | int) -> tuple[np.ndarray, tuple[str, ...]]:
+        """The metric-class boxes ``(K, 7)`` (LiDAR frame) and class names of a sample's
+        ``label_2``, without reading its point clouds."""
+        sid = format_id(sample_id)
+        calib = read_calib(self._file(self.lidar_dir, CALIB, sid))
+        return labels_to_boxes(read_label_file(self._file(self.lidar_dir, LABEL, sid)), calib)
 
     def load(self, sample_id: str | int) -> Sample:
         """Load one sample; every error names the offending file."""
