@@ -8,6 +8,8 @@
     <root>/lidar/training/label_2/<id>.txt        the referred objects
     <root>/lidar/training/prompt/<id>.txt         the prompt
     <root>/lidar/training/image_2/<id>.jpg        camera image (or .png), optional
+    <root>/lidar/training/pose/<id>.json          the ego pose, optional (View-of-Delft's three
+                                                  JSON lines, :mod:`scenes.poses`)
     <root>/radar_5frames/...                      the same folders, radar points and calibration
                                                   (or radar_3frames/, radar/: one radar tree)
     <root>/meta/<id>.json                         Talk2PC sidecar, optional
@@ -41,8 +43,16 @@ CALIB = "calib"
 LABEL = "label_2"
 PROMPT = "prompt"
 IMAGE = "image_2"
+POSE = "pose"
 
-FOLDER_SUFFIX = {VELODYNE: ".bin", CALIB: ".txt", LABEL: ".txt", PROMPT: ".txt", IMAGE: ".jpg"}
+FOLDER_SUFFIX = {
+    VELODYNE: ".bin",
+    CALIB: ".txt",
+    LABEL: ".txt",
+    PROMPT: ".txt",
+    IMAGE: ".jpg",
+    POSE: ".json",
+}
 """The file suffix of each sample folder (images may also be ``.png``: :data:`IMAGE_SUFFIXES`)."""
 IMAGE_SUFFIXES = (".jpg", ".png")
 """Image suffixes a root may use, in the order readers look for them (VoD uses ``.jpg``)."""
@@ -52,6 +62,7 @@ SAMPLE_FILES: tuple[tuple[str, str], ...] = (
     (LABEL, ".txt"),
     (PROMPT, ".txt"),
     *((IMAGE, suffix) for suffix in IMAGE_SUFFIXES),
+    (POSE, ".json"),
 )
 """``(folder, suffix)`` of every file a sample may have in a tree."""
 SAMPLE_FOLDERS = tuple(dict.fromkeys(folder for folder, _ in SAMPLE_FILES))
@@ -130,6 +141,7 @@ __all__ = [
     "LABEL",
     "LIDAR_FOLDER",
     "META",
+    "POSE",
     "PROMPT",
     "RADAR_FOLDERS",
     "RADAR_FOLDER_OF_SCANS",

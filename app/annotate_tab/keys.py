@@ -52,6 +52,7 @@ class Key:
 
 
 PLACE, BOXES, SENTENCE, PAIR = "Placing", "The selected box", "The sentence", "The pair"
+SEQUENCE = "Sequences (splits with pose files)"
 
 
 def _keys() -> tuple[Key, ...]:
@@ -92,6 +93,10 @@ def _keys() -> tuple[Key, ...]:
         Key("redo", "Z", "cmd/ctrl+shift", "Redo", "Ctrl/Cmd+Shift+Z", PAIR),
         Key("new_pair", "delete", "shift", "New pair (discard the draft)", "Shift+Delete", PAIR),
         Key("help", "H", None, "Show the Annotate keys", "H", PAIR),
+        Key("play", "space", None, "Play / pause the drive", "Space", SEQUENCE),
+        Key("drive_previous", "pageup", None, "The drive's previous frame", "Page Up", SEQUENCE),
+        Key("drive_next", "pagedown", None, "The drive's next frame", "Page Down", SEQUENCE),
+        Key("carry", "T", None, "Carry the pair to the next frame", "T", SEQUENCE),
     ]
     return tuple(out)
 

@@ -80,6 +80,7 @@ class PairActions:
             "client %s: saved pair %s v%d", p.session.client_id, result.sample_id, result.version
         )
         with p.session.lock:
+            p.last_pair = (draft, frame)
             p.last_saved = f"pair {result.sample_id} ({where}) in {', '.join(result.record.splits)}"
             p.editor.reset()
             p.selected = None

@@ -139,6 +139,9 @@ class AnnotationPanel:
         """The draft's last validation (what *Save pair*'s state shows)."""
         self.last_saved: str | None = None
         """What this browser's last save wrote, shown in the status line."""
+        self.last_pair: tuple[Draft, DraftFrame] | None = None
+        """The draft this browser saved last and its frame (what *Carry to next frame* carries
+        once the draft was emptied by the save)."""
         self._shown: dict[int, object] = {}
         """The value the server last wrote into each edit widget (by ``id``), see :meth:`_show`."""
         self._evidence: tuple[DraftFrame, tuple[object, ...], tuple[BoxEvidence, ...]] | None

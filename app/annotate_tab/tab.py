@@ -21,6 +21,7 @@ from app.annotate_tab.keys import (
 )
 from app.annotate_tab.pairs import PairActions
 from app.annotate_tab.panel import AnnotationPanel
+from app.annotate_tab.sequence import SequencePanel
 from app.annotate_tab.widgets import NEW_PAIR, REDO, UNDO
 from app.session import ClientSession
 from scenes.actors import CLASSES
@@ -31,12 +32,15 @@ def build_annotation_tab(session: ClientSession, hub: AnnotationHub) -> Annotati
     panel = AnnotationPanel(session, hub)
     edits = DraftEdits(panel)
     pairs = PairActions(panel)
+    sequence = SequencePanel(panel)
     _wire(panel, edits, pairs)
-    _register_keys(panel, edits, pairs)
+    _register_keys(panel, edits, pairs, sequence)
     hub.register(panel)
     panel.refresh_pairs()
     panel.refresh()
+    sequence.refresh()
     session.add_frame_listener(panel.on_frame)
+    session.add_frame_listener(lambda _session: sequence.refresh())
     session.add_answer_listener(panel.on_answer)
     return panel
 
@@ -111,7 +115,9 @@ def _wire(panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions) -> None
             panel.guarded(action)
 
 
-def _register_keys(panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions) -> None:
+def _register_keys(
+    panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions, sequence: SequencePanel
+) -> None:
     """The hotkeys of :data:`~app.annotate_tab.keys.KEYS`, the page-side key P and the help."""
     gui = panel.session.client.gui
     far, step = MOVE_FAR, MOVE_STEP
@@ -146,6 +152,10 @@ def _register_keys(panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions
         "redo": edits.redo,
         "new_pair": edits.new_pair,
         "help": lambda: show_help(gui),
+        "play": sequence.toggle_play,
+        "drive_previous": lambda: sequence.step(-1),
+        "drive_next": lambda: sequence.step(1),
+        "carry": sequence.carry,
     }
     for i, cls in enumerate(CLASSES):
         actions[f"new_class_{i}"] = lambda cls=cls: edits.set_new_class(cls)
