@@ -62,7 +62,14 @@ from scenes.actors import CLASSES
 from scenes.calib import read_calib
 from scenes.durable import replace_files
 from scenes.kitti import ObjectLabel, labels_to_boxes
-from scenes.layout import CALIB, RADAR_FOLDERS, format_id, radar_folders_in, sample_file
+from scenes.layout import (
+    CALIB,
+    RADAR_FOLDERS,
+    format_id,
+    manifest_file,
+    radar_folders_in,
+    sample_file,
+)
 from scenes.root import Sample, Talk2RadarRoot
 from scenes.writer import SampleText, Talk2RadarWriter, sample_text
 
@@ -131,7 +138,7 @@ class AnnotationStore:
         self.writer = Talk2RadarWriter(self.path, radar_folder)
         self.lidar_dir, self.radar_dir = self.writer.trees
         self.annotations_dir = self.path / "annotations"
-        self.manifest_path = self.annotations_dir / "manifest.jsonl"
+        self.manifest_path = manifest_file(self.path)
         self.journal_dir = self.annotations_dir / "pending"
         self.unresolved_dir = self.annotations_dir / "unresolved"
         self.validation = validation if validation is not None else ValidationConfig()

@@ -13,6 +13,8 @@
     <root>/radar_5frames/...                      the same folders, radar points and calibration
                                                   (or radar_3frames/, radar/: one radar tree)
     <root>/meta/<id>.json                         Talk2PC sidecar, optional
+    <root>/annotations/manifest.jsonl             Talk2PC: the annotation store's log of every
+                                                  save, edit, deletion and review (annotate/)
     <root>/sources/<frame>/lidar.bin, radar.bin, lidar_calib.txt, radar_calib.txt, image.jpg
                                                   Talk2PC: a frame's sensor files, hard-linked
                                                   into the samples made from it
@@ -36,6 +38,8 @@ RADAR_FOLDER_OF_SCANS = {1: "radar", 3: "radar_3frames", 5: "radar_5frames"}
 SAMPLES = "training"
 IMAGE_SETS = "ImageSets"
 META = "meta"
+ANNOTATIONS = "annotations"
+MANIFEST = "manifest.jsonl"
 SOURCES = "sources"
 
 VELODYNE = "velodyne"
@@ -122,6 +126,11 @@ def meta_file(root: Path, sample_id: str) -> Path:
     return meta_dir(root) / f"{sample_id}.json"
 
 
+def manifest_file(root: Path) -> Path:
+    """The annotation manifest ``<root>/annotations/manifest.jsonl``."""
+    return root / ANNOTATIONS / MANIFEST
+
+
 def source_dir(root: Path, frame_key: str) -> Path:
     """``<root>/sources/<frame_key>``: one frame's shared sensor files."""
     return root / SOURCES / frame_key
@@ -133,6 +142,7 @@ def radar_folders_in(root: Path) -> list[str]:
 
 
 __all__ = [
+    "ANNOTATIONS",
     "CALIB",
     "FOLDER_SUFFIX",
     "IMAGE",
@@ -140,6 +150,7 @@ __all__ = [
     "IMAGE_SUFFIXES",
     "LABEL",
     "LIDAR_FOLDER",
+    "MANIFEST",
     "META",
     "POSE",
     "PROMPT",
@@ -158,6 +169,7 @@ __all__ = [
     "VELODYNE",
     "RootError",
     "format_id",
+    "manifest_file",
     "meta_dir",
     "meta_file",
     "radar_folders_in",

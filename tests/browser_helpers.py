@@ -94,3 +94,10 @@ def open_annotate(page, app, timeout_s: float = 40.0):
     panel = next(p for p in app.annotations.panels() if p.session is session)
     poll(lambda: panel.frame is not None, timeout_s, "the draft's frame")
     return panel
+
+
+def labelled_field(page, label: str):
+    """The text field (``input`` or ``textarea``) of the viser control labelled ``label``
+    (viser's ``<label for=...>`` does not name a text field's id, so ``get_by_label`` misses)."""
+    row = f"//label[normalize-space()='{label}']/ancestor::div[contains(@class,'mantine-Flex-root')][1]"
+    return page.locator(f"xpath={row}").locator("input, textarea").first

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from scenes.layout import LABEL, LIDAR_FOLDER, sample_file
-from tests.browser_helpers import CHROMIUM_ARGS, open_annotate, pixel_of, poll
+from tests.browser_helpers import CHROMIUM_ARGS, labelled_field, open_annotate, pixel_of, poll
 
 TIMEOUT = 60.0
 
@@ -235,3 +235,54 @@ def test_browser_plays_a_sequence_and_carries_a_pair_to_the_next_frame(
             second = max(store.pairs(), key=lambda x: x.sample_id)
             saved = Talk2RadarRoot(store.path).load(second.sample_id)
             np.testing.assert_allclose(saved.boxes[0, :2], carried[:2], atol=1e-4)
+
+
+@pytest.mark.browser
+def test_browser_reviews_the_pairs_of_a_split(
+    tmp_path, chromium, write_tiny_root, torch_threads, serve_app
+) -> None:
+    """Walk the saved pairs of a split: approve the first (Y), fix the second (relabel it with
+    C, then Shift+F); the manifest records both verdicts with the reviewer's name, and the
+    split's approved ids are both pairs (the fix's new version)."""
+    from playwright.sync_api import sync_playwright
+
+    from annotate import AnnotationStore, Draft, SourceFrame, default_box
+    from model import build_model
+    from scenes.reviews import approved_ids, read_pair_states
+
+    root = write_tiny_root(tmp_path / "root", frames=2)
+    store = AnnotationStore(root)
+    saved = []
+    for x in (12.0, 20.0):
+        draft = Draft().add_box(default_box("Car", x, 2.0), "Car").set_prompt(f"the car at {x}")
+        saved.append(store.save(draft, SourceFrame.from_root(root, 0), annotator="ada").sample_id)
+    with torch_threads(1):
+        model = build_model("small", text_encoder="gru").eval()
+        with serve_app(root, model, warm_up=False) as app, sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=chromium, headless=True, args=CHROMIUM_ARGS)
+            try:
+                page = browser.new_page(viewport={"width": 1400, "height": 860})
+                panel = open_annotate(page, app, TIMEOUT)
+                labelled_field(page, "Annotator").fill("rita")
+                poll(lambda: panel.w.annotator.value == "rita", TIMEOUT, "the reviewer's name")
+                page.get_by_text("Review", exact=True).first.click()  # open the folder
+                page.get_by_role("button", name="Next").last.click()
+                poll(lambda: panel.draft.sample_id == saved[0], TIMEOUT, "the first pair")
+                assert panel.draft.prompt == "the car at 12.0"
+                page.get_by_text("Reviewing").wait_for(timeout=TIMEOUT * 1000)
+                keys = page.keyboard
+                page.get_by_text("Reviewing").click()  # the focus off the name field
+                keys.press("y")
+                poll(lambda: panel.draft.sample_id == saved[1], TIMEOUT, "the next pair")
+                keys.press("c")  # the opened pair's box is selected: Car -> Pedestrian
+                poll(lambda: panel.draft.classes == ("Pedestrian",), TIMEOUT, "the fix")
+                keys.press("Shift+F")
+                poll(lambda: store.version(saved[1]) == 2, TIMEOUT, "the fix saved")
+                poll(lambda: len(approved_ids(root, "train")) == 2, TIMEOUT, "the verdicts")
+            finally:
+                browser.close()
+            states = read_pair_states(root)
+            assert [states[s].review.verdict for s in saved] == ["approved", "fixed"]
+            assert {states[s].review.reviewer for s in saved} == {"rita"}
+            assert approved_ids(root, "train") == tuple(saved)
+            assert store.open(saved[1]).classes == ("Pedestrian",)

@@ -58,6 +58,10 @@ Using it (a one-box pair: a click and the sentence; see docs/ANNOTATION.md):
 - *Saved pairs* lists the pairs of the store (re-read on every page load); *Open pair* reopens
   one into the draft (saving then writes a new version), *Delete pair* removes it (after a
   confirmation).
+- *Sequence* (:mod:`~app.annotate_tab.sequence`, on splits with pose files): play a drive,
+  step through it, and *Carry to next frame* (:mod:`annotate.carry`).
+- *Review* (:mod:`~app.annotate_tab.review`): walk a split's saved pairs; approve, reject, or
+  save a fix, each a ``review`` line of the manifest (:mod:`annotate.review`).
 - The draft is drawn into the camera panel too (its ``draft`` layer,
   :func:`~app.annotate_tab.view.draft_layer`).
 

@@ -53,6 +53,7 @@ class Key:
 
 PLACE, BOXES, SENTENCE, PAIR = "Placing", "The selected box", "The sentence", "The pair"
 SEQUENCE = "Sequences (splits with pose files)"
+REVIEW = "Review"
 
 
 def _keys() -> tuple[Key, ...]:
@@ -97,6 +98,11 @@ def _keys() -> tuple[Key, ...]:
         Key("drive_previous", "pageup", None, "The drive's previous frame", "Page Up", SEQUENCE),
         Key("drive_next", "pagedown", None, "The drive's next frame", "Page Down", SEQUENCE),
         Key("carry", "T", None, "Carry the pair to the next frame", "T", SEQUENCE),
+        Key("review_next", "J", None, "Review the next pair", "J", REVIEW),
+        Key("review_previous", "K", None, "Review the previous pair", "K", REVIEW),
+        Key("approve", "Y", None, "Approve the pair under review", "Y", REVIEW),
+        Key("reject", "X", None, "Reject the pair under review", "X", REVIEW),
+        Key("fix", "F", "shift", "Save the fix of the pair under review", "Shift+F", REVIEW),
     ]
     return tuple(out)
 

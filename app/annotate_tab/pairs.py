@@ -10,7 +10,14 @@ from __future__ import annotations
 import logging
 from pathlib import Path
 
-from annotate import ConflictError, SourceFrame, StoreError, ValidationError, is_pristine
+from annotate import (
+    ConflictError,
+    SaveResult,
+    SourceFrame,
+    StoreError,
+    ValidationError,
+    is_pristine,
+)
 from app.annotate_tab.formatting import option_pair_id
 from app.annotate_tab.panel import AnnotationPanel, DraftFrame
 from app.scene_view import estimate_ground_z
@@ -40,9 +47,10 @@ class PairActions:
             reasons = report.messages() or [str(p.hub.error)]
             p.notify("Not saved yet", "\n".join(reasons))
 
-    def save(self) -> None:
+    def save(self) -> SaveResult | None:
         """Save the draft (a new pair, or a new version of the reopened pair); the panel's
-        status line then names the pair written, and the box fields are cleared."""
+        status line then names the pair written, and the box fields are cleared. Returns what
+        the store saved (None: nothing, a notification says why)."""
         p = self.panel
         store = p.store
         with p.session.lock:
@@ -86,6 +94,7 @@ class PairActions:
             p.selected = None
             p.bind_to_screen()
         self._after_store_change()
+        return result
 
     def _after_store_change(self) -> None:
         p = self.panel

@@ -21,6 +21,7 @@ from app.annotate_tab.keys import (
 )
 from app.annotate_tab.pairs import PairActions
 from app.annotate_tab.panel import AnnotationPanel
+from app.annotate_tab.review import ReviewPanel
 from app.annotate_tab.sequence import SequencePanel
 from app.annotate_tab.widgets import NEW_PAIR, REDO, UNDO
 from app.session import ClientSession
@@ -33,8 +34,9 @@ def build_annotation_tab(session: ClientSession, hub: AnnotationHub) -> Annotati
     edits = DraftEdits(panel)
     pairs = PairActions(panel)
     sequence = SequencePanel(panel)
+    review = ReviewPanel(panel, pairs)
     _wire(panel, edits, pairs)
-    _register_keys(panel, edits, pairs, sequence)
+    _register_keys(panel, edits, pairs, sequence, review)
     hub.register(panel)
     panel.refresh_pairs()
     panel.refresh()
@@ -116,7 +118,11 @@ def _wire(panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions) -> None
 
 
 def _register_keys(
-    panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions, sequence: SequencePanel
+    panel: AnnotationPanel,
+    edits: DraftEdits,
+    pairs: PairActions,
+    sequence: SequencePanel,
+    review: ReviewPanel,
 ) -> None:
     """The hotkeys of :data:`~app.annotate_tab.keys.KEYS`, the page-side key P and the help."""
     gui = panel.session.client.gui
@@ -156,6 +162,11 @@ def _register_keys(
         "drive_previous": lambda: sequence.step(-1),
         "drive_next": lambda: sequence.step(1),
         "carry": sequence.carry,
+        "review_next": lambda: review.step(1),
+        "review_previous": lambda: review.step(-1),
+        "approve": lambda: review.verdict("approved"),
+        "reject": lambda: review.verdict("rejected"),
+        "fix": review.save_fix,
     }
     for i, cls in enumerate(CLASSES):
         actions[f"new_class_{i}"] = lambda cls=cls: edits.set_new_class(cls)
