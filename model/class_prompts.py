@@ -57,10 +57,10 @@ from model.class_prompt_counts import (
     PromptCount,
     bev_range,
     count_prompt,
-    in_camera_view,
     other_label_boxes,
 )
 from scenes.calib import IMAGE_SIZE
+from scenes.projection import in_camera_view
 from scenes.root import LIDAR_FOLDER, RADAR_FOLDERS, RootError, Sample, Talk2RadarRoot
 
 FOVS = ("camera", "all")

@@ -26,6 +26,7 @@ boxes and scores, misses and false detections included.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
@@ -34,6 +35,7 @@ import torch
 from torch import Tensor
 
 from model.decode import decode
+from model.grid import BevGrid
 from model.grounder import SceneCandidates, stack_candidates
 from model.labelled import anchor_scores
 from model.losses import LossTerms, grounding_loss
@@ -49,7 +51,8 @@ from model.text import TextFeatures
 from model.tpcnet import TPCNet, as_points
 from scenes.actors import CLASSES, Actor
 from scenes.boxes import match_by_centre
-from scenes.frame_dataset import FrameDataset, FrameItem
+from scenes.calib import Calibration
+from scenes.frame_dataset import AnnotatedRegion, FrameDataset, FrameItem
 from scenes.prompts import Prompt, PromptConfig, generate_prompts
 
 MATCH_DISTANCE = {"Car": 2.0, "Pedestrian": 1.0, "Cyclist": 1.2}
@@ -254,12 +257,29 @@ def detection_targets(
     if all(f.region is None for f in frames):
         return targets
     h, w = model.head_grid.shape
-    centres = grid_cell_centres(model.head_grid)
     ignore = np.zeros((len(frames), 1, h, w), dtype=bool)
     for b, frame in enumerate(frames):
         if frame.region is not None:
-            ignore[b, 0] = ~frame.region.contains(centres).reshape(h, w)
+            region = frame.region
+            calib = tuple(
+                (m.tobytes(), m.shape)
+                for m in (region.calib.P2, region.calib.R0_rect, region.calib.Tr_velo_to_cam)
+            )
+            ignore[b, 0] = _outside(model.head_grid, calib, region.image_size, region.mirrored)
     return replace(targets, ignore=torch.from_numpy(ignore))
+
+
+@functools.lru_cache(maxsize=64)
+def _outside(
+    grid: BevGrid, calib: tuple, image_size: tuple[int, int], mirrored: bool
+) -> np.ndarray:
+    """``(H, W)`` bool: head-grid cells outside the annotated region of a calibration (given as
+    the bytes and shapes of ``P2``, ``R0_rect``, ``Tr_velo_to_cam``); a release's frames share a
+    handful of calibrations, so this is computed once per calibration and flip."""
+    p2, r0, tr = (np.frombuffer(data, dtype=np.float64).reshape(shape) for data, shape in calib)
+    region = AnnotatedRegion(Calibration(p2, r0, tr), image_size, mirrored)
+    h, w = grid.shape
+    return ~region.contains(grid_cell_centres(grid)).reshape(h, w)
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,7 @@ access, and the 2D boxes of ``label_2`` are clipped to its size (:attr:`Sample.i
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -23,6 +24,7 @@ from scenes.imagefile import label_image_size, read_image, warn_principal_point
 from scenes.kitti import ObjectLabel, labels_to_boxes, read_label_file
 from scenes.layout import (
     CALIB,
+    FOLDER_SUFFIX,
     IMAGE,
     IMAGE_SUFFIXES,
     LABEL,
@@ -45,6 +47,7 @@ from scenes.textfile import read_text_file
 from scenes.writer import LABEL_DECIMALS, SampleText, SensorFiles, Talk2RadarWriter, sample_text
 
 __all__ = [  # with the writer, the sidecar and the layout names readers use, re-exported
+    "ALL_FRAMES",
     "LABEL_DECIMALS",
     "LIDAR_FOLDER",
     "RADAR_FOLDERS",
@@ -58,6 +61,9 @@ __all__ = [  # with the writer, the sidecar and the layout names readers use, re
     "format_id",
     "sample_text",
 ]
+
+ALL_FRAMES = "all"
+"""The split name :meth:`Talk2RadarRoot.splits` gives a root without an ImageSets folder."""
 
 
 @dataclass(frozen=True)
@@ -157,21 +163,31 @@ class Talk2RadarRoot:
         self.radar_folder = radar
         self.radar_dir = self.path / radar if radar else None
         self._has_prompts = sample_dir(self.lidar_dir, PROMPT).is_dir()
+        self._all_frames_noted = False
 
     def __repr__(self) -> str:
         return f"Talk2RadarRoot({str(self.path)!r}, radar={self.radar_folder!r})"
 
     def splits(self) -> list[str]:
-        """Names of the ImageSets files present (e.g. ``['test', 'train', 'val']``)."""
+        """Names of the ImageSets files present (e.g. ``['test', 'train', 'val']``);
+        ``[ALL_FRAMES]`` for a root without an ImageSets folder (:meth:`ids`)."""
+        if not split_dir(self.lidar_dir).is_dir():
+            return [ALL_FRAMES]
         return sorted(p.stem for p in split_dir(self.lidar_dir).glob("*.txt"))
 
     def ids(self, split: str) -> list[str]:
         """The 5-digit ids listed in ``lidar/ImageSets/<split>.txt`` (blank lines skipped).
 
+        A root without an ``ImageSets`` folder (the View-of-Delft devkit's example set) serves
+        every frame of ``lidar/training/velodyne/`` as any split, with a one-line notice
+        (``UserWarning``, once per root object).
+
         Raises:
             RootError: the list is missing or unreadable, a line is not an integer, or an id is
                 listed twice (``2`` and ``00002`` are the same id); the message names file and line.
         """
+        if not split_dir(self.lidar_dir).is_dir():
+            return self._all_frames(split)
         path = split_file(self.lidar_dir, split)
         if not _is_file(path):
             raise RootError(f"{path}: split {split!r} not found (present: {self.splits()})")
@@ -192,6 +208,28 @@ class Talk2RadarRoot:
                 first[sid] = lineno
                 out.append(sid)
         return out
+
+    def _all_frames(self, split: str) -> list[str]:
+        """Every frame of ``lidar/training/velodyne/`` (sorted), for a root without ImageSets."""
+        folder = sample_dir(self.lidar_dir, VELODYNE)
+        ids = []
+        for path in sorted(folder.glob(f"*{FOLDER_SUFFIX[VELODYNE]}")):
+            try:
+                sid = format_id(path.stem)
+            except RootError as exc:
+                raise RootError(f"{path}: not named by a frame id ({exc})") from exc
+            if sid != path.stem:
+                raise RootError(f"{path}: not named by a 5-digit frame id (expected {sid})")
+            ids.append(sid)
+        if not self._all_frames_noted:
+            self._all_frames_noted = True
+            warnings.warn(
+                f"{split_dir(self.lidar_dir)}: no ImageSets folder; serving all {len(ids)} frames "
+                f"of {folder} as split {split!r} (and as any other split)",
+                UserWarning,
+                stacklevel=3,
+            )
+        return ids
 
     def _file(self, tree: Path, folder: str, sample_id: str) -> Path:
         path = sample_file(tree, folder, sample_id)

@@ -42,8 +42,8 @@ def test_class_index_is_case_insensitive():
 
 def test_fov_mask_is_the_camera_wedge():
     calib = vod_lidar_calibration()
-    xy = np.array([[20.0, 0.0], [20.0, 40.0], [-5.0, 0.0], [5.0, -1.0]])
-    assert fov_mask(xy, calib, IMAGE_SIZE).tolist() == [True, False, False, True]
+    xy = np.array([[20.0, 0.0], [20.0, 40.0], [-5.0, 0.0], [5.0, -1.0], [60.0, 0.0]])
+    assert fov_mask(xy, calib, IMAGE_SIZE).tolist() == [True, False, False, True, False]
 
 
 def test_labelled_boxes_validate():
