@@ -17,6 +17,8 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 ARTIFACTS = REPO / "artifacts"
+PAGE_SIZE = (1400, 860)
+"""The browser tests' page size (CSS pixels): ``viewport={"width": 1400, "height": 860}``."""
 CHROMIUM_CANDIDATES = ("/usr/bin/chromium", "/usr/bin/chromium-browser")
 CHROMIUM_ARGS = [
     "--no-sandbox",
@@ -57,11 +59,14 @@ def poll(condition: Callable[[], object], timeout: float, what: str) -> None:
         time.sleep(0.05)
 
 
-def pixel_of(camera, point) -> tuple[float, float]:
+def pixel_of(camera, point, page_size: tuple[float, float] | None = None) -> tuple[float, float]:
     """Where a world point (LiDAR frame) appears on a browser's canvas (full-page canvas).
 
     viser's camera pose is ``T_world_camera`` in the OpenCV convention (+z forward, +y down) and
-    ``fov`` is the vertical field of view.
+    ``fov`` is the vertical field of view. The camera's ``image_width`` / ``image_height`` are the
+    render size, which the client may keep below the page's (its adaptive pixel ratio): with
+    ``page_size`` (the page's width and height in CSS pixels) the result is in the page's pixels,
+    where a mouse click goes.
     """
     w, x, y, z = camera.wxyz
     rotation = np.array(
@@ -73,10 +78,12 @@ def pixel_of(camera, point) -> tuple[float, float]:
     )
     p = rotation.T @ (np.asarray(point, dtype=np.float64) - np.asarray(camera.position))
     focal = camera.image_height / 2.0 / math.tan(camera.fov / 2.0)
-    return (
-        camera.image_width / 2.0 + focal * p[0] / p[2],
-        camera.image_height / 2.0 + focal * p[1] / p[2],
-    )
+    u = camera.image_width / 2.0 + focal * p[0] / p[2]
+    v = camera.image_height / 2.0 + focal * p[1] / p[2]
+    if page_size is not None:
+        u *= page_size[0] / camera.image_width
+        v *= page_size[1] / camera.image_height
+    return u, v
 
 
 def open_annotate(page, app, timeout_s: float = 40.0):

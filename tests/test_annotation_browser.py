@@ -12,7 +12,14 @@ import numpy as np
 import pytest
 
 from scenes.layout import LABEL, LIDAR_FOLDER, sample_file
-from tests.browser_helpers import CHROMIUM_ARGS, labelled_field, open_annotate, pixel_of, poll
+from tests.browser_helpers import (
+    CHROMIUM_ARGS,
+    PAGE_SIZE,
+    labelled_field,
+    open_annotate,
+    pixel_of,
+    poll,
+)
 
 TIMEOUT = 60.0
 
@@ -45,7 +52,7 @@ def test_browser_next_class_never_relabels_the_placed_box(
                 ground = panel.frame.ground_z
                 car = gt_box[:2] + np.array([2.0 * app.frame.index, 0.0])
                 camera = panel.session.client.camera
-                page.mouse.click(*pixel_of(camera, (car[0], car[1], ground)))
+                page.mouse.click(*pixel_of(camera, (car[0], car[1], ground), PAGE_SIZE))
                 poll(lambda: len(panel.draft.boxes) == 1, TIMEOUT, "the car")
                 assert panel.draft.classes == ("Car",) and panel.selected is not None
 
@@ -55,7 +62,7 @@ def test_browser_next_class_never_relabels_the_placed_box(
                 page.wait_for_timeout(300)  # any (wrong) relabel would have arrived by now
                 assert panel.draft.classes == ("Car",), "choosing the next class relabelled"
 
-                page.mouse.click(*pixel_of(camera, (10.0, -3.0, ground)))
+                page.mouse.click(*pixel_of(camera, (10.0, -3.0, ground), PAGE_SIZE))
                 poll(lambda: len(panel.draft.boxes) == 2, TIMEOUT, "the pedestrian")
                 assert panel.draft.classes == ("Car", "Pedestrian")
 
@@ -93,12 +100,12 @@ def test_browser_every_step_but_the_ground_click_from_the_keyboard(
                 ground = panel.frame.ground_z
                 car = gt_box[:2] + np.array([2.0 * app.frame.index, 0.0])
                 camera = panel.session.client.camera
-                page.mouse.click(*pixel_of(camera, (car[0] - 0.6, car[1] + 0.3, ground)))
+                page.mouse.click(*pixel_of(camera, (car[0] - 0.6, car[1] + 0.3, ground), PAGE_SIZE))
                 poll(lambda: len(panel.draft.boxes) == 1, TIMEOUT, "the car")
                 keys = page.keyboard
                 keys.press("2")
                 poll(lambda: panel.w.cls.value == "Pedestrian", TIMEOUT, "key 2")
-                page.mouse.click(*pixel_of(camera, (10.0, -3.0, ground)))
+                page.mouse.click(*pixel_of(camera, (10.0, -3.0, ground), PAGE_SIZE))
                 poll(lambda: len(panel.draft.boxes) == 2, TIMEOUT, "the pedestrian")
                 keys.press("c")
                 poll(lambda: panel.draft.classes[1] == "Cyclist", TIMEOUT, "key C")
@@ -210,7 +217,7 @@ def test_browser_plays_a_sequence_and_carries_a_pair_to_the_next_frame(
                 keys.press(cls)
                 poll(lambda: panel.w.cls.value == actor.cls, TIMEOUT, "the class")
                 camera = panel.session.client.camera
-                page.mouse.click(*pixel_of(camera, (actor.box[0], actor.box[1], ground)))
+                page.mouse.click(*pixel_of(camera, (actor.box[0], actor.box[1], ground), PAGE_SIZE))
                 poll(lambda: len(panel.draft.boxes) == 1, TIMEOUT, "the box")
                 placed = panel.draft.boxes[0].box
                 keys.press("f")

@@ -20,7 +20,7 @@ from app.annotate_tab import AnnotationPanel
 from app.annotate_tab.formatting import NO_BOX, option_index, option_pair_id, pair_option
 from app.annotate_tab.view import box_at, ground_hit, wxyz_to_yaw, yaw_to_wxyz
 from scenes.root import Talk2RadarRoot
-from tests.browser_helpers import pixel_of, poll
+from tests.browser_helpers import PAGE_SIZE, pixel_of, poll
 
 # ---------------------------------------------------------------------- pure helpers
 
@@ -445,7 +445,7 @@ def drive_annotation(
             start = time.perf_counter()
             for k, (x, y, fit) in enumerate(targets):
                 camera = panel.session.client.camera
-                page.mouse.click(*pixel_of(camera, (x, y, panel.frame.ground_z)))
+                page.mouse.click(*pixel_of(camera, (x, y, panel.frame.ground_z), PAGE_SIZE))
                 poll(lambda k=k: len(panel.draft.boxes) == k + 1, timeout_s, f"box {k + 1}")
                 if fit:
                     placed = panel.draft.boxes[k].box

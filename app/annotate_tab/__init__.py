@@ -58,6 +58,10 @@ Using it (a one-box pair: a click and the sentence; see docs/ANNOTATION.md):
 - *Saved pairs* lists the pairs of the store (re-read on every page load); *Open pair* reopens
   one into the draft (saving then writes a new version), *Delete pair* removes it (after a
   confirmation).
+- **Sentence first on labelled frames** (:mod:`~app.annotate_tab.referents`; a View-of-Delft
+  root, or ``--scene-labels``, with a referent-path model): typing the sentence picks its
+  referents among the frame's labelled boxes; a click on a labelled box toggles it; Enter saves
+  only a pick made for the sentence as it is.
 - *Sequence* (:mod:`~app.annotate_tab.sequence`, on splits with pose files): play a drive,
   step through it, and *Carry to next frame* (:mod:`annotate.carry`).
 - *Review* (:mod:`~app.annotate_tab.review`): walk a split's saved pairs; approve, reject, or

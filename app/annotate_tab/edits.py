@@ -28,16 +28,13 @@ from annotate import (
     proposals,
     scene_objects,
     suggest_prompt,
-    validate,
 )
 from app.annotate_tab.formatting import option_index, option_ready_index, placement_problem
 from app.annotate_tab.panel import AnnotationPanel, Part
+from app.annotate_tab.referents import ReferentPicker
 from app.annotate_tab.view import box_at, box_tag, ground_hit, screen_axes, wxyz_to_yaw
 from app.query_panel import submitted_prompt
 from scenes.actors import CLASSES
-
-PLACEMENT_FIELDS = (".position", ".image")
-"""Validation fields of a box that say it cannot be saved where it is."""
 
 
 class DraftEdits:
@@ -47,8 +44,9 @@ class DraftEdits:
         panel: The tab's state and drawing.
     """
 
-    def __init__(self, panel: AnnotationPanel) -> None:
+    def __init__(self, panel: AnnotationPanel, referents: ReferentPicker) -> None:
         self.panel = panel
+        self.referents = referents
         self._drag = 0
         """Gizmo drags so far: each drag is one undo step (its ``merge_key``)."""
         self._suggestions = 0
@@ -78,12 +76,23 @@ class DraftEdits:
                 return
             draft = p.editor.draft
             index = box_at(draft.box_array, *hit)
+            labelled = p.labelled()
+            if (
+                index is not None
+                and labelled is not None
+                and labelled.index_of(draft.boxes[index].box) is not None
+            ):  # a labelled box in the pair: a click toggles it out
+                self.referents.by_hand()
+                p.editor.delete_box(draft.boxes[index].box_id)
+                p.refresh(Part.DRAFT)
+                return
             if index is not None:
                 p.selected = draft.boxes[index].box_id
                 p.refresh(Part.SELECTION)
                 return
             ready = box_at(p.ready_boxes, *hit) if p.offers_ready() else None
             if ready is not None:
+                self.referents.by_hand()
                 self._add(p.ready_boxes[ready], p.ready_classes[ready], "ready-made box")
                 return
             cls = p.w.cls.value
@@ -94,8 +103,7 @@ class DraftEdits:
         (then say why). Holds the session's lock."""
         p = self.panel
         assert p.frame is not None
-        report = validate(Draft().add_box(box, cls), p.config(), p.frame.sample.calib)
-        problems = [i.message for i in report.errors if i.field.endswith(PLACEMENT_FIELDS)]
+        problems = p.placement_problems(box, cls)
         if problems:
             p.notify(f"No {what} placed there", placement_problem(problems) + ".")
             return
@@ -109,6 +117,7 @@ class DraftEdits:
             index = option_ready_index(p.w.ready.value)
             if p.frame is None or index is None or index >= len(p.ready_boxes):
                 return
+            self.referents.by_hand()
             self._add(p.ready_boxes[index], p.ready_classes[index], "ready-made box")
 
     async def on_gizmo(self, event: viser.TransformControlsEvent) -> None:
@@ -273,6 +282,8 @@ class DraftEdits:
                 p.accept_edit(p.w.prompt)
             p.editor.set_prompt(entered if entered is not None else value)
             p.refresh(Part.TEXT, skip=p.w.prompt)
+            if entered is None:
+                self.referents.typed()
             return entered is not None
 
     def set_nothing(self) -> None:
@@ -318,13 +329,33 @@ class DraftEdits:
         with p.session.lock:
             if p.selected is None:
                 return
+            self.referents.by_hand()
             p.editor.delete_box(p.selected)
             p.selected = None
             p.refresh(Part.DRAFT)
 
-    def use_predictions(self) -> None:
-        """Add the last answer's boxes on this frame to the draft (one undo step)."""
+    def pick_referents(self) -> None:
+        """Pick the sentence's referents among the frame's labelled boxes now (key L; *Use
+        predictions* on a labelled frame), and let typing pick again."""
         p = self.panel
+        if p.labelled() is None:
+            p.notify("No labelled boxes", "This frame has no labelled boxes to pick among.")
+            return
+        if not p.editor.draft.prompt.strip():
+            p.notify("Write the sentence first", "The referents are picked for the sentence.")
+            return
+        self.referents.auto = True
+        count = self.referents.pick()
+        if count is not None:
+            p.notify("Referents picked", f"{count} labelled box(es) for the sentence.", "green")
+
+    def use_predictions(self) -> None:
+        """Add the last answer's boxes on this frame to the draft (one undo step); on a frame
+        with labelled boxes, pick the sentence's referents among them instead."""
+        p = self.panel
+        if p.labelled() is not None:
+            self.pick_referents()
+            return
         with p.session.lock:
             answer = p.session.answer
             if answer is None:

@@ -63,7 +63,7 @@ def _keys() -> tuple[Key, ...]:
     ]
     out += [
         Key("add_ready", "A", None, "Add the chosen labelled object", "A", PLACE),
-        Key("use_predictions", "U", None, "Use predictions", "U", PLACE),
+        Key("use_predictions", "U", None, "Use predictions (labelled frames: pick)", "U", PLACE),
         Key("select_next", "N", None, "Select the next box", "N", BOXES),
         Key("select_previous", "N", "shift", "Select the previous box", "Shift+N", BOXES),
         Key("deselect", "escape", None, "Select no box", "Esc", BOXES),
@@ -88,6 +88,7 @@ def _keys() -> tuple[Key, ...]:
         Key("delete", "backspace", None, "Delete the selected box", "Backspace", BOXES),
         Key("focus_prompt", None, None, "Write the sentence", "P", SENTENCE),
         Key("suggest", "G", None, "Suggest a sentence", "G", SENTENCE),
+        Key("referents", "L", None, "Pick the referents among the labelled boxes", "L", SENTENCE),
         Key("nothing", "0", None, "Refers to nothing (toggle)", "0", SENTENCE),
         Key("save", "S", "cmd/ctrl+shift", "Save the pair", "Ctrl/Cmd+Shift+S", PAIR),
         Key("undo", "Z", "cmd/ctrl", "Undo", "Ctrl/Cmd+Z", PAIR),

@@ -21,6 +21,7 @@ from app.annotate_tab.keys import (
 )
 from app.annotate_tab.pairs import PairActions
 from app.annotate_tab.panel import AnnotationPanel
+from app.annotate_tab.referents import ReferentPicker
 from app.annotate_tab.review import ReviewPanel
 from app.annotate_tab.sequence import SequencePanel
 from app.annotate_tab.widgets import NEW_PAIR, REDO, UNDO
@@ -31,11 +32,12 @@ from scenes.actors import CLASSES
 def build_annotation_tab(session: ClientSession, hub: AnnotationHub) -> AnnotationPanel:
     """Fill the Annotate tab of one browser (called inside the tab's container)."""
     panel = AnnotationPanel(session, hub)
-    edits = DraftEdits(panel)
+    referents = ReferentPicker(panel)
+    edits = DraftEdits(panel, referents)
     pairs = PairActions(panel)
     sequence = SequencePanel(panel)
     review = ReviewPanel(panel, pairs)
-    _wire(panel, edits, pairs)
+    _wire(panel, edits, pairs, referents)
     _register_keys(panel, edits, pairs, sequence, review)
     hub.register(panel)
     panel.refresh_pairs()
@@ -43,6 +45,8 @@ def build_annotation_tab(session: ClientSession, hub: AnnotationHub) -> Annotati
     sequence.refresh()
     session.add_frame_listener(panel.on_frame)
     session.add_frame_listener(lambda _session: sequence.refresh())
+    session.add_frame_listener(lambda _session: referents.prefetch())
+    referents.prefetch()
     session.add_answer_listener(panel.on_answer)
     return panel
 
@@ -52,7 +56,9 @@ def _from_browser(event: viser.GuiEvent) -> bool:
     return event.client is not None
 
 
-def _wire(panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions) -> None:
+def _wire(
+    panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions, referents: ReferentPicker
+) -> None:
     w = panel.w
     scene = panel.session.client.scene
 
@@ -91,8 +97,9 @@ def _wire(panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions) -> None
             panel.accept_edit(w.prompt)
             entered = [False]
             panel.guarded(lambda: entered.__setitem__(0, edits.set_prompt()))
-        if entered[0]:  # Enter: save outside the session's lock (the store's work)
-            panel.guarded(pairs.submit)
+        if entered[0]:  # Enter: save outside the session's lock (the store's work), once the
+            # referents shown were picked for this sentence (referents.ready_to_save)
+            panel.guarded(lambda: referents.ready_to_save() and pairs.submit())
 
     for handle in (w.length, w.width, w.height):
         on_user(handle, lambda h=handle: edits.resize(h))
@@ -152,6 +159,7 @@ def _register_keys(
         "fit": edits.fit_selected,
         "delete": edits.delete_selected,
         "suggest": edits.suggest,
+        "referents": edits.pick_referents,
         "nothing": edits.toggle_nothing,
         "save": pairs.save,
         "undo": edits.undo,
