@@ -38,7 +38,13 @@ from model.grounder import SceneCandidates, stack_candidates
 from model.losses import LossTerms, grounding_loss
 from model.referent import CandidateBatch, referent_loss
 from model.targets import anchor_points, collate_targets, draw_targets
-from model.text import TextFeatures
+from model.text import (
+    MiniLMTextEncoder,
+    TextFeatures,
+    encode_minilm_batched,
+    pad_features,
+    validate_prompt,
+)
 from model.tpcnet import TPCNet, as_points
 from scenes.actors import CLASSES, Actor
 from scenes.frame_dataset import FrameDataset, FrameItem
@@ -174,15 +180,46 @@ def _prompt_losses(
     return referent_loss(logits, target, batch.padding)
 
 
+def _per_item(
+    rng: np.random.Generator | Sequence[np.random.Generator], count: int
+) -> list[np.random.Generator]:
+    """One generator per item: ``rng`` itself for all (drawn in turn), or one given per item."""
+    if isinstance(rng, np.random.Generator):
+        return [rng] * count
+    rngs = list(rng)
+    if len(rngs) != count:
+        raise ValueError(f"{len(rngs)} random generators for {count} items")
+    return rngs
+
+
+def step_text(model: TPCNet, texts: Sequence[str]) -> TextFeatures:
+    """The step's prompts encoded by ``model``'s text encoder. The frozen MiniLM encodes the
+    step's distinct prompts afresh in one padded batch, bypassing its cache: batched features equal
+    one-at-a-time ones only to float rounding, so a cache filled by earlier steps would make a
+    step's features depend on them, and a resumed run would not repeat an uninterrupted one."""
+    encoder = model.text_encoder
+    if isinstance(encoder, MiniLMTextEncoder):
+        valid = [validate_prompt(t) for t in texts]
+        distinct = list(dict.fromkeys(valid))
+        entries = dict(
+            zip(distinct, encode_minilm_batched(distinct, encoder.max_tokens), strict=True)
+        )
+        return pad_features([entries[t] for t in valid], model.device)
+    return encoder(texts)
+
+
 def referent_step(
     model: TPCNet,
     frames: Sequence[FrameItem],
-    rng: np.random.Generator,
+    rng: np.random.Generator | Sequence[np.random.Generator],
     cfg: ReferentTrainConfig,
     prompt_config: PromptConfig | None = None,
 ) -> ReferentLoss:
-    """Losses of one batch of scenes (module docstring); call ``.total.backward()``."""
+    """Losses of one batch of scenes (module docstring); call ``.total.backward()``. ``rng`` is
+    one generator drawn from scene after scene, or one per scene (then a scene's jitter and
+    prompts do not depend on the others of the batch: :func:`model.train.item_rngs`)."""
     device = model.device
+    rngs = _per_item(rng, len(frames))
     lidar = [as_points(f.lidar, 4, "LiDAR").to(device) for f in frames]
     radar = [as_points(f.radar, 7, "radar").to(device) for f in frames]
     out, maps = model.detect(
@@ -210,10 +247,10 @@ def referent_step(
         if not actors[b]:
             continue
         boxes, labels, scores, ids = training_candidates(
-            actors[b], dets[b].boxes, dets[b].labels, dets[b].scores, heat[b], model, rng, cfg
+            actors[b], dets[b].boxes, dets[b].labels, dets[b].scores, heat[b], model, rngs[b], cfg
         )
         prompts: list[Prompt] = generate_prompts(
-            frame.actors, rng, cfg.prompts_per_scene, config=pcfg
+            frame.actors, rngs[b], cfg.prompts_per_scene, config=pcfg
         )
         usable = [p for p in prompts if set(p.referent_ids) <= set(ids.tolist())]
         if not usable:
@@ -228,10 +265,7 @@ def referent_step(
     if not texts:
         zero = det.total.new_zeros(())
         return ReferentLoss(det.total, det, zero, zero, 0)
-    prefetch = getattr(model.text_encoder, "prefetch", None)
-    if prefetch is not None:
-        prefetch(texts)
-    text = model.text_encoder(texts)
+    text = step_text(model, texts)
     bce, listwise = _prompt_losses(model, scenes, rows, text, target_rows)
     total = det.total + cfg.referent_weight * (bce + cfg.listwise_weight * listwise)
     return ReferentLoss(total, det, bce, listwise, len(texts))
@@ -282,8 +316,6 @@ class TextBank:
 
     def features(self, texts: Sequence[str], device: torch.device):
         """:class:`model.text.TextFeatures` of ``texts`` (all in the bank)."""
-        from model.text import pad_features
-
         return pad_features([self.entries[t] for t in texts], device)
 
 
@@ -298,8 +330,6 @@ def cache_scenes(
     """Encode every scene of ``dataset`` with the frozen model, generate ``prompts_per_scene``
     prompts per scene and encode them with the frozen text encoder (module docstring)."""
     from tqdm import tqdm
-
-    from model.text import encode_minilm_batched
 
     model.eval()
     pcfg = PromptConfig(phrasing=phrasing)
@@ -347,19 +377,19 @@ def cached_referent_step(
     model: TPCNet,
     scenes: Sequence[CachedScene],
     bank: TextBank,
-    rng: np.random.Generator,
+    rng: np.random.Generator | Sequence[np.random.Generator],
     cfg: ReferentTrainConfig,
 ) -> ReferentLoss:
     """Referent loss on cached scenes, ``cfg.prompts_per_scene`` banked prompts drawn per scene
-    (only the referent stage learns). Undetected referents cannot be answered and are not in a
-    prompt's target."""
+    (only the referent stage learns; ``rng`` as in :func:`referent_step`). Undetected referents
+    cannot be answered and are not in a prompt's target."""
     device = model.device
     chosen, texts, rows, targets = [], [], [], []
-    for scene in scenes:
+    for scene, scene_rng in zip(scenes, _per_item(rng, len(scenes)), strict=True):
         if not len(scene.candidates) or not scene.prompts:
             continue
         k = min(cfg.prompts_per_scene, len(scene.prompts))
-        picks = rng.choice(len(scene.prompts), size=k, replace=False)
+        picks = scene_rng.choice(len(scene.prompts), size=k, replace=False)
         index = len(chosen)
         chosen.append(scene.candidates)
         for j in picks:
@@ -386,5 +416,6 @@ __all__ = [
     "in_grid_actors",
     "match_detections",
     "referent_step",
+    "step_text",
     "training_candidates",
 ]

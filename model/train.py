@@ -2,40 +2,44 @@
 
 The paper's Talk2Radar settings (section IV-A): AdamW, learning rate 1e-3, weight decay 5e-4, a
 cosine schedule (here per step, after a short linear warm-up), batch size 4. Gradients are clipped
-at max-norm 35 (Talk2Radar's value). On CUDA the forward pass runs under bfloat16 autocast (AMP).
+at max-norm 35 (Talk2Radar's value). ``--amp bf16`` runs the forward passes under bfloat16
+autocast (CUDA only; the losses stay in float32).
 
-Several processes: ``torchrun --nproc_per_node N -m model.train ...`` trains with
-DistributedDataParallel (``gloo`` on CPU, ``nccl`` on GPUs); each rank sees a disjoint shard of every
-epoch's permutation, and only rank 0 writes checkpoints and logs.
+Several processes: ``torchrun --standalone --nproc_per_node N -m model.train ...`` trains every
+path (the paper's, the referent path's joint stage and its ``--freeze-scene`` stage) with
+DistributedDataParallel (:mod:`model.distributed`: ``gloo`` on CPU, ``nccl`` on GPUs); each rank
+takes a disjoint shard of every epoch's permutation (``--batch-size`` is per rank), and only rank 0
+writes checkpoints and logs.
 
-Outputs in ``--out``: ``last.pt`` and ``best.pt`` (model checkpoints, :mod:`model.checkpoint`),
-``train_state.pt`` (optimizer, schedule, step, epoch, best metric: what ``--resume`` needs) and
-``log.jsonl`` (one line per logged step and per validation). Resuming restarts at the exact step:
-the data order of epoch ``e`` is a permutation seeded by ``(seed, e)``, augmentations are seeded
-per item, and a resumed epoch skips the batches already done.
+Outputs in ``--out``: ``train_state.pt`` (:mod:`model.train_state`: weights, optimiser, schedule,
+sampler position and every RNG state of every rank, one atomic file: what ``--resume`` needs),
+``last.pt`` (derived from it) and ``best.pt`` (model checkpoints, :mod:`model.checkpoint`), and
+``log.jsonl`` (one line per logged step and per validation). A resumed run repeats an
+uninterrupted one bit for bit (on the CPU): the data order of epoch ``e`` is a permutation seeded
+by ``(seed, e)``, augmentations and generated prompts are seeded per item, a resumed epoch skips
+the batches already done, and the RNG states are restored.
 
-A non-finite loss stops training with a message; the last good checkpoint is kept as it was.
+SIGINT or SIGTERM (:mod:`model.stop_signal`) let the current step finish, save the run state and
+exit with 130 or 143 and one line. A non-finite loss or gradient stops training with a message
+(exit 2); the last good checkpoint is kept as it was, and so is a training split without a box of
+the three classes.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import math
-import os
 import sys
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
 import torch
-import torch.distributed as dist
-from torch.nn.parallel import DistributedDataParallel
 from tqdm import tqdm
 
-from model import build_model
-from model.checkpoint import load_checkpoint, save_checkpoint
+from model import build_model, distributed
+from model.checkpoint import checkpoint_payload, model_from_payload, write_payload
 from model.losses import grounding_loss
 from model.referent_train import (
     ReferentTrainConfig,
@@ -43,10 +47,27 @@ from model.referent_train import (
     cached_referent_step,
     referent_step,
 )
+from model.stop_signal import StopRequest, TrainingInterrupted
 from model.targets import collate_targets, draw_targets
+from model.train_state import (
+    BEST_FILE,
+    LAST_FILE,
+    RunState,
+    RunStateError,
+    TrainState,
+    check_resumable,
+    load_run,
+    rng_state,
+    save_run,
+    set_rng_state,
+    state_path,
+)
+from scenes.actors import CLASSES
 from scenes.dataset import AugmentConfig, GroundingBatch, GroundingDataset, collate
-from scenes.durable import atomic_file
+from scenes.durable import append_json_line
 from scenes.frame_dataset import FrameDataset, SensorAugment
+from scenes.kitti import read_label_file
+from scenes.layout import LABEL, sample_dir, sample_file, split_file
 from scenes.root import Talk2RadarRoot
 
 
@@ -79,7 +100,7 @@ class TrainConfig:
     val_limit: int = 0
     seed: int = 0
     device: str = "cpu"
-    amp: bool = True
+    amp: str = "none"
     max_steps: int = 0
     stop_epoch: int = 0
     log_every: int = 10
@@ -97,6 +118,8 @@ class TrainConfig:
             if getattr(self, name) < 1:
                 flag = "--" + name.replace("_", "-")
                 raise TrainingError(f"{flag} must be >= 1, got {getattr(self, name)}")
+        if self.amp not in ("none", "bf16"):
+            raise TrainingError(f"--amp must be none or bf16, got {self.amp!r}")
         if self.grounding not in ("referent", "tpcnet"):
             raise TrainingError(f"--grounding must be referent or tpcnet, got {self.grounding!r}")
         if Path(self.out).exists() and not Path(self.out).is_dir():
@@ -108,23 +131,11 @@ class TrainConfig:
         return {n: getattr(self, n) for n in names if getattr(self, n) is not None}
 
 
-@dataclass
-class TrainState:
-    """The mutable progress of a run (saved in ``train_state.pt``)."""
-
-    epoch: int = 0
-    step: int = 0
-    step_in_epoch: int = 0
-    best_map: float = -1.0
-    last_map: float | None = None
-
-
-def _rank() -> int:
-    return dist.get_rank() if dist.is_available() and dist.is_initialized() else 0
-
-
-def _world() -> int:
-    return dist.get_world_size() if dist.is_available() and dist.is_initialized() else 1
+def item_rngs(seed: int, epoch: int, indices: list[int]) -> list[np.random.Generator]:
+    """The generator of each training item of a step (referent path: box jitter, generated and
+    drawn prompts), seeded by ``(seed, epoch, item)``: the same whichever rank or step draws the
+    item, so a resumed or a distributed run draws what one uninterrupted process does."""
+    return [np.random.default_rng((seed, 7, epoch, i)) for i in indices]
 
 
 def cosine_lr(step: int, total: int, base: float, warmup: int) -> float:
@@ -177,8 +188,7 @@ def init_from(model: torch.nn.Module, path: str) -> int:
 
 
 def _log(out: Path, record: dict) -> None:
-    with open(out / "log.jsonl", "a") as handle:
-        handle.write(json.dumps(record) + "\n")
+    append_json_line(out / "log.jsonl", record)
 
 
 def validate(model: torch.nn.Module, cfg: TrainConfig, root: Talk2RadarRoot) -> dict:
@@ -197,22 +207,52 @@ def validate(model: torch.nn.Module, cfg: TrainConfig, root: Talk2RadarRoot) -> 
     }
 
 
+def check_labels(root: Talk2RadarRoot, split: str) -> None:
+    """Refuse a training split none of whose ``label_2`` files holds a box of :data:`CLASSES`
+    (an empty or foreign-class root would train to nothing and report mAP 0)."""
+    ids = root.ids(split)
+    if not ids:
+        raise TrainingError(f"{split_file(root.lidar_dir, split)}: split {split!r} is empty")
+    for sid in ids:
+        path = sample_file(root.lidar_dir, LABEL, sid)
+        if path.is_file() and any(label.name in CLASSES for label in read_label_file(path)):
+            return
+    raise TrainingError(
+        f"{sample_dir(root.lidar_dir, LABEL)}: no label of the {len(ids)} samples of split "
+        f"{split!r} has a {', '.join(CLASSES)} box: nothing to train on"
+    )
+
+
+def _forward_step(model: torch.nn.Module, lidar: list, radar: list, prompts: list):
+    return model(lidar, radar, prompts)
+
+
 def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
-    """Run (or resume) a training run; returns the final state."""
+    """Run (or resume) a training run; returns the final state.
+
+    Raises:
+        TrainingError: bad data or settings, a non-finite loss.
+        model.stop_signal.TrainingInterrupted: SIGINT / SIGTERM (the state is saved when steps
+            had run; module docstring).
+    """
+    with StopRequest() as stop:
+        return _train(cfg, resume, stop)
+
+
+def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
     out = Path(cfg.out)
-    rank, world = _rank(), _world()
-    device = torch.device(cfg.device)
-    if device.type == "cuda" and world > 1:
-        device = torch.device("cuda", int(os.environ.get("LOCAL_RANK", 0)))
-        torch.cuda.set_device(device)
+    rank, world = distributed.rank(), distributed.world()
+    device = distributed.local_device(torch.device(cfg.device))
+    use_amp = cfg.amp == "bf16"
+    if use_amp and device.type != "cuda":
+        raise TrainingError("--amp bf16 runs on CUDA only (give --device cuda)")
     torch.manual_seed(cfg.seed + rank)
     root = Talk2RadarRoot(cfg.data, radar=None if cfg.radar_folder == "none" else cfg.radar_folder)
+    check_labels(root, cfg.train_split)
     augment = AugmentConfig(flip_probability=cfg.flip_probability)
     referent = cfg.grounding == "referent"
     dataset: GroundingDataset | FrameDataset
     if referent:
-        if world > 1:
-            raise TrainingError("the referent path trains in one process (no torchrun yet)")
         sensors = SensorAugment() if cfg.sensor_augment else None
         dataset = FrameDataset(root, cfg.train_split, augment, sensors, seed=cfg.seed)
         if cfg.freeze_scene and cfg.scene_limit:
@@ -222,27 +262,18 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
     referent_cfg = ReferentTrainConfig(prompts_per_scene=cfg.prompts_per_scene)
 
     state = TrainState()
-    if resume and (out / "last.pt").is_file():
-        model = load_checkpoint(out / "last.pt", device=str(device))
-        saved = torch.load(out / "train_state.pt", map_location="cpu", weights_only=False)
-        free = {
-            "epochs",
-            "max_steps",
-            "stop_epoch",
-            "val_every",
-            "val_limit",
-            "log_every",
-            "device",
-            "amp",
-            "prompts_per_scene",
-            "bank_prompts",
-            "init",
-        }
-        now = asdict(cfg)
-        changed = sorted(k for k, v in saved["config"].items() if k not in free and now.get(k) != v)
-        if changed:
-            raise TrainingError(f"{out}: --resume with different settings: {changed}")
-        state = TrainState(**saved["state"])
+    run: RunState | None = None
+    if resume and (state_path(out).is_file() or (out / LAST_FILE).is_file()):
+        run = load_run(out, repair=rank == 0)
+        check_resumable(asdict(cfg), run, world)
+        model = model_from_payload(run.model, state_path(out), device)
+        state = replace(run.progress)
+        if not run.rng and rank == 0:
+            print(
+                f"{state_path(out)}: a run state of the older layout, without RNG states: the "
+                "resumed run will not repeat an uninterrupted one bit for bit",
+                file=sys.stderr,
+            )
     else:
         if resume:
             print(f"{out}: nothing to resume, starting a new run", file=sys.stderr)
@@ -250,7 +281,6 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
         if cfg.init:
             copied = init_from(model, cfg.init)
             print(f"initialised {copied} weight tensors from {cfg.init}", file=sys.stderr)
-        saved = None
     model.to(device)
     cached = None
     if referent and cfg.freeze_scene:
@@ -271,18 +301,19 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
         )
     params = [p for p in model.parameters() if p.requires_grad]
     optimizer = torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay)
-    if saved is not None:
-        optimizer.load_state_dict(saved["optimizer"])
-    wrapped: torch.nn.Module = model
-    if world > 1:
-        ids = [device.index] if device.type == "cuda" else None
-        wrapped = DistributedDataParallel(model, device_ids=ids, find_unused_parameters=False)
+    if run is not None:
+        optimizer.load_state_dict(run.optimizer)
+    if cached is not None:
+        step = distributed.wrap_step(model, cached_referent_step)
+    elif referent:
+        step = distributed.wrap_step(model, referent_step)
+    else:
+        step = distributed.wrap_step(model, _forward_step, find_unused=False)
 
     steps_per_epoch = len(epoch_batches(len(dataset), cfg.batch_size, 0, cfg.seed, rank, world))
     total_steps = cfg.epochs * steps_per_epoch
     if cfg.max_steps:
         total_steps = min(total_steps, cfg.max_steps)
-    use_amp = cfg.amp and device.type == "cuda"
     if rank == 0:
         out.mkdir(parents=True, exist_ok=True)
     metadata = {
@@ -291,22 +322,31 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
     }
 
     def checkpoint(best: bool) -> None:
+        """Every rank's RNG state to rank 0, which writes the run state and ``last.pt``."""
+        rngs = distributed.gather(rng_state())
         if rank != 0:
             return
         meta = dict(metadata, step=state.step, epoch=state.epoch, val_mAP_3d=state.last_map)
-        save_checkpoint(out / "last.pt", model, **meta)
-        with atomic_file(out / "train_state.pt") as handle:
-            torch.save(
-                {
-                    "config": asdict(cfg),
-                    "state": asdict(state),
-                    "optimizer": optimizer.state_dict(),
-                },
-                handle,
-            )
+        payload = checkpoint_payload(model, **meta)
+        schedule = {"total_steps": total_steps, "warmup_steps": cfg.warmup_steps, "lr": cfg.lr}
+        save_run(out, payload, optimizer.state_dict(), asdict(cfg), state, rngs, schedule)
         if best:
-            save_checkpoint(out / "best.pt", model, **meta)
+            write_payload(out / BEST_FILE, payload)
 
+    def halt_if_asked() -> None:
+        """At a step boundary: on a signal seen by any rank, save and stop (all ranks)."""
+        signum = distributed.agree_max(stop.signum or 0)
+        if signum:
+            checkpoint(best=False)
+            bar.close()
+            raise TrainingInterrupted(
+                signum,
+                f"stopped after step {state.step} (epoch {state.epoch + 1}, batch "
+                f"{state.step_in_epoch}); resumable state in {state_path(out)} (--resume)",
+            )
+
+    if run is not None and run.rng:
+        set_rng_state(run.rng[rank])
     bar = tqdm(
         total=total_steps,
         initial=state.step,
@@ -317,86 +357,82 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
     )
     start_time, seen = time.perf_counter(), 0
     last_epoch = min(cfg.epochs, cfg.stop_epoch) if cfg.stop_epoch else cfg.epochs
-    while state.step < total_steps and state.epoch < last_epoch:
-        dataset.set_epoch(state.epoch)
-        batches = epoch_batches(len(dataset), cfg.batch_size, state.epoch, cfg.seed, rank, world)
-        model.train()
-        for indices in batches[state.step_in_epoch :]:
-            if state.step >= total_steps:
-                break
-            for group in optimizer.param_groups:
-                group["lr"] = cosine_lr(state.step, total_steps, cfg.lr, cfg.warmup_steps)
-            if cached is not None:
-                step_rng = np.random.default_rng((cfg.seed, 7, state.step))
-                picked = [cached[i] for i in indices]
-                ref = cached_referent_step(model, picked, bank, step_rng, referent_cfg)
-                terms, total = ref.detection, ref.total
-                extra = {"bce": ref.bce.item(), "listwise": ref.listwise.item()}
-            elif referent:
-                step_rng = np.random.default_rng((cfg.seed, 7, state.step))
-                frames = [dataset[i] for i in indices]
-                with torch.autocast(device_type=device.type, dtype=torch.bfloat16, enabled=use_amp):
-                    ref = referent_step(model, frames, step_rng, referent_cfg)
-                terms = ref.detection
-                total = ref.total
-                extra = {"bce": ref.bce.item(), "listwise": ref.listwise.item()}
+    with stop.deferred():
+        while state.step < total_steps and state.epoch < last_epoch:
+            dataset.set_epoch(state.epoch)
+            batches = epoch_batches(
+                len(dataset), cfg.batch_size, state.epoch, cfg.seed, rank, world
+            )
+            model.train()
+            for indices in batches[state.step_in_epoch :]:
+                if state.step >= total_steps:
+                    break
+                halt_if_asked()
+                for group in optimizer.param_groups:
+                    group["lr"] = cosine_lr(state.step, total_steps, cfg.lr, cfg.warmup_steps)
+                autocast = torch.autocast(device.type, torch.bfloat16, enabled=use_amp)
+                if referent:
+                    rngs = item_rngs(cfg.seed, state.epoch, indices)
+                    with autocast:
+                        if cached is not None:
+                            ref = step([cached[i] for i in indices], bank, rngs, referent_cfg)
+                        else:
+                            ref = step([dataset[i] for i in indices], rngs, referent_cfg)
+                    terms, total = ref.detection, ref.total
+                    extra = {"bce": ref.bce.item(), "listwise": ref.listwise.item()}
+                else:
+                    batch = collate([dataset[i] for i in indices])
+                    targets = _targets(batch, model, device)
+                    lidar = [t.to(device) for t in batch.lidar]
+                    radar = [t.to(device) for t in batch.radar]
+                    with autocast:
+                        output = step(lidar, radar, list(batch.prompts))
+                    terms = grounding_loss(output, targets)
+                    total = terms.total
+                    extra = {}
+                if not total.requires_grad:  # no prompt in this shard: a zero-gradient step
+                    total = total + sum(p.sum() * 0.0 for p in params)
+                optimizer.zero_grad(set_to_none=True)
+                total.backward()
+                norm = torch.nn.utils.clip_grad_norm_(params, cfg.grad_clip)
+                if not (torch.isfinite(total) and torch.isfinite(norm)):
+                    raise TrainingError(
+                        f"non-finite loss or gradient at step {state.step} (heatmap "
+                        f"{terms.heatmap.item()}, regression {terms.regression.item()}, {extra}); "
+                        f"the last good checkpoint in {out} is kept"
+                    )
+                optimizer.step()
+                state.step += 1
+                state.step_in_epoch += 1
+                seen += len(indices) * world
+                rate = seen / max(time.perf_counter() - start_time, 1e-9)
+                bar.update(1)
+                bar.set_postfix(loss=f"{total.item():.3f}", samples_s=f"{rate:.1f}", ep=state.epoch)
+                if state.step % cfg.log_every == 0:
+                    terms_logged = {"loss": total, "heatmap": terms.heatmap}
+                    terms_logged.update(regression=terms.regression, **extra)
+                    means = distributed.mean([float(v) for v in terms_logged.values()])
+                    if rank == 0:
+                        record = {"step": state.step, "epoch": state.epoch}
+                        record.update(zip(terms_logged, means, strict=True))
+                        lr = optimizer.param_groups[0]["lr"]
+                        _log(out, {**record, "lr": lr, "samples_per_s": rate})
             else:
-                batch = collate([dataset[i] for i in indices])
-                targets = _targets(batch, model, device)
-                lidar = [t.to(device) for t in batch.lidar]
-                radar = [t.to(device) for t in batch.radar]
-                with torch.autocast(device_type=device.type, dtype=torch.bfloat16, enabled=use_amp):
-                    output = wrapped(lidar, radar, list(batch.prompts))
-                terms = grounding_loss(output, targets)
-                total = terms.total
-                extra = {}
-            if not torch.isfinite(total):
-                raise TrainingError(
-                    f"non-finite loss at step {state.step} (heatmap {terms.heatmap.item()}, "
-                    f"regression {terms.regression.item()}, {extra}); the last good checkpoint "
-                    f"in {out} is kept"
-                )
-            optimizer.zero_grad(set_to_none=True)
-            total.backward()
-            torch.nn.utils.clip_grad_norm_(params, cfg.grad_clip)
-            optimizer.step()
-            state.step += 1
-            state.step_in_epoch += 1
-            seen += len(indices) * world
-            rate = seen / max(time.perf_counter() - start_time, 1e-9)
-            bar.update(1)
-            bar.set_postfix(loss=f"{total.item():.3f}", samples_s=f"{rate:.1f}", ep=state.epoch)
-            if rank == 0 and state.step % cfg.log_every == 0:
-                _log(
-                    out,
-                    {
-                        "step": state.step,
-                        "epoch": state.epoch,
-                        "loss": total.item(),
-                        "heatmap": terms.heatmap.item(),
-                        "regression": terms.regression.item(),
-                        **extra,
-                        "lr": optimizer.param_groups[0]["lr"],
-                        "samples_per_s": rate,
-                    },
-                )
-        else:
-            state.epoch += 1
-            state.step_in_epoch = 0
-            best = False
-            if rank == 0 and cfg.val_every and state.epoch % cfg.val_every == 0:
-                metrics = validate(model, cfg, root)
-                state.last_map = metrics["mAP_3d"]
-                best = state.last_map > state.best_map
-                state.best_map = max(state.best_map, state.last_map)
-                _log(out, {"step": state.step, "epoch": state.epoch, "val": metrics})
-                bar.write(f"epoch {state.epoch}: val 3D mAP {metrics['mAP_3d']:.2f}")
-            checkpoint(best=best)
-            if world > 1:
-                dist.barrier()
-            continue
-        break  # max_steps reached inside an epoch
-    checkpoint(best=state.best_map < 0)
+                state.epoch += 1
+                state.step_in_epoch = 0
+                best = False
+                if rank == 0 and cfg.val_every and state.epoch % cfg.val_every == 0:
+                    metrics = validate(model, cfg, root)
+                    state.last_map = metrics["mAP_3d"]
+                    best = state.last_map > state.best_map
+                    state.best_map = max(state.best_map, state.last_map)
+                    _log(out, {"step": state.step, "epoch": state.epoch, "val": metrics})
+                    bar.write(f"epoch {state.epoch}: val 3D mAP {metrics['mAP_3d']:.2f}")
+                checkpoint(best=best)
+                distributed.barrier()
+                continue
+            break  # max_steps reached inside an epoch
+        checkpoint(best=state.best_map < 0)
     bar.close()
     return state
 
@@ -440,7 +476,12 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     p.add_argument("--val-limit", type=int, default=0, help="validate on the first N frames only")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
-    p.add_argument("--no-amp", action="store_true", help="disable bfloat16 autocast on CUDA")
+    p.add_argument(
+        "--amp",
+        default="none",
+        choices=["none", "bf16"],
+        help="bf16: bfloat16 autocast of the forward passes (CUDA only)",
+    )
     p.add_argument("--max-steps", type=int, default=0, help="stop after N steps (0: all epochs)")
     p.add_argument(
         "--stop-epoch",
@@ -484,59 +525,34 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     a = p.parse_args(argv)
     if a.threads:
         torch.set_num_threads(a.threads)
-    cfg = TrainConfig(
-        data=a.data,
-        out=a.out,
-        preset=a.preset,
-        epochs=a.epochs,
-        batch_size=a.batch_size,
-        lr=a.lr,
-        weight_decay=a.weight_decay,
-        warmup_steps=a.warmup_steps,
-        modalities=a.modalities,
-        fusion=a.fusion,
-        text_fusion=a.text_fusion,
-        anchor=a.anchor,
-        text_encoder=a.text_encoder,
-        radar_folder=a.radar_folder,
-        val_every=a.val_every,
-        val_limit=a.val_limit,
-        seed=a.seed,
-        device=a.device,
-        amp=not a.no_amp,
-        max_steps=a.max_steps,
-        stop_epoch=a.stop_epoch,
-        log_every=a.log_every,
-        flip_probability=a.flip_probability,
-        grounding=a.grounding,
-        init=a.init,
-        prompts_per_scene=a.prompts_per_scene,
-        sensor_augment=not a.no_sensor_augment,
-        freeze_scene=a.freeze_scene,
-        bank_prompts=a.bank_prompts,
-        scene_limit=a.scene_limit,
-    )
+    given = {f.name: getattr(a, f.name) for f in fields(TrainConfig) if hasattr(a, f.name)}
+    cfg = TrainConfig(**given, sensor_augment=not a.no_sensor_augment)
     return cfg, a.resume
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The command: 0 when done, 2 on bad input or settings, 130 / 143 on SIGINT / SIGTERM."""
     try:
         cfg, resume = parse_args(argv)
     except TrainingError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    distributed = int(os.environ.get("WORLD_SIZE", "1")) > 1
-    if distributed:
-        dist.init_process_group("nccl" if cfg.device.startswith("cuda") else "gloo")
-    rank = int(os.environ.get("RANK", "0"))
+    rank = distributed.launch_rank()
     try:
+        distributed.init_from_env(cfg.device)
         state = train(cfg, resume=resume)
-    except (TrainingError, ValueError, FileNotFoundError) as exc:
+    except TrainingInterrupted as exc:
+        if rank == 0:
+            print(exc.message(), file=sys.stderr)
+        return exc.exit_code
+    except KeyboardInterrupt:  # before the handlers were installed
+        print("interrupted by SIGINT: nothing new to save", file=sys.stderr)
+        return 130
+    except (TrainingError, RunStateError, ValueError, FileNotFoundError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     finally:
-        if distributed:
-            dist.destroy_process_group()
+        distributed.close()
     if rank == 0:
         print(
             f"done: {state.step} steps, {state.epoch} epochs, best val 3D mAP {state.best_map:.2f}"
