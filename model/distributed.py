@@ -40,8 +40,9 @@ def launch_rank() -> int:
 
 def init_from_env(device: str) -> bool:
     """Join the ``torchrun`` process group (``nccl`` for a CUDA ``device``, else ``gloo``);
-    returns whether one was joined (False in a plain process)."""
-    if not launched():
+    returns whether this call joined it (False in a plain process, or when already joined: the
+    caller that joined closes it)."""
+    if not launched() or active():
         return False
     cuda = device.startswith("cuda")
     if cuda:
@@ -113,6 +114,17 @@ def gather(obj: Any) -> list[Any]:
     return out
 
 
+def same_on_every_rank(tensors: list[torch.Tensor]) -> bool:
+    """Whether every rank holds the same ``tensors`` (compared by a float64 sum and sum of
+    squares of each): DistributedDataParallel keeps the weights of all ranks identical, so a
+    difference means that gradients were not averaged."""
+    digest = [
+        (float(t.detach().double().sum()), float(t.detach().double().square().sum()))
+        for t in tensors
+    ]
+    return all(other == digest for other in gather(digest))
+
+
 def barrier() -> None:
     """Wait for every rank."""
     if active():
@@ -156,6 +168,7 @@ __all__ = [
     "local_device",
     "mean",
     "rank",
+    "same_on_every_rank",
     "world",
     "wrap_step",
 ]

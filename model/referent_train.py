@@ -35,6 +35,7 @@ from torch import Tensor
 
 from model.decode import decode
 from model.grounder import SceneCandidates, stack_candidates
+from model.head import HeadOutput
 from model.losses import LossTerms, grounding_loss
 from model.referent import CandidateBatch, referent_loss
 from model.targets import anchor_points, collate_targets, draw_targets
@@ -180,6 +181,11 @@ def _prompt_losses(
     return referent_loss(logits, target, batch.padding)
 
 
+def float32_output(out: HeadOutput) -> HeadOutput:
+    """``out`` in float32 (a bfloat16 autocast forward's output; a no-op for float32)."""
+    return HeadOutput(out.heatmap.float(), out.regression.float())
+
+
 def _per_item(
     rng: np.random.Generator | Sequence[np.random.Generator], count: int
 ) -> list[np.random.Generator]:
@@ -237,10 +243,11 @@ def referent_step(
             for acts in actors
         ]
     ).to(device)
+    out = float32_output(out)  # the losses and the decoding in float32 under autocast
     det = grounding_loss(out, targets)
     with torch.no_grad():
         dets = decode(out, model.head_grid, model.cfg.head, model.cfg.referent.candidate_threshold)
-        heat = torch.sigmoid(out.heatmap.detach()).float().cpu().numpy()
+        heat = torch.sigmoid(out.heatmap.detach()).cpu().numpy()
     pcfg = prompt_config or PromptConfig(phrasing=cfg.phrasing)
     scenes, texts, rows, target_rows = [], [], [], []
     for b, frame in enumerate(frames):
@@ -413,6 +420,7 @@ __all__ = [
     "TextBank",
     "cache_scenes",
     "cached_referent_step",
+    "float32_output",
     "in_grid_actors",
     "match_detections",
     "referent_step",

@@ -45,6 +45,7 @@ from model.referent_train import (
     ReferentTrainConfig,
     cache_scenes,
     cached_referent_step,
+    float32_output,
     referent_step,
 )
 from model.stop_signal import StopRequest, TrainingInterrupted
@@ -322,16 +323,19 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
     }
 
     def checkpoint(best: bool) -> None:
-        """Every rank's RNG state to rank 0, which writes the run state and ``last.pt``."""
+        """Every rank's RNG state to rank 0, which writes the run state and ``last.pt``; the
+        other ranks wait until it is written."""
+        if not distributed.same_on_every_rank(params):
+            raise TrainingError(f"the {world} ranks hold different weights at step {state.step}")
         rngs = distributed.gather(rng_state())
-        if rank != 0:
-            return
-        meta = dict(metadata, step=state.step, epoch=state.epoch, val_mAP_3d=state.last_map)
-        payload = checkpoint_payload(model, **meta)
-        schedule = {"total_steps": total_steps, "warmup_steps": cfg.warmup_steps, "lr": cfg.lr}
-        save_run(out, payload, optimizer.state_dict(), asdict(cfg), state, rngs, schedule)
-        if best:
-            write_payload(out / BEST_FILE, payload)
+        if rank == 0:
+            meta = dict(metadata, step=state.step, epoch=state.epoch, val_mAP_3d=state.last_map)
+            payload = checkpoint_payload(model, **meta)
+            schedule = {"total_steps": total_steps, "warmup": cfg.warmup_steps, "lr": cfg.lr}
+            save_run(out, payload, optimizer.state_dict(), asdict(cfg), state, rngs, schedule)
+            if best:
+                write_payload(out / BEST_FILE, payload)
+        distributed.barrier()
 
     def halt_if_asked() -> None:
         """At a step boundary: on a signal seen by any rank, save and stop (all ranks)."""
@@ -387,7 +391,7 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
                     radar = [t.to(device) for t in batch.radar]
                     with autocast:
                         output = step(lidar, radar, list(batch.prompts))
-                    terms = grounding_loss(output, targets)
+                    terms = grounding_loss(float32_output(output), targets)
                     total = terms.total
                     extra = {}
                 if not total.requires_grad:  # no prompt in this shard: a zero-gradient step
@@ -409,9 +413,9 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
                 bar.update(1)
                 bar.set_postfix(loss=f"{total.item():.3f}", samples_s=f"{rate:.1f}", ep=state.epoch)
                 if state.step % cfg.log_every == 0:
-                    terms_logged = {"loss": total, "heatmap": terms.heatmap}
-                    terms_logged.update(regression=terms.regression, **extra)
-                    means = distributed.mean([float(v) for v in terms_logged.values()])
+                    terms_logged = {"loss": total.item(), "heatmap": terms.heatmap.item()}
+                    terms_logged.update(regression=terms.regression.item(), **extra)
+                    means = distributed.mean(list(terms_logged.values()))
                     if rank == 0:
                         record = {"step": state.step, "epoch": state.epoch}
                         record.update(zip(terms_logged, means, strict=True))
@@ -429,7 +433,6 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
                     _log(out, {"step": state.step, "epoch": state.epoch, "val": metrics})
                     bar.write(f"epoch {state.epoch}: val 3D mAP {metrics['mAP_3d']:.2f}")
                 checkpoint(best=best)
-                distributed.barrier()
                 continue
             break  # max_steps reached inside an epoch
         checkpoint(best=state.best_map < 0)
@@ -537,9 +540,9 @@ def main(argv: list[str] | None = None) -> int:
     except TrainingError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    rank = distributed.launch_rank()
+    rank, joined = distributed.launch_rank(), False
     try:
-        distributed.init_from_env(cfg.device)
+        joined = distributed.init_from_env(cfg.device)
         state = train(cfg, resume=resume)
     except TrainingInterrupted as exc:
         if rank == 0:
@@ -552,7 +555,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     finally:
-        distributed.close()
+        if joined:
+            distributed.close()
     if rank == 0:
         print(
             f"done: {state.step} steps, {state.epoch} epochs, best val 3D mAP {state.best_map:.2f}"
