@@ -14,7 +14,8 @@ writes checkpoints and logs.
 Outputs in ``--out``: ``train_state.pt`` (:mod:`model.train_state`: weights, optimiser, schedule,
 sampler position and every RNG state of every rank, one atomic file: what ``--resume`` needs),
 ``last.pt`` (derived from it) and ``best.pt`` (model checkpoints, :mod:`model.checkpoint`), and
-``log.jsonl`` (one line per logged step and per validation). A resumed run repeats an
+``log.jsonl`` (one line per logged step and per validation; a resume drops the lines of steps
+after the saved one). A resumed run repeats an
 uninterrupted one bit for bit (on the CPU): the data order of epoch ``e`` is a permutation seeded
 by ``(seed, e)``, augmentations and generated prompts are seeded per item, a resumed epoch skips
 the batches already done, and the RNG states are restored.
@@ -53,6 +54,7 @@ from model.targets import collate_targets, draw_targets
 from model.train_state import (
     BEST_FILE,
     LAST_FILE,
+    LOG_FILE,
     RunState,
     RunStateError,
     TrainState,
@@ -62,6 +64,7 @@ from model.train_state import (
     save_run,
     set_rng_state,
     state_path,
+    trim_log,
 )
 from scenes.actors import CLASSES
 from scenes.dataset import AugmentConfig, GroundingBatch, GroundingDataset, collate
@@ -189,7 +192,7 @@ def init_from(model: torch.nn.Module, path: str) -> int:
 
 
 def _log(out: Path, record: dict) -> None:
-    append_json_line(out / "log.jsonl", record)
+    append_json_line(out / LOG_FILE, record)
 
 
 def validate(model: torch.nn.Module, cfg: TrainConfig, root: Talk2RadarRoot) -> dict:
@@ -269,6 +272,8 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
         check_resumable(asdict(cfg), run, world)
         model = model_from_payload(run.model, state_path(out), device)
         state = replace(run.progress)
+        if rank == 0:
+            trim_log(out, state.step)
         if not run.rng and rank == 0:
             print(
                 f"{state_path(out)}: a run state of the older layout, without RNG states: the "
@@ -293,13 +298,7 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
         scenes = FrameDataset(root, cfg.train_split)
         if cfg.scene_limit:
             scenes.ids = scenes.ids[: cfg.scene_limit]
-        cached, bank = cache_scenes(
-            model,
-            scenes,
-            cfg.bank_prompts,
-            seed=cfg.seed,
-            progress=rank == 0,
-        )
+        cached, bank = cache_scenes(model, scenes, cfg.bank_prompts, cfg.seed, progress=rank == 0)
     params = [p for p in model.parameters() if p.requires_grad]
     optimizer = torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay)
     if run is not None:

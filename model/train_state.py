@@ -27,6 +27,10 @@ belong to the same step: a torn pair cannot be resumed. A run folder of the olde
 without RNG states (so not bit for bit); a torn pair of that layout (``last.pt`` of step 8 with the
 state of step 4) is refused (:class:`RunStateError`).
 
+On resume, :func:`trim_log` drops the records ``log.jsonl`` holds of steps after the saved one (a
+run killed after logging steps it had not saved), so that the resumed run's log reads as an
+uninterrupted run's.
+
 Everything is plain data and tensors, so the file loads with ``torch.load(weights_only=True)``.
 """
 
@@ -47,7 +51,7 @@ from model.checkpoint import (
     read_checkpoint,
     write_payload,
 )
-from scenes.durable import atomic_file
+from scenes.durable import atomic_file, atomic_write_text, read_json_lines
 
 STATE_FILE = "train_state.pt"
 """The run state in a run folder."""
@@ -55,6 +59,8 @@ LAST_FILE = "last.pt"
 """The latest model checkpoint in a run folder (derived from the state)."""
 BEST_FILE = "best.pt"
 """The checkpoint of the best validation metric."""
+LOG_FILE = "log.jsonl"
+"""One JSON record per logged step and per validation."""
 FORMAT = "talk2pc-train-state"
 FORMAT_VERSION = 2
 """Version 1 (no ``format`` entry) held only config, progress and optimiser."""
@@ -284,12 +290,33 @@ def load_run(out: str | os.PathLike[str], repair: bool = True) -> RunState:
     )
 
 
+def trim_log(out: str | os.PathLike[str], step: int) -> int:
+    """Drop the records of ``out/log.jsonl`` of steps after ``step``, and unreadable (torn)
+    lines; returns how many lines were dropped."""
+    path = Path(out) / LOG_FILE
+    log = read_json_lines(path)
+    if not log.entries and not log.unreadable:
+        return 0
+    lines = path.read_text(encoding="utf-8", errors="replace").split("\n")
+    keep = [
+        lines[n - 1]
+        for n, record in log.entries
+        if not (isinstance(record, dict) and isinstance(record.get("step"), int))
+        or record["step"] <= step
+    ]
+    dropped = len(log.entries) + len(log.unreadable) - len(keep)
+    if dropped:
+        atomic_write_text(path, "".join(line + "\n" for line in keep))
+    return dropped
+
+
 __all__ = [
     "BEST_FILE",
     "FORMAT",
     "FORMAT_VERSION",
     "FREE_ON_RESUME",
     "LAST_FILE",
+    "LOG_FILE",
     "STATE_FILE",
     "RunState",
     "RunStateError",
@@ -300,4 +327,5 @@ __all__ = [
     "save_run",
     "set_rng_state",
     "state_path",
+    "trim_log",
 ]

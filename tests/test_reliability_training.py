@@ -226,3 +226,14 @@ def test_training_without_a_box_of_the_three_classes_exits_2(
     for label in (data / "lidar" / "training" / "label_2").glob("*.txt"):  # other classes only
         label.write_text("DontCare 0 0 0 0 0 0 0 0 0 0 0 0 0 0\n")
     assert main([*args, "--text-encoder", "gru", "--val-every", "0"]) == 2
+
+
+def test_resume_drops_log_records_of_steps_it_did_not_save(root: Path, tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    train(_config(root, out, "tpcnet", text_encoder="gru", max_steps=2))
+    with open(out / "log.jsonl", "a") as handle:  # a kill after logging step 3, mid-line 4
+        handle.write('{"step": 3, "loss": 1.0}\n{"step": 4, "lo')
+    train(_config(root, out, "tpcnet", text_encoder="gru", max_steps=3), resume=True)
+    lines = (out / "log.jsonl").read_text().splitlines()
+    assert [json.loads(line)["step"] for line in lines] == [1, 2, 3]
+    assert json.loads(lines[-1])["loss"] != 1.0
