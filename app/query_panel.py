@@ -23,6 +23,9 @@ from app.engine import MODALITY_LABELS, Answer, Modality
 from app.navigation import Frame
 from app.text import md_text
 
+CANDIDATE_SOURCES = {"Detector proposals": "detector", "Labelled boxes": "labels"}
+"""GUI label -> what the referent stage chooses among (the "Candidates" control)."""
+
 HISTORY_SIZE = 20
 """Prompts kept in a browser's history."""
 
@@ -47,6 +50,7 @@ class QueryRequest:
         frame: The frame on screen when the prompt was sent.
         generation: The session's generation number at that moment.
         received: ``time.perf_counter()`` when the server received the prompt.
+        labelled: Choose among the frame's labelled boxes instead of the detector's proposals.
     """
 
     prompt: str
@@ -55,6 +59,7 @@ class QueryRequest:
     frame: Frame
     generation: int
     received: float
+    labelled: bool = False
 
 
 def submitted_prompt(value: str) -> str | None:
@@ -140,9 +145,16 @@ class QueryPanel:
     results: viser.GuiMarkdownHandle
     history: viser.GuiDropdownHandle
     rerun: viser.GuiButtonHandle
+    candidates: viser.GuiDropdownHandle | None = None
 
     def selected_modality(self) -> Modality:
         return MODALITY_LABELS.get(self.modality.value, "both")
+
+    def labelled_selected(self) -> bool:
+        """Whether the "Candidates" control asks for the frame's labelled boxes."""
+        if self.candidates is None:
+            return False
+        return CANDIDATE_SOURCES.get(self.candidates.value, "detector") == "labels"
 
 
 def build_query_panel(
@@ -151,8 +163,10 @@ def build_query_panel(
     score_threshold: float,
     heatmap_opacity: float = 0.7,
     prompt: str = "",
+    labelled: bool = False,
 ) -> QueryPanel:
-    """Add the Query widgets to ``gui`` (in the current container) and return their handles."""
+    """Add the Query widgets to ``gui`` (in the current container) and return their handles;
+    ``labelled``: the frames have labelled boxes (a "Candidates" control is added)."""
     prompt_box = gui.add_text(
         "Prompt", prompt, multiline=True, hint="Describe the objects to find; Enter runs it"
     )
@@ -161,6 +175,16 @@ def build_query_panel(
     modality = gui.add_dropdown(
         "Sensors", labels, initial_value=labels[0], hint="The other sensor's points are emptied"
     )
+    candidates = None
+    if labelled:
+        names = tuple(CANDIDATE_SOURCES)
+        candidates = gui.add_dropdown(
+            "Candidates",
+            names,
+            initial_value=names[0],
+            hint="What the answer is chosen among: the detector's proposals, or the frame's "
+            "labelled boxes (grounding apart from detection)",
+        )
     threshold = gui.add_slider(
         "Score threshold", 0.0, 0.95, 0.01, float(np.clip(score_threshold, 0.0, 0.95))
     )
@@ -183,4 +207,5 @@ def build_query_panel(
         results=results,
         history=history,
         rerun=rerun,
+        candidates=candidates,
     )

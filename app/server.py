@@ -44,6 +44,7 @@ import viser
 from app.annotate_tab import AnnotationHub, build_annotation_tab
 from app.engine import GroundingEngine, GroundingModel, initial_threshold
 from app.keys import add_escape_leaves_fields
+from app.labelled import LabelledFrames
 from app.navigation import (
     Frame,
     FrameLoadError,
@@ -135,6 +136,9 @@ class AppConfig:
             raises :class:`ServerStartError`.
         pairs_root: Where the Annotate tab saves pairs (a Talk2Radar root, created when
             missing); None: :func:`default_pairs_root`.
+        scene_labels: The View-of-Delft root with every object of the served frames (for a
+            Talk2Radar root; a release opened directly is its own): the Query tab then offers
+            "Candidates: Labelled boxes".
     """
 
     host: str = "127.0.0.1"
@@ -149,6 +153,7 @@ class AppConfig:
     dark_mode: bool = True
     start_timeout: float = 20.0
     pairs_root: Path | None = None
+    scene_labels: Path | None = None
 
 
 PAIRS_SUFFIX = "-talk2radar"
@@ -202,6 +207,9 @@ class Talk2PCApp:
         )
         self.score_threshold = initial_threshold(model, DEFAULT_SCORE_THRESHOLD)
         self.model_note = self.config.model_note
+        self.labelled = LabelledFrames(root, self.config.scene_labels)
+        referent = getattr(getattr(model, "cfg", None), "grounding", None) == "referent"
+        self.labelled_boxes = self.labelled.boxes if self.labelled.available and referent else None
         pairs = self.config.pairs_root
         self.annotations = AnnotationHub(
             Path(pairs) if pairs is not None else default_pairs_root(root),
@@ -343,7 +351,11 @@ class Talk2PCApp:
         return (ExtraTab("Annotate", viser.Icon.PENCIL, build, name="annotation panel"),)
 
     def _on_connect(self, client: viser.ClientHandle) -> None:
-        options = SessionOptions(model_note=self.model_note, score_threshold=self.score_threshold)
+        options = SessionOptions(
+            model_note=self.model_note,
+            score_threshold=self.score_threshold,
+            labelled_boxes=self.labelled_boxes,
+        )
         with self.navigator.lock:
             session = ClientSession(client, self.navigator, self.engine, options)
             self.sessions[client.client_id] = session

@@ -90,10 +90,13 @@ class SessionOptions:
     Attributes:
         model_note: A warning shown at the top of the panel (None: none).
         score_threshold: The query panel's initial score threshold.
+        labelled_boxes: The labelled boxes of a sample's frame (``model.LabelledBoxes``, None
+            where it has none); None: the root has no labelled boxes (no "Candidates" control).
     """
 
     model_note: str | None = None
     score_threshold: float = 0.3
+    labelled_boxes: Callable[[Sample], object | None] | None = None
 
 
 @dataclass(frozen=True)
@@ -224,7 +227,11 @@ class ClientSession:
         sample_prompt = (self.sample.prompt or "") if self.sample is not None else ""
         with tabs.add_tab("Query", icon=viser.Icon.MESSAGE):
             self.query = build_query_panel(
-                gui, self.engine.modalities, self.options.score_threshold, prompt=sample_prompt
+                gui,
+                self.engine.modalities,
+                self.options.score_threshold,
+                prompt=sample_prompt,
+                labelled=self.options.labelled_boxes is not None,
             )
         with tabs.add_tab("View", icon=viser.Icon.EYE):
             self.view = build_view_panel(gui, self.scene_view.settings)
@@ -282,6 +289,8 @@ class ClientSession:
 
         q.modality.on_update(rerun_last)
         q.threshold.on_update(rerun_last)
+        if q.candidates is not None:
+            q.candidates.on_update(rerun_last)
 
         @q.opacity.on_update
         def _(_: viser.GuiEvent) -> None:
@@ -416,6 +425,7 @@ class ClientSession:
                 prompt=text,
                 modality=self.query.selected_modality(),
                 score_threshold=float(self.query.threshold.value),
+                labelled=self.query.labelled_selected(),
                 frame=self.frame,
                 generation=self._generation,
                 received=received,
@@ -430,8 +440,20 @@ class ClientSession:
         if self._stale(request):
             return
         try:
+            candidates = None
+            if request.labelled and self.options.labelled_boxes is not None:
+                candidates = self.options.labelled_boxes(request.frame.sample)
+                if candidates is None:
+                    raise ValueError(
+                        f"frame {request.frame.sample.sample_id} has no labelled boxes: choose "
+                        "Candidates: Detector proposals"
+                    )
             answer = self.engine.answer(
-                request.frame.sample, request.modality, request.prompt, request.score_threshold
+                request.frame.sample,
+                request.modality,
+                request.prompt,
+                request.score_threshold,
+                candidates,
             )
         except Exception as exc:
             self.report_error("Model error", exc)

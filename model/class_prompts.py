@@ -57,11 +57,11 @@ from model.class_prompt_counts import (
     PromptCount,
     bev_range,
     count_prompt,
-    in_camera_view,
     other_label_boxes,
 )
 from scenes.calib import IMAGE_SIZE
 from scenes.layout import ID_WIDTH, is_frame_id
+from scenes.projection import in_camera_view
 from scenes.root import LIDAR_FOLDER, RADAR_FOLDERS, RootError, Sample, Talk2RadarRoot
 
 FOVS = ("camera", "all")

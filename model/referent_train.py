@@ -26,6 +26,7 @@ boxes and scores, misses and false detections included.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
@@ -34,11 +35,19 @@ import torch
 from torch import Tensor
 
 from model.decode import decode
+from model.grid import BevGrid
 from model.grounder import SceneCandidates, stack_candidates
 from model.head import HeadOutput
+from model.labelled import anchor_scores
 from model.losses import LossTerms, grounding_loss
 from model.referent import CandidateBatch, referent_loss
-from model.targets import anchor_points, collate_targets, draw_targets
+from model.targets import (
+    BatchTargets,
+    anchor_points,
+    collate_targets,
+    draw_targets,
+    grid_cell_centres,
+)
 from model.text import (
     MiniLMTextEncoder,
     TextFeatures,
@@ -48,7 +57,9 @@ from model.text import (
 )
 from model.tpcnet import TPCNet, as_points
 from scenes.actors import CLASSES, Actor
-from scenes.frame_dataset import FrameDataset, FrameItem
+from scenes.boxes import match_by_centre
+from scenes.calib import Calibration
+from scenes.frame_dataset import AnnotatedRegion, FrameDataset, FrameItem
 from scenes.prompts import Prompt, PromptConfig, generate_prompts
 
 MATCH_DISTANCE = {"Car": 2.0, "Pedestrian": 1.0, "Cyclist": 1.2}
@@ -100,20 +111,6 @@ def in_grid_actors(actors: Sequence[Actor], model: TPCNet) -> list[Actor]:
     return [a for a, ok in zip(actors, inside, strict=True) if ok and a.cls in CLASSES]
 
 
-def _anchor_scores(heat: np.ndarray, boxes: np.ndarray, labels: np.ndarray, model: TPCNet):
-    """Detector score of each box: the 3x3 max of its class heatmap around its anchor cell."""
-    if len(boxes) == 0:
-        return np.zeros(0)
-    _, h, w = heat.shape
-    cells = np.floor(model.head_grid.xy_to_cell(anchor_points(boxes, model.cfg.head.anchor)))
-    out = np.zeros(len(boxes))
-    for i, ((c, r), lab) in enumerate(zip(cells.astype(int), labels, strict=True)):
-        r0, r1, c0, c1 = max(r - 1, 0), min(r + 2, h), max(c - 1, 0), min(c + 2, w)
-        if r0 < r1 and c0 < c1:
-            out[i] = float(heat[lab, r0:r1, c0:c1].max())
-    return out
-
-
 def training_candidates(
     actors: Sequence[Actor],
     detections_boxes: np.ndarray,
@@ -138,7 +135,7 @@ def training_candidates(
         boxes[:, :2] += rng.normal(0.0, cfg.jitter_xy, (len(boxes), 2))
         boxes[:, 3:6] *= np.exp(rng.normal(0.0, cfg.jitter_size, (len(boxes), 3)))
         boxes[:, 6] += rng.normal(0.0, cfg.jitter_yaw, len(boxes))
-    scores = _anchor_scores(heat, boxes, labels, model)
+    scores = anchor_scores(heat, boxes, labels, model.head_grid, model.cfg.head.anchor)
     false = []
     for i, (box, lab) in enumerate(zip(detections_boxes, detections_labels, strict=True)):
         same = [a for a in actors if CLASSES.index(a.cls) == lab]
@@ -232,17 +229,7 @@ def referent_step(
         lidar if model.cfg.uses_lidar else None, radar if model.cfg.uses_radar else None
     )
     actors = [in_grid_actors(f.actors, model) for f in frames]
-    targets = collate_targets(
-        [
-            draw_targets(
-                np.stack([a.box for a in acts]) if acts else np.zeros((0, 7)),
-                [a.cls for a in acts],
-                model.head_grid,
-                model.cfg.head,
-            )
-            for acts in actors
-        ]
-    ).to(device)
+    targets = detection_targets(model, frames, actors).to(device)
     out = float32_output(out)  # the losses and the decoding in float32 under autocast
     det = grounding_loss(out, targets)
     with torch.no_grad():
@@ -253,22 +240,32 @@ def referent_step(
     for b, frame in enumerate(frames):
         if not actors[b]:
             continue
+        d = dets[b]
+        inside = slice(None) if frame.region is None else frame.region.contains(d.boxes[:, :2])
         boxes, labels, scores, ids = training_candidates(
-            actors[b], dets[b].boxes, dets[b].labels, dets[b].scores, heat[b], model, rngs[b], cfg
+            actors[b],
+            d.boxes[inside],
+            d.labels[inside],
+            d.scores[inside],
+            heat[b],
+            model,
+            rngs[b],
+            cfg,
         )
-        prompts: list[Prompt] = generate_prompts(
-            frame.actors, rngs[b], cfg.prompts_per_scene, config=pcfg
-        )
-        usable = [p for p in prompts if set(p.referent_ids) <= set(ids.tolist())]
+        usable = [
+            (text, refs)
+            for text, refs in frame_prompts(frame, rngs[b], cfg.prompts_per_scene, pcfg)
+            if set(refs) <= set(ids.tolist())
+        ]
         if not usable:
             continue
         cands = model.candidates(boxes, labels, scores, maps[b], frame.lidar, frame.radar)
         scene_index = len(scenes)
         scenes.append(cands)
-        for p in usable:
-            texts.append(p.text)
+        for text, refs in usable:
+            texts.append(text)
             rows.append(scene_index)
-            target_rows.append(np.isin(ids, p.referent_ids).astype(np.float32))
+            target_rows.append(np.isin(ids, refs).astype(np.float32))
     if not texts:
         zero = det.total.new_zeros(())
         return ReferentLoss(det.total, det, zero, zero, 0)
@@ -276,6 +273,61 @@ def referent_step(
     bce, listwise = _prompt_losses(model, scenes, rows, text, target_rows)
     total = det.total + cfg.referent_weight * (bce + cfg.listwise_weight * listwise)
     return ReferentLoss(total, det, bce, listwise, len(texts))
+
+
+def frame_prompts(
+    frame: FrameItem, rng: np.random.Generator, count: int, config: PromptConfig
+) -> list[tuple[str, tuple[int, ...]]]:
+    """``(text, referent actor ids)`` of a frame's training prompts: the prompts that come with
+    it (labels source, all of them), or ``count`` generated from its actors (sidecar source)."""
+    if not frame.generates_prompts:
+        return [(g.text, g.referent_ids) for g in frame.given]
+    prompts: list[Prompt] = generate_prompts(frame.actors, rng, count, config=config)
+    return [(p.text, tuple(p.referent_ids)) for p in prompts]
+
+
+def detection_targets(
+    model: TPCNet, frames: Sequence[FrameItem], actors: Sequence[Sequence[Actor]]
+) -> BatchTargets:
+    """Detector targets of a batch: every in-grid actor of each frame, and where a frame's labels
+    cover only the camera view (:attr:`FrameItem.region`), no negatives outside it."""
+    targets = collate_targets(
+        [
+            draw_targets(
+                np.stack([a.box for a in acts]) if acts else np.zeros((0, 7)),
+                [a.cls for a in acts],
+                model.head_grid,
+                model.cfg.head,
+            )
+            for acts in actors
+        ]
+    )
+    if all(f.region is None for f in frames):
+        return targets
+    h, w = model.head_grid.shape
+    ignore = np.zeros((len(frames), 1, h, w), dtype=bool)
+    for b, frame in enumerate(frames):
+        if frame.region is not None:
+            region = frame.region
+            calib = tuple(
+                (m.tobytes(), m.shape)
+                for m in (region.calib.P2, region.calib.R0_rect, region.calib.Tr_velo_to_cam)
+            )
+            ignore[b, 0] = _outside(model.head_grid, calib, region.image_size, region.mirrored)
+    return replace(targets, ignore=torch.from_numpy(ignore))
+
+
+@functools.lru_cache(maxsize=64)
+def _outside(
+    grid: BevGrid, calib: tuple, image_size: tuple[int, int], mirrored: bool
+) -> np.ndarray:
+    """``(H, W)`` bool: head-grid cells outside the annotated region of a calibration (given as
+    the bytes and shapes of ``P2``, ``R0_rect``, ``Tr_velo_to_cam``); a release's frames share a
+    handful of calibrations, so this is computed once per calibration and flip."""
+    p2, r0, tr = (np.frombuffer(data, dtype=np.float64).reshape(shape) for data, shape in calib)
+    region = AnnotatedRegion(Calibration(p2, r0, tr), image_size, mirrored)
+    h, w = grid.shape
+    return ~region.contains(grid_cell_centres(grid)).reshape(h, w)
 
 
 @dataclass(frozen=True)
@@ -297,21 +349,16 @@ class CachedScene:
 
 def match_detections(boxes: np.ndarray, labels: np.ndarray, actors: Sequence[Actor]) -> np.ndarray:
     """Actor id ``(K,)`` of each detection (-1: none): detections in the given (score) order take
-    the nearest free actor of their class within :data:`MATCH_DISTANCE` of the BEV centre."""
-    out = np.full(len(boxes), -1, dtype=np.int64)
-    taken: set[int] = set()
-    for i, (box, lab) in enumerate(zip(boxes, labels, strict=True)):
-        best, best_d = -1, MATCH_DISTANCE[CLASSES[lab]]
-        for a in actors:
-            if a.cls != CLASSES[lab] or a.actor_id in taken:
-                continue
-            d = float(np.hypot(*(a.box[:2] - box[:2])))
-            if d <= best_d:
-                best, best_d = a.actor_id, d
-        if best >= 0:
-            out[i] = best
-            taken.add(best)
-    return out
+    the nearest free actor of their class within :data:`MATCH_DISTANCE` of the BEV centre
+    (:func:`scenes.boxes.match_by_centre`)."""
+    if not actors:
+        return np.full(len(boxes), -1, dtype=np.int64)
+    targets = np.stack([a.box for a in actors])
+    target_labels = np.array([CLASSES.index(a.cls) for a in actors], dtype=np.int64)
+    limits = np.array([MATCH_DISTANCE[c] for c in CLASSES])
+    index = match_by_centre(boxes, labels, targets, target_labels, limits)
+    ids = np.array([a.actor_id for a in actors], dtype=np.int64)
+    return np.where(index >= 0, ids[np.maximum(index, 0)], -1)
 
 
 @dataclass
@@ -355,14 +402,20 @@ def cache_scenes(
             )
             ids = match_detections(objects.boxes, objects.labels, item.actors)
             rng = np.random.default_rng((seed, 11, i))
-            prompts = generate_prompts(item.actors, rng, prompts_per_scene, config=pcfg)
-            usable = [p for p in prompts if np.isin(ids, p.referent_ids).any()]
+            prompts = frame_prompts(item, rng, prompts_per_scene, pcfg)
+            # A generated prompt needs a detected referent; a given one is kept when it refers to
+            # nothing (the empty answer is an answer) or to at least one detected object.
+            usable = [
+                (text, refs)
+                for text, refs in prompts
+                if np.isin(ids, refs).any() or (not refs and not item.generates_prompts)
+            ]
             scenes.append(
                 CachedScene(
                     cpu,
                     ids,
-                    tuple(p.text for p in usable),
-                    tuple(np.isin(ids, p.referent_ids).astype(np.float32) for p in usable),
+                    tuple(text for text, _ in usable),
+                    tuple(np.isin(ids, refs).astype(np.float32) for _, refs in usable),
                 )
             )
     texts = list(dict.fromkeys(t for s in scenes for t in s.prompts))

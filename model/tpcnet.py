@@ -52,6 +52,7 @@ from model.grounder import (
     stack_candidates,
 )
 from model.head import C3DRecHead, HeadOutput
+from model.labelled import LabelledBoxes, anchor_scores
 from model.pillars import PillarEncoder
 from model.referent import ReferentStage
 from model.text import TextFeatures, build_text_encoder, validate_prompt
@@ -387,7 +388,10 @@ class TPCNet(nn.Module):
     # ------------------------------------------------------------------ public API
 
     def encode_scene(
-        self, lidar: PointsLike | None = None, radar: PointsLike | None = None
+        self,
+        lidar: PointsLike | None = None,
+        radar: PointsLike | None = None,
+        candidates: LabelledBoxes | None = None,
     ) -> SceneFeatures:
         """Text-independent features of one scene (sensor branches + LiDAR-radar fusion; with
         ``grounding="referent"`` also the text-agnostic detections as candidates).
@@ -396,10 +400,18 @@ class TPCNet(nn.Module):
             lidar: ``(N, 4)`` LiDAR points (x, y, z, intensity), LiDAR frame; ignored (may be
                 ``None``) by a radar-only model.
             radar: ``(M, 7)`` radar points in the LiDAR frame; ignored by a LiDAR-only model.
+            candidates: Referent path only: the frame's labelled boxes, among which the referent
+                stage then chooses instead of the detector's proposals (each gets the detector's
+                score at its anchor cell, :func:`model.labelled.anchor_scores`).
 
         Returns:
             :class:`SceneFeatures` with ``lr_i`` of shape ``(1, C_i, H_i, W_i)``.
         """
+        if candidates is not None and self.referent is None:
+            raise ValueError(
+                "labelled candidates need a referent-path model; the paper's path ranks "
+                "its own heatmap peaks"
+            )
         lidar_t = self._clouds(
             None if lidar is None else [lidar], 1, "lidar", LIDAR_FEATURES, self.cfg.uses_lidar
         )
@@ -413,24 +425,32 @@ class TPCNet(nn.Module):
                 clock = _Clock(self.device)
                 neck = self.neck(list(stages))
                 out = self.head(neck)
-                dets = decode(
-                    out, self.head_grid, self.cfg.head, self.cfg.referent.candidate_threshold
-                )[0]
-                keep = slice(0, self.cfg.referent.max_candidates)
+                heat = torch.sigmoid(out.heatmap[0]).float().cpu().numpy()
+                if candidates is None:
+                    dets = decode(
+                        out, self.head_grid, self.cfg.head, self.cfg.referent.candidate_threshold
+                    )[0]
+                    keep = slice(0, self.cfg.referent.max_candidates)
+                    boxes, labels = dets.boxes[keep], dets.labels[keep]
+                    scores = dets.scores[keep]
+                else:
+                    boxes, labels = candidates.boxes, candidates.labels
+                    scores = anchor_scores(
+                        heat, boxes, labels, self.head_grid, self.cfg.head.anchor
+                    )
                 maps = SceneMaps(
                     neck[0],
                     per_sensor["l"][0][0] if "l" in per_sensor else None,
                     per_sensor["r"][0][0] if "r" in per_sensor else None,
                 )
                 objects = self.candidates(
-                    dets.boxes[keep],
-                    dets.labels[keep],
-                    dets.scores[keep],
+                    boxes,
+                    labels,
+                    scores,
                     maps,
                     None if lidar_t is None else lidar_t[0].cpu().numpy(),
                     None if radar_t is None else radar_t[0].cpu().numpy(),
                 )
-                heat = torch.sigmoid(out.heatmap[0]).float().cpu().numpy()
                 timings = dataclasses.replace(timings, detect=clock.lap())
         return SceneFeatures(
             stages=tuple(stages),

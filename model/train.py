@@ -44,6 +44,7 @@ from model.checkpoint import checkpoint_payload, model_from_payload, write_paylo
 from model.losses import grounding_loss
 from model.referent_train import (
     ReferentTrainConfig,
+    TextBank,
     cache_scenes,
     cached_referent_step,
     float32_output,
@@ -66,6 +67,13 @@ from model.train_state import (
     state_path,
     trim_log,
 )
+from model.training_data import (
+    DataSpecError,
+    MixedFrames,
+    RootSpec,
+    frame_dataset,
+    root_specs,
+)
 from scenes.actors import CLASSES
 from scenes.dataset import AugmentConfig, GroundingBatch, GroundingDataset, collate
 from scenes.durable import append_json_line
@@ -73,6 +81,7 @@ from scenes.frame_dataset import FrameDataset, SensorAugment
 from scenes.kitti import read_label_file
 from scenes.layout import LABEL, sample_dir, sample_file, split_file
 from scenes.root import Talk2RadarRoot
+from scenes.scene_labels import SceneLabels, class_index
 
 
 class TrainingError(RuntimeError):
@@ -83,7 +92,7 @@ class TrainingError(RuntimeError):
 class TrainConfig:
     """Everything that defines a training run (stored in the checkpoints)."""
 
-    data: str
+    data: tuple[str, ...]
     out: str
     preset: str = "small"
     epochs: int = 20
@@ -116,8 +125,25 @@ class TrainConfig:
     freeze_scene: bool = False
     bank_prompts: int = 24
     scene_limit: int = 0
+    data_weights: tuple[float, ...] = ()
+    scene_labels: tuple[str, ...] = ()
+    init_detector: str | None = None
 
     def __post_init__(self) -> None:
+        for name in ("data", "data_weights", "scene_labels"):
+            value = getattr(self, name)
+            object.__setattr__(self, name, (value,) if isinstance(value, str) else tuple(value))
+        try:
+            self.roots()
+        except DataSpecError as exc:
+            raise TrainingError(str(exc)) from exc
+        if self.init and self.init_detector:
+            raise TrainingError("give --init or --init-detector, not both")
+        if self.grounding != "referent" and (len(self.data) > 1 or self.scene_labels):
+            raise TrainingError(
+                "several --data roots and --scene-labels are the referent path's; the paper's "
+                "path trains on one root's label_2 boxes"
+            )
         for name in ("epochs", "batch_size", "prompts_per_scene"):
             if getattr(self, name) < 1:
                 flag = "--" + name.replace("_", "-")
@@ -128,6 +154,10 @@ class TrainConfig:
             raise TrainingError(f"--grounding must be referent or tpcnet, got {self.grounding!r}")
         if Path(self.out).exists() and not Path(self.out).is_dir():
             raise TrainingError(f"--out {self.out} is a file; give a run folder")
+
+    def roots(self) -> tuple[RootSpec, ...]:
+        """The training roots (:func:`model.training_data.root_specs`)."""
+        return root_specs(self.data, self.data_weights, self.scene_labels)
 
     def model_overrides(self) -> dict[str, str]:
         """The ``build_model`` overrides given on the command line."""
@@ -176,15 +206,24 @@ def _targets(batch: GroundingBatch, model: torch.nn.Module, device: torch.device
     ).to(device)
 
 
-def init_from(model: torch.nn.Module, path: str) -> int:
+SCENE_MODULES = ("lidar.", "radar.", "fusion.", "neck.", "head.")
+"""Parameter-name prefixes of the scene encoder and detector (what ``--init-detector`` copies)."""
+
+
+def init_from(model: torch.nn.Module, path: str, prefixes: tuple[str, ...] = ()) -> int:
     """Copy every weight of the checkpoint at ``path`` whose name and shape match ``model``'s
     (e.g. the sensor branches, fusion, neck and head of a paper-path checkpoint into a referent
-    model); returns how many tensors were copied."""
+    model), only names starting with one of ``prefixes`` when given; returns how many tensors
+    were copied."""
     from model.checkpoint import read_checkpoint
 
     state = read_checkpoint(path)["state_dict"]
     own = model.state_dict()
-    same = {k: v for k, v in state.items() if k in own and own[k].shape == v.shape}
+    same = {
+        k: v
+        for k, v in state.items()
+        if k in own and own[k].shape == v.shape and (not prefixes or k.startswith(prefixes))
+    }
     if not same:
         raise TrainingError(f"{path}: no weight matches this model's names and shapes")
     model.load_state_dict(same, strict=False)
@@ -211,19 +250,22 @@ def validate(model: torch.nn.Module, cfg: TrainConfig, root: Talk2RadarRoot) -> 
     }
 
 
-def check_labels(root: Talk2RadarRoot, split: str) -> None:
-    """Refuse a training split none of whose ``label_2`` files holds a box of :data:`CLASSES`
-    (an empty or foreign-class root would train to nothing and report mAP 0)."""
+def check_labels(spec: RootSpec, split: str) -> None:
+    """Refuse a training root none of whose ``split`` frames has a label of :data:`CLASSES` (its
+    ``label_2``, or its scene labels' where given): it would train to nothing and report mAP 0."""
+    root = Talk2RadarRoot(spec.path, radar=None)
     ids = root.ids(split)
     if not ids:
         raise TrainingError(f"{split_file(root.lidar_dir, split)}: split {split!r} is empty")
+    scene = None if spec.scene_labels is None else SceneLabels(spec.scene_labels)
     for sid in ids:
-        path = sample_file(root.lidar_dir, LABEL, sid)
-        if path.is_file() and any(label.name in CLASSES for label in read_label_file(path)):
+        path = sample_file(root.lidar_dir, LABEL, sid) if scene is None else scene.label_path(sid)
+        if path.is_file() and any(class_index(x.name) >= 0 for x in read_label_file(path)):
             return
+    folder = sample_dir(root.lidar_dir if scene is None else scene.tree, LABEL)
     raise TrainingError(
-        f"{sample_dir(root.lidar_dir, LABEL)}: no label of the {len(ids)} samples of split "
-        f"{split!r} has a {', '.join(CLASSES)} box: nothing to train on"
+        f"{folder}: no label of the {len(ids)} samples of split {split!r} has a "
+        f"{', '.join(CLASSES)} box: nothing to train on"
     )
 
 
@@ -251,16 +293,28 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
     if use_amp and device.type != "cuda":
         raise TrainingError("--amp bf16 runs on CUDA only (give --device cuda)")
     torch.manual_seed(cfg.seed + rank)
-    root = Talk2RadarRoot(cfg.data, radar=None if cfg.radar_folder == "none" else cfg.radar_folder)
-    check_labels(root, cfg.train_split)
+    radar_folder = None if cfg.radar_folder == "none" else cfg.radar_folder
+    specs = cfg.roots()
+    root = Talk2RadarRoot(specs[0].path, radar=radar_folder, sidecar=specs[0].scene_labels is None)
+    for spec in specs:
+        check_labels(spec, cfg.train_split)
     augment = AugmentConfig(flip_probability=cfg.flip_probability)
     referent = cfg.grounding == "referent"
-    dataset: GroundingDataset | FrameDataset
+    dataset: GroundingDataset | MixedFrames
+
+    def frames_of(spec: RootSpec, **kwargs: object) -> FrameDataset:
+        frames = frame_dataset(spec, cfg.train_split, **kwargs)
+        if cfg.freeze_scene and cfg.scene_limit:
+            frames.limit(cfg.scene_limit)  # the cached scenes (see below)
+        return frames
+
     if referent:
         sensors = SensorAugment() if cfg.sensor_augment else None
-        dataset = FrameDataset(root, cfg.train_split, augment, sensors, seed=cfg.seed)
-        if cfg.freeze_scene and cfg.scene_limit:
-            dataset.ids = dataset.ids[: cfg.scene_limit]  # the cached scenes (see below)
+        dataset = MixedFrames(
+            [frames_of(spec, augment=augment, sensors=sensors, seed=cfg.seed) for spec in specs],
+            [spec.weight for spec in specs],
+            seed=cfg.seed,
+        )
     else:
         dataset = GroundingDataset(root, cfg.train_split, augment=augment, seed=cfg.seed)
     referent_cfg = ReferentTrainConfig(prompts_per_scene=cfg.prompts_per_scene)
@@ -287,6 +341,13 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
         if cfg.init:
             copied = init_from(model, cfg.init)
             print(f"initialised {copied} weight tensors from {cfg.init}", file=sys.stderr)
+        if cfg.init_detector:
+            copied = init_from(model, cfg.init_detector, SCENE_MODULES)
+            print(
+                f"initialised the scene encoder and detector ({copied} tensors) from "
+                f"{cfg.init_detector}; the referent stage starts from scratch",
+                file=sys.stderr,
+            )
     model.to(device)
     cached = None
     if referent and cfg.freeze_scene:
@@ -295,10 +356,13 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
             p.requires_grad_(name.startswith("referent."))
         if cfg.text_encoder not in (None, "minilm"):
             raise TrainingError("--freeze-scene banks frozen MiniLM prompt features: use minilm")
-        scenes = FrameDataset(root, cfg.train_split)
-        if cfg.scene_limit:
-            scenes.ids = scenes.ids[: cfg.scene_limit]
-        cached, bank = cache_scenes(model, scenes, cfg.bank_prompts, cfg.seed, progress=rank == 0)
+        cached, bank = [], TextBank({})
+        for spec in specs:
+            part, part_bank = cache_scenes(
+                model, frames_of(spec), cfg.bank_prompts, seed=cfg.seed, progress=rank == 0
+            )
+            cached += part
+            bank.entries.update(part_bank.entries)
     params = [p for p in model.parameters() if p.requires_grad]
     optimizer = torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay)
     if run is not None:
@@ -318,7 +382,11 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
         out.mkdir(parents=True, exist_ok=True)
     metadata = {
         "train_config": asdict(cfg),
-        "data": {"root": str(Path(cfg.data).resolve()), "train_samples": len(dataset)},
+        "data": {
+            "root": str(Path(specs[0].path).resolve()),
+            "roots": [str(Path(spec.path).resolve()) for spec in specs],
+            "train_samples": len(dataset),
+        },
     }
 
     def checkpoint(best: bool) -> None:
@@ -378,7 +446,8 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
                     rngs = item_rngs(cfg.seed, state.epoch, indices)
                     with autocast:
                         if cached is not None:
-                            ref = step([cached[i] for i in indices], bank, rngs, referent_cfg)
+                            picked = [cached[dataset.resolve(i)] for i in indices]
+                            ref = step(picked, bank, rngs, referent_cfg)
                         else:
                             ref = step([dataset[i] for i in indices], rngs, referent_cfg)
                     terms, total = ref.detection, ref.total
@@ -442,7 +511,28 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
 def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     """Parse the command line into a :class:`TrainConfig` and the resume flag."""
     p = argparse.ArgumentParser(prog="python -m model.train", description=__doc__.split("\n")[0])
-    p.add_argument("--data", required=True, help="Talk2Radar root")
+    p.add_argument(
+        "--data",
+        required=True,
+        action="append",
+        help="Talk2Radar root; give it several times to train on several roots at once",
+    )
+    p.add_argument(
+        "--data-weight",
+        type=float,
+        action="append",
+        default=[],
+        help="referent path: times each frame of the matching --data root (in order) is seen "
+        "per epoch (default 1)",
+    )
+    p.add_argument(
+        "--scene-labels",
+        action="append",
+        default=[],
+        help="referent path: the View-of-Delft root whose label_2 lists every object of the "
+        "matching --data root's frames (in order; 'none' for a root without); such a root trains "
+        "on its labels and prompts only, never a sidecar",
+    )
     p.add_argument("--out", required=True, help="run folder, e.g. runs/NAME")
     p.add_argument("--preset", default="small", choices=["small", "paper"])
     p.add_argument("--epochs", type=int, default=20)
@@ -466,6 +556,11 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     )
     p.add_argument(
         "--init", help="copy matching weights from this checkpoint before training (new runs)"
+    )
+    p.add_argument(
+        "--init-detector",
+        help="copy only the scene encoder and detector from this checkpoint; the referent stage "
+        "starts from scratch (new runs)",
     )
     p.add_argument(
         "--prompts-per-scene",
@@ -528,7 +623,9 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     if a.threads:
         torch.set_num_threads(a.threads)
     given = {f.name: getattr(a, f.name) for f in fields(TrainConfig) if hasattr(a, f.name)}
-    cfg = TrainConfig(**given, sensor_augment=not a.no_sensor_augment)
+    cfg = TrainConfig(
+        **given, data_weights=tuple(a.data_weight), sensor_augment=not a.no_sensor_augment
+    )
     return cfg, a.resume
 
 

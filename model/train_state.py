@@ -123,6 +123,7 @@ FREE_ON_RESUME = frozenset(
         "prompts_per_scene",
         "bank_prompts",
         "init",
+        "init_detector",
     }
 )
 """Settings a resumed run may change (every other one must be the run's)."""

@@ -35,9 +35,13 @@ RADAR_FOLDERS = ("radar_5frames", "radar_3frames", "radar")
 """The radar trees a root may have, in the order readers look for them."""
 RADAR_FOLDER_OF_SCANS = {1: "radar", 3: "radar_3frames", 5: "radar_5frames"}
 """Radar tree per number of accumulated radar scans (as VoD)."""
+SCANS_OF_RADAR_FOLDER = {folder: scans for scans, folder in RADAR_FOLDER_OF_SCANS.items()}
+"""Number of accumulated radar scans of each radar tree."""
 
 SAMPLES = "training"
 IMAGE_SETS = "ImageSets"
+TRAIN_VAL = "train_val"
+"""The View-of-Delft release's split list of its ``train`` and ``val`` frames together."""
 META = "meta"
 SOURCES = "sources"
 
@@ -207,6 +211,7 @@ __all__ = [
     "SAMPLES",
     "SAMPLE_FILES",
     "SAMPLE_FOLDERS",
+    "SCANS_OF_RADAR_FOLDER",
     "SOURCES",
     "SOURCE_IMAGE",
     "SOURCE_LIDAR",
@@ -214,6 +219,7 @@ __all__ = [
     "SOURCE_RADAR",
     "SOURCE_RADAR_CALIB",
     "SOURCE_SENSORS",
+    "TRAIN_VAL",
     "VELODYNE",
     "RootError",
     "format_id",

@@ -15,7 +15,7 @@ import pytest
 
 import launch
 from app.server import default_pairs_root
-from scenes.root import Talk2RadarRoot
+from scenes.root import RootError, Talk2RadarRoot
 
 
 def _files(root: Path) -> dict[str, tuple[int, int]]:
@@ -57,9 +57,39 @@ def test_launch_errors_name_the_file_and_exit_2(tmp_path, write_vod_root, capsys
     code = launch.main(["--data", str(root), "--port", "0"])
     assert code == 2 and "no split can be served" in capsys.readouterr().err
     bare = write_vod_root(tmp_path / "bare", frames=1, splits={})
+    (bare / "lidar" / "ImageSets").mkdir()  # a folder without lists (no folder: every frame)
     code = launch.main(["--data", str(bare), "--port", "0"])
     err = capsys.readouterr().err
     assert code == 2 and "no split list" in err and "ImageSets" in err
+
+
+def test_a_root_without_image_sets_serves_every_frame(tmp_path, write_vod_root) -> None:
+    """The devkit's example set has no ImageSets: all frames of velodyne/, with one notice."""
+    path = write_vod_root(tmp_path / "example", frames=3, splits={})
+    for file in sorted(path.glob("*/training/*/00001.*")):
+        file.rename(file.with_stem("00549"))
+    assert not (path / "lidar" / "ImageSets").exists()
+    root = Talk2RadarRoot(path)
+    assert root.splits() == ["all"]
+    with pytest.warns(UserWarning, match=r"no ImageSets folder; serving all 3 frames") as notes:
+        assert root.ids("all") == ["00000", "00002", "00549"]
+    assert len(notes) == 1 and "\n" not in str(notes[0].message)
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # once per root: no second notice
+        assert root.ids("test") == ["00000", "00002", "00549"]
+    with pytest.warns(UserWarning):
+        opened = launch.open_root(path, None)
+        assert launch.choose_split(opened, None) == "all"
+    (path / "radar" / "training" / "calib" / "00549.txt").unlink()
+    with pytest.warns(UserWarning), pytest.raises(launch.LaunchError) as info:
+        launch.open_root(path, "all")
+    assert "calib/00549.txt: missing calib file" in str(info.value)
+    assert "1 of the 3 frames of" in str(info.value) and "velodyne miss files" in str(info.value)
+    (path / "lidar" / "training" / "velodyne" / "frame7.bin").write_bytes(b"")
+    with pytest.raises(RootError, match=r"frame7\.bin: not named by a frame id"):
+        Talk2RadarRoot(path).ids("all")
 
 
 def test_pairs_of_a_root_without_prompts_go_beside_it(tmp_path, write_vod_root) -> None:
