@@ -79,6 +79,8 @@ class ReferentTrainConfig:
         referent_weight: Weight of the referent BCE in the total loss.
         listwise_weight: Weight of the listwise term.
         phrasing: Phrasing stream of the generated prompts (``PromptConfig.phrasing``).
+        label_prompts: Labels-source frames with scene labels: prompts generated per frame from
+            its labelled boxes, beside the given ones (:func:`frame_prompts`).
     """
 
     prompts_per_scene: int = 8
@@ -89,6 +91,7 @@ class ReferentTrainConfig:
     referent_weight: float = 1.0
     listwise_weight: float = 0.5
     phrasing: str = "train"
+    label_prompts: int = 0
 
 
 @dataclass(frozen=True)
@@ -254,7 +257,9 @@ def referent_step(
         )
         usable = [
             (text, refs)
-            for text, refs in frame_prompts(frame, rngs[b], cfg.prompts_per_scene, pcfg)
+            for text, refs in frame_prompts(
+                frame, rngs[b], cfg.prompts_per_scene, pcfg, cfg.label_prompts
+            )
             if set(refs) <= set(ids.tolist())
         ]
         if not usable:
@@ -276,12 +281,25 @@ def referent_step(
 
 
 def frame_prompts(
-    frame: FrameItem, rng: np.random.Generator, count: int, config: PromptConfig
+    frame: FrameItem,
+    rng: np.random.Generator,
+    count: int,
+    config: PromptConfig,
+    label_prompts: int = 0,
 ) -> list[tuple[str, tuple[int, ...]]]:
     """``(text, referent actor ids)`` of a frame's training prompts: the prompts that come with
-    it (labels source, all of them), or ``count`` generated from its actors (sidecar source)."""
+    it (labels source, all of them), or ``count`` generated from its actors (sidecar source).
+
+    ``label_prompts``: on a labels-source frame with complete labels (scene labels), that many
+    more prompts generated from its labelled boxes, of the attributes a box alone decides
+    (``PromptConfig.geometry_only``: class, depth, side; the boxes' motion is unknown)."""
     if not frame.generates_prompts:
-        return [(g.text, g.referent_ids) for g in frame.given]
+        given = [(g.text, g.referent_ids) for g in frame.given]
+        if label_prompts <= 0 or frame.region is None:
+            return given
+        geometry = replace(config, geometry_only=True)
+        extra: list[Prompt] = generate_prompts(frame.actors, rng, label_prompts, config=geometry)
+        return given + [(p.text, tuple(p.referent_ids)) for p in extra]
     prompts: list[Prompt] = generate_prompts(frame.actors, rng, count, config=config)
     return [(p.text, tuple(p.referent_ids)) for p in prompts]
 
@@ -380,9 +398,12 @@ def cache_scenes(
     seed: int = 0,
     phrasing: str = "train",
     progress: bool = True,
+    label_prompts: int = 0,
 ) -> tuple[list[CachedScene], TextBank]:
     """Encode every scene of ``dataset`` with the frozen model, generate ``prompts_per_scene``
-    prompts per scene and encode them with the frozen text encoder (module docstring)."""
+    prompts per scene (labels source: take its given prompts, plus ``label_prompts`` from its
+    labelled boxes, :func:`frame_prompts`) and encode them with the frozen text encoder (module
+    docstring). A ``dataset`` that flips every frame gives the mirrored views of the scenes."""
     from tqdm import tqdm
 
     model.eval()
@@ -402,7 +423,7 @@ def cache_scenes(
             )
             ids = match_detections(objects.boxes, objects.labels, item.actors)
             rng = np.random.default_rng((seed, 11, i))
-            prompts = frame_prompts(item, rng, prompts_per_scene, pcfg)
+            prompts = frame_prompts(item, rng, prompts_per_scene, pcfg, label_prompts)
             # A generated prompt needs a detected referent; a given one is kept when it refers to
             # nothing (the empty answer is an answer) or to at least one detected object.
             usable = [

@@ -43,6 +43,7 @@ from model import build_model, distributed
 from model.checkpoint import checkpoint_payload, model_from_payload, write_payload
 from model.losses import grounding_loss
 from model.referent_train import (
+    CachedScene,
     ReferentTrainConfig,
     TextBank,
     cache_scenes,
@@ -128,6 +129,7 @@ class TrainConfig:
     data_weights: tuple[float, ...] = ()
     scene_labels: tuple[str, ...] = ()
     init_detector: str | None = None
+    label_prompts: int = 0
 
     def __post_init__(self) -> None:
         for name in ("data", "data_weights", "scene_labels"):
@@ -208,6 +210,17 @@ def _targets(batch: GroundingBatch, model: torch.nn.Module, device: torch.device
 
 SCENE_MODULES = ("lidar.", "radar.", "fusion.", "neck.", "head.")
 """Parameter-name prefixes of the scene encoder and detector (what ``--init-detector`` copies)."""
+
+
+def pick_view(
+    cached: list, mirrored: list, index: int, cfg: TrainConfig, epoch: int
+) -> CachedScene:
+    """``--freeze-scene``: the cached scene ``index`` as is, or its mirrored view (prompts with
+    left and right swapped) with ``cfg.flip_probability``, drawn from ``(seed, epoch, index)``."""
+    if not mirrored:
+        return cached[index]
+    rng = np.random.default_rng((cfg.seed, 13, epoch, index))
+    return mirrored[index] if rng.random() < cfg.flip_probability else cached[index]
 
 
 def init_from(model: torch.nn.Module, path: str, prefixes: tuple[str, ...] = ()) -> int:
@@ -317,7 +330,9 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
         )
     else:
         dataset = GroundingDataset(root, cfg.train_split, augment=augment, seed=cfg.seed)
-    referent_cfg = ReferentTrainConfig(prompts_per_scene=cfg.prompts_per_scene)
+    referent_cfg = ReferentTrainConfig(
+        prompts_per_scene=cfg.prompts_per_scene, label_prompts=cfg.label_prompts
+    )
 
     state = TrainState()
     run: RunState | None = None
@@ -356,15 +371,25 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
             p.requires_grad_(name.startswith("referent."))
         if cfg.text_encoder not in (None, "minilm"):
             raise TrainingError("--freeze-scene banks frozen MiniLM prompt features: use minilm")
-        cached, bank = [], TextBank({})
+        cached, mirrored, bank = [], [], TextBank({})
+        flip = AugmentConfig(flip_probability=1.0, lidar_keep_min=1.0, shuffle_points=False)
         for spec in specs:
-            part, part_bank = cache_scenes(
-                model, frames_of(spec), cfg.bank_prompts, seed=cfg.seed, progress=rank == 0
-            )
-            cached += part
-            bank.entries.update(part_bank.entries)
+            views = [(frames_of(spec), cached)]
+            if cfg.flip_probability > 0:  # every scene also encoded mirrored, prompts swapped
+                views.append((frames_of(spec, augment=flip), mirrored))
+            for frames, into in views:
+                part, part_bank = cache_scenes(
+                    model,
+                    frames,
+                    cfg.bank_prompts,
+                    seed=cfg.seed,
+                    progress=rank == 0,
+                    label_prompts=cfg.label_prompts,
+                )
+                into += part
+                bank.entries.update(part_bank.entries)
     params = [p for p in model.parameters() if p.requires_grad]
-    optimizer = torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay)
+    optimizer = torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay, foreach=True)
     if run is not None:
         optimizer.load_state_dict(run.optimizer)
     if cached is not None:
@@ -446,7 +471,10 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
                     rngs = item_rngs(cfg.seed, state.epoch, indices)
                     with autocast:
                         if cached is not None:
-                            picked = [cached[dataset.resolve(i)] for i in indices]
+                            picked = [
+                                pick_view(cached, mirrored, dataset.resolve(i), cfg, state.epoch)
+                                for i in indices
+                            ]
                             ref = step(picked, bank, rngs, referent_cfg)
                         else:
                             ref = step([dataset[i] for i in indices], rngs, referent_cfg)
@@ -605,6 +633,14 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
         type=int,
         default=24,
         help="--freeze-scene: prompts generated and encoded once per scene",
+    )
+    p.add_argument(
+        "--label-prompts",
+        type=int,
+        default=0,
+        help="referent path, roots with --scene-labels: prompts generated per frame from its "
+        "labelled boxes (class, depth and side only: their motion is unknown) beside the given "
+        "one (default 0: given prompts only)",
     )
     p.add_argument(
         "--scene-limit",
