@@ -93,13 +93,8 @@ def test_every_stage_steps_under_bfloat16_autocast(tmp_path: Path, write_tiny_ro
 
     from model import build_model
     from model.losses import grounding_loss
-    from model.referent_train import (
-        ReferentTrainConfig,
-        cache_scenes,
-        cached_referent_step,
-        float32_output,
-        referent_step,
-    )
+    from model.referent_cache import cache_scenes, cached_referent_step
+    from model.referent_train import ReferentTrainConfig, float32_output, referent_step
     from model.targets import collate_targets, draw_targets
     from model.train import init_from
     from scenes.dataset import GroundingDataset, collate
