@@ -85,11 +85,14 @@ def cache_scenes(
     phrasing: str = "train",
     progress: bool = True,
     label_prompts: int = 0,
+    known: TextBank | None = None,
 ) -> tuple[list[CachedScene], TextBank]:
     """Encode every scene of ``dataset`` with the frozen model, generate ``prompts_per_scene``
     prompts per scene (labels source: take its given prompts, plus ``label_prompts`` from its
     labelled boxes, :func:`frame_prompts`) and encode them with the frozen text encoder (module
-    docstring). A ``dataset`` that flips every frame gives the mirrored views of the scenes."""
+    docstring). A ``dataset`` that flips every frame gives the mirrored views of the scenes.
+    Prompts already in ``known`` (e.g. the other view's bank) are not encoded again; the bank
+    returned holds only the new ones."""
     from tqdm import tqdm
 
     model.eval()
@@ -125,7 +128,8 @@ def cache_scenes(
                     tuple(np.isin(ids, refs).astype(np.float32) for _, refs in usable),
                 )
             )
-    texts = list(dict.fromkeys(t for s in scenes for t in s.prompts))
+    done = {} if known is None else known.entries
+    texts = [t for t in dict.fromkeys(t for s in scenes for t in s.prompts) if t not in done]
     entries = {}
     max_tokens = model.cfg.text.max_tokens
     chunk = 256

@@ -294,6 +294,7 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
                     seed=cfg.seed,
                     progress=rank == 0,
                     label_prompts=cfg.label_prompts,
+                    known=bank,
                 )
                 into += part
                 bank.entries.update(part_bank.entries)
