@@ -19,13 +19,18 @@
                                                   Talk2PC: a frame's sensor files, hard-linked
                                                   into the samples made from it
 
-Ids are 5-digit, zero padded (:func:`format_id`). The reader (:class:`scenes.root.Talk2RadarRoot`),
+Ids follow one rule (:func:`is_frame_id`): exactly :data:`ID_WIDTH` (5) ASCII digits, as
+Talk2Radar and View-of-Delft write them (``00042``). Split lists and file names must spell them so
+(:func:`parse_id`, :func:`parse_split_list`: ``42``, ``0_0010``, ``+4``, ``-6``, other scripts'
+digits, whitespace and 6-digit ids are refused, naming the file and line); code that holds a number
+formats it with :func:`format_id`. The reader (:class:`scenes.root.Talk2RadarRoot`),
 the writer (:class:`scenes.writer.Talk2RadarWriter`), the synthetic generator and the annotation
 store take every path from here. Nothing here touches the disk but :func:`radar_folders_in`.
 """
 
 from __future__ import annotations
 
+import operator
 from pathlib import Path
 
 LIDAR_FOLDER = "lidar"
@@ -89,12 +94,77 @@ class RootError(ValueError):
     """A Talk2Radar root is incomplete or malformed; the message names the file."""
 
 
+ID_WIDTH = 5
+"""Digits of a frame id (Talk2Radar and View-of-Delft)."""
+_ID_EXAMPLE = "42".zfill(ID_WIDTH)
+
+
+def is_frame_id(text: object) -> bool:
+    """Whether ``text`` is a frame id as files write it: exactly :data:`ID_WIDTH` ASCII digits."""
+    return isinstance(text, str) and len(text) == ID_WIDTH and text.isascii() and text.isdigit()
+
+
+def parse_id(text: str) -> str:
+    """``text`` (a split-list entry, a file stem) checked by :func:`is_frame_id`.
+
+    Raises:
+        RootError: anything else (the caller adds the file and line).
+    """
+    if not is_frame_id(text):
+        raise RootError(
+            f"invalid sample id {text!r}: expected {ID_WIDTH} ASCII digits, e.g. {_ID_EXAMPLE}"
+        )
+    return text
+
+
 def format_id(sample_id: str | int) -> str:
-    """The 5-digit, zero-padded form of a frame id (``7`` -> ``"00007"``)."""
+    """The :data:`ID_WIDTH`-digit form of a frame id held by code: a number in
+    ``[0, 10**ID_WIDTH)`` (``7`` -> ``"00007"``) or a string of at most :data:`ID_WIDTH` ASCII
+    digits (``"7"`` -> ``"00007"``). Signs, underscores, whitespace, other scripts' digits and
+    wider ids are refused (:class:`RootError`)."""
+    if isinstance(sample_id, str):
+        if not (0 < len(sample_id) <= ID_WIDTH and sample_id.isascii() and sample_id.isdigit()):
+            raise RootError(
+                f"invalid sample id {sample_id!r}: expected up to {ID_WIDTH} ASCII digits, e.g. "
+                f"{_ID_EXAMPLE}"
+            )
+        return sample_id.zfill(ID_WIDTH)
     try:
-        return f"{int(sample_id):05d}"
-    except ValueError as exc:
-        raise RootError(f"invalid sample id {sample_id!r}: expected an integer") from exc
+        if isinstance(sample_id, bool):
+            raise TypeError
+        number = operator.index(sample_id)
+    except TypeError:
+        raise RootError(f"invalid sample id {sample_id!r}: expected an integer") from None
+    if not 0 <= number < 10**ID_WIDTH:
+        raise RootError(f"invalid sample id {number}: expected 0 to {10**ID_WIDTH - 1}")
+    return f"{number:0{ID_WIDTH}d}"
+
+
+def parse_split_list(text: str, path: Path) -> list[str]:
+    """The ids of an ImageSets list's ``text`` (read from ``path``), in order; blank lines are
+    skipped.
+
+    Raises:
+        RootError: ``path:line:`` an entry that is not a frame id (:func:`parse_id`), or an id
+            listed twice.
+    """
+    out: list[str] = []
+    first: dict[str, int] = {}
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        if not line.strip():
+            continue
+        try:
+            sid = parse_id(line)
+        except RootError as exc:
+            raise RootError(f"{path}:{lineno}: {exc}") from exc
+        if sid in first:
+            raise RootError(
+                f"{path}:{lineno}: sample {sid} is listed twice (first on line {first[sid]}); "
+                "each id may appear once per split"
+            )
+        first[sid] = lineno
+        out.append(sid)
+    return out
 
 
 def sample_dir(tree: Path, folder: str) -> Path:
@@ -149,6 +219,7 @@ __all__ = [
     "ANNOTATIONS",
     "CALIB",
     "FOLDER_SUFFIX",
+    "ID_WIDTH",
     "IMAGE",
     "IMAGE_SETS",
     "IMAGE_SUFFIXES",
@@ -175,9 +246,12 @@ __all__ = [
     "VELODYNE",
     "RootError",
     "format_id",
+    "is_frame_id",
     "manifest_file",
     "meta_dir",
     "meta_file",
+    "parse_id",
+    "parse_split_list",
     "radar_folders_in",
     "sample_dir",
     "sample_file",

@@ -261,8 +261,13 @@ def test_a_pair_saved_beside_reopens_on_its_source_frame(vod_app, ws_client) -> 
         client.pump_until(lambda: any(o.startswith(sid) for o in client.dropdown("Pair")), 5, "")
         client.set("Pair", next(o for o in client.dropdown("Pair") if o.startswith(sid)))
         client.click("Open pair")
-        client.pump_until(lambda: panel.draft.sample_id == sid, 5, "the pair opened")
-        assert panel.frame.sample_ids == frozenset({f"0000{source}"})
+        # The draft is reset a moment before the panel's frame is set (the server's thread).
+        expected = frozenset({f"0000{source}"})
+        client.pump_until(
+            lambda: panel.draft.sample_id == sid and panel.frame.sample_ids == expected,
+            5,
+            "the pair opened on its source frame",
+        )
         client.pump_until(lambda: panel.session.frame.index == source, 5, "its frame shown")
         assert panel.draft.classes == ("Pedestrian",)
     finally:
