@@ -21,7 +21,14 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from scenes.durable import read_json_lines
-from scenes.layout import LIDAR_FOLDER, RootError, format_id, manifest_file, split_file
+from scenes.layout import (
+    LIDAR_FOLDER,
+    RootError,
+    format_id,
+    manifest_file,
+    parse_split_list,
+    split_file,
+)
 
 REVIEW = "review"
 """The manifest ``action`` of a review line."""
@@ -106,18 +113,18 @@ def approved_ids(root: str | Path, split: str) -> tuple[str, ...]:
     (see the module docstring); samples the manifest never recorded are not approved.
 
     Raises:
-        RootError: the root has no list of ``split``.
+        RootError: the root has no list of ``split``, or it is malformed (the line named).
     """
     path = split_file(Path(root) / LIDAR_FOLDER, split)
     try:
-        listed = [line.strip() for line in path.read_text(encoding="utf-8").splitlines()]
+        listed = parse_split_list(path.read_text(encoding="utf-8"), path)
     except OSError as exc:
         raise RootError(f"{path}: cannot read the list of split {split!r}: {exc}") from exc
     states = read_pair_states(root)
     out = []
-    for sid in (s for s in listed if s):
-        state = states.get(format_id(sid))
+    for sid in listed:
+        state = states.get(sid)
         review = state.review if state is not None and not state.deleted else None
         if review is not None and review.approved:
-            out.append(format_id(sid))
+            out.append(sid)
     return tuple(out)

@@ -230,7 +230,9 @@ def test_browser_plays_a_sequence_and_carries_a_pair_to_the_next_frame(
                 keys.press("t")
                 poll(lambda: app.frame.index == 1 and panel.draft.boxes, TIMEOUT, "the carry")
                 carried = np.array(panel.draft.boxes[0].box)
-                assert panel.draft.prompt == f"the moving {actor.cls.lower()}"
+                sentence = f"the moving {actor.cls.lower()}"
+                field = labelled_field(page, "Pair prompt")
+                poll(lambda: field.input_value() == sentence, TIMEOUT, "the sentence carried")
                 keys.press("p")
                 keys.press("Enter")
                 poll(lambda: len(store.pairs()) == 2, TIMEOUT, "the carried pair saved")
