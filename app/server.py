@@ -24,6 +24,10 @@ port outside 0..65535, an address that is not this machine's), so the host and p
 first (:func:`check_listen_address`) and viser is started under a deadline
 (:attr:`AppConfig.start_timeout`); both failures raise :class:`ServerStartError` (an ``OSError``).
 A busy port is no failure: viser serves on the next free one, as before.
+
+Hostile input: every message handler viser registers is wrapped (:mod:`app.guards`: forged GUI
+values refused or clamped to the widget's range, one rate-limited warning line per connection,
+never a traceback), and what a departed browser leaves is collected (:mod:`app.memory`).
 """
 
 from __future__ import annotations
@@ -43,7 +47,9 @@ import viser
 
 from app.annotate_tab import AnnotationHub, build_annotation_tab
 from app.engine import GroundingEngine, GroundingModel, initial_threshold
+from app.guards import InputWarnings, LogGuards, guard_client, guard_server
 from app.keys import add_escape_leaves_fields
+from app.memory import MemoryReaper
 from app.navigation import (
     Frame,
     FrameLoadError,
@@ -210,6 +216,11 @@ class Talk2PCApp:
         )
         self.server: viser.ViserServer | None = None
         self.sessions: dict[int, ClientSession] = {}
+        self.input_warnings = InputWarnings()
+        """Forged or malformed browser messages, one rate-limited line per connection."""
+        self.reaper = MemoryReaper()
+        """Collects what departed browsers leave (see :mod:`app.memory`)."""
+        self._log_guards = LogGuards(self.input_warnings)
         self._startup: list[Future] = []
 
     @property
@@ -258,9 +269,12 @@ class Talk2PCApp:
         server.initial_camera.position = pose.position
         server.initial_camera.look_at = pose.look_at
         server.initial_camera.up = pose.up
+        guard_server(server, self.input_warnings)
+        self._log_guards.install(server)
         server.on_client_connect(self._on_connect)
         server.on_client_disconnect(self._on_disconnect)
         self.server = server
+        self.reaper.start()
         if self.config.warm_up:
             self._startup.append(self.engine.warm_up())
         self._startup.append(self.engine.prefetch(first.sample, self.engine.modalities[0]))
@@ -327,8 +341,10 @@ class Talk2PCApp:
             self.sessions.clear()
         self.annotations.close()
         self.engine.close()
+        self.reaper.stop()
         if server is not None:
             server.stop()
+            self._log_guards.remove()
 
     def __enter__(self) -> Talk2PCApp:
         return self.start()
@@ -343,6 +359,7 @@ class Talk2PCApp:
         return (ExtraTab("Annotate", viser.Icon.PENCIL, build, name="annotation panel"),)
 
     def _on_connect(self, client: viser.ClientHandle) -> None:
+        guard_client(client, self.input_warnings)  # before any widget exists
         options = SessionOptions(model_note=self.model_note, score_threshold=self.score_threshold)
         with self.navigator.lock:
             session = ClientSession(client, self.navigator, self.engine, options)
@@ -364,6 +381,8 @@ class Talk2PCApp:
                 self.navigator.unsubscribe(session)
         if session is not None:
             session.close()
+        self.input_warnings.forget(f"client {client.client_id}")
+        self.reaper.schedule()
         log.info("client %d disconnected", client.client_id)
 
     # ------------------------------------------------------------------ navigation (shared)
