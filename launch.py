@@ -284,7 +284,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
 
     config = AppConfig(
-        host=args.host, port=args.port, split=split, model_note=note, pairs_root=args.pairs
+        host=args.host,
+        port=args.port,
+        split=split,
+        model_note=note,
+        pairs_root=args.pairs,
+        freeze_startup=True,  # this process only serves: cheap collections after disconnects
     )
     try:
         app = Talk2PCApp(root, model, config)

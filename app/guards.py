@@ -20,7 +20,8 @@ and :func:`guard_server` for the server-wide ones) by our code, without touching
   refused update is dropped; a clamped one is applied clamped. Either way the widget's value is
   sent back to that browser, so its view shows a valid value again.
 - **Scene messages** (clicks, gizmo drags, the camera) holding a number that is not finite or is
-  larger than :data:`MAX_COORDINATE` metres are dropped.
+  larger than :data:`MAX_COORDINATE` metres are dropped, and so is a camera report viser could
+  not turn into a pose (:func:`check_camera`).
 - **A handler that raises anyway** is reported as one warning line, not a traceback.
 
 Warnings go through :class:`InputWarnings`: the first refusal of a connection is logged at once as
@@ -57,6 +58,9 @@ MAX_COORDINATE = 1.0e6
 
 WARNING_INTERVAL = 10.0
 """Seconds between two warning lines of one connection."""
+
+MAX_SOURCES = 1024
+"""Connections :class:`InputWarnings` remembers (the oldest are forgotten beyond)."""
 
 SHOWN_VALUE_CHARS = 60
 """A forged value is shown in the log cut to this many characters."""
@@ -100,7 +104,12 @@ class InputWarnings:
             if last is not None and now - last < self.interval:
                 self._held[source] = self._held.get(source, 0) + 1
                 return False
+            self._last.pop(source, None)  # (re)inserted last: the oldest are dropped first
             self._last[source] = now
+            while len(self._last) > MAX_SOURCES:
+                oldest = next(iter(self._last))
+                del self._last[oldest]
+                self._held.pop(oldest, None)
             held = self._held.pop(source, 0)
         more = f" ({held} more refused since the last line)" if held else ""
         log.warning("%s: %s%s", source, text, more)
@@ -193,6 +202,28 @@ def check_numbers(message: object) -> str | None:
     return None
 
 
+def check_camera(message: messages.ViewerCameraMessage) -> str | None:
+    """Why a camera report is refused (one viser cannot turn into a camera pose: the position on
+    the look-at point, a zero up or rotation, a field of view outside ``(0, pi)``, clipping
+    planes not ``0 < near < far``, an empty image), or None."""
+
+    def norm(v: object) -> float:
+        return math.sqrt(sum(float(x) ** 2 for x in v))  # type: ignore[union-attr]
+
+    m = message
+    try:
+        offset = [float(a) - float(b) for a, b in zip(m.position, m.look_at, strict=True)]
+        if norm(offset) < 1e-9 or norm(m.up_direction) < 1e-9 or norm(m.wxyz) < 1e-9:
+            return "a degenerate camera (zero look distance, up or rotation)"
+        if not (0.0 < float(m.fov) < math.pi and 0.0 < float(m.near) < float(m.far)):
+            return f"fov {shown(m.fov)}, near {shown(m.near)}, far {shown(m.far)}"
+        if int(m.image_width) < 1 or int(m.image_height) < 1:
+            return f"an image of {shown(m.image_width)} x {shown(m.image_height)} pixels"
+    except (TypeError, ValueError):
+        return "a camera field that is not a number or not three numbers"
+    return None
+
+
 def _send_value(handle: viser.GuiInputHandle, value: object) -> None:
     """Send ``value`` as the widget's value to the browser(s) its GUI belongs to (viser sends
     nothing back to the browser whose update it applies)."""
@@ -273,7 +304,7 @@ class MessageGuard:
 
     def install(self, handlers: dict[type, list[Callable[..., Any]]]) -> None:
         """Wrap every handler in ``handlers`` (viser's table: message type -> callbacks)."""
-        for kind, callbacks in handlers.items():
+        for kind, callbacks in list(handlers.items()):
             callbacks[:] = [
                 _wrap(cb, self._vetter(kind), self.warnings, self.describe) for cb in callbacks
             ]
@@ -287,6 +318,8 @@ class MessageGuard:
 
     def vet_scene(self, client_id: int, message: Any) -> Vetted:
         problem = check_numbers(message)
+        if problem is None and isinstance(message, messages.ViewerCameraMessage):
+            problem = check_camera(message)
         if problem is None:
             return message, None
         self.warnings.warn(self.describe(client_id), f"{type(message).__name__} refused: {problem}")

@@ -49,7 +49,7 @@ from app.annotate_tab import AnnotationHub, build_annotation_tab
 from app.engine import GroundingEngine, GroundingModel, initial_threshold
 from app.guards import InputWarnings, LogGuards, guard_client, guard_server
 from app.keys import add_escape_leaves_fields
-from app.memory import MemoryReaper
+from app.memory import MemoryReaper, freeze_startup_objects
 from app.navigation import (
     Frame,
     FrameLoadError,
@@ -141,6 +141,9 @@ class AppConfig:
             raises :class:`ServerStartError`.
         pairs_root: Where the Annotate tab saves pairs (a Talk2Radar root, created when
             missing); None: :func:`default_pairs_root`.
+        freeze_startup: Freeze the objects alive at start before any browser connects
+            (:func:`app.memory.freeze_startup_objects`: cheap collections after disconnects);
+            process-wide, so for the process that serves (``launch.py``), not for tests.
     """
 
     host: str = "127.0.0.1"
@@ -155,6 +158,7 @@ class AppConfig:
     dark_mode: bool = True
     start_timeout: float = 20.0
     pairs_root: Path | None = None
+    freeze_startup: bool = False
 
 
 PAIRS_SUFFIX = "-talk2radar"
@@ -222,6 +226,8 @@ class Talk2PCApp:
         """Collects what departed browsers leave (see :mod:`app.memory`)."""
         self._log_guards = LogGuards(self.input_warnings)
         self._startup: list[Future] = []
+        self._connected = False
+        """Whether a browser ever connected (see :meth:`_freeze_if_alone`)."""
 
     @property
     def frames(self) -> FrameStore:
@@ -271,6 +277,8 @@ class Talk2PCApp:
         server.initial_camera.up = pose.up
         guard_server(server, self.input_warnings)
         self._log_guards.install(server)
+        if self.config.freeze_startup:
+            freeze_startup_objects()  # again after the warm-up (the text encoder), if alone
         server.on_client_connect(self._on_connect)
         server.on_client_disconnect(self._on_disconnect)
         self.server = server
@@ -278,6 +286,8 @@ class Talk2PCApp:
         if self.config.warm_up:
             self._startup.append(self.engine.warm_up())
         self._startup.append(self.engine.prefetch(first.sample, self.engine.modalities[0]))
+        if self.config.freeze_startup:
+            self._startup[0].add_done_callback(lambda _: self._freeze_if_alone())
         log.info("serving %d frames of %s at %s", len(self.frames), self.frames.root, self.url)
         return self
 
@@ -321,6 +331,13 @@ class Talk2PCApp:
             raise error
         return state["server"]  # type: ignore[return-value]
 
+    def _freeze_if_alone(self) -> None:
+        """Freeze what the warm-up made, unless a browser connected meanwhile (its session
+        would never be collected)."""
+        with self.navigator.lock:
+            if not self._connected:
+                freeze_startup_objects()
+
     def wait_ready(self, timeout: float | None = None) -> None:
         """Block until the start-up work (model warm-up, first scene encoding) is done.
 
@@ -362,6 +379,7 @@ class Talk2PCApp:
         guard_client(client, self.input_warnings)  # before any widget exists
         options = SessionOptions(model_note=self.model_note, score_threshold=self.score_threshold)
         with self.navigator.lock:
+            self._connected = True
             session = ClientSession(client, self.navigator, self.engine, options)
             self.sessions[client.client_id] = session
             self.navigator.subscribe(session)
