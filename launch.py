@@ -15,8 +15,10 @@
   prompts (a Talk2Radar root), else into the sibling folder ``<ROOT>-talk2radar`` (created when
   the first pair is saved), so a release's own files are never touched
   (:func:`app.server.default_pairs_root`).
-- A ``--checkpoint`` or ``--data`` that is missing or invalid, an unknown split, a root without
-  ImageSets lists, a split listing frames whose sensor, calib or label files are missing (the
+- A root without an ``ImageSets`` folder (the View-of-Delft devkit's example set) serves every
+  frame of ``lidar/training/velodyne/`` (split ``all``, with a notice).
+- A ``--checkpoint`` or ``--data`` that is missing or invalid, an unknown split, an ImageSets
+  folder without lists, a split listing frames whose sensor, calib or label files are missing (the
   message names the first such file), a split where no frame loads, ``--device cuda`` without CUDA, a ``--port`` outside 0..65535, a ``--host`` that is
   not an address of this machine, or a server that does not listen within 20 s: a one-line error
   on stderr and exit code 2, within seconds (the host and port are checked before anything else).
@@ -90,6 +92,13 @@ def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
         default=None,
         help="where annotation saves prompt-to-box pairs, a Talk2Radar root (default: the "
         "served root when it has prompts, else <ROOT>-talk2radar beside it)",
+    )
+    p.add_argument(
+        "--scene-labels",
+        type=Path,
+        default=None,
+        help="the View-of-Delft root whose label_2 lists every object of the served frames: the "
+        "Query tab then offers Candidates: Labelled boxes (a VoD root opened directly is its own)",
     )
     p.add_argument(
         "--threads",
@@ -168,10 +177,13 @@ def _split_problem(root: Talk2RadarRoot, split: str) -> str | None:
     if not ids:
         return f"{root.path}: split {split!r} lists no frame (splits: {root.splits()})"
     if missing:
-        listed = root.lidar_dir / "ImageSets" / f"{split}.txt"
-        return (
-            f"{missing[0]} ({len(missing)} of the {len(ids)} frames listed in {listed} miss files)"
-        )
+        from scenes.layout import VELODYNE, sample_dir, split_dir, split_file
+
+        if split_dir(root.lidar_dir).is_dir():
+            where = f"listed in {split_file(root.lidar_dir, split)}"
+        else:
+            where = f"of {sample_dir(root.lidar_dir, VELODYNE)}"
+        return f"{missing[0]} ({len(missing)} of the {len(ids)} frames {where} miss files)"
     return None
 
 
@@ -179,7 +191,7 @@ def open_root(path: Path, split: str | None) -> Talk2RadarRoot:
     """Open a root and check ``split`` (None: only that the root has a split list).
 
     Raises:
-        LaunchError: not a root, no ImageSets list, an unknown or empty split, or a split listing
+        LaunchError: not a root, an ImageSets folder without lists, an unknown or empty split, or a split listing
             frames whose files are missing (the message names the first such file).
     """
     from scenes.root import RootError, Talk2RadarRoot
@@ -195,7 +207,7 @@ def open_root(path: Path, split: str | None) -> Talk2RadarRoot:
         raise LaunchError(
             f"{root.lidar_dir / 'ImageSets'}: no split list (<split>.txt with one frame id a "
             "line); write one, e.g. all.txt listing the ids of lidar/training/velodyne, and pass "
-            "--split all"
+            "--split all, or remove the empty folder to serve every frame"
         )
     if split is not None:
         problem = _split_problem(root, split)
@@ -289,6 +301,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         split=split,
         model_note=note,
         pairs_root=args.pairs,
+        scene_labels=args.scene_labels,
         freeze_startup=True,  # this process only serves: cheap collections after disconnects
     )
     try:

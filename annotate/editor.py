@@ -147,6 +147,8 @@ class DraftEditor:
     def __init__(self, draft: Draft | None = None, max_steps: int = 200) -> None:
         self.history = History(draft if draft is not None else Draft(), max_steps=max_steps)
         self._lock = threading.RLock()
+        self.reset_listeners: list[Callable[[Draft], None]] = []
+        """Called with the new draft after every :meth:`reset` (a save, an opened pair)."""
 
     @property
     def draft(self) -> Draft:
@@ -236,6 +238,12 @@ class DraftEditor:
         return self._apply(self.draft.delete_box(box_id), f"delete {self._name(box_id)}")
 
     @_serialised
+    def apply(self, draft: Draft, label: str, merge_key: Hashable | None = None) -> Draft:
+        """Record a snapshot made by several :class:`Draft` operations as one edit (e.g. the
+        referents chosen for a sentence: some boxes deleted, others added)."""
+        return self._apply(draft, label, merge_key)
+
+    @_serialised
     def clear(self) -> Draft:
         return self._apply(self.draft.clear(), "clear")
 
@@ -250,4 +258,7 @@ class DraftEditor:
     @_serialised
     def reset(self, draft: Draft | None = None) -> Draft:
         """Start over from ``draft`` (default: an empty draft) with an empty history."""
-        return self.history.reset(draft if draft is not None else Draft())
+        out = self.history.reset(draft if draft is not None else Draft())
+        for listener in list(self.reset_listeners):
+            listener(out)
+        return out

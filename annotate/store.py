@@ -62,14 +62,26 @@ from annotate.requests import RequestLog
 from annotate.source import SourceFrame, write_source
 from annotate.transaction import Transactions
 from annotate.tree import RootFiles
-from annotate.validation import Issue, ValidationConfig, ValidationError, validate
+from annotate.validation import (
+    Issue,
+    ValidationConfig,
+    clean_annotator,
+    clean_prompt,
+    validate,
+)
 from scenes.actors import CLASSES
 from scenes.calib import read_calib
 from scenes.durable import replace_files
 from scenes.kitti import ObjectLabel, labels_to_boxes
-from scenes.layout import CALIB, RADAR_FOLDERS, format_id, radar_folders_in, sample_file
+from scenes.layout import (
+    CALIB,
+    RADAR_FOLDERS,
+    format_id,
+    manifest_file,
+    radar_folders_in,
+    sample_file,
+)
 from scenes.root import Sample, Talk2RadarRoot
-from scenes.text_policy import ANNOTATOR, PROMPT, TextPolicyError, clean_text
 from scenes.writer import SampleText, Talk2RadarWriter, sample_text
 
 _SPLIT_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}")
@@ -142,7 +154,7 @@ class AnnotationStore:
         self.writer = Talk2RadarWriter(self.path, radar_folder)
         self.lidar_dir, self.radar_dir = self.writer.trees
         self.annotations_dir = self.path / "annotations"
-        self.manifest_path = self.annotations_dir / "manifest.jsonl"
+        self.manifest_path = manifest_file(self.path)
         self.journal_dir = self.annotations_dir / "pending"
         self.unresolved_dir = self.annotations_dir / "unresolved"
         self.validation = validation if validation is not None else ValidationConfig()
@@ -272,10 +284,10 @@ class AnnotationStore:
             StoreError: The root cannot be read or locked.
         """
         self._check_split(split)
-        annotator = _clean_annotator(annotator)
+        annotator = clean_annotator(annotator)
         report = validate(draft, self.validation, source.sample.calib)
         report.raise_if_invalid()
-        draft = _clean_prompt(draft)
+        draft = clean_prompt(draft)
         sample = source.sample
         text = self._text(draft, sample)
         with self.transactions.transaction(f"saving a new pair in {self.path}") as tx:
@@ -306,13 +318,13 @@ class AnnotationStore:
         if draft.sample_id is None:
             raise ValueError("this draft is not an opened pair (sample_id is None): use create()")
         sid = format_id(draft.sample_id)
-        annotator = _clean_annotator(annotator)
+        annotator = clean_annotator(annotator)
         calib_path = sample_file(self.lidar_dir, CALIB, sid)
         if not calib_path.is_file():
             raise StoreError(f"sample {sid} has no calibration file {calib_path}")
         report = validate(draft, self.validation, read_calib(calib_path))
         report.raise_if_invalid()
-        draft = _clean_prompt(draft)
+        draft = clean_prompt(draft)
         with self.transactions.transaction(f"saving the edit of pair {sid}") as tx:
             splits, current = self._listed_version(sid, draft.base_version, "(deleted?); not saved")
             sample = Talk2RadarRoot(self.path, radar=self.writer.radar_folder).load(sid)
@@ -346,7 +358,7 @@ class AnnotationStore:
             DiskFullError, SaveError: As :meth:`create`.
         """
         sid = format_id(sample_id)
-        annotator = _clean_annotator(annotator)
+        annotator = clean_annotator(annotator)
         with self.transactions.transaction(f"deleting pair {sid}") as tx:
             splits, current = self._listed_version(sid, base_version, "(already deleted?)")
             record = self._record(Action.DELETE, sid, current + 1, annotator, splits)
@@ -481,20 +493,6 @@ def _check_split_name(split: object) -> None:
             f"invalid split name {shown}: use at most 64 letters, digits, '_', '-' or '.' "
             "(e.g. 'train')"
         )
-
-
-def _clean_annotator(name: object) -> str:
-    """The annotator name as recorded (the text policy; empty: ``anonymous``); a refusal is a
-    :class:`ValidationError` of the field ``annotator``."""
-    try:
-        return clean_text(name, ANNOTATOR) or "anonymous"
-    except TextPolicyError as exc:
-        raise ValidationError((Issue("annotator", str(exc)),)) from None
-
-
-def _clean_prompt(draft: Draft) -> Draft:
-    """``draft`` with its prompt in the policy's form (validation accepted it already)."""
-    return draft.set_prompt(clean_text(draft.prompt, PROMPT))
 
 
 __all__ = ["DEFAULT_SPLITS", "AnnotationStore", "SaveResult"]

@@ -39,7 +39,7 @@ from annotate.draft import Draft
 from scenes.actors import CLASSES
 from scenes.boxes import bev_iou
 from scenes.calib import IMAGE_SIZE, Calibration, boxes_2d, boxes_lidar_to_camera
-from scenes.text_policy import PROMPT, TextPolicyError, clean_text
+from scenes.text_policy import ANNOTATOR, PROMPT, TextPolicyError, TextRule, clean_text
 
 MIN_EVAL_HEIGHT_PX = 40.0
 """The official VoD evaluation ignores ground truth whose 2D box is at most this tall."""
@@ -306,3 +306,27 @@ def _image_issues(
             )
         ]
     return []
+
+
+def clean_field(text: object, rule: TextRule, field: str) -> str:
+    """``text`` in the text policy's form under ``rule`` (:func:`scenes.text_policy.clean_text`).
+
+    Raises:
+        ValidationError: the policy refuses it (one issue of ``field``, e.g. ``annotator``).
+    """
+    try:
+        return clean_text(text, rule)
+    except TextPolicyError as exc:
+        raise ValidationError((Issue(field, str(exc)),)) from None
+
+
+def clean_annotator(name: object) -> str:
+    """The annotator (or reviewer) name as the manifest records it: :func:`clean_field` under
+    :data:`scenes.text_policy.ANNOTATOR`, ``anonymous`` when empty."""
+    return clean_field(name, ANNOTATOR, "annotator") or "anonymous"
+
+
+def clean_prompt(draft: Draft) -> Draft:
+    """``draft`` with its prompt in the text policy's form, as it is saved (:func:`validate`
+    has accepted the prompt)."""
+    return draft.set_prompt(clean_text(draft.prompt, PROMPT))

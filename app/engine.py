@@ -265,7 +265,7 @@ class GroundingEngine(Generic[Features]):
         self.workers = DaemonWorkers(workers, "talk2pc-model")
         self._model_lock = threading.Lock()
         self._cache_lock = threading.Lock()
-        self._features: OrderedDict[tuple[str, Modality], Features] = OrderedDict()
+        self._features: OrderedDict[tuple[str, Modality, bool], Features] = OrderedDict()
         self.encode_calls = 0
         self.ground_calls = 0
 
@@ -275,10 +275,10 @@ class GroundingEngine(Generic[Features]):
         future.add_done_callback(_log_failure)
         return future
 
-    def cached(self, sample_id: str, modality: Modality) -> bool:
-        """Whether the features of (sample, modality) are cached."""
+    def cached(self, sample_id: str, modality: Modality, labelled: bool = False) -> bool:
+        """Whether the features of (sample, modality) are cached (with labelled candidates)."""
         with self._cache_lock:
-            return (sample_id, modality) in self._features
+            return (sample_id, modality, labelled) in self._features
 
     def _check_modality(self, modality: Modality) -> None:
         if modality not in self.modalities:
@@ -286,16 +286,23 @@ class GroundingEngine(Generic[Features]):
                 f"this model answers with {', '.join(self.modalities)} only, not {modality!r}"
             )
 
-    def _encode_locked(self, sample: Sample, modality: Modality) -> tuple[Features, float]:
-        """Features of (sample, modality) and the encoding time (0 when cached); hold the lock."""
-        key = (sample.sample_id, modality)
+    def _encode_locked(
+        self, sample: Sample, modality: Modality, candidates: object | None = None
+    ) -> tuple[Features, float]:
+        """Features of (sample, modality) and the encoding time (0 when cached); hold the lock.
+        ``candidates``: the frame's labelled boxes for the referent stage to choose among
+        (``model.LabelledBoxes``), None for the detector's proposals."""
+        key = (sample.sample_id, modality, candidates is not None)
         with self._cache_lock:
             if key in self._features:
                 self._features.move_to_end(key)
                 return self._features[key], 0.0
         lidar, radar = sensor_inputs(sample, modality)
         start = time.perf_counter()
-        features = self.model.encode_scene(lidar, radar)
+        if candidates is None:
+            features = self.model.encode_scene(lidar, radar)
+        else:
+            features = self.model.encode_scene(lidar, radar, candidates=candidates)
         elapsed = (time.perf_counter() - start) * 1000.0
         self.encode_calls += 1
         with self._cache_lock:
@@ -304,25 +311,35 @@ class GroundingEngine(Generic[Features]):
                 self._features.popitem(last=False)
         return features, max(elapsed, 1e-3)
 
-    def encode(self, sample: Sample, modality: Modality) -> tuple[Features, float]:
-        """Encode (or fetch from the cache) one scene; returns ``(features, encode_ms)``."""
+    def encode(
+        self, sample: Sample, modality: Modality, candidates: object | None = None
+    ) -> tuple[Features, float]:
+        """Encode (or fetch from the cache) one scene (with labelled ``candidates``: as
+        :meth:`answer`); returns ``(features, encode_ms)``."""
         self._check_modality(modality)
         with self._model_lock:
-            return self._encode_locked(sample, modality)
+            return self._encode_locked(sample, modality, candidates)
 
-    def prefetch(self, sample: Sample, modality: Modality) -> Future:
+    def prefetch(
+        self, sample: Sample, modality: Modality, candidates: object | None = None
+    ) -> Future:
         """Encode a scene in the background (no-op when cached)."""
-        return self.submit(self.encode, sample, modality)
+        return self.submit(self.encode, sample, modality, candidates)
 
     def answer(
-        self, sample: Sample, modality: Modality, prompt: str, score_threshold: float
+        self,
+        sample: Sample,
+        modality: Modality,
+        prompt: str,
+        score_threshold: float,
+        candidates: object | None = None,
     ) -> Answer:
         """Answer ``prompt`` on ``sample`` (blocking; call it through :meth:`submit`)."""
         self._check_modality(modality)
         queued = time.perf_counter()
         with self._model_lock:
             waited = (time.perf_counter() - queued) * 1000.0
-            features, encode_ms = self._encode_locked(sample, modality)
+            features, encode_ms = self._encode_locked(sample, modality, candidates)
             start = time.perf_counter()
             predictions = self.model.ground(features, prompt, score_threshold=score_threshold)
             ground_ms = (time.perf_counter() - start) * 1000.0

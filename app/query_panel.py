@@ -39,7 +39,11 @@ from app.engine import MODALITY_LABELS, Answer, Modality, Predictions
 from app.heatmap_view import HeatmapView
 from app.navigation import Frame
 from app.text import md_text
-from scenes.text_policy import collapse_spaces
+from scenes.root import Sample
+from scenes.text_policy import PROMPT, TextPolicyError, clean_text, collapse_spaces
+
+CANDIDATE_SOURCES = {"Detector proposals": "detector", "Labelled boxes": "labels"}
+"""GUI label -> what the referent stage chooses among (the "Candidates" control)."""
 
 HISTORY_SIZE = 20
 """Prompts kept in a browser's history."""
@@ -65,6 +69,7 @@ class QueryRequest:
         frame: The frame on screen when the prompt was sent.
         generation: The session's generation number at that moment.
         received: ``time.perf_counter()`` when the server received the prompt.
+        labelled: Choose among the frame's labelled boxes instead of the detector's proposals.
     """
 
     prompt: str
@@ -73,6 +78,39 @@ class QueryRequest:
     frame: Frame
     generation: int
     received: float
+    labelled: bool = False
+
+    def candidates(self, labelled_boxes: Callable[[Sample], object | None] | None) -> object:
+        """What the referent stage chooses among: the frame's labelled boxes (from
+        ``labelled_boxes``, :attr:`app.session.SessionOptions.labelled_boxes`) when the request
+        asks for them, else None (the detector's proposals).
+
+        Raises:
+            ValueError: the request asks for labelled boxes the frame does not have.
+        """
+        if not self.labelled or labelled_boxes is None:
+            return None
+        boxes = labelled_boxes(self.frame.sample)
+        if boxes is None:
+            raise ValueError(
+                f"frame {self.frame.sample.sample_id} has no labelled boxes: choose "
+                "Candidates: Detector proposals"
+            )
+        return boxes
+
+
+def prompt_to_run(prompt: str | None) -> tuple[str, tuple[str, str] | None]:
+    """The prompt a box's text runs as (the text policy's form of :func:`one_line`), and the
+    ``(title, body)`` of the notification that says why it cannot run (refused by the policy,
+    or empty), else None."""
+    try:
+        text = clean_text(one_line(prompt or ""), PROMPT)
+    except TextPolicyError as exc:
+        return "", ("Prompt not run", exc.sentence)
+    if not text:
+        example = f'Type a sentence describing the objects to find, e.g. "{EXAMPLE_PROMPT}".'
+        return "", ("Empty prompt", example)
+    return text, None
 
 
 def submitted_prompt(value: str) -> str | None:
@@ -211,9 +249,16 @@ class QueryPanel:
     results: viser.GuiMarkdownHandle
     history: viser.GuiDropdownHandle
     rerun: viser.GuiButtonHandle
+    candidates: viser.GuiDropdownHandle | None = None
 
     def selected_modality(self) -> Modality:
         return MODALITY_LABELS.get(self.modality.value, "both")
+
+    def labelled_selected(self) -> bool:
+        """Whether the "Candidates" control asks for the frame's labelled boxes."""
+        if self.candidates is None:
+            return False
+        return CANDIDATE_SOURCES.get(self.candidates.value, "detector") == "labels"
 
     def wire_layers(
         self,
@@ -248,8 +293,10 @@ def build_query_panel(
     score_threshold: float,
     heatmap_opacity: float = 0.7,
     prompt: str = "",
+    labelled: bool = False,
 ) -> QueryPanel:
-    """Add the Query widgets to ``gui`` (in the current container) and return their handles."""
+    """Add the Query widgets to ``gui`` (in the current container) and return their handles;
+    ``labelled``: the frames have labelled boxes (a "Candidates" control is added)."""
     prompt_box = gui.add_text(
         "Prompt", prompt, multiline=True, hint="Describe the objects to find; Enter runs it"
     )
@@ -264,6 +311,16 @@ def build_query_panel(
     modality = gui.add_dropdown(
         "Sensors", labels, initial_value=labels[0], hint="The other sensor's points are emptied"
     )
+    candidates = None
+    if labelled:
+        names = tuple(CANDIDATE_SOURCES)
+        candidates = gui.add_dropdown(
+            "Candidates",
+            names,
+            initial_value=names[0],
+            hint="What the answer is chosen among: the detector's proposals, or the frame's "
+            "labelled boxes (grounding apart from detection)",
+        )
     threshold = gui.add_slider(
         "Score threshold", 0.0, 0.95, 0.01, float(np.clip(score_threshold, 0.0, 0.95))
     )
@@ -287,4 +344,5 @@ def build_query_panel(
         results=results,
         history=history,
         rerun=rerun,
+        candidates=candidates,
     )

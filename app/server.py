@@ -49,6 +49,7 @@ from app.annotate_tab import AnnotationHub, build_annotation_tab
 from app.engine import GroundingEngine, GroundingModel, initial_threshold
 from app.guards import InputWarnings, LogGuards, guard_client, guard_server
 from app.keys import add_escape_leaves_fields
+from app.labelled import LabelledFrames
 from app.memory import MemoryReaper, freeze_startup_objects
 from app.navigation import (
     Frame,
@@ -144,6 +145,9 @@ class AppConfig:
         freeze_startup: Freeze the objects alive at start before any browser connects
             (:func:`app.memory.freeze_startup_objects`: cheap collections after disconnects);
             process-wide, so for the process that serves (``launch.py``), not for tests.
+        scene_labels: The View-of-Delft root with every object of the served frames (for a
+            Talk2Radar root; a release opened directly is its own): the Query tab then offers
+            "Candidates: Labelled boxes".
     """
 
     host: str = "127.0.0.1"
@@ -159,6 +163,7 @@ class AppConfig:
     start_timeout: float = 20.0
     pairs_root: Path | None = None
     freeze_startup: bool = False
+    scene_labels: Path | None = None
 
 
 PAIRS_SUFFIX = "-talk2radar"
@@ -212,6 +217,9 @@ class Talk2PCApp:
         )
         self.score_threshold = initial_threshold(model, DEFAULT_SCORE_THRESHOLD)
         self.model_note = self.config.model_note
+        self.labelled = LabelledFrames(root, self.config.scene_labels)
+        referent = getattr(getattr(model, "cfg", None), "grounding", None) == "referent"
+        self.labelled_boxes = self.labelled.boxes if self.labelled.available and referent else None
         pairs = self.config.pairs_root
         self.annotations = AnnotationHub(
             Path(pairs) if pairs is not None else default_pairs_root(root),
@@ -377,7 +385,11 @@ class Talk2PCApp:
 
     def _on_connect(self, client: viser.ClientHandle) -> None:
         guard_client(client, self.input_warnings)  # before any widget exists
-        options = SessionOptions(model_note=self.model_note, score_threshold=self.score_threshold)
+        options = SessionOptions(
+            model_note=self.model_note,
+            score_threshold=self.score_threshold,
+            labelled_boxes=self.labelled_boxes,
+        )
         with self.navigator.lock:
             self._connected = True
             session = ClientSession(client, self.navigator, self.engine, options)

@@ -64,7 +64,6 @@ from app.navigation import (
     build_navigation_panel,
 )
 from app.query_panel import (
-    EXAMPLE_PROMPT,
     NO_HISTORY,
     PromptField,
     PromptHistory,
@@ -72,14 +71,13 @@ from app.query_panel import (
     QueryRequest,
     answer_labels,
     build_query_panel,
-    one_line,
+    prompt_to_run,
     results_markdown,
     submitted_prompt,
 )
 from app.scene_view import SceneView, ViewPanel, build_view_panel
 from app.text import md_text
 from scenes.root import Sample
-from scenes.text_policy import PROMPT, TextPolicyError, clean_text
 
 log = logging.getLogger(__name__)
 
@@ -93,10 +91,13 @@ class SessionOptions:
     Attributes:
         model_note: A warning shown at the top of the panel (None: none).
         score_threshold: The query panel's initial score threshold.
+        labelled_boxes: The labelled boxes of a sample's frame (``model.LabelledBoxes``, None
+            where it has none); None: the root has no labelled boxes (no "Candidates" control).
     """
 
     model_note: str | None = None
     score_threshold: float = 0.3
+    labelled_boxes: Callable[[Sample], object | None] | None = None
 
 
 @dataclass(frozen=True)
@@ -215,7 +216,11 @@ class ClientSession:
         sample_prompt = (self.sample.prompt or "") if self.sample is not None else ""
         with tabs.add_tab("Query", icon=viser.Icon.MESSAGE):
             self.query = build_query_panel(
-                gui, self.engine.modalities, self.options.score_threshold, prompt=sample_prompt
+                gui,
+                self.engine.modalities,
+                self.options.score_threshold,
+                prompt=sample_prompt,
+                labelled=self.options.labelled_boxes is not None,
             )
             self.prompt_field = PromptField(self.query.prompt)
         with tabs.add_tab("View", icon=viser.Icon.EYE):
@@ -280,6 +285,8 @@ class ClientSession:
 
         q.modality.on_update(rerun_last)
         q.threshold.on_update(rerun_last)
+        if q.candidates is not None:
+            q.candidates.on_update(rerun_last)
         q.wire_layers(
             self.lock,
             self.heatmap_view,
@@ -390,24 +397,13 @@ class ClientSession:
                 self.prompt_field.write(text)
 
     def run_prompt(self, prompt: str | None) -> Future | None:
-        """Answer ``prompt`` on the frame on screen, in the engine's worker pool.
-
-        The text policy applies first (:func:`scenes.text_policy.clean_text`); a prompt it
-        refuses, or an empty one, shows a notification instead. Returns the job's future (None
-        when nothing was started).
-        """
+        """Answer ``prompt`` on the frame on screen, in the engine's worker pool; one the text
+        policy refuses, or an empty one, gets a notification (:func:`prompt_to_run`). Returns the
+        job's future (None when nothing was started)."""
         received = time.perf_counter()
-        try:
-            text = clean_text(one_line(prompt or ""), PROMPT)
-        except TextPolicyError as exc:
-            self.notify("Prompt not run", exc.sentence, color="yellow")
-            return None
-        if not text:
-            self.notify(
-                "Empty prompt",
-                f'Type a sentence describing the objects to find, e.g. "{EXAMPLE_PROMPT}".',
-                color="yellow",
-            )
+        text, problem = prompt_to_run(prompt)
+        if problem is not None:
+            self.notify(*problem, color="yellow")
             return None
         with self.lock:
             if self.frame is None or self.query is None or self.closed:
@@ -417,6 +413,7 @@ class ClientSession:
                 prompt=text,
                 modality=self.query.selected_modality(),
                 score_threshold=float(self.query.threshold.value),
+                labelled=self.query.labelled_selected(),
                 frame=self.frame,
                 generation=self._generation,
                 received=received,
@@ -432,7 +429,11 @@ class ClientSession:
             return
         try:
             answer = self.engine.answer(
-                request.frame.sample, request.modality, request.prompt, request.score_threshold
+                request.frame.sample,
+                request.modality,
+                request.prompt,
+                request.score_threshold,
+                request.candidates(self.options.labelled_boxes),
             )
         except Exception as exc:
             self.report_error("Model error", exc)
@@ -489,8 +490,7 @@ class ClientSession:
                 self.report_error("An extension failed", exc)
 
     def close(self) -> None:
-        """Forget this browser (it disconnected): pending answers are dropped; the frame, the
-        answer and the listeners are let go (the rest: :class:`app.memory.MemoryReaper`)."""
+        """Forget this browser (it left): drop pending answers, the frame, answer, listeners."""
         with self.lock:
             self.closed = True
             self._generation += 1

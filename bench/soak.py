@@ -46,11 +46,12 @@ SPLIT = "train"
 START_TIMEOUT = 300.0
 """Seconds the server may take to listen and warm up."""
 
-SETTLE_SECONDS = 7.0
+SETTLE_SECONDS = 10.0
 """Pause between the two readings: *busy* is RSS right after a visit (the last seconds'
 visitors may not be collected yet), *at rest* after this pause, once the server has collected
 what the departed browsers left and trimmed its heap (its reaper collects 0.5 s after a
-disconnect, at most every 2 s, and trims after 5 s without one)."""
+disconnect, at most every 2 s, and trims after 5 s without one; a full collection takes up to
+a second on a loaded machine)."""
 
 STEP_TIMEOUT = 120.0
 """Seconds one step of a visit may take (a loaded 2-core machine is slow)."""

@@ -11,9 +11,18 @@ from __future__ import annotations
 from typing import Any
 
 from model.config import ModelConfig, apply_overrides, preset
+from model.labelled import LabelledBoxes
 from model.tpcnet import Predictions, SceneFeatures, TPCNet
 
-__all__ = ["ModelConfig", "Predictions", "SceneFeatures", "TPCNet", "build_config", "build_model"]
+__all__ = [
+    "LabelledBoxes",
+    "ModelConfig",
+    "Predictions",
+    "SceneFeatures",
+    "TPCNet",
+    "build_config",
+    "build_model",
+]
 
 
 def build_config(preset_name: str = "small", **overrides: Any) -> ModelConfig:

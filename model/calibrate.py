@@ -1,6 +1,7 @@
 """Choose a checkpoint's operating threshold on a validation split and store it in the checkpoint.
 
-``python -m model.calibrate --data ROOT --checkpoint PATH [--split val] [--limit N] [--dry-run]``
+``python -m model.calibrate --data ROOT --checkpoint PATH [--split val] [--limit N] [--dry-run]
+[--min-prompts N]``
 
 The operating threshold is the score above which a model's boxes are its answer: the set the app
 shows and the set metrics of :mod:`model.grounding_metrics` score. It is chosen, never tuned on the
@@ -10,6 +11,10 @@ the checkpoint's metadata as ``operating_threshold`` with ``operating_threshold_
 split, prompts, the F1 and exact-set it reached). :func:`model.predict.operating_threshold` reads it
 back for ``model.evaluate`` and the app. Both paths (referent and the paper's) are calibrated the
 same way, so their set metrics compare fairly.
+
+A split that cannot measure a threshold is refused (exit 2, one line, the checkpoint untouched):
+one whose prompts refer to nothing (every threshold that returns nothing would score a perfect set
+F1 there) or with fewer than :data:`MIN_REFERRED_PROMPTS` prompts that refer to something.
 """
 
 from __future__ import annotations
@@ -36,6 +41,16 @@ mean by 0.4 points on 240), and of equally good thresholds the highest returns t
 boxes: what matters where a scene holds clutter the training data did not (real frames). The
 referent checkpoint's curve is flat from 0.15 to 0.65 (set F1 83-84); this picks 0.4 there, with
 a higher exact-set rate than the argmax 0.2."""
+
+
+MIN_REFERRED_PROMPTS = 50
+"""Prompts with at least one referent a calibration split must hold (``--min-prompts``). Below
+it one prompt moves the mean set F1 by more than 2 points, four times :data:`F1_PLATEAU`, and the
+choice is noise."""
+
+
+class CalibrationError(ValueError):
+    """The split cannot measure an operating threshold; the message says why."""
 
 
 @dataclass(frozen=True)
@@ -78,11 +93,21 @@ def choose_threshold(
 
 
 def calibrate(
-    model: torch.nn.Module, data: str | Path, split: str = "val", limit: int = 0
+    model: torch.nn.Module,
+    data: str | Path,
+    split: str = "val",
+    limit: int = 0,
+    min_prompts: int = MIN_REFERRED_PROMPTS,
 ) -> Calibration:
     """Ground every prompt of ``split`` with ``model`` (a loaded checkpoint) and choose its
-    threshold."""
+    threshold.
+
+    Raises:
+        CalibrationError: fewer than ``min_prompts`` (and at least one) of the prompts have a
+            referent (module docstring).
+    """
     from model.predict import decode_threshold
+    from scenes.layout import split_file
     from scenes.root import Talk2RadarRoot
 
     root = Talk2RadarRoot(data)
@@ -93,6 +118,13 @@ def calibrate(
         predicted = PromptBoxes.make(fp.boxes, fp.classes, fp.scores, source=fp.sample.sample_id)
         referents = PromptBoxes.make(fp.sample.boxes, fp.sample.classes)
         answers.append((predicted, referents))
+    referred = sum(len(r.boxes) > 0 for _, r in answers)
+    if referred < max(1, min_prompts):
+        raise CalibrationError(
+            f"{split_file(root.lidar_dir, split)}: {referred} of the "
+            f"{len(answers)} prompts of split {split!r} have a referent; calibrating needs at "
+            f"least {max(1, min_prompts)} (--min-prompts), so no threshold is chosen"
+        )
     return choose_threshold(answers)
 
 
@@ -105,13 +137,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--split", default="val")
     p.add_argument("--limit", type=int, default=0, help="first N samples only (0: all)")
     p.add_argument("--dry-run", action="store_true", help="print the choice, write nothing")
+    p.add_argument(
+        "--min-prompts",
+        type=int,
+        default=MIN_REFERRED_PROMPTS,
+        help=f"prompts with a referent the split must hold (default {MIN_REFERRED_PROMPTS})",
+    )
     a = p.parse_args(argv)
     from model.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
     from scenes.root import RootError
 
     try:
         model = load_checkpoint(a.checkpoint)
-        cal = calibrate(model, a.data, a.split, a.limit)
+        cal = calibrate(model, a.data, a.split, a.limit, a.min_prompts)
         for t, f1, exact in cal.curve:
             mark = "  <- chosen" if t == cal.threshold else ""
             print(f"threshold {t:.3f}: set F1 {f1:5.1f}  exact-set {exact:5.1f}{mark}")

@@ -16,12 +16,9 @@ from model.metrics import MIN_OVERLAPS
 from scenes.actors import CLASSES
 from scenes.boxes import bev_iou, iou3d
 from scenes.calib import (
-    IMAGE_SIZE,
     Calibration,
     CameraBoxes,
-    boxes_2d,
     boxes_camera_to_lidar,
-    boxes_lidar_to_camera,
 )
 from scenes.kitti import ObjectLabel
 
@@ -70,22 +67,6 @@ def other_label_boxes(labels: Sequence[ObjectLabel], calib: Calibration) -> np.n
         rotation_y=np.array([lab.rotation_y for lab in other], dtype=np.float64),
     )
     return boxes_camera_to_lidar(cam, calib)
-
-
-def in_camera_view(
-    boxes: np.ndarray, calib: Calibration, image_size: tuple[int, int] = IMAGE_SIZE
-) -> np.ndarray:
-    """Which LiDAR-frame boxes ``(K, 7)`` the camera sees: the box centre in front of the camera
-    (camera-frame depth > 0) and the projected 2D box, clipped to ``image_size`` (width, height),
-    of positive area (``model.predict``'s image rule). Returns ``(K,)`` bool."""
-    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
-    if len(b) == 0:
-        return np.zeros(0, dtype=bool)
-    cam = boxes_lidar_to_camera(b, calib)
-    depth = cam.location[:, 2]  # bottom centre; the geometric centre has the same depth
-    box2d = boxes_2d(cam, calib, image_size)
-    area_ok = (box2d[:, 2] > box2d[:, 0]) & (box2d[:, 3] > box2d[:, 1])
-    return (depth > 0.0) & area_ok
 
 
 def assign_matches(

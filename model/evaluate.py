@@ -41,6 +41,7 @@ from model.metrics import VodResult, evaluate_frames
 if TYPE_CHECKING:
     from model.report import GroundingReport
 from scenes.kitti import LabelError, ObjectLabel, parse_label_line, read_label_file
+from scenes.layout import ID_WIDTH, format_id, is_frame_id
 from scenes.textfile import read_text_file
 
 DEFAULT_CHECKPOINT = Path(__file__).resolve().parents[1] / "checkpoints" / "tpcnet-small.pt"
@@ -98,15 +99,16 @@ def _frame_files(folder: Path, what: str) -> dict[str, Path]:
         if not regular:
             raise EvaluationInputError(f"{path}: cannot read this {what} file ({reason})")
         stem = path.stem
-        if not (stem.isascii() and stem.isdigit()):
+        if not is_frame_id(stem):
+            if stem.isascii() and stem.isdigit() and len(stem) < ID_WIDTH:
+                raise EvaluationInputError(
+                    f"{path}: frame id {stem!r} is not written as {ID_WIDTH} digits; rename it "
+                    f"{format_id(stem)}.txt (frame ids are zero-padded to {ID_WIDTH} digits, and "
+                    "one frame has one file)"
+                )
             raise EvaluationInputError(
-                f"{path}: not a {what} file name: expected <5-digit frame id>.txt, e.g. 00002.txt"
-            )
-        padded = f"{int(stem):05d}"
-        if stem != padded:
-            raise EvaluationInputError(
-                f"{path}: frame id {stem!r} is not written as 5 digits; rename it {padded}.txt "
-                "(frame ids are zero-padded to 5 digits, and one frame has one file)"
+                f"{path}: not a {what} file name: expected <{ID_WIDTH}-digit frame id>.txt, e.g. "
+                f"{format_id(2)}.txt"
             )
         files[stem] = path
     return files
@@ -257,6 +259,20 @@ def build_parser() -> argparse.ArgumentParser:
     model_mode.add_argument(
         "--radar-folder", default="auto", help="radar tree to read: auto, none or a folder name"
     )
+    model_mode.add_argument(
+        "--scene-labels",
+        type=Path,
+        default=None,
+        help="the View-of-Delft root whose label_2 lists every object of the frames (the "
+        "language-blind oracle's objects; with it nothing under the root's meta/ is read)",
+    )
+    model_mode.add_argument(
+        "--candidates",
+        default="detector",
+        choices=["detector", "labels"],
+        help="what the referent stage chooses among: the detector's proposals (default) or the "
+        "frame's labelled boxes from --scene-labels (grounding apart from detection)",
+    )
     model_mode.add_argument("--device", default="cpu", help="cpu or cuda")
     model_mode.add_argument("--limit", type=int, default=0, help="first N frames only (0: all)")
     parser.add_argument("--json", type=Path, default=None, help="write the results as JSON here")
@@ -314,8 +330,16 @@ def _run_model_mode(args: argparse.Namespace) -> int:
     if args.threshold is not None and not 0.0 <= args.threshold < 1.0:
         raise EvaluationInputError(f"--threshold must be in [0, 1), got {args.threshold}")
 
+    from scenes.scene_labels import SceneLabels
+
     radar = None if args.radar_folder == "none" else args.radar_folder
-    root = Talk2RadarRoot(args.data, radar=radar)
+    if args.candidates == "labels" and args.scene_labels is None:
+        raise EvaluationInputError(
+            "--candidates labels needs --scene-labels VOD_ROOT (a Talk2Radar label_2 lists only "
+            "the referents, which would give the answer away)"
+        )
+    scene_labels = None if args.scene_labels is None else SceneLabels(args.scene_labels)
+    root = Talk2RadarRoot(args.data, radar=radar, sidecar=scene_labels is None)
     ids = root.ids(args.split)
     if args.limit:
         ids = ids[: args.limit]
@@ -323,14 +347,30 @@ def _run_model_mode(args: argparse.Namespace) -> int:
         raise EvaluationInputError(f"{args.data}: split {args.split!r} has no samples")
     model = load_checkpoint(args.checkpoint, device=args.device)
     operating = operating_threshold(model) if args.threshold is None else args.threshold
-    report = evaluate_predictions(model, root, ids, operating=operating, baselines=args.baselines)
+    if args.candidates == "labels" and model.cfg.grounding != "referent":
+        raise EvaluationInputError(
+            f"{args.checkpoint}: --candidates labels needs a referent-path checkpoint"
+        )
+    report = evaluate_predictions(
+        model,
+        root,
+        ids,
+        operating=operating,
+        baselines=args.baselines,
+        scene_labels=scene_labels,
+        candidates=args.candidates,
+    )
     out = write_predictions(report.predictions, args.out)
     # Score the files as written (4 decimals), as the official devkit reads them.
     from_files, missing = load_prediction_dir(out, tuple(sorted(ids)))
     if missing:
         raise EvaluationInputError(f"{out}: prediction files missing for {list(missing)[:5]}")
     report = report.rescored(from_files)
-    print(f"data: {args.data} split {args.split} ({len(ids)} frames); checkpoint {args.checkpoint}")
+    print(
+        f"data: {args.data} split {args.split} ({len(ids)} frames); checkpoint {args.checkpoint}; "
+        f"candidates: {args.candidates}"
+        + ("" if scene_labels is None else f"; scene labels {args.scene_labels}")
+    )
     source = "--threshold" if args.threshold is not None else "checkpoint"
     print(f"predictions written to {out}; operating threshold {operating:g} ({source})")
     print(report.format_tables(), end="")

@@ -49,7 +49,11 @@ class LossTerms:
 
 
 def focal_heatmap_loss(
-    logits: Tensor, target: Tensor, alpha: float = 2.0, gamma: float = 4.0
+    logits: Tensor,
+    target: Tensor,
+    alpha: float = 2.0,
+    gamma: float = 4.0,
+    ignore: Tensor | None = None,
 ) -> Tensor:
     """CenterNet's Gaussian focal loss.
 
@@ -58,6 +62,8 @@ def focal_heatmap_loss(
         target: ``(B, C, H, W)`` Gaussian targets in ``[0, 1]``, exactly 1 at positives.
         alpha: Focusing exponent on ``(1 - p)`` / ``p``.
         gamma: Exponent of the ``(1 - target)`` penalty reduction around positives.
+        ignore: Optional ``(B, 1, H, W)`` bool: cells whose negatives count nothing (labels
+            incomplete there); positives count wherever they are.
 
     Returns:
         Scalar: the summed loss over the batch divided by the number of positives (at least 1).
@@ -67,6 +73,8 @@ def focal_heatmap_loss(
     pos = target.eq(1.0)
     pos_loss = torch.log(pred) * (1.0 - pred) ** alpha
     neg_loss = torch.log(1.0 - pred) * pred**alpha * (1.0 - target) ** gamma
+    if ignore is not None:
+        neg_loss = neg_loss.masked_fill(ignore.to(neg_loss.device), 0.0)
     loss = torch.where(pos, pos_loss, neg_loss).sum()
     num_pos = pos.sum().clamp(min=1).to(pred.dtype)
     return -loss / num_pos
@@ -112,7 +120,7 @@ def grounding_loss(
             f"grounding_loss: regression must have {REGRESSION_CHANNELS} channels, "
             f"got {out.regression.shape[1]}"
         )
-    hm_loss = focal_heatmap_loss(out.heatmap, targets.heatmap)
+    hm_loss = focal_heatmap_loss(out.heatmap, targets.heatmap, ignore=targets.ignore)
     pred = gather_regression(out.regression, targets.indices).float()  # (B, K, 8)
     mask = targets.mask.to(pred.dtype)[..., None]  # (B, K, 1)
     per_value = F.smooth_l1_loss(

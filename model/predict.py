@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import time
 from collections import OrderedDict
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -25,6 +25,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from model.labelled import LabelledBoxes
 from scenes.calib import IMAGE_SIZE, Calibration, bottom_centres
 from scenes.kitti import ObjectLabel, boxes_to_labels, write_label_file
 from scenes.root import Sample, Talk2RadarRoot
@@ -78,11 +79,17 @@ def prediction_labels(
     return kept
 
 
+UNCALIBRATED_REFERENT = 0.5
+"""Operating threshold of a referent-path checkpoint that was never calibrated."""
+
+
 def operating_threshold(model: torch.nn.Module) -> float:
     """The score above which the model's boxes are its answer (the set metrics, the app).
 
-    ``model.checkpoint_metadata["operating_threshold"]`` where the checkpoint stores one, else the
-    decoder's ``model.cfg.head.score_threshold``.
+    ``model.checkpoint_metadata["operating_threshold"]`` where the checkpoint stores one (set by
+    ``python -m model.calibrate``); else, on the referent path, :data:`UNCALIBRATED_REFERENT` (a
+    referent probability: the decision boundary its BCE training draws), and on the paper's path
+    the decoder's ``model.cfg.head.score_threshold``.
 
     Raises:
         ValueError: the stored value is not a number in ``[0, 1)`` (the message names the field).
@@ -90,6 +97,8 @@ def operating_threshold(model: torch.nn.Module) -> float:
     meta = getattr(model, "checkpoint_metadata", None) or {}
     value = meta.get("operating_threshold")
     if value is None:
+        if getattr(model.cfg, "grounding", "tpcnet") == "referent":
+            return UNCALIBRATED_REFERENT
         return float(model.cfg.head.score_threshold)
     if isinstance(value, bool) or not isinstance(value, int | float) or not 0.0 <= value < 1.0:
         raise ValueError(
@@ -114,18 +123,8 @@ SceneKey = tuple[object, ...]
 
 
 def scene_key(root: Talk2RadarRoot, sample_id: str) -> SceneKey:
-    """The identity of a sample's sensor files: ``(device, inode)`` of its LiDAR and radar point
-    files and of both calibrations. Samples of one synthetic world (or annotated from one source
-    frame) share these files as hard links, so they share a key and one encoded scene; a copied
-    root without hard links merely loses the sharing."""
-    folders = [(root.lidar_dir, "velodyne", "bin"), (root.lidar_dir, "calib", "txt")]
-    if root.radar_dir is not None:
-        folders += [(root.radar_dir, "velodyne", "bin"), (root.radar_dir, "calib", "txt")]
-    key: list[object] = [root.radar_folder]
-    for tree, folder, ext in folders:
-        stat = (tree / "training" / folder / f"{sample_id}.{ext}").stat()
-        key.append((stat.st_dev, stat.st_ino))
-    return tuple(key)
+    """The identity of a sample's frame: :meth:`scenes.root.Talk2RadarRoot.frame_key`."""
+    return root.frame_key(sample_id)
 
 
 @dataclass(frozen=True)
@@ -162,6 +161,7 @@ def iterate_predictions(
     progress: bool = True,
     min_label_score: float = 0.0,
     cache_scenes: int = 4,
+    candidates: Callable[[Sample], LabelledBoxes] | None = None,
 ) -> Iterator[FramePrediction]:
     """Run ``model.encode_scene`` + ``model.ground`` on each sample (eval mode, no gradients).
 
@@ -171,6 +171,9 @@ def iterate_predictions(
         cache_scenes: Encoded scenes kept (most recently used first) for the following samples
             with the same :func:`scene_key`; ids in world order (as ``scenes.synth`` writes them)
             encode each world once. 0 encodes every sample.
+        candidates: Referent path: the labelled boxes of a sample's frame, among which the
+            referent stage then chooses (``model.evaluate --candidates labels``); None: the
+            detector's proposals.
     """
     model.eval()
     cache: OrderedDict[SceneKey, tuple[SceneFeatures, float]] = OrderedDict()
@@ -185,7 +188,12 @@ def iterate_predictions(
                 features, encode_seconds = cache[key]
             else:
                 start = time.perf_counter()
-                features = model.encode_scene(sample.lidar, sample.radar)
+                if candidates is None:
+                    features = model.encode_scene(sample.lidar, sample.radar)
+                else:
+                    features = model.encode_scene(
+                        sample.lidar, sample.radar, candidates=candidates(sample)
+                    )
                 encode_seconds = time.perf_counter() - start
                 if cache_scenes > 0:
                     cache[key] = (features, encode_seconds)

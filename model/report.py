@@ -41,6 +41,7 @@ from model.grounding_metrics import (
     grounding_metrics,
     prompt_outcome,
 )
+from model.labelled import LabelledBoxes
 from model.metrics import VodResult, evaluate_frames
 from model.predict import (
     decode_threshold,
@@ -48,9 +49,11 @@ from model.predict import (
     operating_threshold,
     prediction_labels,
 )
+from scenes.actors import CLASSES, Actor
 from scenes.kitti import ObjectLabel, format_label_line, parse_label_line
 from scenes.prompts import infer_tags
 from scenes.root import Sample, Talk2RadarRoot
+from scenes.scene_labels import SceneLabels
 
 PROMPT_TYPES: tuple[str, ...] = ("depth", "velocity", "motion", "position")
 DEPTH_BINS: tuple[tuple[float, float], ...] = tuple((10.0 * i, 10.0 * (i + 1)) for i in range(6))
@@ -228,6 +231,8 @@ def evaluate_predictions(
     score_threshold: float | None = None,
     operating: float | None = None,
     baselines: bool = False,
+    scene_labels: SceneLabels | None = None,
+    candidates: str = "detector",
 ) -> GroundingReport:
     """Ground every sample of ``ids`` and score the answers.
 
@@ -237,7 +242,13 @@ def evaluate_predictions(
         operating: Operating threshold of the set metrics (None:
             :func:`model.predict.operating_threshold`).
         baselines: Also score the class-noun prompt and the language-blind oracle (the oracle
-            needs every sample's sidecar; without one it is left out with a note).
+            needs every frame's objects: the scene labels where given, else the sidecar; without
+            either it is left out with a note).
+        scene_labels: The View-of-Delft root with every frame's full labels. Where given, nothing
+            under the root's ``meta/`` is read.
+        candidates: ``"detector"`` (the detector's proposals) or ``"labels"`` (the frame's
+            labelled boxes of the three classes: grounding apart from detection; needs
+            ``scene_labels``).
     """
     if not ids:
         raise ValueError(f"{root.path}: no samples to evaluate")
@@ -246,6 +257,20 @@ def evaluate_predictions(
     if not 0.0 <= op < 1.0:
         raise ValueError(f"operating threshold must be in [0, 1), got {op}")
     ground_at = min(decode, op)
+    if candidates not in ("detector", "labels"):
+        raise ValueError(f"candidates must be detector or labels, got {candidates!r}")
+    if candidates == "labels" and scene_labels is None:
+        raise ValueError(
+            "candidates 'labels' need the frames' full labels (--scene-labels VOD_ROOT): a "
+            "Talk2Radar label_2 lists only the referents"
+        )
+    if scene_labels is not None and root.sidecar:
+        root = Talk2RadarRoot(root.path, radar=root.radar_folder, sidecar=False)
+
+    def labelled(sample: Sample) -> LabelledBoxes:
+        assert scene_labels is not None
+        return LabelledBoxes(*scene_labels.load(sample.sample_id).metric())
+
     gt: dict[str, list[ObjectLabel]] = {}
     dt: dict[str, list[ObjectLabel]] = {}
     tags: dict[str, frozenset[str]] = {}
@@ -255,7 +280,13 @@ def evaluate_predictions(
     noun_answers: dict[tuple[object, ...], PromptBoxes] = {}
     no_meta: list[str] = []
     for pred in iterate_predictions(
-        model, root, ids, ground_at, progress=progress, min_label_score=decode
+        model,
+        root,
+        ids,
+        ground_at,
+        progress=progress,
+        min_label_score=decode,
+        candidates=labelled if candidates == "labels" else None,
     ):
         sample = pred.sample
         sid = sample.sample_id
@@ -280,11 +311,19 @@ def evaluate_predictions(
         noun_boxes = noun_answers[key]
         base_dt["class_noun"][sid] = _labels(noun_boxes, decode, sample)
         outcomes["class_noun"].append(prompt_outcome(sid, tags[sid], noun_boxes, referents, op))
-        if sample.meta is None:
+        if scene_labels is not None:
+            boxes, labels = scene_labels.load(sid).metric()
+            objects = [
+                Actor(i, CLASSES[int(lab)], box, np.zeros(2))
+                for i, (box, lab) in enumerate(zip(boxes, labels, strict=True))
+            ]
+            oracle = oracle_boxes(objects, cls)
+        elif sample.meta is None:
             no_meta.append(sid)
             continue
-        skip = unsensed_ids(sample.meta, source=f"{root.path / 'meta' / sid}.json")
-        oracle = oracle_boxes(sample.meta.actors, cls, exclude=skip)
+        else:
+            skip = unsensed_ids(sample.meta, source=f"{root.path / 'meta' / sid}.json")
+            oracle = oracle_boxes(sample.meta.actors, cls, exclude=skip)
         base_dt["oracle"][sid] = _labels(oracle, decode, sample)
         outcomes["oracle"].append(prompt_outcome(sid, tags[sid], oracle, referents, op))
     report = build_report(gt, dt, tags, tuple(seconds))

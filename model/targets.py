@@ -75,6 +75,8 @@ class BatchTargets:
         regression: ``(B, Kmax, 8)`` float32.
         mask: ``(B, Kmax)`` bool.
         labels: ``(B, Kmax)`` int64 (-1 for ignored classes and padding).
+        ignore: ``(B, 1, H, W)`` bool, True where the labels are incomplete (outside the camera
+            view VoD annotates): no negative heatmap loss there. None: labels complete.
     """
 
     heatmap: Tensor
@@ -83,6 +85,7 @@ class BatchTargets:
     regression: Tensor
     mask: Tensor
     labels: Tensor
+    ignore: Tensor | None = None
 
     def to(self, device: torch.device | str) -> BatchTargets:
         """A copy with every tensor on ``device``."""
@@ -93,6 +96,7 @@ class BatchTargets:
             regression=self.regression.to(device),
             mask=self.mask.to(device),
             labels=self.labels.to(device),
+            ignore=None if self.ignore is None else self.ignore.to(device),
         )
 
 
@@ -146,6 +150,13 @@ def anchor_points(boxes: np.ndarray, anchor: str) -> np.ndarray:
     if anchor == "center":
         return np.asarray(boxes[:, :2], dtype=np.float64).copy()
     raise ValueError(f"unknown anchor {anchor!r}")
+
+
+def grid_cell_centres(grid: BevGrid) -> np.ndarray:
+    """Metric centres ``(H * W, 2)`` of every cell of ``grid``, row-major (``[iy, ix]``)."""
+    h, w = grid.shape
+    rows, cols = np.meshgrid(np.arange(h), np.arange(w), indexing="ij")
+    return cell_centres(grid, cols.reshape(-1), rows.reshape(-1))
 
 
 def cell_centres(grid: BevGrid, cols: np.ndarray, rows: np.ndarray) -> np.ndarray:

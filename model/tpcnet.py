@@ -52,6 +52,7 @@ from model.grounder import (
     stack_candidates,
 )
 from model.head import C3DRecHead, HeadOutput
+from model.labelled import LabelledBoxes, anchor_scores, with_context
 from model.pillars import PillarEncoder
 from model.referent import ReferentStage
 from model.text import TextFeatures, build_text_encoder, validate_prompt
@@ -111,6 +112,9 @@ class SceneFeatures:
         timings: Time per stage of the encoding.
         objects: ``grounding="referent"`` only: the text-agnostic detections of the scene as
             referent-stage candidates, and the detector's ``(3, H, W)`` sigmoid heatmaps.
+        answerable: With labelled candidates (:mod:`model.labelled`): the first this many
+            candidates are the labelled boxes, the only possible answers (the rest is context).
+            None: every candidate may be an answer.
     """
 
     stages: tuple[Tensor, ...]
@@ -119,6 +123,7 @@ class SceneFeatures:
     timings: SceneTimings
     objects: SceneCandidates | None = None
     detection_heatmaps: np.ndarray | None = None
+    answerable: int | None = None
 
 
 @dataclass(frozen=True)
@@ -387,7 +392,10 @@ class TPCNet(nn.Module):
     # ------------------------------------------------------------------ public API
 
     def encode_scene(
-        self, lidar: PointsLike | None = None, radar: PointsLike | None = None
+        self,
+        lidar: PointsLike | None = None,
+        radar: PointsLike | None = None,
+        candidates: LabelledBoxes | None = None,
     ) -> SceneFeatures:
         """Text-independent features of one scene (sensor branches + LiDAR-radar fusion; with
         ``grounding="referent"`` also the text-agnostic detections as candidates).
@@ -396,41 +404,67 @@ class TPCNet(nn.Module):
             lidar: ``(N, 4)`` LiDAR points (x, y, z, intensity), LiDAR frame; ignored (may be
                 ``None``) by a radar-only model.
             radar: ``(M, 7)`` radar points in the LiDAR frame; ignored by a LiDAR-only model.
+            candidates: Referent path only: the frame's labelled boxes, among which the referent
+                stage then chooses instead of the detector's proposals (each gets the detector's
+                score at its anchor cell, :func:`model.labelled.anchor_scores`).
 
         Returns:
             :class:`SceneFeatures` with ``lr_i`` of shape ``(1, C_i, H_i, W_i)``.
         """
+        if candidates is not None and self.referent is None:
+            raise ValueError(
+                "labelled candidates need a referent-path model; the paper's path ranks "
+                "its own heatmap peaks"
+            )
         lidar_t = self._clouds(
             None if lidar is None else [lidar], 1, "lidar", LIDAR_FEATURES, self.cfg.uses_lidar
         )
         radar_t = self._clouds(
             None if radar is None else [radar], 1, "radar", RADAR_FEATURES, self.cfg.uses_radar
         )
-        objects, heat = None, None
+        objects, heat, answerable = None, None, None
         with torch.no_grad():
             stages, per_sensor, timings = self._encode(lidar_t, radar_t, timed=True)
             if self.referent is not None:
                 clock = _Clock(self.device)
                 neck = self.neck(list(stages))
                 out = self.head(neck)
+                heat = torch.sigmoid(out.heatmap[0]).float().cpu().numpy()
                 dets = decode(
                     out, self.head_grid, self.cfg.head, self.cfg.referent.candidate_threshold
                 )[0]
                 keep = slice(0, self.cfg.referent.max_candidates)
+                boxes, labels = dets.boxes[keep], dets.labels[keep]
+                scores = dets.scores[keep]
+                if candidates is not None:
+                    answerable = len(candidates)
+                    boxes, labels, scores = with_context(
+                        candidates,
+                        anchor_scores(
+                            heat,
+                            candidates.boxes,
+                            candidates.labels,
+                            self.head_grid,
+                            self.cfg.head.anchor,
+                        ),
+                        boxes,
+                        labels,
+                        scores,
+                        self.cfg.referent.max_candidates,
+                    )
                 maps = SceneMaps(
                     neck[0],
                     per_sensor["l"][0][0] if "l" in per_sensor else None,
                     per_sensor["r"][0][0] if "r" in per_sensor else None,
                 )
                 objects = self.candidates(
-                    dets.boxes[keep],
-                    dets.labels[keep],
-                    dets.scores[keep],
+                    boxes,
+                    labels,
+                    scores,
                     maps,
                     None if lidar_t is None else lidar_t[0].cpu().numpy(),
                     None if radar_t is None else radar_t[0].cpu().numpy(),
                 )
-                heat = torch.sigmoid(out.heatmap[0]).float().cpu().numpy()
                 timings = dataclasses.replace(timings, detect=clock.lap())
         return SceneFeatures(
             stages=tuple(stages),
@@ -439,6 +473,7 @@ class TPCNet(nn.Module):
             timings=timings,
             objects=objects,
             detection_heatmaps=heat,
+            answerable=answerable,
         )
 
     def ground(
@@ -509,8 +544,12 @@ class TPCNet(nn.Module):
                 probs = np.zeros(0, dtype=np.float32)
             t_ref = clock.lap()
         probs = probs.astype(np.float64)
+        if features.answerable is not None:  # labelled candidates; the proposals are context
+            probs[features.answerable :] = 0.0
         order = np.argsort(-probs, kind="stable")
         order = order[probs[order] >= threshold]
+        if features.answerable is not None:
+            order = order[order < features.answerable]
         heatmaps = referent_heatmap(
             heat, objects.boxes, objects.labels, probs, self.head_grid, self.cfg.head.anchor
         )

@@ -191,6 +191,46 @@ def iou3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return _pairwise(a, b, with_height=True)
 
 
+def match_by_centre(
+    boxes: np.ndarray,
+    labels: np.ndarray,
+    targets: np.ndarray,
+    target_labels: np.ndarray,
+    max_distance: np.ndarray,
+) -> np.ndarray:
+    """Greedy one-to-one matching of boxes to targets of the same class by BEV centre distance.
+
+    Boxes are taken in the given order (e.g. by detection score); each takes the nearest free
+    target of its class within ``max_distance[label]`` metres.
+
+    Args:
+        boxes: ``(K, 7)`` LiDAR frame; labels: ``(K,)`` class indices.
+        targets: ``(T, 7)`` LiDAR frame; target_labels: ``(T,)`` class indices.
+        max_distance: ``(C,)`` largest centre distance (m) per class index.
+
+    Returns:
+        ``(K,)`` int64: the index of each box's target, ``-1`` for none.
+    """
+    b = _as_boxes(boxes)
+    t = _as_boxes(targets)
+    out = np.full(len(b), -1, dtype=np.int64)
+    if len(b) == 0 or len(t) == 0:
+        return out
+    labels = np.asarray(labels, dtype=np.int64).reshape(-1)
+    target_labels = np.asarray(target_labels, dtype=np.int64).reshape(-1)
+    limit = np.asarray(max_distance, dtype=np.float64)
+    dist = np.hypot(*(b[:, None, :2] - t[None, :, :2]).transpose(2, 0, 1))
+    dist[labels[:, None] != target_labels[None, :]] = np.inf
+    free = np.ones(len(t), dtype=bool)
+    for i in range(len(b)):
+        row = np.where(free, dist[i], np.inf)
+        j = int(np.argmin(row))
+        if row[j] <= limit[labels[i]]:
+            out[i] = j
+            free[j] = False
+    return out
+
+
 def nearest_bev_corner(boxes: np.ndarray, origin: tuple[float, float] = (0.0, 0.0)) -> np.ndarray:
     """The BEV corner of each box nearest to ``origin`` (the ego sensor): ``(K, 2)``.
 

@@ -110,10 +110,22 @@ def atomic_write_text(path: str | Path, text: str) -> None:
         handle.write(text)
 
 
+def _same_file(a: str | Path, b: str | Path) -> bool:
+    """Whether both paths exist and name the same file (False where either is missing)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
 def link_or_copy(src: str | Path, dst: str | Path) -> None:
     """Hard-link ``src`` to ``dst``, replacing ``dst`` atomically (a copy, fsynced, where links are
-    impossible, e.g. across filesystems); the folder is fsynced."""
+    impossible, e.g. across filesystems); the folder is fsynced. Nothing to do where ``dst`` is
+    already ``src`` (the same file, or another link to it): a rename onto a link of the same file
+    does nothing, and would leave the temporary behind."""
     dst = Path(dst)
+    if _same_file(src, dst):
+        return
     dst.parent.mkdir(parents=True, exist_ok=True)
     tmp = temp_path(dst)
     tmp.unlink(missing_ok=True)

@@ -16,20 +16,46 @@ beam-wise LiDAR dropout, radar point count, RCS offset, and single-scan radar (r
 with the single-scan ``radar`` tree only). They change what the sensors report; the one exception,
 a mounting-height offset, moves the whole scene in z (points and actors alike), which no prompt
 speaks of. Nothing rescales distances.
+
+Two sources of a frame's objects and prompts:
+
+- **sidecar** (a synthetic root): the actors of ``meta/<id>.json`` (with ground velocities), and
+  prompts generated during training from them;
+- **labels** (a root as the real releases come, or any root given ``scene_labels``): the objects
+  are the metric-class boxes of the View-of-Delft release's own ``label_2``
+  (:class:`scenes.scene_labels.SceneLabels`), the region they cover is the camera's field of view
+  (:class:`AnnotatedRegion`; outside it nothing is background), and the prompts are the ones that
+  come with the root (:class:`GivenPrompt`: each sample's ``prompt/`` sentence, its referents
+  its ``label_2`` boxes matched to the frame's objects). Without scene labels the objects are the
+  union of the referents of the frame's samples (every other object then counts as background,
+  which :class:`FrameDataset` warns about). Nothing under ``meta/`` is read in this mode; objects
+  have no velocity (zeros, never read: the prompts are given, and candidates' motion evidence
+  comes from the radar points).
+
+A frame is :meth:`scenes.root.Talk2RadarRoot.frame_key`: samples sharing sensor files (one
+synthetic world, or several prompts on one release frame) are one item.
 """
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass
 
 import numpy as np
 from torch.utils.data import Dataset
 
 from scenes import augment as aug
-from scenes.actors import Actor
-from scenes.boxes import wrap_yaw
+from scenes.actors import CLASSES, Actor
+from scenes.boxes import match_by_centre, wrap_yaw
+from scenes.calib import IMAGE_SIZE, Calibration
 from scenes.dataset import AugmentConfig
+from scenes.prompts import flip_left_right
 from scenes.root import Talk2RadarRoot
+from scenes.scene_labels import SceneLabels, fov_mask
+
+REFERENT_MATCH_DISTANCE = 1.0
+"""A referent box (a Talk2Radar ``label_2`` line) is the frame's labelled object of the same class
+whose BEV centre is nearest, within this many metres (both are annotations of one object)."""
 
 
 @dataclass(frozen=True)
@@ -84,6 +110,43 @@ class SensorAugment:
 
 
 @dataclass(frozen=True)
+class GivenPrompt:
+    """A prompt that comes with a frame (labels source).
+
+    Attributes:
+        sample_id: The sample it is the prompt of.
+        text: The sentence (left/right swapped when the frame is flipped).
+        referent_ids: Actor ids of its referents among the frame's objects (may be empty).
+    """
+
+    sample_id: str
+    text: str
+    referent_ids: tuple[int, ...]
+
+
+@dataclass(frozen=True)
+class AnnotatedRegion:
+    """Where a frame's labels are complete: the camera's field of view (VoD labels only that).
+
+    Attributes:
+        calib: The frame's LiDAR calibration.
+        image_size: ``(width, height)`` of its camera image.
+        mirrored: The frame was flipped left-right (positions are mirrored back to test them).
+    """
+
+    calib: Calibration
+    image_size: tuple[int, int]
+    mirrored: bool = False
+
+    def contains(self, xy: np.ndarray) -> np.ndarray:
+        """``(N,)`` bool for ``(N, 2)`` LiDAR-frame ground positions of the (augmented) frame."""
+        pts = np.array(xy, dtype=np.float64, copy=True).reshape(-1, 2)
+        if self.mirrored:
+            pts[:, 1] *= -1
+        return fov_mask(pts, self.calib, self.image_size)
+
+
+@dataclass(frozen=True)
 class FrameItem:
     """One scene with all its actors.
 
@@ -92,8 +155,11 @@ class FrameItem:
         lidar: ``(N, 4)`` float32, LiDAR frame.
         radar: ``(M, 7)`` float32, LiDAR frame.
         actors: Every actor of the scene (LiDAR frame, ground velocities), augmented with the
-            points.
+            points; on the labels source, the frame's labelled objects (velocities zero, unknown).
         flipped: Whether the left-right flip was applied.
+        given: Labels source: the prompts that come with the frame; empty on the sidecar source
+            (prompts are generated from the actors, :attr:`generates_prompts`).
+        region: Labels source with scene labels: where the labels are complete (None: everywhere).
     """
 
     sample_id: str
@@ -101,6 +167,14 @@ class FrameItem:
     radar: np.ndarray
     actors: tuple[Actor, ...]
     flipped: bool = False
+    given: tuple[GivenPrompt, ...] = ()
+    region: AnnotatedRegion | None = None
+    from_labels: bool = False
+
+    @property
+    def generates_prompts(self) -> bool:
+        """Whether prompts are generated from the actors (sidecar source) rather than given."""
+        return not self.from_labels
 
 
 def flip_actor(actor: Actor) -> Actor:
@@ -119,19 +193,35 @@ def shift_actor(actor: Actor, dz: float) -> Actor:
     return Actor(actor.actor_id, actor.cls, box, actor.velocity)
 
 
-def scene_ids(root: Talk2RadarRoot, split: str) -> list[str]:
-    """One sample id per distinct scene of ``split`` (first sample of each world), in order."""
-    seen: set[int] = set()
-    out = []
+def frame_groups(root: Talk2RadarRoot, split: str) -> list[list[str]]:
+    """The sample ids of ``split`` grouped by frame (:meth:`Talk2RadarRoot.frame_key`), groups in
+    the order of their first sample."""
+    groups: dict[tuple[object, ...], list[str]] = {}
     for sid in root.ids(split):
-        meta = root.load_meta(sid)
-        world = -1 if meta is None else meta.world_id
-        if world >= 0:
-            if world in seen:
-                continue
-            seen.add(world)
-        out.append(sid)
-    return out
+        groups.setdefault(root.frame_key(sid), []).append(sid)
+    return list(groups.values())
+
+
+def scene_ids(root: Talk2RadarRoot, split: str) -> list[str]:
+    """One sample id per distinct frame of ``split`` (the first of each group), in order."""
+    return [group[0] for group in frame_groups(root, split)]
+
+
+def _objects_from_referents(
+    boxes: list[np.ndarray], labels: list[np.ndarray]
+) -> tuple[np.ndarray, np.ndarray]:
+    """The union of several samples' referent boxes of one frame (duplicates merged)."""
+    out_boxes: list[np.ndarray] = []
+    out_labels: list[int] = []
+    limits = np.full(len(CLASSES), REFERENT_MATCH_DISTANCE)
+    for b, lab in zip(boxes, labels, strict=True):
+        known = np.array(out_boxes).reshape(-1, 7)
+        match = match_by_centre(b, lab, known, np.array(out_labels, dtype=np.int64), limits)
+        for box, label, m in zip(b, lab, match, strict=True):
+            if m < 0:
+                out_boxes.append(box)
+                out_labels.append(int(label))
+    return np.array(out_boxes).reshape(-1, 7), np.array(out_labels, dtype=np.int64)
 
 
 class FrameDataset(Dataset):
@@ -145,8 +235,14 @@ class FrameDataset(Dataset):
         seed: Seed of the augmentation stream (item ``i`` at epoch ``e`` draws from
             ``(seed, e, i)``; call :meth:`set_epoch`).
 
+        scene_labels: A View-of-Delft root with the frames' full labels: the labels source with
+            the camera's field of view as the annotated region.
+        source: ``"sidecar"``, ``"labels"`` or ``"auto"`` (labels when ``scene_labels`` is given
+            or the root has no ``meta/`` folder, as a release; else the sidecar).
+
     Raises:
-        ValueError: The split has no scene, or a scene has no sidecar listing its actors.
+        ValueError: The split has no scene, or (sidecar source) a scene has no sidecar listing
+            its actors.
     """
 
     def __init__(
@@ -156,16 +252,85 @@ class FrameDataset(Dataset):
         augment: AugmentConfig | None = None,
         sensors: SensorAugment | None = None,
         seed: int = 0,
+        scene_labels: SceneLabels | None = None,
+        source: str = "auto",
     ) -> None:
-        self.root = root if isinstance(root, Talk2RadarRoot) else Talk2RadarRoot(root)
+        root = root if isinstance(root, Talk2RadarRoot) else Talk2RadarRoot(root)
+        if source not in ("auto", "sidecar", "labels"):
+            raise ValueError(f"source must be auto, sidecar or labels, got {source!r}")
+        if source == "auto":
+            has_meta = (root.path / "meta").is_dir() and root.sidecar
+            source = "labels" if scene_labels is not None or not has_meta else "sidecar"
+        if source == "sidecar" and scene_labels is not None:
+            raise ValueError("scene labels are for the labels source")
+        self.source = source
+        if source == "labels":
+            root = Talk2RadarRoot(root.path, radar=root.radar_folder, sidecar=False)
+        self.root = root
         self.split = split
         self.sensors = sensors
-        self.ids = scene_ids(self.root, split)
+        self.scene_labels = scene_labels
+        self.groups = frame_groups(self.root, split)
+        self.ids = [group[0] for group in self.groups]
         if not self.ids:
             raise ValueError(f"{self.root.path}: split {split!r} has no samples")
+        if source == "labels" and scene_labels is None:
+            print(
+                f"{self.root.path}: no scene labels given: a frame's objects are the referents of "
+                "its prompts, and every other object counts as background (give the View-of-Delft "
+                "release with --scene-labels)",
+                file=sys.stderr,
+            )
         self.augment = augment
         self.seed = seed
         self.epoch = 0
+
+    def limit(self, count: int) -> None:
+        """Keep only the first ``count`` frames."""
+        self.groups = self.groups[:count]
+        self.ids = self.ids[:count]
+
+    def _labelled(
+        self, index: int
+    ) -> tuple[object, tuple[Actor, ...], tuple[GivenPrompt, ...], AnnotatedRegion | None]:
+        """The first sample, objects, given prompts and annotated region of frame ``index``."""
+        group = self.groups[index]
+        first = self.root.load(group[0])
+        referents = [(first.boxes, first.classes, first.prompt)]
+        for sid in group[1:]:
+            boxes, classes = self.root.load_referents(sid)
+            referents.append((boxes, classes, self.root.load_prompt(sid)))
+        ref_labels = [np.array([CLASSES.index(c) for c in r[1]], dtype=np.int64) for r in referents]
+        region = None
+        if self.scene_labels is not None:
+            objects = self.scene_labels.load(group[0])
+            boxes, labels = objects.metric()
+            size = first.image_size if first.image_path is not None else IMAGE_SIZE
+            region = AnnotatedRegion(objects.calib, size)
+            boxes, labels = list(boxes), list(labels)
+        else:
+            union = _objects_from_referents([r[0] for r in referents], ref_labels)
+            boxes, labels = list(union[0]), list(union[1])
+        limits = np.full(len(CLASSES), REFERENT_MATCH_DISTANCE)
+        given = []
+        for sid, (ref_boxes, _, prompt), ref_lab in zip(group, referents, ref_labels, strict=True):
+            match = match_by_centre(
+                ref_boxes, ref_lab, np.array(boxes).reshape(-1, 7), np.array(labels), limits
+            )
+            ids = []
+            for box, lab, m in zip(ref_boxes, ref_lab, match, strict=True):
+                if m < 0:  # a referent the scene labels lack: it is an object all the same
+                    boxes.append(box)
+                    labels.append(int(lab))
+                    m = len(boxes) - 1
+                ids.append(int(m))
+            if prompt is not None:
+                given.append(GivenPrompt(sid, prompt, tuple(ids)))
+        actors = tuple(
+            Actor(i, CLASSES[int(lab)], box, np.zeros(2))
+            for i, (box, lab) in enumerate(zip(boxes, labels, strict=True))
+        )
+        return first, actors, tuple(given), region
 
     def set_epoch(self, epoch: int) -> None:
         """Select the augmentation stream of ``epoch``."""
@@ -175,15 +340,21 @@ class FrameDataset(Dataset):
         return len(self.ids)
 
     def __getitem__(self, index: int) -> FrameItem:
-        sample = self.root.load(self.ids[index])
-        if sample.meta is None or not sample.meta.actors:
-            raise ValueError(
-                f"{self.root.path}: sample {sample.sample_id} has no meta/{sample.sample_id}.json "
-                "listing the scene's actors; the referent path trains on every actor of a frame"
-            )
+        given: tuple[GivenPrompt, ...] = ()
+        region = None
+        if self.source == "labels":
+            sample, actors, given, region = self._labelled(index)
+        else:
+            sample = self.root.load(self.ids[index])
+            if sample.meta is None or not sample.meta.actors:
+                raise ValueError(
+                    f"{self.root.path}: sample {sample.sample_id} has no "
+                    f"meta/{sample.sample_id}.json listing the scene's actors; a root as the "
+                    "releases come trains on its labels: give --scene-labels VOD_ROOT"
+                )
+            actors = tuple(sample.meta.actors)
         lidar = np.asarray(sample.lidar, dtype=np.float32)
         radar = np.asarray(sample.radar, dtype=np.float32)
-        actors = tuple(sample.meta.actors)
         flipped = False
         if self.augment is not None:
             rng = np.random.default_rng((self.seed, self.epoch, index))
@@ -192,6 +363,11 @@ class FrameDataset(Dataset):
                 lidar[:, 1] *= -1
                 radar[:, 1] *= -1
                 actors = tuple(flip_actor(a) for a in actors)
+                given = tuple(
+                    GivenPrompt(g.sample_id, flip_left_right(g.text), g.referent_ids) for g in given
+                )
+                if region is not None:
+                    region = AnnotatedRegion(region.calib, region.image_size, mirrored=True)
                 flipped = True
             if self.sensors is not None:
                 lidar, radar = self.sensors.apply(lidar, radar, rng)
@@ -202,7 +378,27 @@ class FrameDataset(Dataset):
                     radar[:, 2] += dz
                     actors = tuple(shift_actor(a, dz) for a in actors)
             lidar, radar = self.augment.thin_and_shuffle(lidar, radar, rng)
-        return FrameItem(sample.sample_id, lidar, radar, actors, flipped)
+        return FrameItem(
+            sample.sample_id,
+            lidar,
+            radar,
+            actors,
+            flipped,
+            given=given,
+            region=region,
+            from_labels=self.source == "labels",
+        )
 
 
-__all__ = ["FrameDataset", "FrameItem", "SensorAugment", "flip_actor", "scene_ids", "shift_actor"]
+__all__ = [
+    "REFERENT_MATCH_DISTANCE",
+    "AnnotatedRegion",
+    "FrameDataset",
+    "FrameItem",
+    "GivenPrompt",
+    "SensorAugment",
+    "flip_actor",
+    "frame_groups",
+    "scene_ids",
+    "shift_actor",
+]

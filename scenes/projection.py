@@ -1,5 +1,6 @@
 """LiDAR-frame geometry into the camera image: points to pixels, 3D box wireframes to 2D line
-segments, and the calibration of a resized image.
+segments, which boxes the camera sees (:func:`in_camera_view`), and the calibration of a resized
+image.
 
 Conventions
     Inputs are in the LiDAR (sensor) frame of a :class:`~scenes.calib.Calibration` (x forward,
@@ -19,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scenes.boxes import box_corners
-from scenes.calib import IMAGE_SIZE, Calibration
+from scenes.calib import IMAGE_SIZE, Calibration, boxes_2d, boxes_lidar_to_camera
 
 MIN_DEPTH = 0.1
 """Metres in front of the camera below which points are not projected and segments are cut."""
@@ -167,3 +168,19 @@ def project_box_edges(
     flat[drawn, 0] = q0[drawn]
     flat[drawn, 1] = q1[drawn]
     return flat.reshape(k, 12, 2, 2), drawn.reshape(k, 12)
+
+
+def in_camera_view(
+    boxes: np.ndarray, calib: Calibration, image_size: tuple[int, int] = IMAGE_SIZE
+) -> np.ndarray:
+    """Which LiDAR-frame boxes ``(K, 7)`` the camera sees: the box centre in front of the camera
+    (camera-frame depth > 0) and the projected 2D box, clipped to ``image_size`` (width, height),
+    of positive area (``model.predict``'s image rule). Returns ``(K,)`` bool."""
+    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
+    if len(b) == 0:
+        return np.zeros(0, dtype=bool)
+    cam = boxes_lidar_to_camera(b, calib)
+    depth = cam.location[:, 2]  # bottom centre; the geometric centre has the same depth
+    box2d = boxes_2d(cam, calib, image_size)
+    area_ok = (box2d[:, 2] > box2d[:, 0]) & (box2d[:, 3] > box2d[:, 1])
+    return (depth > 0.0) & area_ok

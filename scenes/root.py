@@ -12,6 +12,7 @@ access, and the 2D boxes of ``label_2`` are clipped to its size (:attr:`Sample.i
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -23,6 +24,7 @@ from scenes.imagefile import label_image_size, read_image, warn_principal_point
 from scenes.kitti import ObjectLabel, labels_to_boxes, read_label_file
 from scenes.layout import (
     CALIB,
+    FOLDER_SUFFIX,
     IMAGE,
     IMAGE_SUFFIXES,
     LABEL,
@@ -33,6 +35,8 @@ from scenes.layout import (
     RootError,
     format_id,
     meta_file,
+    parse_id,
+    parse_split_list,
     radar_folders_in,
     sample_dir,
     sample_file,
@@ -45,6 +49,7 @@ from scenes.textfile import read_text_file
 from scenes.writer import LABEL_DECIMALS, SampleText, SensorFiles, Talk2RadarWriter, sample_text
 
 __all__ = [  # with the writer, the sidecar and the layout names readers use, re-exported
+    "ALL_FRAMES",
     "LABEL_DECIMALS",
     "LIDAR_FOLDER",
     "RADAR_FOLDERS",
@@ -58,6 +63,9 @@ __all__ = [  # with the writer, the sidecar and the layout names readers use, re
     "format_id",
     "sample_text",
 ]
+
+ALL_FRAMES = "all"
+"""The split name :meth:`Talk2RadarRoot.splits` gives a root without an ImageSets folder."""
 
 
 @dataclass(frozen=True)
@@ -136,10 +144,14 @@ class Talk2RadarRoot:
         path: The root folder (containing ``lidar/`` and a radar tree).
         radar: Radar tree to read (``radar_5frames``, ``radar_3frames``, ``radar``), ``"auto"``
             for the first present in that order, or None to read no radar (empty ``(0, 7)``).
+        sidecar: Whether to read Talk2PC's ``meta/`` sidecars. False: nothing under ``meta/`` is
+            ever touched and :attr:`Sample.meta` is None, as on a real release (training and
+            evaluation on labels alone).
     """
 
-    def __init__(self, path: str | Path, radar: str | None = "auto") -> None:
+    def __init__(self, path: str | Path, radar: str | None = "auto", sidecar: bool = True) -> None:
         self.path = Path(path)
+        self.sidecar = sidecar
         self.lidar_dir = self.path / LIDAR_FOLDER
         if not self.lidar_dir.is_dir():
             raise RootError(f"{self.path}: not a Talk2Radar root (no {LIDAR_FOLDER}/ folder)")
@@ -153,41 +165,55 @@ class Talk2RadarRoot:
         self.radar_folder = radar
         self.radar_dir = self.path / radar if radar else None
         self._has_prompts = sample_dir(self.lidar_dir, PROMPT).is_dir()
+        self._all_frames_noted = False
 
     def __repr__(self) -> str:
         return f"Talk2RadarRoot({str(self.path)!r}, radar={self.radar_folder!r})"
 
     def splits(self) -> list[str]:
-        """Names of the ImageSets files present (e.g. ``['test', 'train', 'val']``)."""
+        """Names of the ImageSets files present (e.g. ``['test', 'train', 'val']``);
+        ``[ALL_FRAMES]`` for a root without an ImageSets folder (:meth:`ids`)."""
+        if not split_dir(self.lidar_dir).is_dir():
+            return [ALL_FRAMES]
         return sorted(p.stem for p in split_dir(self.lidar_dir).glob("*.txt"))
 
     def ids(self, split: str) -> list[str]:
-        """The 5-digit ids listed in ``lidar/ImageSets/<split>.txt`` (blank lines skipped).
+        """The ids listed in ``lidar/ImageSets/<split>.txt`` (blank lines skipped).
+
+        A root without an ``ImageSets`` folder (the View-of-Delft devkit's example set) serves
+        every frame of ``lidar/training/velodyne/`` as any split, with a one-line notice
+        (``UserWarning``, once per root object).
 
         Raises:
-            RootError: the list is missing or unreadable, a line is not an integer, or an id is
-                listed twice (``2`` and ``00002`` are the same id); the message names file and line.
+            RootError: the list is missing or unreadable, an entry is not a 5-digit ASCII frame
+                id (:func:`scenes.layout.parse_split_list`), or an id is listed twice; the
+                message names file and line.
         """
+        if not split_dir(self.lidar_dir).is_dir():
+            return self._all_frames(split)
         path = split_file(self.lidar_dir, split)
         if not _is_file(path):
             raise RootError(f"{path}: split {split!r} not found (present: {self.splits()})")
-        out: list[str] = []
-        first: dict[str, int] = {}
-        text = read_text_file(path, "split list", RootError)
-        for lineno, line in enumerate(text.splitlines(), start=1):
-            if line.strip():
-                try:
-                    sid = format_id(line.strip())
-                except RootError as exc:
-                    raise RootError(f"{path}:{lineno}: {exc}") from exc
-                if sid in first:
-                    raise RootError(
-                        f"{path}:{lineno}: sample {sid} is listed twice (first on line "
-                        f"{first[sid]}); each id may appear once per split"
-                    )
-                first[sid] = lineno
-                out.append(sid)
-        return out
+        return parse_split_list(read_text_file(path, "split list", RootError), path)
+
+    def _all_frames(self, split: str) -> list[str]:
+        """Every frame of ``lidar/training/velodyne/`` (sorted), for a root without ImageSets."""
+        folder = sample_dir(self.lidar_dir, VELODYNE)
+        ids = []
+        for path in sorted(folder.glob(f"*{FOLDER_SUFFIX[VELODYNE]}")):
+            try:
+                ids.append(parse_id(path.stem))
+            except RootError as exc:
+                raise RootError(f"{path}: not named by a frame id ({exc})") from exc
+        if not self._all_frames_noted:
+            self._all_frames_noted = True
+            warnings.warn(
+                f"{split_dir(self.lidar_dir)}: no ImageSets folder; serving all {len(ids)} frames "
+                f"of {folder} as split {split!r} (and as any other split)",
+                UserWarning,
+                stacklevel=3,
+            )
+        return ids
 
     def _file(self, tree: Path, folder: str, sample_id: str) -> Path:
         path = sample_file(tree, folder, sample_id)
@@ -216,6 +242,8 @@ class Talk2RadarRoot:
         Raises:
             RootError: the sidecar is unreadable, not UTF-8, not JSON or not a sidecar object.
         """
+        if not self.sidecar:
+            return None
         path = meta_file(self.path, format_id(sample_id))
         if not path.exists() and not path.is_symlink():
             return None
@@ -225,6 +253,34 @@ class Talk2RadarRoot:
         except (json.JSONDecodeError, RecursionError) as exc:
             raise RootError(f"{path}: invalid JSON: {exc}") from exc
         return SampleMeta.from_json(data, source=str(path))
+
+    def frame_key(self, sample_id: str | int) -> tuple[object, ...]:
+        """The identity of a sample's frame: ``(device, inode)`` of its LiDAR and radar point files
+        and of both calibrations (and the radar tree read). This is the one definition of "the
+        same frame" (training groups, prediction's scene cache, class prompts): samples of one
+        synthetic world, or annotated from one source frame, share these files as hard links; a
+        release's frames are each their own. It reads sensor files' metadata only, never a
+        sidecar; a copied root without hard links merely loses the sharing."""
+        sid = format_id(sample_id)
+        files = [
+            sample_file(self.lidar_dir, VELODYNE, sid),
+            sample_file(self.lidar_dir, CALIB, sid),
+        ]
+        if self.radar_dir is not None:
+            files += [
+                sample_file(self.radar_dir, VELODYNE, sid),
+                sample_file(self.radar_dir, CALIB, sid),
+            ]
+        key: list[object] = [self.radar_folder]
+        for path in files:
+            try:
+                stat = path.stat()
+            except OSError as exc:
+                raise RootError(
+                    f"{path}: cannot read the sensor file of sample {sid}: {exc}"
+                ) from exc
+            key.append((stat.st_dev, stat.st_ino))
+        return tuple(key)
 
     def image_path(self, sample_id: str | int) -> Path | None:
         """The camera image of a sample (``training/image_2/<id>.jpg``, or ``.png``, in the LiDAR
@@ -237,6 +293,13 @@ class Talk2RadarRoot:
                 if path.exists() or path.is_symlink():
                     return path  # something is there: read_image says what is wrong with it
         return None
+
+    def load_referents(self, sample_id: str | int) -> tuple[np.ndarray, tuple[str, ...]]:
+        """The metric-class boxes ``(K, 7)`` (LiDAR frame) and class names of a sample's
+        ``label_2``, without reading its point clouds."""
+        sid = format_id(sample_id)
+        calib = read_calib(self._file(self.lidar_dir, CALIB, sid))
+        return labels_to_boxes(read_label_file(self._file(self.lidar_dir, LABEL, sid)), calib)
 
     def load(self, sample_id: str | int) -> Sample:
         """Load one sample; every error names the offending file."""

@@ -4,7 +4,8 @@ annotator names.
 Every path that takes such text applies :func:`clean_text` on the server: the Query tab before a
 prompt runs (:mod:`app.session`), :func:`annotate.validation.validate` for a draft's prompt (the
 Annotate tab's live checks and every save) and :class:`annotate.AnnotationStore` for what it
-writes (the prompt file, the sidecar, the manifest's prompt and annotator). The rule:
+writes (the prompt file, the sidecar, the manifest's prompt and annotator), and
+:func:`annotate.review.record_review` for a reviewer's name and note. The rule:
 
 1. **Unicode NFKC.** Compatibility forms become their plain equivalents (full-width ``１５`` is
    ``15``, a no-break space is a space, ``ﬁ`` is ``fi``), so the file, the text encoder and the
@@ -22,7 +23,7 @@ writes (the prompt file, the sidecar, the manifest's prompt and annotator). The 
 3. **Spaces collapse**: runs of spaces and tabs become one space, and the ends are stripped
    (:func:`collapse_spaces`).
 4. **Length caps** (after 1-3): :data:`PROMPT` 500 characters (a Talk2Radar prompt has about 30
-   words, 200 characters at most), :data:`ANNOTATOR` 64. Longer text is refused, not cut, so
+   words, 200 characters at most), :data:`ANNOTATOR` 64, :data:`NOTE` 500. Longer text is refused, not cut, so
    nothing is saved that the person did not see.
 
 Decision: refuse rather than silently drop forbidden characters. A NUL or a line separator in a
@@ -74,6 +75,9 @@ PROMPT = TextRule("prompt", 500)
 
 ANNOTATOR = TextRule("annotator name", 64)
 """The annotator name recorded with a pair."""
+
+NOTE = TextRule("review note", 500)
+"""A reviewer's note on a pair (:mod:`annotate.review`)."""
 
 
 class TextPolicyError(ValueError):
@@ -161,6 +165,7 @@ def _too_long(rule: TextRule, length: int) -> TextPolicyError:
 
 __all__ = [
     "ANNOTATOR",
+    "NOTE",
     "PROMPT",
     "TextPolicyError",
     "TextRule",

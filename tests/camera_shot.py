@@ -5,7 +5,7 @@ documentation screenshot::
 
     python -m tests.camera_shot --out docs/images/camera.png
 
-(the default synthetic data written in the View-of-Delft layout by :mod:`bench.vod_layout`, the
+(the default synthetic data written in the View-of-Delft layout by :mod:`scenes.export_real`, the
 bundled checkpoint, or an untrained model where there is none).
 """
 
@@ -127,7 +127,7 @@ def main() -> int:
     """Write ``docs/images/camera.png`` from the default data in the View-of-Delft layout."""
     import launch
     from app import AppConfig, Talk2PCApp
-    from bench.vod_layout import convert
+    from scenes.export_real import export
 
     parser = argparse.ArgumentParser(description="Screenshot the camera panel for the docs.")
     parser.add_argument("--out", type=Path, default=REPO / "docs" / "images" / "camera.png")
@@ -139,7 +139,7 @@ def main() -> int:
         raise SystemExit("no Chromium found")
     with tempfile.TemporaryDirectory() as tmp:
         vod = Path(tmp) / "vod"
-        convert(launch.ensure_default_data(), vod)
+        export(launch.ensure_default_data(), None, vod)
         root = launch.open_root(vod, None)
         split = launch.choose_split(root, None)
         model, note = launch.load_model(None, "cpu", threads=1)

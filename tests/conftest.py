@@ -315,3 +315,42 @@ def _write_vod_root() -> Callable[..., Path]:
     from tests.vod_fixtures import write_vod_root
 
     return write_vod_root
+
+
+# ---------------------------------------------------------------------------- real-format roots
+
+REAL_FORMAT_SOURCE = {"frames": 8, "seed": 11, "prompts_per_world": 2, "camera_scale": 0.25}
+"""The synthetic root :func:`real_format_roots` exports: 4 worlds of 2 prompts each (train 2,
+val 1, test 1), the camera at a quarter of VoD's size."""
+
+
+@pytest.fixture(scope="session")
+def real_format_source(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The tiny synthetic root (with its sidecars) that :func:`real_format_roots` exports
+    (:data:`REAL_FORMAT_SOURCE`). Read only."""
+    from scenes.camera import CameraConfig
+    from scenes.synth import SynthSettings, generate_root
+
+    spec = REAL_FORMAT_SOURCE
+    settings = SynthSettings(
+        seed=spec["seed"],
+        prompts_per_world=spec["prompts_per_world"],
+        camera=CameraConfig(image_scale=spec["camera_scale"]),
+    )
+    out = tmp_path_factory.mktemp("real-format") / "synth"
+    generate_root(out, spec["frames"], settings, split_fractions=(0.5, 0.25, 0.25))
+    return out
+
+
+@pytest.fixture(scope="session")
+def real_format_roots(real_format_source: Path) -> tuple[Path, Path]:
+    """``(t2r_root, vod_root)``: :func:`real_format_source` as the real releases come
+    (``python -m scenes.export_real --radar both``): a Talk2Radar tree with one prompt per frame,
+    label_2 = its referents and no sidecar, and a View-of-Delft tree of the same 4 frame ids whose
+    label_2 lists every annotated object under VoD's class names; both with the ``radar`` and
+    ``radar_5frames`` trees. Read only (copy a root before changing it)."""
+    from scenes.export_real import export
+
+    base = real_format_source.parent
+    export(real_format_source, base / "t2r", base / "vod", radar="both")
+    return base / "t2r", base / "vod"

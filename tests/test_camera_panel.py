@@ -111,7 +111,8 @@ def vod_app(tmp_path_factory, write_vod_root, torch_threads, serve_app):
     from model import build_model
 
     root = write_vod_root(tmp_path_factory.mktemp("camera") / "vod", frames=3)
-    (root / "lidar" / "training" / "image_2" / "00001.jpg").unlink()  # no image
+    for image in root.glob("*/training/image_2/00001.jpg"):  # no image (in any tree)
+        image.unlink()
     (root / "lidar" / "training" / "image_2" / "00002.jpg").write_bytes(b"\xff\xd8 broken")
     with torch_threads(1):
         model = build_model("small", text_encoder="gru", head__score_threshold=0.0).eval()

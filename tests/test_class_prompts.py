@@ -1,6 +1,7 @@
-"""Class prompts on a fully labelled root (model.class_prompts) and the VoD-layout converter
-(bench.vod_layout): exact counting with a fake model on a hand-written VoD-layout frame, the
-command line's errors, and one smoke run of the bundled checkpoint on converted synthetic frames."""
+"""Class prompts on a fully labelled root (model.class_prompts): exact counting with a fake model
+on a hand-written VoD-layout frame (written by scenes.vod_writer), the command line's errors, and
+one smoke run of the bundled checkpoint on synthetic frames exported in the View-of-Delft layout
+(``real_format_roots``: python -m scenes.export_real)."""
 
 from __future__ import annotations
 
@@ -12,18 +13,18 @@ import numpy as np
 import pytest
 
 import model.checkpoint
-from bench.vod_layout import convert, write_image_sets, write_vod_frame
 from model.class_prompt_counts import (
     CLASS_PROMPTS,
     ClassSummary,
     assign_matches,
     count_prompt,
-    in_camera_view,
 )
 from model.class_prompts import ScoringConfig, main, score_root
 from scenes.calib import vod_lidar_calibration, vod_radar_calibration
-from scenes.kitti import read_label_file
+from scenes.kitti import boxes_to_labels
+from scenes.projection import in_camera_view
 from scenes.root import Talk2RadarRoot
+from scenes.vod_writer import VodWriter
 
 RADAR = "radar"
 
@@ -106,21 +107,13 @@ def vod_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
     lidar = rng.uniform([0, -10, -2, 0], [40, 10, 1, 255], size=(500, 4)).astype(np.float32)
     radar = rng.uniform(-1, 1, size=(40, 7)).astype(np.float32) + np.array([20, 0, 0, 0, 0, 0, 0])
     names = list(OBJECTS)
+    writer = VodWriter(out, (RADAR,))
+    calib = vod_lidar_calibration()
     for sid in ("00003", "00010"):
-        labels = write_vod_frame(
-            out,
-            sid,
-            lidar,
-            radar,
-            vod_lidar_calibration(),
-            vod_radar_calibration(),
-            np.array([OBJECTS[n][1] for n in names]),
-            [OBJECTS[n][0] for n in names],
-            radar_folder=RADAR,
-            camera_view_only=False,
-        )
-        assert len(labels) == len(names)
-    write_image_sets(out, RADAR, {"val": ["00003", "00010"], "test": []})
+        writer.write_sensors(sid, lidar, {RADAR: radar}, calib, vod_radar_calibration())
+        boxes = np.array([OBJECTS[n][1] for n in names])
+        writer.write_labels(sid, boxes_to_labels(boxes, [OBJECTS[n][0] for n in names], calib))
+    writer.write_image_sets({"val": ["00003", "00010"], "test": []})
     return out
 
 
@@ -308,48 +301,10 @@ def test_cli_says_a_talk2radar_root_has_referent_labels_only(
     assert "Talk2Radar root" in capsys.readouterr().err
 
 
-@pytest.fixture(scope="module")
-def converted(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    """A 2-world synthetic root (no camera) and its VoD-layout version."""
-    from scenes.synth import SynthSettings, generate_root
-
-    src = tmp_path_factory.mktemp("synth")
-    generate_root(src, 4, SynthSettings(seed=5, camera=None), split_fractions=(0.5, 0.0, 0.5))
-    out = tmp_path_factory.mktemp("vodsynth") / "root"
-    convert(src, out)
-    return src, out
-
-
-def test_converter_writes_every_object_in_view_one_frame_per_world(
-    converted: tuple[Path, Path],
+def test_bundled_checkpoint_smoke_on_exported_frames(
+    real_format_roots: tuple[Path, Path], tmp_path: Path, capsys
 ) -> None:
-    src, out = converted
-    source = Talk2RadarRoot(src)
-    root = Talk2RadarRoot(out)
-    assert not (out / "lidar" / "training" / "prompt").exists() and not (out / "meta").exists()
-    ids = sorted(root.ids("train") + root.ids("test"))
-    worlds = {source.load_meta(s).world_id for s in source.ids("train") + source.ids("test")}
-    assert len(ids) == len(worlds) == 2
-    for sid in ids:
-        meta = source.load_meta(sid)
-        sample = root.load(sid)
-        assert sample.prompt is None and sample.meta is None
-        assert np.array_equal(sample.lidar, source.load(sid).lidar)
-        unsensed = set(meta.extra["unsensed_actor_ids"])
-        actors = [a for a in meta.actors if a.actor_id not in unsensed]
-        in_view = in_camera_view(np.array([a.box for a in actors]), sample.calib)
-        assert len(sample.boxes) == int(in_view.sum()) > len(source.load(sid).boxes)
-        assert np.allclose(sample.boxes, np.array([a.box for a in actors])[in_view], atol=1e-4)
-        names = {lab.name for lab in read_label_file(out / "lidar/training/label_2" / f"{sid}.txt")}
-        assert names & {"bicycle", "bicycle_rack", "moped_scooter"}
-    with pytest.raises(ValueError, match="not an empty folder"):
-        convert(src, out)
-
-
-def test_bundled_checkpoint_smoke_on_converted_frames(
-    converted: tuple[Path, Path], tmp_path: Path, capsys
-) -> None:
-    _, root = converted
+    _, root = real_format_roots
     out = tmp_path / "smoke.json"
     assert main(["--data", str(root), "--limit", "2", "--json", str(out), "--quiet"]) == 0
     data = json.loads(out.read_text())

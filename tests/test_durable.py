@@ -137,6 +137,17 @@ def test_link_or_copy_links_and_falls_back_to_a_copy(
     assert _names(copied.parent) == ["00001.bin"]
 
 
+def test_link_or_copy_onto_the_same_file_does_nothing(tmp_path: Path) -> None:
+    src = tmp_path / "lidar.bin"
+    src.write_bytes(b"points")
+    other = tmp_path / "00001.bin"
+    link_or_copy(src, other)
+    link_or_copy(src, other)  # already a link to it: a rename would do nothing, leaving a temporary
+    link_or_copy(src, src)
+    assert _names(tmp_path) == ["00001.bin", "lidar.bin"]
+    assert other.stat().st_ino == src.stat().st_ino and src.read_bytes() == b"points"
+
+
 def test_replace_files_changes_nothing_when_a_temporary_cannot_be_written(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:

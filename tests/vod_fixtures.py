@@ -1,12 +1,13 @@
 """Small View-of-Delft-layout roots the tests write themselves (the ``write_vod_root`` fixture of
 ``conftest.py``). Not a test module.
 
-The layout is the release's, as a researcher downloads it: ``lidar/`` and one radar tree
-(``radar`` by default: a single scan) with ``training/{velodyne,calib,label_2}``, the camera image
-``lidar/training/image_2/<id>.jpg`` (a 1936 x 1216 JPEG, VoD's size and intrinsics), the radar
-points stored in the radar's own frame (2.51 m ahead of and 1.15 m below the LiDAR), label_2
-listing *every* object of the camera's view (the metric classes and VoD's others), ImageSets in
-the LiDAR tree only, and no ``prompt/`` or ``meta/`` folder.
+The layout is the release's, as a researcher downloads it (written by
+:class:`scenes.vod_writer.VodWriter`): ``lidar/`` and one radar tree (``radar`` by default: a
+single scan) with ``ImageSets/`` and ``training/{velodyne,calib,label_2,image_2}``, the camera
+image a 1936 x 1216 JPEG (VoD's size and intrinsics), the radar points stored in the radar's own
+frame (2.51 m ahead of and 1.15 m below the LiDAR), label_2 listing *every* object given (the
+metric classes and VoD's others, one of them beyond the annotated range), and no ``prompt/`` or
+``meta/`` folder.
 """
 
 from __future__ import annotations
@@ -17,18 +18,10 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
-from scenes.calib import (
-    IMAGE_SIZE,
-    sensor_to_lidar,
-    transform_points,
-    vod_lidar_calibration,
-    vod_radar_calibration,
-)
-from scenes.imagefile import write_jpeg
-from scenes.kitti import atomic_write_text, boxes_to_labels, write_label_file
-from scenes.pointcloud import write_points
+from scenes.calib import IMAGE_SIZE, vod_lidar_calibration, vod_radar_calibration
+from scenes.kitti import boxes_to_labels
 from scenes.projection import project_box_edges
-from scenes.root import format_id
+from scenes.vod_writer import VodWriter
 
 GROUND_Z = -1.7
 """The flat ground of every fixture frame (LiDAR frame)."""
@@ -121,27 +114,23 @@ def write_vod_root(
     splits: Mapping[str, Sequence[int]] | None = None,
 ) -> Path:
     """Write a VoD-layout root (see the module docstring) with ``frames`` frames, ids
-    ``00000..``; ``splits`` maps ImageSets names to frame indices (default ``val``: all of
-    them, ``train``: the first). Returns ``path``."""
+    ``00000..``, through the one writer of the layout (:class:`scenes.vod_writer.VodWriter`);
+    ``splits`` maps ImageSets names to frame indices (default ``val``: all of them, ``train``:
+    the first; ``{}``: no ImageSets folder, as the devkit's example set). Returns ``path``."""
     rng = np.random.default_rng(seed)
     lidar_calib, radar_calib = vod_lidar_calibration(), vod_radar_calibration()
-    to_radar = np.linalg.inv(sensor_to_lidar(lidar_calib, radar_calib))
-    lidar_tree, radar_tree = path / "lidar" / "training", path / radar_folder / "training"
+    writer = VodWriter(path, (radar_folder,))
     for index in range(frames):
-        sid = format_id(index)
         boxes, classes = vod_objects(index)
-        write_points(lidar_tree / "velodyne" / f"{sid}.bin", _points(rng, boxes))
-        radar = transform_points(_radar(rng, boxes).astype(np.float64), to_radar)
-        write_points(radar_tree / "velodyne" / f"{sid}.bin", radar)
-        atomic_write_text(lidar_tree / "calib" / f"{sid}.txt", lidar_calib.to_text())
-        atomic_write_text(radar_tree / "calib" / f"{sid}.txt", radar_calib.to_text())
-        labels = boxes_to_labels(boxes, classes, lidar_calib)
-        for tree in (lidar_tree, radar_tree):
-            write_label_file(tree / "label_2" / f"{sid}.txt", labels, decimals=6)
-        if images:
-            write_jpeg(lidar_tree / "image_2" / f"{sid}.jpg", _image(boxes, classes))
+        writer.write_sensors(
+            index,
+            _points(rng, boxes),
+            {radar_folder: _radar(rng, boxes)},
+            lidar_calib,
+            radar_calib,
+            image=_image(boxes, classes) if images else None,
+        )
+        writer.write_labels(index, boxes_to_labels(boxes, classes, lidar_calib))
     chosen = splits if splits is not None else {"val": range(frames), "train": [0]}
-    for split, indices in chosen.items():
-        text = "".join(format_id(i) + "\n" for i in indices)
-        atomic_write_text(path / "lidar" / "ImageSets" / f"{split}.txt", text)
+    writer.write_image_sets(chosen)
     return path

@@ -58,9 +58,11 @@ class PairActions:
             reasons = report.messages() or [str(p.hub.error)]
             p.notify("Not saved yet", "\n".join(reasons))
 
-    def save(self) -> None:
+    def save(self) -> SaveResult | None:
         """Save the draft (a new pair, or a new version of the reopened pair); the panel's
-        status line then names the pair written, and the box fields are cleared."""
+        status line then names the pair written, and the box fields are cleared. Returns what
+        the store saved (None: nothing, a notification says why; also for a repeated request,
+        which the first one's answer covers)."""
         p = self.panel
         store = p.store
         with p.session.lock:
@@ -99,6 +101,7 @@ class PairActions:
             "client %s: saved pair %s v%d", p.session.client_id, result.sample_id, result.version
         )
         with p.session.lock:
+            p.last_pair = (draft, frame)
             p.last_saved = f"pair {result.sample_id} ({_where(result)}) in " + ", ".join(
                 result.record.splits
             )
@@ -108,6 +111,7 @@ class PairActions:
                 p.bind_to_screen()
                 self._last_save = (p.editor.version, result)
         self._after_store_change()
+        return result
 
     def _tell_saved(self, result: SaveResult, again: bool) -> None:
         p = self.panel

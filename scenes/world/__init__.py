@@ -59,10 +59,12 @@ from scenes.world.actor_meshes import (
     CAR_SIZE,
     CYCLIST_SIZE,
     PEDESTRIAN_SIZE,
+    RIDER_IN_CYCLIST,
     bicycle_parts,
     car_mesh,
     cyclist_mesh,
     pedestrian_mesh,
+    rider_boxes,
 )
 from scenes.world.clutter import BICYCLE_SIZE, MOPED_SIZE, RACK_SLOT, Clutter, moped_mesh
 from scenes.world.config import WorldConfig
@@ -98,6 +100,7 @@ __all__ = [
     "RADAR_PROB",
     "RADAR_RCS",
     "REFLECTIVITY",
+    "RIDER_IN_CYCLIST",
     "U_RANGE",
     "Band",
     "Clutter",
@@ -122,5 +125,6 @@ __all__ = [
     "make_road",
     "moped_mesh",
     "pedestrian_mesh",
+    "rider_boxes",
     "road_mesh",
 ]

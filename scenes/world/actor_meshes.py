@@ -21,6 +21,14 @@ PEDESTRIAN_SIZE = ((0.5, 0.9), (0.5, 0.9), (1.5, 1.9))
 CYCLIST_SIZE = ((1.6, 1.9), (0.5, 0.8), (1.5, 1.9))
 """``(l, w, h)`` ranges in metres per class."""
 
+RIDER_IN_CYCLIST = (0.48, 1.0, 0.1, 1.0)
+"""Where the rider of :func:`cyclist_mesh` is in the cyclist's box: its length and width as shares
+of the box's (centred), and its bottom and top as shares of the box's height above the box's bottom
+(measured on the rider's clothing and skin over 135 random cyclists: length 0.47..0.48, full width,
+bottom 0.07..0.16, top 1.0; the pedals hang lowest). View-of-Delft labels this person separately
+as a ``rider`` inside the ``Cyclist`` box (about 0.45 of its length and 0.9 of its height in the
+devkit's example frames)."""
+
 DARK_CLOTHING = 0.5
 """Share of pedestrians and riders in dark clothes (:attr:`Mat.CLOTHING_DARK`, about 12 %
 reflective at the LiDAR's 905 nm, against 40 %): dark coats and jeans are common in Delft, and
@@ -163,3 +171,16 @@ def cyclist_mesh(size: np.ndarray, rng: np.random.Generator) -> TaggedMesh:
             cylinder_part([shoulders[0], side * 0.22, 1.4], [0.36, side * 0.27, 1.0], 0.06, cloth)
         )
     return fit_to_box(TaggedMesh.concatenate(parts), size)
+
+
+def rider_boxes(cyclists: np.ndarray) -> np.ndarray:
+    """The riders' boxes ``(K, 7)`` of cyclist boxes ``(K, 7)`` (LiDAR frame, z at the geometric
+    centre): :data:`RIDER_IN_CYCLIST` of each box, same centre in x and y, same yaw."""
+    b = np.asarray(cyclists, dtype=np.float64).reshape(-1, 7).copy()
+    length, width, bottom, top = RIDER_IN_CYCLIST
+    height = b[:, 5].copy()
+    b[:, 2] += height * ((bottom + top) / 2.0 - 0.5)
+    b[:, 3] *= length
+    b[:, 4] *= width
+    b[:, 5] = height * (top - bottom)
+    return b

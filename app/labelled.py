@@ -1,0 +1,56 @@
+"""The labelled boxes of the served frames, where the root has them ("candidates: labelled boxes").
+
+A View-of-Delft release opened directly has every object of a frame in its own ``label_2``; a
+Talk2Radar root (whose ``label_2`` lists only a prompt's referents) has them when the app is given
+the release it was made from (``launch.py --scene-labels VOD_ROOT``). With them, the referent stage
+can choose among the boxes already drawn instead of the detector's proposals: grounding apart from
+detection, and the fastest way to make a pair on a labelled frame.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from model import LabelledBoxes
+from scenes.actors import CLASSES
+from scenes.root import Sample, Talk2RadarRoot
+from scenes.scene_labels import SceneLabels
+
+
+class LabelledFrames:
+    """Where the labelled boxes of a frame come from.
+
+    Args:
+        root: The served root.
+        scene_labels: A View-of-Delft root with the frames' full labels, or None: then a root
+            without prompts (a release opened directly) is its own, and a Talk2Radar root has none.
+    """
+
+    def __init__(self, root: Talk2RadarRoot, scene_labels: str | Path | None = None) -> None:
+        self.own = scene_labels is None and not (root.lidar_dir / "training" / "prompt").is_dir()
+        self.labels = SceneLabels(scene_labels) if scene_labels is not None else None
+
+    @property
+    def available(self) -> bool:
+        """Whether frames have labelled boxes to choose among."""
+        return self.own or self.labels is not None
+
+    def boxes(self, sample: Sample) -> LabelledBoxes | None:
+        """The metric-class labelled boxes of ``sample``'s frame (None: none known).
+
+        Raises:
+            scenes.layout.RootError, scenes.kitti.LabelError: a missing or malformed label file.
+        """
+        if self.labels is not None:
+            if not self.labels.has(sample.sample_id):
+                return None
+            return LabelledBoxes(*self.labels.load(sample.sample_id).metric())
+        if self.own:
+            labels = np.array([CLASSES.index(c) for c in sample.classes], dtype=np.int64)
+            return LabelledBoxes(sample.boxes, labels)
+        return None
+
+
+__all__ = ["LabelledFrames"]
