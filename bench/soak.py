@@ -193,6 +193,26 @@ def growth(rss: dict[int, float], warm_up: int) -> float:
     return max(v for c, v in rss.items() if c >= warm_up) - base
 
 
+def _commit(launch: Path) -> str:
+    """The git commit of the checkout ``launch`` belongs to (``"unknown"`` outside git), and
+    ``+changes`` when its working tree differs from it."""
+    where = ["git", "-C", str(launch.parent)]
+    try:
+        head = subprocess.run(
+            [*where, "rev-parse", "--short", "HEAD"], capture_output=True, text=True
+        )
+        dirty = subprocess.run(
+            [*where, "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+        )
+    except OSError:
+        return "unknown"
+    if head.returncode != 0:
+        return "unknown"
+    return head.stdout.strip() + (" +changes" if dirty.stdout.strip() else "")
+
+
 def run(args: argparse.Namespace, command: str) -> BenchResult:
     start = time.perf_counter()
     machine = machine_info(command)
@@ -225,7 +245,7 @@ def run(args: argparse.Namespace, command: str) -> BenchResult:
         columns=("visits", *(f"{n}, {k}" for n in names for k in ("busy", "at rest"))),
         rows=tuple(rows),
         align=("l", *("r" for _ in names for _ in kinds)),
-        notes=tuple(f"{n}: {runs[n]}" for n in names),
+        notes=tuple(f"{n}: {runs[n]} (commit {_commit(runs[n])})" for n in names),
     )
     target = Target(
         name=f"Server RSS growth at rest after {args.warm_up} visits, over {args.cycles}",
