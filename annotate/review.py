@@ -19,11 +19,10 @@ import uuid
 from annotate.errors import ConflictError, StoreError
 from annotate.manifest import Action, ManifestRecord, conflict_message
 from annotate.store import AnnotationStore
+from annotate.validation import clean_annotator, clean_field
 from scenes.layout import format_id
 from scenes.reviews import VERDICTS, PairState, pair_states
-
-MAX_NOTE = 500
-"""Characters of a review note kept (the rest is cut)."""
+from scenes.text_policy import NOTE
 
 
 def record_review(
@@ -39,14 +38,15 @@ def record_review(
 
     Raises:
         ValueError: ``verdict`` is not one of :data:`scenes.reviews.VERDICTS`.
+        ValidationError: the text policy refuses the reviewer's name or the note.
         StoreError: the pair is not listed in any split (deleted, or never saved).
         ConflictError: ``version`` is not the pair's current version.
     """
     if verdict not in VERDICTS:
         raise ValueError(f"verdict must be one of {', '.join(VERDICTS)}, got {verdict!r}")
     sid = format_id(sample_id)
-    reviewer = " ".join(str(reviewer).split()) or "anonymous"
-    note = " ".join(str(note).split())[:MAX_NOTE]
+    reviewer = clean_annotator(reviewer)  # the one text policy (scenes.text_policy)
+    note = clean_field(note, NOTE, "note")
     with store.transactions.locked():
         splits = store.splits_of(sid)
         if not splits:

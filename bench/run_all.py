@@ -37,7 +37,7 @@ from bench.common import (
     read_result,
 )
 
-BENCHMARKS = ("latency", "fusion_cost", "graph_cost", "model_size", "train_throughput")
+BENCHMARKS = ("latency", "fusion_cost", "graph_cost", "model_size", "train_throughput", "soak")
 """Benchmarks of this package, in the order of the document (``bench/<name>.py``)."""
 
 SYNTH = "synth"
