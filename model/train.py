@@ -475,27 +475,10 @@ def main(argv: list[str] | None = None) -> int:
             f"done: {state.step} steps, {state.epoch} epochs, best val 3D mAP {state.best_map:.2f}"
         )
         if cfg.grounding == "referent" and cfg.calibrate and state.epoch >= cfg.epochs:
-            calibrate_run(cfg)
+            from model.calibrate import calibrate_run
+
+            calibrate_run(Path(cfg.out) / LAST_FILE, cfg.roots()[0].path, cfg.val_split)
     return 0
-
-
-def calibrate_run(cfg: TrainConfig) -> None:
-    """Choose the finished run's operating threshold on the first root's validation split
-    (:func:`model.calibrate.calibrate_file`) and store it in ``last.pt``; a split that cannot
-    measure one leaves the checkpoint at the uncalibrated 0.5, with a notice."""
-    from model.calibrate import CalibrationError, calibrate_file
-    from scenes.layout import RootError
-
-    path = Path(cfg.out) / LAST_FILE
-    try:
-        cal = calibrate_file(path, cfg.roots()[0].path, cfg.val_split)
-    except (CalibrationError, RootError) as exc:
-        print(f"not calibrated: {exc}", file=sys.stderr)
-        return
-    print(
-        f"operating threshold {cal.threshold:.3f} (set F1 {cal.set_f1:.1f} on {cal.prompts} "
-        f"{cfg.val_split} prompts) stored in {path}"
-    )
 
 
 if __name__ == "__main__":
