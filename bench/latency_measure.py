@@ -368,7 +368,13 @@ def measure_detect_parts(
             head = model.head(neck)
             out["head"].append(_lap(device, t0))
             t0 = time.perf_counter()
-            dets = decode(head, model.head_grid, cfg.head, cfg.referent.candidate_threshold)[0]
+            dets = decode(
+                head,
+                model.head_grid,
+                cfg.head,
+                cfg.referent.candidate_threshold,
+                limit=cfg.referent.max_candidates,
+            )[0]
             torch.sigmoid(head.heatmap[0]).float().cpu().numpy()
             out["decode"].append(_lap(device, t0))
             t0 = time.perf_counter()

@@ -79,29 +79,38 @@ def voxelize(
         raise ValueError("voxelize needs at least one point cloud (batch size 0)")
     num_features = clouds[0].shape[1]
     device = clouds[0].device
-    points = torch.cat([c.reshape(-1, num_features) for c in clouds], dim=0)
-    batch = torch.repeat_interleave(
-        torch.arange(len(clouds), device=device),
-        torch.tensor([c.shape[0] for c in clouds], device=device),
-    )
+    batch = None
+    if len(clouds) == 1:  # the app's case: no copy of the cloud, no batch index
+        points = clouds[0].reshape(-1, num_features)
+    else:
+        points = torch.cat([c.reshape(-1, num_features) for c in clouds], dim=0)
+        batch = torch.repeat_interleave(
+            torch.arange(len(clouds), device=device),
+            torch.tensor([c.shape[0] for c in clouds], device=device),
+        )
     ny, nx = grid.shape
-    col = torch.floor((points[:, 0] - grid.x_min) / grid.cell).long()
-    row = torch.floor((points[:, 1] - grid.y_min) / grid.cell).long()
+    x, y, z = points[:, 0], points[:, 1], points[:, 2]
     inside = (
-        (points[:, 0] >= grid.x_min)
-        & (points[:, 0] < grid.x_max)
-        & (points[:, 1] >= grid.y_min)
-        & (points[:, 1] < grid.y_max)
-        & (points[:, 2] >= z_min)
-        & (points[:, 2] < z_max)
-        & (col >= 0)
-        & (col < nx)
-        & (row >= 0)
-        & (row < ny)
+        (x >= grid.x_min)
+        & (x < grid.x_max)
+        & (y >= grid.y_min)
+        & (y < grid.y_max)
+        & (z >= z_min)
+        & (z < z_max)
     )
-    # One index of the points in range (cheaper than masking four tensors), gathered once at the end.
+    # One index of the points in range (cheaper than masking four tensors), gathered once at the
+    # end; cells are computed for those points only, and checked (rounding can put a point just
+    # below x_max into column nx).
     selected = torch.nonzero(inside).squeeze(1)
-    keys_of_point = ((batch * ny + row) * nx + col).index_select(0, selected)
+    col = torch.floor((x.index_select(0, selected) - grid.x_min) / grid.cell).long()
+    row = torch.floor((y.index_select(0, selected) - grid.y_min) / grid.cell).long()
+    in_grid = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
+    if not bool(in_grid.all()):
+        keep = torch.nonzero(in_grid).squeeze(1)
+        selected, col, row = selected[keep], col[keep], row[keep]
+    keys_of_point = row * nx + col
+    if batch is not None:
+        keys_of_point = keys_of_point + batch.index_select(0, selected) * (ny * nx)
     # One stable sort groups the points by pillar and keeps their input order within a pillar.
     order = _stable_order(keys_of_point, len(clouds) * ny * nx)
     keys, pillar_sorted, counts = torch.unique_consecutive(
@@ -194,6 +203,32 @@ class PillarEncoder(nn.Module):
             [pts * self.scale, xyz - mean[pillars.pillar_of_point], xyz - centre], dim=1
         )
 
+    def _pooled(self, pillars: Pillars) -> Tensor:
+        """``(P, C)``: per pillar the max over its points of ``ReLU(BN(Linear(features)))``.
+
+        With running statistics (eval mode) BatchNorm is ``a * h + b`` per channel, and it and
+        ReLU are monotone: the max of ``ReLU(BN(h))`` over a pillar is ``ReLU(BN(max h))`` where
+        ``a >= 0`` and ``ReLU(BN(min h))`` where ``a < 0`` (rounding is monotone too, so the
+        values are the same bit for bit). So the pillars are pooled first, from the linear map
+        with the ``a < 0`` channels' weights negated (``max(-h) = -min(h)`` exactly), and
+        normalised after: the per-point BatchNorm and ReLU are not computed. In training the
+        statistics are the points', and every point is normalised.
+        """
+        channels = self.out_channels
+        index = pillars.pillar_of_point.unsqueeze(1).expand(-1, channels)
+        x = self.point_features(pillars)
+        if self.norm.training:
+            h = torch.relu(_batch_norm_points(self.norm, self.linear(x)))
+            sign = None
+        else:
+            sign = torch.where(self.norm.weight >= 0, 1.0, -1.0).to(x.dtype)
+            h = F.linear(x, self.linear.weight * sign[:, None])
+        pooled = torch.zeros(pillars.keys.numel(), channels, device=h.device, dtype=h.dtype)
+        pooled = pooled.scatter_reduce(0, index, h, reduce="amax", include_self=False)
+        if sign is None:
+            return pooled
+        return torch.relu(self.norm(pooled * sign))
+
     def forward(self, clouds: Sequence[Tensor]) -> Tensor:
         """Encode a batch of clouds.
 
@@ -218,13 +253,9 @@ class PillarEncoder(nn.Module):
         if pillars.keys.numel() == 0:
             canvas = torch.zeros(channels, pillars.batch_size * ny * nx, device=device)
         else:
-            h = self.linear(self.point_features(pillars))
-            h = torch.relu(_batch_norm_points(self.norm, h))
-            index = pillars.pillar_of_point.unsqueeze(1).expand(-1, channels)
-            pooled = torch.zeros(pillars.keys.numel(), channels, device=device, dtype=h.dtype)
-            pooled = pooled.scatter_reduce(0, index, h, reduce="amax", include_self=False)
+            pooled = self._pooled(pillars)
             canvas = torch.zeros(
-                channels, pillars.batch_size * ny * nx, device=device, dtype=h.dtype
+                channels, pillars.batch_size * ny * nx, device=device, dtype=pooled.dtype
             )
             canvas.index_copy_(1, pillars.keys, pooled.t())
         return canvas.view(channels, pillars.batch_size, ny, nx).permute(1, 0, 2, 3).contiguous()
