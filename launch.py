@@ -302,6 +302,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         model_note=note,
         pairs_root=args.pairs,
         scene_labels=args.scene_labels,
+        freeze_startup=True,  # this process only serves: cheap collections after disconnects
     )
     try:
         app = Talk2PCApp(root, model, config)

@@ -41,6 +41,9 @@ class History:
         self._undo: list[_Entry] = []
         self._redo: list[_Entry] = []
         self._present = _Entry(initial if initial is not None else Draft(), "open")
+        self.version = 0
+        """Counts the changes of the present snapshot (edit, undo, redo, reset): two moments
+        with the same version hold the same draft (a save request's key)."""
 
     def __len__(self) -> int:
         """Number of undo steps available."""
@@ -90,6 +93,7 @@ class History:
             del self._undo[: max(0, len(self._undo) - self.max_steps)]
         self._redo.clear()
         self._present = entry
+        self.version += 1
         return draft
 
     def undo(self) -> Draft:
@@ -97,6 +101,7 @@ class History:
         if self._undo:
             self._redo.append(self._present)
             self._present = replace(self._undo.pop(), merge_key=None)
+            self.version += 1
         return self.present
 
     def redo(self) -> Draft:
@@ -104,6 +109,7 @@ class History:
         if self._redo:
             self._undo.append(self._present)
             self._present = replace(self._redo.pop(), merge_key=None)
+            self.version += 1
         return self.present
 
     def reset(self, draft: Draft) -> Draft:
@@ -111,6 +117,7 @@ class History:
         self._undo.clear()
         self._redo.clear()
         self._present = _Entry(draft, "open")
+        self.version += 1
         return draft
 
 
@@ -140,11 +147,18 @@ class DraftEditor:
     def __init__(self, draft: Draft | None = None, max_steps: int = 200) -> None:
         self.history = History(draft if draft is not None else Draft(), max_steps=max_steps)
         self._lock = threading.RLock()
+        self.reset_listeners: list[Callable[[Draft], None]] = []
+        """Called with the new draft after every :meth:`reset` (a save, an opened pair)."""
 
     @property
     def draft(self) -> Draft:
         """The current snapshot."""
         return self.history.present
+
+    @property
+    def version(self) -> int:
+        """The draft's version (:attr:`History.version`)."""
+        return self.history.version
 
     def _apply(self, draft: Draft, label: str, merge_key: Hashable | None = None) -> Draft:
         return self.history.apply(draft, label, merge_key)
@@ -224,6 +238,12 @@ class DraftEditor:
         return self._apply(self.draft.delete_box(box_id), f"delete {self._name(box_id)}")
 
     @_serialised
+    def apply(self, draft: Draft, label: str, merge_key: Hashable | None = None) -> Draft:
+        """Record a snapshot made by several :class:`Draft` operations as one edit (e.g. the
+        referents chosen for a sentence: some boxes deleted, others added)."""
+        return self._apply(draft, label, merge_key)
+
+    @_serialised
     def clear(self) -> Draft:
         return self._apply(self.draft.clear(), "clear")
 
@@ -238,4 +258,7 @@ class DraftEditor:
     @_serialised
     def reset(self, draft: Draft | None = None) -> Draft:
         """Start over from ``draft`` (default: an empty draft) with an empty history."""
-        return self.history.reset(draft if draft is not None else Draft())
+        out = self.history.reset(draft if draft is not None else Draft())
+        for listener in list(self.reset_listeners):
+            listener(out)
+        return out

@@ -31,6 +31,8 @@ class Action(enum.Enum):
     CREATE = "create"
     EDIT = "edit"
     DELETE = "delete"
+    REVIEW = "review"
+    """A reviewer's verdict on a version (:mod:`annotate.review`); the pair is unchanged."""
 
 
 @dataclass(frozen=True)
@@ -53,6 +55,10 @@ class ManifestRecord:
         source: Where the sensors come from: ``key``, ``root`` and ``sample_id`` of the frame.
         previous: For an edit or a delete: ``version``, ``prompt`` and ``label_text`` before.
         format: :data:`MANIFEST_FORMAT`.
+        verdict: For a review: ``approved``, ``rejected`` or ``fixed``
+            (:data:`scenes.reviews.VERDICTS`); ``version`` is the version reviewed and
+            ``annotator`` the reviewer.
+        note: For a review: the reviewer's note.
     """
 
     action: Action
@@ -70,9 +76,13 @@ class ManifestRecord:
     source: Mapping[str, object] = field(default_factory=dict)
     previous: Mapping[str, object] | None = None
     format: int = MANIFEST_FORMAT
+    verdict: str | None = None
+    note: str | None = None
 
     def to_json(self) -> dict:
-        """A JSON-serialisable dict (one manifest line)."""
+        """A JSON-serialisable dict (one manifest line; a review's has ``verdict`` and
+        ``note`` too)."""
+        review = {"verdict": self.verdict, "note": self.note} if self.verdict is not None else {}
         return {
             "format": self.format,
             "op": self.op,
@@ -89,6 +99,7 @@ class ManifestRecord:
             "label_text": self.label_text,
             "source": dict(self.source),
             "previous": None if self.previous is None else dict(self.previous),
+            **review,
         }
 
     @staticmethod
@@ -111,6 +122,8 @@ class ManifestRecord:
             source=dict(data.get("source") or {}),
             previous=None if previous is None else dict(previous),
             format=int(data.get("format", MANIFEST_FORMAT)),
+            verdict=None if data.get("verdict") is None else str(data["verdict"]),
+            note=None if data.get("note") is None else str(data["note"]),
         )
 
 
@@ -164,9 +177,17 @@ class Manifest:
             return read_manifest(self.path).records
 
     def history(self, sample_id: str | int) -> tuple[ManifestRecord, ...]:
-        """The manifest lines of one pair, oldest first (every version)."""
+        """The manifest lines of one pair that changed it, oldest first (every version; its
+        reviews are :meth:`reviews`)."""
         sid = format_id(sample_id)
-        return tuple(r for r in self.records() if r.sample_id == sid)
+        return tuple(
+            r for r in self.records() if r.sample_id == sid and r.action is not Action.REVIEW
+        )
+
+    def reviews(self, sample_id: str | int) -> tuple[ManifestRecord, ...]:
+        """The review lines of one pair, oldest first."""
+        sid = format_id(sample_id)
+        return tuple(r for r in self.records() if r.sample_id == sid and r.action is Action.REVIEW)
 
     def version(self, sample_id: str | int) -> int:
         """The pair's current version (0 when the manifest never recorded it)."""
@@ -177,7 +198,8 @@ class Manifest:
         """The saved pairs that are not deleted, by sample id (latest version each)."""
         latest: dict[str, ManifestRecord] = {}
         for r in self.records():
-            latest[r.sample_id] = r
+            if r.action is not Action.REVIEW:
+                latest[r.sample_id] = r
         out = []
         for sid in sorted(latest):
             r = latest[sid]

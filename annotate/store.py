@@ -19,6 +19,10 @@ sidecar), :mod:`annotate.errors`. This module is the public face: :class:`Annota
 - **Atomic files.** Every file is written to a temporary file, fsynced and renamed over the target,
   its folder fsynced (:mod:`scenes.durable`); a reader sees the old or the new content, never a
   part.
+- **Text.** The prompt and the annotator name are written in the text policy's form
+  (:mod:`scenes.text_policy`); a refusal is a :class:`~annotate.validation.ValidationError`.
+- **Idempotent saves.** A :meth:`AnnotationStore.save` with the ``request`` key of an earlier one
+  (the app's: its draft's version) writes nothing and returns that one's result.
 - **Ids.** Allocated under the lock, above the highest id in any ImageSets list, sample folder,
   sidecar, the manifest and pending or set-aside journals, so concurrent clients always get
   distinct ids and no id is ever reused.
@@ -38,7 +42,7 @@ import logging
 import re
 import uuid
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from datetime import UTC, datetime
 from pathlib import Path
 
@@ -54,15 +58,29 @@ from annotate.manifest import (
     last_source,
 )
 from annotate.pair_files import frame_image_size, pair_meta
+from annotate.requests import RequestLog
 from annotate.source import SourceFrame, write_source
 from annotate.transaction import Transactions
 from annotate.tree import RootFiles
-from annotate.validation import Issue, ValidationConfig, validate
+from annotate.validation import (
+    Issue,
+    ValidationConfig,
+    clean_annotator,
+    clean_prompt,
+    validate,
+)
 from scenes.actors import CLASSES
 from scenes.calib import read_calib
 from scenes.durable import replace_files
 from scenes.kitti import ObjectLabel, labels_to_boxes
-from scenes.layout import CALIB, RADAR_FOLDERS, format_id, radar_folders_in, sample_file
+from scenes.layout import (
+    CALIB,
+    RADAR_FOLDERS,
+    format_id,
+    manifest_file,
+    radar_folders_in,
+    sample_file,
+)
 from scenes.root import Sample, Talk2RadarRoot
 from scenes.writer import SampleText, Talk2RadarWriter, sample_text
 
@@ -70,6 +88,9 @@ _SPLIT_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}")
 
 DEFAULT_SPLITS: tuple[str, ...] = ("train", "val", "test")
 """The splits a store offers unless told otherwise (:attr:`AnnotationStore.splits`)."""
+
+REMEMBERED_REQUESTS = 256
+"""Successful save requests a store remembers (:meth:`AnnotationStore.save`)."""
 
 log = logging.getLogger(__name__)
 
@@ -83,6 +104,8 @@ class SaveResult:
     version: int
     record: ManifestRecord
     warnings: tuple[Issue, ...] = ()
+    repeated: bool = False
+    """A repeated request (:meth:`AnnotationStore.save`): nothing was written this time."""
 
 
 def _utc_now() -> str:
@@ -131,12 +154,14 @@ class AnnotationStore:
         self.writer = Talk2RadarWriter(self.path, radar_folder)
         self.lidar_dir, self.radar_dir = self.writer.trees
         self.annotations_dir = self.path / "annotations"
-        self.manifest_path = self.annotations_dir / "manifest.jsonl"
+        self.manifest_path = manifest_file(self.path)
         self.journal_dir = self.annotations_dir / "pending"
         self.unresolved_dir = self.annotations_dir / "unresolved"
         self.validation = validation if validation is not None else ValidationConfig()
         self.lock_timeout = float(lock_timeout)
         self.clock = clock
+        self.requests: RequestLog[SaveResult] = RequestLog(REMEMBERED_REQUESTS)
+        """Save requests by key (:meth:`save`)."""
         self.files = RootFiles(self.path, self.lidar_dir)
         self.manifest = Manifest(self.manifest_path)
         self.journals = Journals(self.journal_dir, self.unresolved_dir)
@@ -213,9 +238,29 @@ class AnnotationStore:
         *,
         annotator: str = "anonymous",
         split: str = "train",
+        request: str | None = None,
     ) -> SaveResult:
         """Create a new pair (``draft.sample_id`` None; needs ``source``) or edit the pair the
-        draft was opened from."""
+        draft was opened from.
+
+        ``request``: the caller's key of this save (e.g. its draft's version). One with the key
+        of a save running waits for it, of one that succeeded gets its result (``repeated``);
+        a failure is forgotten (:class:`annotate.requests.RequestLog`).
+
+        Raises:
+            ValueError: ``request`` was used before for another draft or split.
+            As :meth:`create` and :meth:`update`.
+        """
+        if request is None:
+            return self._save(draft, source, annotator, split)
+        result, repeated = self.requests.run(
+            request, (draft, split), lambda: self._save(draft, source, annotator, split)
+        )
+        return replace(result, repeated=True) if repeated else result
+
+    def _save(
+        self, draft: Draft, source: SourceFrame | None, annotator: str, split: str
+    ) -> SaveResult:
         if draft.sample_id is None:
             if source is None:
                 raise ValueError("saving a new pair needs the source frame")
@@ -239,9 +284,10 @@ class AnnotationStore:
             StoreError: The root cannot be read or locked.
         """
         self._check_split(split)
-        annotator = _clean_annotator(annotator)
+        annotator = clean_annotator(annotator)
         report = validate(draft, self.validation, source.sample.calib)
         report.raise_if_invalid()
+        draft = clean_prompt(draft)
         sample = source.sample
         text = self._text(draft, sample)
         with self.transactions.transaction(f"saving a new pair in {self.path}") as tx:
@@ -272,12 +318,13 @@ class AnnotationStore:
         if draft.sample_id is None:
             raise ValueError("this draft is not an opened pair (sample_id is None): use create()")
         sid = format_id(draft.sample_id)
-        annotator = _clean_annotator(annotator)
+        annotator = clean_annotator(annotator)
         calib_path = sample_file(self.lidar_dir, CALIB, sid)
         if not calib_path.is_file():
             raise StoreError(f"sample {sid} has no calibration file {calib_path}")
         report = validate(draft, self.validation, read_calib(calib_path))
         report.raise_if_invalid()
+        draft = clean_prompt(draft)
         with self.transactions.transaction(f"saving the edit of pair {sid}") as tx:
             splits, current = self._listed_version(sid, draft.base_version, "(deleted?); not saved")
             sample = Talk2RadarRoot(self.path, radar=self.writer.radar_folder).load(sid)
@@ -311,7 +358,7 @@ class AnnotationStore:
             DiskFullError, SaveError: As :meth:`create`.
         """
         sid = format_id(sample_id)
-        annotator = _clean_annotator(annotator)
+        annotator = clean_annotator(annotator)
         with self.transactions.transaction(f"deleting pair {sid}") as tx:
             splits, current = self._listed_version(sid, base_version, "(already deleted?)")
             record = self._record(Action.DELETE, sid, current + 1, annotator, splits)
@@ -446,11 +493,6 @@ def _check_split_name(split: object) -> None:
             f"invalid split name {shown}: use at most 64 letters, digits, '_', '-' or '.' "
             "(e.g. 'train')"
         )
-
-
-def _clean_annotator(name: str) -> str:
-    text = " ".join(str(name).split())
-    return text or "anonymous"
 
 
 __all__ = ["DEFAULT_SPLITS", "AnnotationStore", "SaveResult"]

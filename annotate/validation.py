@@ -7,8 +7,10 @@ position and :attr:`Issue.field` a machine-readable field name (``prompt``, ``bo
 
 Errors:
 
-- the prompt is empty (after stripping) or spans several lines (a Talk2Radar prompt file is one
-  sentence; readers keep internal line breaks, which would reach the text encoder);
+- the prompt is empty (after stripping), or the text policy refuses it
+  (:func:`scenes.text_policy.clean_text`: a control, invisible or line-break character, named in
+  the message, since a Talk2Radar prompt file is one sentence and readers keep internal line
+  breaks; more than 500 characters);
 - no box and the "refers to nothing" flag not set; or the flag set while boxes remain;
 - a box with a non-finite value, a non-positive size or a size above ``max_size``;
 - a class outside the metric classes (``Car``, ``Pedestrian``, ``Cyclist``);
@@ -37,6 +39,7 @@ from annotate.draft import Draft
 from scenes.actors import CLASSES
 from scenes.boxes import bev_iou
 from scenes.calib import IMAGE_SIZE, Calibration, boxes_2d, boxes_lidar_to_camera
+from scenes.text_policy import ANNOTATOR, PROMPT, TextPolicyError, TextRule, clean_text
 
 MIN_EVAL_HEIGHT_PX = 40.0
 """The official VoD evaluation ignores ground truth whose 2D box is at most this tall."""
@@ -157,14 +160,14 @@ def validate(
     """
     cfg = config if config is not None else ValidationConfig()
     issues: list[Issue] = []
-    text = draft.prompt.strip()
-    if not text:
+    try:
+        text: str | None = clean_text(draft.prompt, PROMPT)
+    except TextPolicyError as exc:
+        issues.append(Issue("prompt", str(exc)))
+        text = None
+    if text == "":
         issues.append(Issue("prompt", "the prompt is empty: type the sentence the boxes answer"))
-    elif "\n" in text or "\r" in text:
-        issues.append(
-            Issue("prompt", "the prompt must be a single line (it contains a line break)")
-        )
-    elif len(text.split()) > cfg.max_prompt_words:
+    elif text is not None and len(text.split()) > cfg.max_prompt_words:
         issues.append(
             Issue(
                 "prompt",
@@ -303,3 +306,27 @@ def _image_issues(
             )
         ]
     return []
+
+
+def clean_field(text: object, rule: TextRule, field: str) -> str:
+    """``text`` in the text policy's form under ``rule`` (:func:`scenes.text_policy.clean_text`).
+
+    Raises:
+        ValidationError: the policy refuses it (one issue of ``field``, e.g. ``annotator``).
+    """
+    try:
+        return clean_text(text, rule)
+    except TextPolicyError as exc:
+        raise ValidationError((Issue(field, str(exc)),)) from None
+
+
+def clean_annotator(name: object) -> str:
+    """The annotator (or reviewer) name as the manifest records it: :func:`clean_field` under
+    :data:`scenes.text_policy.ANNOTATOR`, ``anonymous`` when empty."""
+    return clean_field(name, ANNOTATOR, "annotator") or "anonymous"
+
+
+def clean_prompt(draft: Draft) -> Draft:
+    """``draft`` with its prompt in the text policy's form, as it is saved (:func:`validate`
+    has accepted the prompt)."""
+    return draft.set_prompt(clean_text(draft.prompt, PROMPT))

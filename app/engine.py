@@ -311,15 +311,20 @@ class GroundingEngine(Generic[Features]):
                 self._features.popitem(last=False)
         return features, max(elapsed, 1e-3)
 
-    def encode(self, sample: Sample, modality: Modality) -> tuple[Features, float]:
-        """Encode (or fetch from the cache) one scene; returns ``(features, encode_ms)``."""
+    def encode(
+        self, sample: Sample, modality: Modality, candidates: object | None = None
+    ) -> tuple[Features, float]:
+        """Encode (or fetch from the cache) one scene (with labelled ``candidates``: as
+        :meth:`answer`); returns ``(features, encode_ms)``."""
         self._check_modality(modality)
         with self._model_lock:
-            return self._encode_locked(sample, modality)
+            return self._encode_locked(sample, modality, candidates)
 
-    def prefetch(self, sample: Sample, modality: Modality) -> Future:
+    def prefetch(
+        self, sample: Sample, modality: Modality, candidates: object | None = None
+    ) -> Future:
         """Encode a scene in the background (no-op when cached)."""
-        return self.submit(self.encode, sample, modality)
+        return self.submit(self.encode, sample, modality, candidates)
 
     def answer(
         self,

@@ -270,6 +270,16 @@ class NavigationPanel:
     frame_number: viser.GuiNumberHandle
     info: viser.GuiMarkdownHandle
 
+    def set_count(self, count: int) -> None:
+        """The split has ``count`` frames (after a re-read)."""
+        self.frame_number.max = count
+        self.frame_number.hint = f"1..{count}"
+
+    def show(self, frame: Frame, count: int) -> None:
+        """Show ``frame`` (of ``count``) in the frame number box and the summary."""
+        self.frame_number.value = frame.index + 1
+        self.info.content = frame_markdown(frame, count)
+
     def wire(self, step: Callable[[int], object], go_to: Callable[[int], object]) -> None:
         """*Previous* / *Next* call ``step(-1)`` / ``step(1)``; a frame number typed in the
         browser calls ``go_to(number - 1)`` (a value set by the server calls nothing)."""

@@ -9,19 +9,38 @@ one 50 ms throttled sender that keeps only the *latest* pending message, so an E
 within 50 ms of the last keystroke replaces that keystroke's value update and the server would run
 a stale prompt. A line break travels inside the value update itself, so the server always sees
 the text the browser shows.
+
+**The prompt box belongs to the person typing in it** (:class:`PromptField`). Several browsers
+share the frame, and viser writes a server-side value into the browser's field at once, even
+while the person types (the keys that follow land after the written text: "...20 km/h.ped
+prompt number 0"). So the server writes the box only in reply to this browser's own actions:
+Enter (the line break removed), *History*, *Re-run*, *Use the frame's prompt*, and a frame
+change this browser asked for (*Previous*, *Next*, *Frame #*) when the box still holds what the
+server last wrote (the person has not typed since). A frame change made by another browser
+never touches the box: the new frame's own prompt is shown under the frame number and offered by
+*Use the frame's prompt*.
+
+Text policy: a prompt runs only once :func:`scenes.text_policy.clean_text` accepts it (control
+and line-separator characters refused with a message naming them, at most 500 characters); the
+session applies it, after :func:`one_line` has turned Enter's line breaks into spaces.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from contextlib import AbstractContextManager
 from dataclasses import dataclass
 
 import numpy as np
 import viser
 
-from app.engine import MODALITY_LABELS, Answer, Modality
+from app.boxes_view import BoxesView, best_iou, box_label
+from app.engine import MODALITY_LABELS, Answer, Modality, Predictions
+from app.heatmap_view import HeatmapView
 from app.navigation import Frame
 from app.text import md_text
+from scenes.root import Sample
+from scenes.text_policy import PROMPT, TextPolicyError, clean_text, collapse_spaces
 
 CANDIDATE_SOURCES = {"Detector proposals": "detector", "Labelled boxes": "labels"}
 """GUI label -> what the referent stage chooses among (the "Candidates" control)."""
@@ -61,21 +80,94 @@ class QueryRequest:
     received: float
     labelled: bool = False
 
+    def candidates(self, labelled_boxes: Callable[[Sample], object | None] | None) -> object:
+        """What the referent stage chooses among: the frame's labelled boxes (from
+        ``labelled_boxes``, :attr:`app.session.SessionOptions.labelled_boxes`) when the request
+        asks for them, else None (the detector's proposals).
+
+        Raises:
+            ValueError: the request asks for labelled boxes the frame does not have.
+        """
+        if not self.labelled or labelled_boxes is None:
+            return None
+        boxes = labelled_boxes(self.frame.sample)
+        if boxes is None:
+            raise ValueError(
+                f"frame {self.frame.sample.sample_id} has no labelled boxes: choose "
+                "Candidates: Detector proposals"
+            )
+        return boxes
+
+
+def prompt_to_run(prompt: str | None) -> tuple[str, tuple[str, str] | None]:
+    """The prompt a box's text runs as (the text policy's form of :func:`one_line`), and the
+    ``(title, body)`` of the notification that says why it cannot run (refused by the policy,
+    or empty), else None."""
+    try:
+        text = clean_text(one_line(prompt or ""), PROMPT)
+    except TextPolicyError as exc:
+        return "", ("Prompt not run", exc.sentence)
+    if not text:
+        example = f'Type a sentence describing the objects to find, e.g. "{EXAMPLE_PROMPT}".'
+        return "", ("Empty prompt", example)
+    return text, None
+
 
 def submitted_prompt(value: str) -> str | None:
     """The prompt to run when the prompt box's value holds a line break (Enter), else None.
 
-    The line breaks become spaces and runs of whitespace collapse: ``"the car\\n"`` gives
-    ``"the car"``; ``"\\n"`` gives ``""`` (an empty prompt, reported to the user).
+    The line breaks become spaces and runs of spaces collapse (:func:`one_line`,
+    :func:`scenes.text_policy.collapse_spaces`): ``"the car\\n"`` gives ``"the car"``; ``"\\n"``
+    gives ``""`` (an empty prompt, reported to the user). Other control characters are left for
+    the text policy to refuse by name.
     """
     if "\n" not in value and "\r" not in value:
         return None
-    return normalise_prompt(value)
+    return collapse_spaces(one_line(value))
 
 
-def normalise_prompt(text: str) -> str:
-    """``text`` with surrounding whitespace stripped and inner whitespace collapsed to spaces."""
-    return " ".join(text.split())
+def one_line(value: str) -> str:
+    """``value`` with each line break of a multi-line field (``\\r\\n``, ``\\n``, ``\\r``: Enter
+    or a pasted line) made a space; the text policy refuses every other line separator."""
+    return value.replace("\r\n", " ").replace("\n", " ").replace("\r", " ")
+
+
+class PromptField:
+    """One browser's prompt box and what the server last wrote into it (see the module
+    docstring: the box belongs to the person typing in it).
+
+    Methods are called holding the session's lock; the browser's own updates change the
+    handle's value on viser's event loop at any time, which :attr:`edited` reads.
+
+    Args:
+        handle: The prompt box.
+    """
+
+    def __init__(self, handle: viser.GuiTextHandle) -> None:
+        self.handle = handle
+        self._written = handle.value
+
+    @property
+    def value(self) -> str:
+        return self.handle.value
+
+    @property
+    def edited(self) -> bool:
+        """Whether the browser changed the box since the server last wrote it."""
+        return self.handle.value != self._written
+
+    def write(self, text: str) -> None:
+        """Write ``text`` into the box (only in reply to this browser's own action)."""
+        self.handle.value = text
+        self._written = self.handle.value
+
+    def offer(self, text: str, own_move: bool) -> bool:
+        """A new frame's prompt: written when this browser asked for the frame and the box is
+        not :attr:`edited`; else left to *Use the frame's prompt*. Returns whether it was."""
+        if not own_move or self.edited:
+            return False
+        self.write(text)
+        return True
 
 
 class PromptHistory:
@@ -100,6 +192,17 @@ class PromptHistory:
 def modality_label(modality: Modality) -> str:
     """GUI label of a modality."""
     return next(label for label, value in MODALITY_LABELS.items() if value == modality)
+
+
+def answer_labels(pred: Predictions, gt_boxes: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """``(ious (K,), labels)`` of an answer's boxes: each one's best 3D IoU with the ``(G, 7)``
+    ground truth (NaN without any) and its 3D label (class, score, IoU)."""
+    ious = best_iou(pred.boxes, gt_boxes)
+    labels = [
+        box_label(cls, float(score), float(iou))
+        for cls, score, iou in zip(pred.classes, pred.scores, ious, strict=True)
+    ]
+    return ious, labels
 
 
 def results_markdown(answer: Answer, ious: np.ndarray, latency_ms: float) -> str:
@@ -137,6 +240,7 @@ class QueryPanel:
 
     prompt: viser.GuiTextHandle
     run: viser.GuiButtonHandle
+    use_frame_prompt: viser.GuiButtonHandle
     modality: viser.GuiDropdownHandle
     threshold: viser.GuiSliderHandle
     show_heatmap: viser.GuiCheckboxHandle
@@ -156,6 +260,32 @@ class QueryPanel:
             return False
         return CANDIDATE_SOURCES.get(self.candidates.value, "detector") == "labels"
 
+    def wire_layers(
+        self,
+        lock: AbstractContextManager,
+        heatmap: HeatmapView,
+        gt: BoxesView,
+        show_gt_in_camera: Callable[[bool], None],
+    ) -> None:
+        """*Heatmap*, *Heatmap opacity* and *Ground truth* show or hide the layers (drawing
+        holding ``lock``, the browser's lock); ``show_gt_in_camera(shown)`` for the camera panel."""
+
+        @self.opacity.on_update
+        def _(_: viser.GuiEvent) -> None:
+            with lock:
+                heatmap.set_opacity(self.opacity.value)
+
+        @self.show_heatmap.on_update
+        def _(_: viser.GuiEvent) -> None:
+            with lock:
+                heatmap.visible = self.show_heatmap.value
+
+        @self.show_gt.on_update
+        def _(_: viser.GuiEvent) -> None:
+            with lock:
+                gt.visible = self.show_gt.value
+            show_gt_in_camera(self.show_gt.value)
+
 
 def build_query_panel(
     gui: viser.GuiApi,
@@ -171,6 +301,12 @@ def build_query_panel(
         "Prompt", prompt, multiline=True, hint="Describe the objects to find; Enter runs it"
     )
     run = gui.add_button("Run", color="green", icon=viser.Icon.PLAYER_PLAY)
+    use_frame_prompt = gui.add_button(
+        "Use the frame's prompt",
+        icon=viser.Icon.ARROW_BACK_UP,
+        disabled=not prompt,
+        hint="Puts the frame's own prompt (shown under Frame #) into the box",
+    )
     labels = tuple(modality_label(m) for m in modalities)
     modality = gui.add_dropdown(
         "Sensors", labels, initial_value=labels[0], hint="The other sensor's points are emptied"
@@ -199,6 +335,7 @@ def build_query_panel(
     return QueryPanel(
         prompt=prompt_box,
         run=run,
+        use_frame_prompt=use_frame_prompt,
         modality=modality,
         threshold=threshold,
         show_heatmap=show_heatmap,

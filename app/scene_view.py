@@ -18,6 +18,7 @@ Points are sent as float32 (viser's float16 default quantises 3 cm beyond 32 m).
 
 from __future__ import annotations
 
+import logging
 import math
 from collections.abc import Callable
 from contextlib import AbstractContextManager
@@ -38,6 +39,8 @@ from app.colors import (
 )
 from scenes.boxes import box_corners
 from scenes.calib import LIDAR_HEIGHT, Calibration
+
+log = logging.getLogger(__name__)
 
 LidarColoring = Literal["height", "intensity"]
 HEIGHT_RANGE = (0.0, 3.0)
@@ -171,13 +174,20 @@ def camera_view_pose(
     )
 
 
-def apply_pose(camera: viser.CameraHandle, pose: CameraPose) -> None:
-    """Move one browser's camera (``look_at`` last: setting ``position`` drags it along)."""
-    camera.up_direction = pose.up
-    if pose.fov is not None:
-        camera.fov = pose.fov
-    camera.position = pose.position
-    camera.look_at = pose.look_at
+def apply_pose(camera: viser.CameraHandle, pose: CameraPose) -> bool:
+    """Move one browser's camera (``look_at`` last: setting ``position`` drags it along).
+    Returns False, with one warning line, when viser refuses it: the browser reported a
+    degenerate camera (its position on its look-at point), which only a forged message does."""
+    try:
+        camera.up_direction = pose.up
+        if pose.fov is not None:
+            camera.fov = pose.fov
+        camera.position = pose.position
+        camera.look_at = pose.look_at
+    except ValueError as exc:
+        log.warning("client %s: camera not moved: %s", camera.client.client_id, exc)
+        return False
+    return True
 
 
 class CameraViewpoint(Protocol):

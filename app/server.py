@@ -24,6 +24,10 @@ port outside 0..65535, an address that is not this machine's), so the host and p
 first (:func:`check_listen_address`) and viser is started under a deadline
 (:attr:`AppConfig.start_timeout`); both failures raise :class:`ServerStartError` (an ``OSError``).
 A busy port is no failure: viser serves on the next free one, as before.
+
+Hostile input: every message handler viser registers is wrapped (:mod:`app.guards`: forged GUI
+values refused or clamped to the widget's range, one rate-limited warning line per connection,
+never a traceback), and what a departed browser leaves is collected (:mod:`app.memory`).
 """
 
 from __future__ import annotations
@@ -43,8 +47,10 @@ import viser
 
 from app.annotate_tab import AnnotationHub, build_annotation_tab
 from app.engine import GroundingEngine, GroundingModel, initial_threshold
+from app.guards import InputWarnings, LogGuards, guard_client, guard_server
 from app.keys import add_escape_leaves_fields
 from app.labelled import LabelledFrames
+from app.memory import MemoryReaper, freeze_startup_objects
 from app.navigation import (
     Frame,
     FrameLoadError,
@@ -136,6 +142,9 @@ class AppConfig:
             raises :class:`ServerStartError`.
         pairs_root: Where the Annotate tab saves pairs (a Talk2Radar root, created when
             missing); None: :func:`default_pairs_root`.
+        freeze_startup: Freeze the objects alive at start before any browser connects
+            (:func:`app.memory.freeze_startup_objects`: cheap collections after disconnects);
+            process-wide, so for the process that serves (``launch.py``), not for tests.
         scene_labels: The View-of-Delft root with every object of the served frames (for a
             Talk2Radar root; a release opened directly is its own): the Query tab then offers
             "Candidates: Labelled boxes".
@@ -153,6 +162,7 @@ class AppConfig:
     dark_mode: bool = True
     start_timeout: float = 20.0
     pairs_root: Path | None = None
+    freeze_startup: bool = False
     scene_labels: Path | None = None
 
 
@@ -218,7 +228,14 @@ class Talk2PCApp:
         )
         self.server: viser.ViserServer | None = None
         self.sessions: dict[int, ClientSession] = {}
+        self.input_warnings = InputWarnings()
+        """Forged or malformed browser messages, one rate-limited line per connection."""
+        self.reaper = MemoryReaper()
+        """Collects what departed browsers leave (see :mod:`app.memory`)."""
+        self._log_guards = LogGuards(self.input_warnings)
         self._startup: list[Future] = []
+        self._connected = False
+        """Whether a browser ever connected (see :meth:`_freeze_if_alone`)."""
 
     @property
     def frames(self) -> FrameStore:
@@ -266,12 +283,19 @@ class Talk2PCApp:
         server.initial_camera.position = pose.position
         server.initial_camera.look_at = pose.look_at
         server.initial_camera.up = pose.up
+        guard_server(server, self.input_warnings)
+        self._log_guards.install(server)
+        if self.config.freeze_startup:
+            freeze_startup_objects()  # again after the warm-up (the text encoder), if alone
         server.on_client_connect(self._on_connect)
         server.on_client_disconnect(self._on_disconnect)
         self.server = server
+        self.reaper.start()
         if self.config.warm_up:
             self._startup.append(self.engine.warm_up())
         self._startup.append(self.engine.prefetch(first.sample, self.engine.modalities[0]))
+        if self.config.freeze_startup:
+            self._startup[0].add_done_callback(lambda _: self._freeze_if_alone())
         log.info("serving %d frames of %s at %s", len(self.frames), self.frames.root, self.url)
         return self
 
@@ -315,6 +339,13 @@ class Talk2PCApp:
             raise error
         return state["server"]  # type: ignore[return-value]
 
+    def _freeze_if_alone(self) -> None:
+        """Freeze what the warm-up made, unless a browser connected meanwhile (its session
+        would never be collected)."""
+        with self.navigator.lock:
+            if not self._connected:
+                freeze_startup_objects()
+
     def wait_ready(self, timeout: float | None = None) -> None:
         """Block until the start-up work (model warm-up, first scene encoding) is done.
 
@@ -335,8 +366,10 @@ class Talk2PCApp:
             self.sessions.clear()
         self.annotations.close()
         self.engine.close()
+        self.reaper.stop()
         if server is not None:
             server.stop()
+            self._log_guards.remove()
 
     def __enter__(self) -> Talk2PCApp:
         return self.start()
@@ -351,12 +384,14 @@ class Talk2PCApp:
         return (ExtraTab("Annotate", viser.Icon.PENCIL, build, name="annotation panel"),)
 
     def _on_connect(self, client: viser.ClientHandle) -> None:
+        guard_client(client, self.input_warnings)  # before any widget exists
         options = SessionOptions(
             model_note=self.model_note,
             score_threshold=self.score_threshold,
             labelled_boxes=self.labelled_boxes,
         )
         with self.navigator.lock:
+            self._connected = True
             session = ClientSession(client, self.navigator, self.engine, options)
             self.sessions[client.client_id] = session
             self.navigator.subscribe(session)
@@ -376,6 +411,8 @@ class Talk2PCApp:
                 self.navigator.unsubscribe(session)
         if session is not None:
             session.close()
+        self.input_warnings.forget(f"client {client.client_id}")
+        self.reaper.schedule()
         log.info("client %d disconnected", client.client_id)
 
     # ------------------------------------------------------------------ navigation (shared)

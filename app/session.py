@@ -49,11 +49,12 @@ from dataclasses import dataclass
 
 import viser
 
-from app.boxes_view import GT_STYLE, PRED_STYLE, BoxesView, best_iou, box_label
+from app.boxes_view import GT_STYLE, PRED_STYLE, BoxesView, box_label
 from app.camera_image import BoxLayer
 from app.camera_panel import CameraPanel
 from app.engine import Answer, GroundingEngine, Predictions
 from app.heatmap_view import HeatmapView
+from app.messages import error_body, notify
 from app.navigation import (
     Frame,
     FrameLoadError,
@@ -61,16 +62,16 @@ from app.navigation import (
     NavigationPanel,
     Navigator,
     build_navigation_panel,
-    frame_markdown,
 )
 from app.query_panel import (
-    EXAMPLE_PROMPT,
     NO_HISTORY,
+    PromptField,
     PromptHistory,
     QueryPanel,
     QueryRequest,
+    answer_labels,
     build_query_panel,
-    normalise_prompt,
+    prompt_to_run,
     results_markdown,
     submitted_prompt,
 )
@@ -148,6 +149,7 @@ class ClientSession:
         self.heatmap_view = HeatmapView(client.scene, "/heatmap")
         self.nav: NavigationPanel | None = None
         self.query: QueryPanel | None = None
+        self.prompt_field: PromptField | None = None
         self.view: ViewPanel | None = None
         self.camera: CameraPanel | None = None
         self.tabs: dict[str, viser.GuiTabHandle] = {}
@@ -156,6 +158,7 @@ class ClientSession:
         self._generation = 0
         self._frame_listeners: list[Listener] = []
         self._answer_listeners: list[Listener] = []
+        self._movers: set[int] = set()  # threads running a move this browser asked for
 
     # ------------------------------------------------------------------ public state
 
@@ -192,26 +195,12 @@ class ClientSession:
         auto_close_seconds: float | None = 6.0,
     ) -> None:
         """Show a notification in this browser (ignored once it has left)."""
-        if self.closed:
-            return
-        try:
-            self.client.add_notification(
-                title,
-                body,
-                color=color,  # type: ignore[arg-type]
-                auto_close_seconds=auto_close_seconds,
-            )
-        except Exception:  # The connection may be gone; the log keeps the message.
-            log.warning("client %s: could not show notification %r", self.client_id, title)
+        if not self.closed:
+            notify(self.client, title, body, color=color, auto_close_seconds=auto_close_seconds)
 
     def report_error(self, title: str, error: BaseException | str) -> None:
         """Log an error and show it in this browser as a red notification."""
-        if isinstance(error, BaseException):
-            log.error("client %s: %s: %s", self.client_id, title, error, exc_info=error)
-            body = f"{type(error).__name__}: {error}"
-        else:
-            log.error("client %s: %s: %s", self.client_id, title, error)
-            body = error
+        body = error_body(self.client, title, error)
         self.notify(title, body, color="red", auto_close_seconds=12.0)
 
     # ------------------------------------------------------------------ GUI
@@ -233,6 +222,7 @@ class ClientSession:
                 prompt=sample_prompt,
                 labelled=self.options.labelled_boxes is not None,
             )
+            self.prompt_field = PromptField(self.query.prompt)
         with tabs.add_tab("View", icon=viser.Icon.EYE):
             self.view = build_view_panel(gui, self.scene_view.settings)
         self.nav.wire(self.step, self.go_to)
@@ -261,23 +251,29 @@ class ClientSession:
             prompt = submitted_prompt(q.prompt.value)
             if prompt is None:
                 return
-            q.prompt.value = prompt  # Drop the line break (fires this callback without client).
+            self.write_prompt(prompt)  # Drop the line break (fires this callback without client).
             self.run_prompt(prompt)
 
         @q.run.on_click
         def _(_: viser.GuiEvent) -> None:
             self.run_prompt(q.prompt.value)
 
+        @q.use_frame_prompt.on_click
+        def _(_: viser.GuiEvent) -> None:
+            sample = self.sample
+            if sample is not None and sample.prompt:
+                self.write_prompt(sample.prompt)
+
         @q.rerun.on_click
         def _(_: viser.GuiEvent) -> None:
             if q.history.value != NO_HISTORY:
-                q.prompt.value = q.history.value
+                self.write_prompt(q.history.value)
                 self.run_prompt(q.history.value)
 
         @q.history.on_update
         def _(event: viser.GuiEvent) -> None:
             if event.client is not None and q.history.value != NO_HISTORY:
-                q.prompt.value = q.history.value
+                self.write_prompt(q.history.value)
 
         def rerun_last(event: viser.GuiEvent) -> None:
             if event.client is None:
@@ -291,22 +287,12 @@ class ClientSession:
         q.threshold.on_update(rerun_last)
         if q.candidates is not None:
             q.candidates.on_update(rerun_last)
-
-        @q.opacity.on_update
-        def _(_: viser.GuiEvent) -> None:
-            with self.lock:
-                self.heatmap_view.set_opacity(q.opacity.value)
-
-        @q.show_heatmap.on_update
-        def _(_: viser.GuiEvent) -> None:
-            with self.lock:
-                self.heatmap_view.visible = q.show_heatmap.value
-
-        @q.show_gt.on_update
-        def _(_: viser.GuiEvent) -> None:
-            with self.lock:
-                self.gt_view.visible = q.show_gt.value
-            self._with_camera(lambda camera: camera.set_layer_visible("gt", q.show_gt.value))
+        q.wire_layers(
+            self.lock,
+            self.heatmap_view,
+            self.gt_view,
+            lambda shown: self._with_camera(lambda camera: camera.set_layer_visible("gt", shown)),
+        )
 
     # ------------------------------------------------------------------ frames
 
@@ -328,16 +314,16 @@ class ClientSession:
         self._with_camera(lambda camera: camera.set_layer(name, layer))
 
     def frame_shown(self, frame: Frame) -> None:
-        """The shared frame moved (called by the navigator): draw it here; a failure is shown in
-        this browser."""
+        """The shared frame moved (called by the navigator on the moving thread): draw it here;
+        a failure is shown in this browser. Its own moves may fill the prompt box."""
         try:
-            self.show_frame(frame)
+            self.show_frame(frame, own_move=threading.get_ident() in self._movers)
         except Exception as exc:
             self.report_error("Could not draw the frame", exc)
 
-    def show_frame(self, frame: Frame) -> None:
-        """Draw ``frame``: points, ground truth, the sample's prompt in the prompt box; the
-        previous answer is cleared."""
+    def show_frame(self, frame: Frame, own_move: bool = True) -> None:
+        """Draw ``frame``: points, ground truth, the sample's prompt offered to the prompt box
+        (:meth:`PromptField.offer`); the previous answer is cleared."""
         with self.lock:
             if self.closed:
                 return
@@ -354,11 +340,12 @@ class ClientSession:
                 )
                 if self.query is not None:
                     self.gt_view.visible = self.query.show_gt.value
-                    self.query.prompt.value = sample.prompt or ""
+                    if self.prompt_field is not None:
+                        self.prompt_field.offer(sample.prompt or "", own_move)
+                    self.query.use_frame_prompt.disabled = not sample.prompt
                     self.query.results.content = "*Type a prompt and press Enter.*"
                 if self.nav is not None:
-                    self.nav.frame_number.value = frame.index + 1
-                    self.nav.info.content = frame_markdown(frame, len(self.navigator))
+                    self.nav.show(frame, len(self.navigator))
             self._with_camera(lambda camera: camera.show_frame(sample))
             self._call(self._frame_listeners)
 
@@ -367,13 +354,10 @@ class ClientSession:
         with self.lock:
             if self.nav is None:
                 return
-            count = len(self.navigator)
-            self.nav.frame_number.max = count
-            self.nav.frame_number.hint = f"1..{count}"
+            self.nav.set_count(len(self.navigator))
             if self.navigator.frame is not None:
                 self.frame = self.navigator.frame
-                self.nav.frame_number.value = self.frame.index + 1
-                self.nav.info.content = frame_markdown(self.frame, count)
+                self.nav.show(self.frame, len(self.navigator))
 
     def go_to(self, index: int) -> Frame | None:
         """Show frame ``index`` in every browser; returns it, or None when it fails (this browser
@@ -385,12 +369,16 @@ class ClientSession:
         return self._move(lambda: self.navigator.step(delta))
 
     def _move(self, move: Callable[[], Frame]) -> Frame | None:
+        thread = threading.get_ident()
+        self._movers.add(thread)
         try:
             return move()
         except FrameLoadError as exc:
             self.report_error(exc.title, exc.cause)
         except NavigationError as exc:
             self.notify(exc.title, str(exc), color="yellow")
+        finally:
+            self._movers.discard(thread)
         self.reset_frame_number()
         return None
 
@@ -402,20 +390,20 @@ class ClientSession:
 
     # ------------------------------------------------------------------ prompts
 
-    def run_prompt(self, prompt: str | None) -> Future | None:
-        """Answer ``prompt`` on the frame on screen, in the engine's worker pool.
+    def write_prompt(self, text: str) -> None:
+        """Put ``text`` into this browser's prompt box (in reply to its own action)."""
+        with self.lock:
+            if self.prompt_field is not None and not self.closed:
+                self.prompt_field.write(text)
 
-        An empty prompt shows a notification instead. Returns the job's future (None when
-        nothing was started).
-        """
+    def run_prompt(self, prompt: str | None) -> Future | None:
+        """Answer ``prompt`` on the frame on screen, in the engine's worker pool; one the text
+        policy refuses, or an empty one, gets a notification (:func:`prompt_to_run`). Returns the
+        job's future (None when nothing was started)."""
         received = time.perf_counter()
-        text = normalise_prompt(prompt or "")
-        if not text:
-            self.notify(
-                "Empty prompt",
-                f'Type a sentence describing the objects to find, e.g. "{EXAMPLE_PROMPT}".',
-                color="yellow",
-            )
+        text, problem = prompt_to_run(prompt)
+        if problem is not None:
+            self.notify(*problem, color="yellow")
             return None
         with self.lock:
             if self.frame is None or self.query is None or self.closed:
@@ -440,20 +428,12 @@ class ClientSession:
         if self._stale(request):
             return
         try:
-            candidates = None
-            if request.labelled and self.options.labelled_boxes is not None:
-                candidates = self.options.labelled_boxes(request.frame.sample)
-                if candidates is None:
-                    raise ValueError(
-                        f"frame {request.frame.sample.sample_id} has no labelled boxes: choose "
-                        "Candidates: Detector proposals"
-                    )
             answer = self.engine.answer(
                 request.frame.sample,
                 request.modality,
                 request.prompt,
                 request.score_threshold,
-                candidates,
+                request.candidates(self.options.labelled_boxes),
             )
         except Exception as exc:
             self.report_error("Model error", exc)
@@ -475,12 +455,7 @@ class ClientSession:
         """Draw boxes, heatmap, summary and history (holding :attr:`lock`)."""
         assert self.query is not None
         pred = answer.predictions
-        sample = request.frame.sample
-        ious = best_iou(pred.boxes, sample.boxes)
-        labels = [
-            box_label(cls, float(score), float(iou))
-            for cls, score, iou in zip(pred.classes, pred.scores, ious, strict=True)
-        ]
+        ious, labels = answer_labels(pred, request.frame.sample.boxes)
         with self.client.atomic():
             self.pred_view.show(pred.boxes, pred.classes, labels)
             self.heatmap_view.visible = self.query.show_heatmap.value
@@ -515,7 +490,11 @@ class ClientSession:
                 self.report_error("An extension failed", exc)
 
     def close(self) -> None:
-        """Forget this browser (it disconnected): pending answers are dropped."""
+        """Forget this browser (it left): drop pending answers, the frame, answer, listeners."""
         with self.lock:
             self.closed = True
             self._generation += 1
+            self.frame = None
+            self.answer = None
+            self._frame_listeners.clear()
+            self._answer_listeners.clear()

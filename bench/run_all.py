@@ -37,7 +37,15 @@ from bench.common import (
     read_result,
 )
 
-BENCHMARKS = ("latency", "floor", "fusion_cost", "graph_cost", "model_size", "train_throughput")
+BENCHMARKS = (
+    "latency",
+    "floor",
+    "fusion_cost",
+    "graph_cost",
+    "model_size",
+    "train_throughput",
+    "soak",
+)
 """Benchmarks of this package, in the order of the document (``bench/<name>.py``)."""
 MANUAL = ("floor_1thread", "eval_throughput")
 """Sections that come from their stored results only, run by hand with the command in their

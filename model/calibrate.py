@@ -1,6 +1,7 @@
 """Choose a checkpoint's operating threshold on a validation split and store it in the checkpoint.
 
-``python -m model.calibrate --data ROOT --checkpoint PATH [--split val] [--limit N] [--dry-run]``
+``python -m model.calibrate --data ROOT --checkpoint PATH [--split val] [--limit N] [--dry-run]
+[--min-prompts N]``
 
 The operating threshold is the score above which a model's boxes are its answer: the set the app
 shows and the set metrics of :mod:`model.grounding_metrics` score. It is chosen, never tuned on the
@@ -10,6 +11,10 @@ the checkpoint's metadata as ``operating_threshold`` with ``operating_threshold_
 split, prompts, the F1 and exact-set it reached). :func:`model.predict.operating_threshold` reads it
 back for ``model.evaluate`` and the app. Both paths (referent and the paper's) are calibrated the
 same way, so their set metrics compare fairly.
+
+A split that cannot measure a threshold is refused (exit 2, one line, the checkpoint untouched):
+one whose prompts refer to nothing (every threshold that returns nothing would score a perfect set
+F1 there) or with fewer than :data:`MIN_REFERRED_PROMPTS` prompts that refer to something.
 """
 
 from __future__ import annotations
@@ -36,6 +41,16 @@ mean by 0.4 points on 240), and of equally good thresholds the highest returns t
 boxes: what matters where a scene holds clutter the training data did not (real frames). The
 referent checkpoint's curve is flat from 0.15 to 0.65 (set F1 83-84); this picks 0.4 there, with
 a higher exact-set rate than the argmax 0.2."""
+
+
+MIN_REFERRED_PROMPTS = 50
+"""Prompts with at least one referent a calibration split must hold (``--min-prompts``). Below
+it one prompt moves the mean set F1 by more than 2 points, four times :data:`F1_PLATEAU`, and the
+choice is noise."""
+
+
+class CalibrationError(ValueError):
+    """The split cannot measure an operating threshold; the message says why."""
 
 
 @dataclass(frozen=True)
@@ -78,11 +93,21 @@ def choose_threshold(
 
 
 def calibrate(
-    model: torch.nn.Module, data: str | Path, split: str = "val", limit: int = 0
+    model: torch.nn.Module,
+    data: str | Path,
+    split: str = "val",
+    limit: int = 0,
+    min_prompts: int = MIN_REFERRED_PROMPTS,
 ) -> Calibration:
     """Ground every prompt of ``split`` with ``model`` (a loaded checkpoint) and choose its
-    threshold."""
+    threshold.
+
+    Raises:
+        CalibrationError: fewer than ``min_prompts`` (and at least one) of the prompts have a
+            referent (module docstring).
+    """
     from model.predict import decode_threshold
+    from scenes.layout import split_file
     from scenes.root import Talk2RadarRoot
 
     root = Talk2RadarRoot(data)
@@ -93,7 +118,63 @@ def calibrate(
         predicted = PromptBoxes.make(fp.boxes, fp.classes, fp.scores, source=fp.sample.sample_id)
         referents = PromptBoxes.make(fp.sample.boxes, fp.sample.classes)
         answers.append((predicted, referents))
+    referred = sum(len(r.boxes) > 0 for _, r in answers)
+    if referred < max(1, min_prompts):
+        raise CalibrationError(
+            f"{split_file(root.lidar_dir, split)}: {referred} of the "
+            f"{len(answers)} prompts of split {split!r} have a referent; calibrating needs at "
+            f"least {max(1, min_prompts)} (--min-prompts), so no threshold is chosen"
+        )
     return choose_threshold(answers)
+
+
+def calibrate_file(
+    path: str | Path,
+    data: str | Path,
+    split: str = "val",
+    limit: int = 0,
+    min_prompts: int = MIN_REFERRED_PROMPTS,
+    dry_run: bool = False,
+) -> Calibration:
+    """Calibrate the checkpoint at ``path`` on ``split`` of ``data`` and, unless ``dry_run``,
+    store the threshold and its source in it (``python -m model.calibrate``; training calls it at
+    the end of a referent-path run).
+
+    Raises:
+        CalibrationError: the split cannot measure a threshold (the checkpoint is untouched).
+    """
+    from model.checkpoint import load_checkpoint, save_checkpoint
+
+    model = load_checkpoint(path)
+    cal = calibrate(model, data, split, limit, min_prompts)
+    if not dry_run:
+        meta = dict(model.checkpoint_metadata)
+        meta["operating_threshold"] = cal.threshold
+        meta["operating_threshold_source"] = {
+            "root": str(Path(data).resolve()),
+            "split": split,
+            "prompts": cal.prompts,
+            "set_f1": round(cal.set_f1, 2),
+            "exact_set": round(cal.exact_set, 2),
+        }
+        save_checkpoint(path, model, **meta)
+    return cal
+
+
+def calibrate_run(path: Path, data: str | Path, split: str) -> None:
+    """Calibrate a finished training run's ``last.pt`` (``path``) on ``split`` of ``data``; a
+    split that cannot measure a threshold leaves it at the uncalibrated 0.5, with a notice."""
+    from scenes.layout import RootError
+
+    try:
+        cal = calibrate_file(path, data, split)
+    except (CalibrationError, RootError) as exc:
+        print(f"not calibrated: {exc}", file=sys.stderr)
+        return
+    print(
+        f"operating threshold {cal.threshold:.3f} (set F1 {cal.set_f1:.1f} on {cal.prompts} "
+        f"{split} prompts) stored in {path}"
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -105,13 +186,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--split", default="val")
     p.add_argument("--limit", type=int, default=0, help="first N samples only (0: all)")
     p.add_argument("--dry-run", action="store_true", help="print the choice, write nothing")
+    p.add_argument(
+        "--min-prompts",
+        type=int,
+        default=MIN_REFERRED_PROMPTS,
+        help=f"prompts with a referent the split must hold (default {MIN_REFERRED_PROMPTS})",
+    )
     a = p.parse_args(argv)
-    from model.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+    from model.checkpoint import CheckpointError
     from scenes.root import RootError
 
     try:
-        model = load_checkpoint(a.checkpoint)
-        cal = calibrate(model, a.data, a.split, a.limit)
+        cal = calibrate_file(
+            a.checkpoint, a.data, a.split, a.limit, a.min_prompts, dry_run=a.dry_run
+        )
         for t, f1, exact in cal.curve:
             mark = "  <- chosen" if t == cal.threshold else ""
             print(f"threshold {t:.3f}: set F1 {f1:5.1f}  exact-set {exact:5.1f}{mark}")
@@ -120,16 +208,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{cal.exact_set:.1f} on {cal.prompts} prompts of {a.data} {a.split})"
         )
         if not a.dry_run:
-            meta = dict(model.checkpoint_metadata)
-            meta["operating_threshold"] = cal.threshold
-            meta["operating_threshold_source"] = {
-                "root": str(Path(a.data).resolve()),
-                "split": a.split,
-                "prompts": cal.prompts,
-                "set_f1": round(cal.set_f1, 2),
-                "exact_set": round(cal.exact_set, 2),
-            }
-            save_checkpoint(a.checkpoint, model, **meta)
             print(f"wrote operating_threshold into {a.checkpoint}")
     except (CheckpointError, RootError, ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -39,31 +39,43 @@ class CheckpointError(ValueError):
     """A checkpoint cannot be written or read, or does not match the code."""
 
 
-def save_checkpoint(path: str | os.PathLike[str], model: TPCNet, **metadata: Any) -> Path:
-    """Write ``model``'s config and weights plus ``metadata`` to ``path`` atomically.
-
-    Returns:
-        The path written.
-    """
-    path = Path(path)
+def checkpoint_payload(model: TPCNet, **metadata: Any) -> dict[str, Any]:
+    """The checkpoint of ``model`` as the dict :func:`save_checkpoint` writes (weights copied to
+    the CPU, ``metadata`` checked to be plain JSON data); :mod:`model.train_state` embeds it."""
     try:
         # The round trip turns float subclasses (numpy scalars) into plain floats, which
         # ``torch.load(weights_only=True)`` accepts; anything not JSON is refused.
         metadata = json.loads(json.dumps(metadata))
     except (TypeError, ValueError) as exc:
-        raise CheckpointError(
-            f"checkpoint metadata for {path} is not plain JSON data: {exc}"
-        ) from exc
-    payload = {
+        raise CheckpointError(f"checkpoint metadata is not plain JSON data: {exc}") from exc
+    return {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
         "config": model.cfg.to_dict(),
         "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
         "metadata": metadata,
     }
+
+
+def write_payload(path: str | os.PathLike[str], payload: dict[str, Any]) -> Path:
+    """Write a :func:`checkpoint_payload` to ``path`` atomically; returns the path."""
+    path = Path(path)
     with atomic_file(path) as fh:
         torch.save(payload, fh)
     return path
+
+
+def save_checkpoint(path: str | os.PathLike[str], model: TPCNet, **metadata: Any) -> Path:
+    """Write ``model``'s config and weights plus ``metadata`` to ``path`` atomically.
+
+    Returns:
+        The path written.
+    """
+    try:
+        payload = checkpoint_payload(model, **metadata)
+    except CheckpointError as exc:
+        raise CheckpointError(f"{path}: {exc}") from exc
+    return write_payload(path, payload)
 
 
 def read_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
@@ -76,17 +88,23 @@ def read_checkpoint(path: str | os.PathLike[str]) -> dict[str, Any]:
     except Exception as exc:
         first = (str(exc).strip().splitlines() or [type(exc).__name__])[0]
         raise CheckpointError(f"checkpoint {path} is corrupt or not a torch file: {first}") from exc
+    check_payload(payload, path)
+    return payload
+
+
+def check_payload(payload: object, source: str | os.PathLike[str]) -> None:
+    """Raise :class:`CheckpointError` naming ``source`` unless ``payload`` is a TPCNet checkpoint
+    of this format version with its three entries."""
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
-        raise CheckpointError(f"checkpoint {path} is not a {FORMAT} checkpoint")
+        raise CheckpointError(f"checkpoint {source} is not a {FORMAT} checkpoint")
     version = payload.get("format_version")
     if version != FORMAT_VERSION:
         raise CheckpointError(
-            f"checkpoint {path} has format_version {version!r}; this code reads {FORMAT_VERSION}"
+            f"checkpoint {source} has format_version {version!r}; this code reads {FORMAT_VERSION}"
         )
     for key in ("config", "state_dict", "metadata"):
         if key not in payload:
-            raise CheckpointError(f"checkpoint {path} has no {key!r} entry")
-    return payload
+            raise CheckpointError(f"checkpoint {source} has no {key!r} entry")
 
 
 def load_metadata(path: str | os.PathLike[str]) -> dict[str, Any]:
@@ -99,7 +117,15 @@ def load_checkpoint(path: str | os.PathLike[str], device: str | torch.device = "
 
     The metadata is available as ``model.checkpoint_metadata`` (a dict).
     """
-    payload = read_checkpoint(path)
+    return model_from_payload(read_checkpoint(path), path, device)
+
+
+def model_from_payload(
+    payload: dict[str, Any], source: str | os.PathLike[str], device: str | torch.device = "cpu"
+) -> TPCNet:
+    """The model of a checked checkpoint payload (:func:`check_payload`) on ``device``, in eval
+    mode; errors name ``source``."""
+    path = source
     try:
         cfg = ModelConfig.from_dict(payload["config"])
     except ConfigError as exc:

@@ -60,6 +60,7 @@ from model.class_prompt_counts import (
     other_label_boxes,
 )
 from scenes.calib import IMAGE_SIZE
+from scenes.layout import ID_WIDTH, is_frame_id
 from scenes.projection import in_camera_view
 from scenes.root import LIDAR_FOLDER, RADAR_FOLDERS, RootError, Sample, Talk2RadarRoot
 
@@ -289,8 +290,11 @@ def root_frame_ids(root: Talk2RadarRoot, split: str) -> list[str]:
         raise RootError(f"{label_dir}: no label folder (a root with full labels has one)")
     ids = sorted(path.stem for path in label_dir.glob("*.txt"))
     for sid in ids:
-        if not (len(sid) == 5 and sid.isdigit()):
-            raise RootError(f"{label_dir / (sid + '.txt')}: not named by a 5-digit frame id")
+        if not is_frame_id(sid):
+            raise RootError(
+                f"{label_dir / (sid + '.txt')}: not named by a {ID_WIDTH}-digit frame id "
+                "(ASCII digits)"
+            )
     if not ids:
         raise RootError(f"{label_dir}: no label files")
     return ids

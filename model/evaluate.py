@@ -41,6 +41,7 @@ from model.metrics import VodResult, evaluate_frames
 if TYPE_CHECKING:
     from model.report import GroundingReport
 from scenes.kitti import LabelError, ObjectLabel, parse_label_line, read_label_file
+from scenes.layout import ID_WIDTH, format_id, is_frame_id
 from scenes.textfile import read_text_file
 
 DEFAULT_CHECKPOINT = Path(__file__).resolve().parents[1] / "checkpoints" / "tpcnet-small.pt"
@@ -98,15 +99,16 @@ def _frame_files(folder: Path, what: str) -> dict[str, Path]:
         if not regular:
             raise EvaluationInputError(f"{path}: cannot read this {what} file ({reason})")
         stem = path.stem
-        if not (stem.isascii() and stem.isdigit()):
+        if not is_frame_id(stem):
+            if stem.isascii() and stem.isdigit() and len(stem) < ID_WIDTH:
+                raise EvaluationInputError(
+                    f"{path}: frame id {stem!r} is not written as {ID_WIDTH} digits; rename it "
+                    f"{format_id(stem)}.txt (frame ids are zero-padded to {ID_WIDTH} digits, and "
+                    "one frame has one file)"
+                )
             raise EvaluationInputError(
-                f"{path}: not a {what} file name: expected <5-digit frame id>.txt, e.g. 00002.txt"
-            )
-        padded = f"{int(stem):05d}"
-        if stem != padded:
-            raise EvaluationInputError(
-                f"{path}: frame id {stem!r} is not written as 5 digits; rename it {padded}.txt "
-                "(frame ids are zero-padded to 5 digits, and one frame has one file)"
+                f"{path}: not a {what} file name: expected <{ID_WIDTH}-digit frame id>.txt, e.g. "
+                f"{format_id(2)}.txt"
             )
         files[stem] = path
     return files

@@ -26,6 +26,7 @@ boxes and scores, misses and false detections included.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 
@@ -34,7 +35,9 @@ import torch
 from torch import Tensor
 
 from model.decode import decode
+from model.grid import BevGrid
 from model.grounder import SceneCandidates, stack_candidates
+from model.head import HeadOutput
 from model.labelled import anchor_scores
 from model.losses import LossTerms, grounding_loss
 from model.referent import CandidateBatch, referent_loss
@@ -45,11 +48,17 @@ from model.targets import (
     draw_targets,
     grid_cell_centres,
 )
-from model.text import TextFeatures
+from model.text import (
+    MiniLMTextEncoder,
+    TextFeatures,
+    encode_minilm_batched,
+    pad_features,
+    validate_prompt,
+)
 from model.tpcnet import TPCNet, as_points
 from scenes.actors import CLASSES, Actor
-from scenes.boxes import match_by_centre
-from scenes.frame_dataset import FrameDataset, FrameItem
+from scenes.calib import Calibration
+from scenes.frame_dataset import AnnotatedRegion, FrameItem
 from scenes.prompts import Prompt, PromptConfig, generate_prompts
 
 MATCH_DISTANCE = {"Car": 2.0, "Pedestrian": 1.0, "Cyclist": 1.2}
@@ -69,6 +78,8 @@ class ReferentTrainConfig:
         referent_weight: Weight of the referent BCE in the total loss.
         listwise_weight: Weight of the listwise term.
         phrasing: Phrasing stream of the generated prompts (``PromptConfig.phrasing``).
+        label_prompts: Labels-source frames with scene labels: prompts generated per frame from
+            its labelled boxes, beside the given ones (:func:`frame_prompts`).
     """
 
     prompts_per_scene: int = 8
@@ -79,6 +90,7 @@ class ReferentTrainConfig:
     referent_weight: float = 1.0
     listwise_weight: float = 0.5
     phrasing: str = "train"
+    label_prompts: int = 0
 
 
 @dataclass(frozen=True)
@@ -168,15 +180,51 @@ def _prompt_losses(
     return referent_loss(logits, target, batch.padding)
 
 
+def float32_output(out: HeadOutput) -> HeadOutput:
+    """``out`` in float32 (a bfloat16 autocast forward's output; a no-op for float32)."""
+    return HeadOutput(out.heatmap.float(), out.regression.float())
+
+
+def _per_item(
+    rng: np.random.Generator | Sequence[np.random.Generator], count: int
+) -> list[np.random.Generator]:
+    """One generator per item: ``rng`` itself for all (drawn in turn), or one given per item."""
+    if isinstance(rng, np.random.Generator):
+        return [rng] * count
+    rngs = list(rng)
+    if len(rngs) != count:
+        raise ValueError(f"{len(rngs)} random generators for {count} items")
+    return rngs
+
+
+def step_text(model: TPCNet, texts: Sequence[str]) -> TextFeatures:
+    """The step's prompts encoded by ``model``'s text encoder. The frozen MiniLM encodes the
+    step's distinct prompts afresh in one padded batch, bypassing its cache: batched features equal
+    one-at-a-time ones only to float rounding, so a cache filled by earlier steps would make a
+    step's features depend on them, and a resumed run would not repeat an uninterrupted one."""
+    encoder = model.text_encoder
+    if isinstance(encoder, MiniLMTextEncoder):
+        valid = [validate_prompt(t) for t in texts]
+        distinct = list(dict.fromkeys(valid))
+        entries = dict(
+            zip(distinct, encode_minilm_batched(distinct, encoder.max_tokens), strict=True)
+        )
+        return pad_features([entries[t] for t in valid], model.device)
+    return encoder(texts)
+
+
 def referent_step(
     model: TPCNet,
     frames: Sequence[FrameItem],
-    rng: np.random.Generator,
+    rng: np.random.Generator | Sequence[np.random.Generator],
     cfg: ReferentTrainConfig,
     prompt_config: PromptConfig | None = None,
 ) -> ReferentLoss:
-    """Losses of one batch of scenes (module docstring); call ``.total.backward()``."""
+    """Losses of one batch of scenes (module docstring); call ``.total.backward()``. ``rng`` is
+    one generator drawn from scene after scene, or one per scene (then a scene's jitter and
+    prompts do not depend on the others of the batch: :func:`model.train.item_rngs`)."""
     device = model.device
+    rngs = _per_item(rng, len(frames))
     lidar = [as_points(f.lidar, 4, "LiDAR").to(device) for f in frames]
     radar = [as_points(f.radar, 7, "radar").to(device) for f in frames]
     out, maps = model.detect(
@@ -184,10 +232,11 @@ def referent_step(
     )
     actors = [in_grid_actors(f.actors, model) for f in frames]
     targets = detection_targets(model, frames, actors).to(device)
+    out = float32_output(out)  # the losses and the decoding in float32 under autocast
     det = grounding_loss(out, targets)
     with torch.no_grad():
         dets = decode(out, model.head_grid, model.cfg.head, model.cfg.referent.candidate_threshold)
-        heat = torch.sigmoid(out.heatmap.detach()).float().cpu().numpy()
+        heat = torch.sigmoid(out.heatmap.detach()).cpu().numpy()
     pcfg = prompt_config or PromptConfig(phrasing=cfg.phrasing)
     scenes, texts, rows, target_rows = [], [], [], []
     for b, frame in enumerate(frames):
@@ -196,11 +245,20 @@ def referent_step(
         d = dets[b]
         inside = slice(None) if frame.region is None else frame.region.contains(d.boxes[:, :2])
         boxes, labels, scores, ids = training_candidates(
-            actors[b], d.boxes[inside], d.labels[inside], d.scores[inside], heat[b], model, rng, cfg
+            actors[b],
+            d.boxes[inside],
+            d.labels[inside],
+            d.scores[inside],
+            heat[b],
+            model,
+            rngs[b],
+            cfg,
         )
         usable = [
             (text, refs)
-            for text, refs in frame_prompts(frame, rng, cfg.prompts_per_scene, pcfg)
+            for text, refs in frame_prompts(
+                frame, rngs[b], cfg.prompts_per_scene, pcfg, cfg.label_prompts
+            )
             if set(refs) <= set(ids.tolist())
         ]
         if not usable:
@@ -215,22 +273,32 @@ def referent_step(
     if not texts:
         zero = det.total.new_zeros(())
         return ReferentLoss(det.total, det, zero, zero, 0)
-    prefetch = getattr(model.text_encoder, "prefetch", None)
-    if prefetch is not None:
-        prefetch(texts)
-    text = model.text_encoder(texts)
+    text = step_text(model, texts)
     bce, listwise = _prompt_losses(model, scenes, rows, text, target_rows)
     total = det.total + cfg.referent_weight * (bce + cfg.listwise_weight * listwise)
     return ReferentLoss(total, det, bce, listwise, len(texts))
 
 
 def frame_prompts(
-    frame: FrameItem, rng: np.random.Generator, count: int, config: PromptConfig
+    frame: FrameItem,
+    rng: np.random.Generator,
+    count: int,
+    config: PromptConfig,
+    label_prompts: int = 0,
 ) -> list[tuple[str, tuple[int, ...]]]:
     """``(text, referent actor ids)`` of a frame's training prompts: the prompts that come with
-    it (labels source, all of them), or ``count`` generated from its actors (sidecar source)."""
+    it (labels source, all of them), or ``count`` generated from its actors (sidecar source).
+
+    ``label_prompts``: on a labels-source frame with complete labels (scene labels), that many
+    more prompts generated from its labelled boxes, of the attributes a box alone decides
+    (``PromptConfig.geometry_only``: class, depth, side; the boxes' motion is unknown)."""
     if not frame.generates_prompts:
-        return [(g.text, g.referent_ids) for g in frame.given]
+        given = [(g.text, g.referent_ids) for g in frame.given]
+        if label_prompts <= 0 or frame.region is None:
+            return given
+        geometry = replace(config, geometry_only=True)
+        extra: list[Prompt] = generate_prompts(frame.actors, rng, label_prompts, config=geometry)
+        return given + [(p.text, tuple(p.referent_ids)) for p in extra]
     prompts: list[Prompt] = generate_prompts(frame.actors, rng, count, config=config)
     return [(p.text, tuple(p.referent_ids)) for p in prompts]
 
@@ -254,163 +322,38 @@ def detection_targets(
     if all(f.region is None for f in frames):
         return targets
     h, w = model.head_grid.shape
-    centres = grid_cell_centres(model.head_grid)
     ignore = np.zeros((len(frames), 1, h, w), dtype=bool)
     for b, frame in enumerate(frames):
         if frame.region is not None:
-            ignore[b, 0] = ~frame.region.contains(centres).reshape(h, w)
+            region = frame.region
+            calib = tuple(
+                (m.tobytes(), m.shape)
+                for m in (region.calib.P2, region.calib.R0_rect, region.calib.Tr_velo_to_cam)
+            )
+            ignore[b, 0] = _outside(model.head_grid, calib, region.image_size, region.mirrored)
     return replace(targets, ignore=torch.from_numpy(ignore))
 
 
-@dataclass(frozen=True)
-class CachedScene:
-    """A training scene encoded once by the frozen detector, with its bank of prompts.
-
-    Attributes:
-        candidates: The detector's candidates (tensors detached, on the CPU).
-        actor_ids: ``(K,)`` the actor each candidate detects, -1 for a false detection.
-        prompts: Generated prompts with at least one detected referent.
-        targets: Per prompt, ``(K,)`` float32: 1 where the candidate is a referent.
-    """
-
-    candidates: SceneCandidates
-    actor_ids: np.ndarray
-    prompts: tuple[str, ...]
-    targets: tuple[np.ndarray, ...]
-
-
-def match_detections(boxes: np.ndarray, labels: np.ndarray, actors: Sequence[Actor]) -> np.ndarray:
-    """Actor id ``(K,)`` of each detection (-1: none): detections in the given (score) order take
-    the nearest free actor of their class within :data:`MATCH_DISTANCE` of the BEV centre
-    (:func:`scenes.boxes.match_by_centre`)."""
-    if not actors:
-        return np.full(len(boxes), -1, dtype=np.int64)
-    targets = np.stack([a.box for a in actors])
-    target_labels = np.array([CLASSES.index(a.cls) for a in actors], dtype=np.int64)
-    limits = np.array([MATCH_DISTANCE[c] for c in CLASSES])
-    index = match_by_centre(boxes, labels, targets, target_labels, limits)
-    ids = np.array([a.actor_id for a in actors], dtype=np.int64)
-    return np.where(index >= 0, ids[np.maximum(index, 0)], -1)
-
-
-@dataclass
-class TextBank:
-    """Frozen-encoder token features of every banked prompt: ``text -> (tokens, numbers,
-    truncated)`` (tokens kept as float16 to halve the memory)."""
-
-    entries: dict
-
-    def features(self, texts: Sequence[str], device: torch.device):
-        """:class:`model.text.TextFeatures` of ``texts`` (all in the bank)."""
-        from model.text import pad_features
-
-        return pad_features([self.entries[t] for t in texts], device)
-
-
-def cache_scenes(
-    model: TPCNet,
-    dataset: FrameDataset,
-    prompts_per_scene: int,
-    seed: int = 0,
-    phrasing: str = "train",
-    progress: bool = True,
-) -> tuple[list[CachedScene], TextBank]:
-    """Encode every scene of ``dataset`` with the frozen model, generate ``prompts_per_scene``
-    prompts per scene and encode them with the frozen text encoder (module docstring)."""
-    from tqdm import tqdm
-
-    from model.text import encode_minilm_batched
-
-    model.eval()
-    pcfg = PromptConfig(phrasing=phrasing)
-    scenes = []
-    with torch.no_grad():
-        for i in tqdm(range(len(dataset)), desc="cache scenes", disable=not progress):
-            item = dataset[i]
-            objects = model.encode_scene(item.lidar, item.radar).objects
-            assert objects is not None
-            cpu = replace(
-                objects,
-                geometry=objects.geometry.cpu(),
-                fused=objects.fused.cpu(),
-                lidar=None if objects.lidar is None else objects.lidar.cpu(),
-                radar=None if objects.radar is None else objects.radar.cpu(),
-            )
-            ids = match_detections(objects.boxes, objects.labels, item.actors)
-            rng = np.random.default_rng((seed, 11, i))
-            prompts = frame_prompts(item, rng, prompts_per_scene, pcfg)
-            # A generated prompt needs a detected referent; a given one is kept when it refers to
-            # nothing (the empty answer is an answer) or to at least one detected object.
-            usable = [
-                (text, refs)
-                for text, refs in prompts
-                if np.isin(ids, refs).any() or (not refs and not item.generates_prompts)
-            ]
-            scenes.append(
-                CachedScene(
-                    cpu,
-                    ids,
-                    tuple(text for text, _ in usable),
-                    tuple(np.isin(ids, refs).astype(np.float32) for _, refs in usable),
-                )
-            )
-    texts = list(dict.fromkeys(t for s in scenes for t in s.prompts))
-    entries = {}
-    max_tokens = model.cfg.text.max_tokens
-    chunk = 256
-    for start in tqdm(
-        range(0, len(texts), chunk), desc="encode prompts", disable=not progress, unit="chunk"
-    ):
-        part = texts[start : start + chunk]
-        for text, (tok, num, trunc) in zip(
-            part, encode_minilm_batched(part, max_tokens, 64), strict=True
-        ):
-            entries[text] = (tok.half(), num, trunc)
-    return scenes, TextBank(entries)
-
-
-def cached_referent_step(
-    model: TPCNet,
-    scenes: Sequence[CachedScene],
-    bank: TextBank,
-    rng: np.random.Generator,
-    cfg: ReferentTrainConfig,
-) -> ReferentLoss:
-    """Referent loss on cached scenes, ``cfg.prompts_per_scene`` banked prompts drawn per scene
-    (only the referent stage learns). Undetected referents cannot be answered and are not in a
-    prompt's target."""
-    device = model.device
-    chosen, texts, rows, targets = [], [], [], []
-    for scene in scenes:
-        if not len(scene.candidates) or not scene.prompts:
-            continue
-        k = min(cfg.prompts_per_scene, len(scene.prompts))
-        picks = rng.choice(len(scene.prompts), size=k, replace=False)
-        index = len(chosen)
-        chosen.append(scene.candidates)
-        for j in picks:
-            texts.append(scene.prompts[j])
-            rows.append(index)
-            targets.append(scene.targets[j])
-    zero = torch.zeros((), device=device)
-    if not texts:
-        return ReferentLoss(zero, LossTerms(zero, zero, zero), zero, zero, 0)
-    text = bank.features(texts, device)
-    bce, listwise = _prompt_losses(model, chosen, rows, text, targets)
-    total = cfg.referent_weight * (bce + cfg.listwise_weight * listwise)
-    return ReferentLoss(total, LossTerms(zero, zero, zero), bce, listwise, len(texts))
+@functools.lru_cache(maxsize=64)
+def _outside(
+    grid: BevGrid, calib: tuple, image_size: tuple[int, int], mirrored: bool
+) -> np.ndarray:
+    """``(H, W)`` bool: head-grid cells outside the annotated region of a calibration (given as
+    the bytes and shapes of ``P2``, ``R0_rect``, ``Tr_velo_to_cam``); a release's frames share a
+    handful of calibrations, so this is computed once per calibration and flip."""
+    p2, r0, tr = (np.frombuffer(data, dtype=np.float64).reshape(shape) for data, shape in calib)
+    region = AnnotatedRegion(Calibration(p2, r0, tr), image_size, mirrored)
+    h, w = grid.shape
+    return ~region.contains(grid_cell_centres(grid)).reshape(h, w)
 
 
 __all__ = [
     "MATCH_DISTANCE",
-    "CachedScene",
     "ReferentLoss",
     "ReferentTrainConfig",
-    "TextBank",
-    "cache_scenes",
-    "cached_referent_step",
+    "float32_output",
     "in_grid_actors",
-    "match_detections",
     "referent_step",
+    "step_text",
     "training_candidates",
 ]

@@ -52,7 +52,7 @@ from model.grounder import (
     stack_candidates,
 )
 from model.head import C3DRecHead, HeadOutput
-from model.labelled import LabelledBoxes, anchor_scores
+from model.labelled import LabelledBoxes, anchor_scores, with_context
 from model.pillars import PillarEncoder
 from model.referent import ReferentStage
 from model.text import TextFeatures, build_text_encoder, validate_prompt
@@ -112,6 +112,9 @@ class SceneFeatures:
         timings: Time per stage of the encoding.
         objects: ``grounding="referent"`` only: the text-agnostic detections of the scene as
             referent-stage candidates, and the detector's ``(3, H, W)`` sigmoid heatmaps.
+        answerable: With labelled candidates (:mod:`model.labelled`): the first this many
+            candidates are the labelled boxes, the only possible answers (the rest is context).
+            None: every candidate may be an answer.
     """
 
     stages: tuple[Tensor, ...]
@@ -120,6 +123,7 @@ class SceneFeatures:
     timings: SceneTimings
     objects: SceneCandidates | None = None
     detection_heatmaps: np.ndarray | None = None
+    answerable: int | None = None
 
 
 @dataclass(frozen=True)
@@ -419,7 +423,7 @@ class TPCNet(nn.Module):
         radar_t = self._clouds(
             None if radar is None else [radar], 1, "radar", RADAR_FEATURES, self.cfg.uses_radar
         )
-        objects, heat = None, None
+        objects, heat, answerable = None, None, None
         with torch.no_grad():
             stages, per_sensor, timings = self._encode(lidar_t, radar_t, timed=True)
             if self.referent is not None:
@@ -427,21 +431,31 @@ class TPCNet(nn.Module):
                 neck = self.neck(list(stages))
                 out = self.head(neck)
                 heat = torch.sigmoid(out.heatmap[0]).float().cpu().numpy()
-                if candidates is None:
-                    dets = decode(
-                        out,
-                        self.head_grid,
-                        self.cfg.head,
-                        self.cfg.referent.candidate_threshold,
-                        limit=self.cfg.referent.max_candidates,
-                    )[0]
-                    keep = slice(0, self.cfg.referent.max_candidates)
-                    boxes, labels = dets.boxes[keep], dets.labels[keep]
-                    scores = dets.scores[keep]
-                else:
-                    boxes, labels = candidates.boxes, candidates.labels
-                    scores = anchor_scores(
-                        heat, boxes, labels, self.head_grid, self.cfg.head.anchor
+                dets = decode(
+                    out,
+                    self.head_grid,
+                    self.cfg.head,
+                    self.cfg.referent.candidate_threshold,
+                    limit=self.cfg.referent.max_candidates,
+                )[0]
+                keep = slice(0, self.cfg.referent.max_candidates)
+                boxes, labels = dets.boxes[keep], dets.labels[keep]
+                scores = dets.scores[keep]
+                if candidates is not None:
+                    answerable = len(candidates)
+                    boxes, labels, scores = with_context(
+                        candidates,
+                        anchor_scores(
+                            heat,
+                            candidates.boxes,
+                            candidates.labels,
+                            self.head_grid,
+                            self.cfg.head.anchor,
+                        ),
+                        boxes,
+                        labels,
+                        scores,
+                        self.cfg.referent.max_candidates,
                     )
                 maps = SceneMaps(
                     neck[0],
@@ -464,6 +478,7 @@ class TPCNet(nn.Module):
             timings=timings,
             objects=objects,
             detection_heatmaps=heat,
+            answerable=answerable,
         )
 
     def ground(
@@ -534,8 +549,12 @@ class TPCNet(nn.Module):
                 probs = np.zeros(0, dtype=np.float32)
             t_ref = clock.lap()
         probs = probs.astype(np.float64)
+        if features.answerable is not None:  # labelled candidates; the proposals are context
+            probs[features.answerable :] = 0.0
         order = np.argsort(-probs, kind="stable")
         order = order[probs[order] >= threshold]
+        if features.answerable is not None:
+            order = order[order < features.answerable]
         heatmaps = referent_heatmap(
             heat, objects.boxes, objects.labels, probs, self.head_grid, self.cfg.head.anchor
         )

@@ -35,6 +35,8 @@ from scenes.layout import (
     RootError,
     format_id,
     meta_file,
+    parse_id,
+    parse_split_list,
     radar_folders_in,
     sample_dir,
     sample_file,
@@ -176,38 +178,23 @@ class Talk2RadarRoot:
         return sorted(p.stem for p in split_dir(self.lidar_dir).glob("*.txt"))
 
     def ids(self, split: str) -> list[str]:
-        """The 5-digit ids listed in ``lidar/ImageSets/<split>.txt`` (blank lines skipped).
+        """The ids listed in ``lidar/ImageSets/<split>.txt`` (blank lines skipped).
 
         A root without an ``ImageSets`` folder (the View-of-Delft devkit's example set) serves
         every frame of ``lidar/training/velodyne/`` as any split, with a one-line notice
         (``UserWarning``, once per root object).
 
         Raises:
-            RootError: the list is missing or unreadable, a line is not an integer, or an id is
-                listed twice (``2`` and ``00002`` are the same id); the message names file and line.
+            RootError: the list is missing or unreadable, an entry is not a 5-digit ASCII frame
+                id (:func:`scenes.layout.parse_split_list`), or an id is listed twice; the
+                message names file and line.
         """
         if not split_dir(self.lidar_dir).is_dir():
             return self._all_frames(split)
         path = split_file(self.lidar_dir, split)
         if not _is_file(path):
             raise RootError(f"{path}: split {split!r} not found (present: {self.splits()})")
-        out: list[str] = []
-        first: dict[str, int] = {}
-        text = read_text_file(path, "split list", RootError)
-        for lineno, line in enumerate(text.splitlines(), start=1):
-            if line.strip():
-                try:
-                    sid = format_id(line.strip())
-                except RootError as exc:
-                    raise RootError(f"{path}:{lineno}: {exc}") from exc
-                if sid in first:
-                    raise RootError(
-                        f"{path}:{lineno}: sample {sid} is listed twice (first on line "
-                        f"{first[sid]}); each id may appear once per split"
-                    )
-                first[sid] = lineno
-                out.append(sid)
-        return out
+        return parse_split_list(read_text_file(path, "split list", RootError), path)
 
     def _all_frames(self, split: str) -> list[str]:
         """Every frame of ``lidar/training/velodyne/`` (sorted), for a root without ImageSets."""
@@ -215,12 +202,9 @@ class Talk2RadarRoot:
         ids = []
         for path in sorted(folder.glob(f"*{FOLDER_SUFFIX[VELODYNE]}")):
             try:
-                sid = format_id(path.stem)
+                ids.append(parse_id(path.stem))
             except RootError as exc:
                 raise RootError(f"{path}: not named by a frame id ({exc})") from exc
-            if sid != path.stem:
-                raise RootError(f"{path}: not named by a 5-digit frame id (expected {sid})")
-            ids.append(sid)
         if not self._all_frames_noted:
             self._all_frames_noted = True
             warnings.warn(

@@ -7,7 +7,7 @@ class names (``Car``, ``Pedestrian``, ``Cyclist`` and ``bicycle``, ``rider``, ``
 ``ride_uncertain``, ``DontCare``). Training on a real root takes its detection targets from here
 (the three classes are positives; the others are never positives, and the real streets are full of
 them), grounding over labelled boxes takes its candidates from here, and the annotation tool
-pre-selects referents among them. VoD annotates only the camera's field of view: :func:`fov_mask`
+pre-selects referents among them. VoD annotates only the camera's field of view within 50 m: :func:`fov_mask`
 tells the annotated region of the BEV, outside of which nothing is background.
 
 Nothing here reads a Talk2PC sidecar: a VoD root (or any root laid out as one) is read through its
@@ -22,14 +22,13 @@ from pathlib import Path
 import numpy as np
 
 from scenes.actors import CLASSES
-from scenes.calib import Calibration, CameraBoxes, boxes_camera_to_lidar, read_calib
+from scenes.calib import IMAGE_SIZE, Calibration, CameraBoxes, boxes_camera_to_lidar, read_calib
 from scenes.kitti import ObjectLabel, read_label_file
 from scenes.layout import CALIB, LABEL, LIDAR_FOLDER, RootError, format_id, sample_file
+from scenes.vod_labels import in_annotated_area
 
 DONT_CARE = "DontCare"
 """VoD's name for a region whose objects are neither positives nor negatives."""
-FOV_MARGIN_PX = 0.0
-"""Pixels by which the annotated region extends beyond the image border."""
 
 
 @dataclass(frozen=True)
@@ -131,31 +130,34 @@ class SceneLabels:
         return objects_from_labels(read_label_file(path), read_calib(calib_path))
 
 
+CELL_PROBE = (1.0, 1.0, 1.0)
+"""Size (l, w, h, m) of the probe box :func:`fov_mask` tests at each position."""
+PROBE_Z = -1.0
+"""LiDAR-frame z of the probe's centre: a road user's centre height (the ground is near -1.7)."""
+
+
 def fov_mask(
-    xy: np.ndarray, calib: Calibration, image_size: tuple[int, int], height: float = 0.0
+    xy: np.ndarray, calib: Calibration, image_size: tuple[int, int] = IMAGE_SIZE
 ) -> np.ndarray:
-    """Which BEV positions lie in the camera's field of view (the region VoD annotates).
+    """Which BEV positions lie in the region VoD annotates (:func:`scenes.vod_labels.
+    in_annotated_area`: within its range and partly in the camera's view), tested with a small
+    probe box (:data:`CELL_PROBE`) at each position.
 
     Args:
         xy: ``(N, 2)`` LiDAR-frame ground positions (m).
-        calib: LiDAR -> camera calibration (``P2``, ``R0_rect``, ``Tr_velo_to_cam``).
+        calib: LiDAR -> camera calibration.
         image_size: ``(width, height)`` pixels.
-        height: z (LiDAR frame) at which the positions are projected.
 
     Returns:
-        ``(N,)`` bool: in front of the camera and projecting inside the image's columns (rows are
-        not tested: an object's ground point may fall below the image while its body is seen).
+        ``(N,)`` bool.
     """
     pts = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     if len(pts) == 0:
         return np.zeros(0, dtype=bool)
-    hom = np.column_stack([pts, np.full(len(pts), height), np.ones(len(pts))])
-    cam = hom @ calib.velo_to_img.T
-    depth = cam[:, 2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        u = cam[:, 0] / depth
-    width = float(image_size[0])
-    return (depth > 0.1) & (u >= -FOV_MARGIN_PX) & (u <= width + FOV_MARGIN_PX)
+    probes = np.column_stack(
+        [pts, np.full(len(pts), PROBE_Z), np.tile(CELL_PROBE, (len(pts), 1)), np.zeros(len(pts))]
+    )
+    return in_annotated_area(probes, calib, image_size)
 
 
 __all__ = [

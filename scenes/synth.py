@@ -33,6 +33,16 @@ Splits
     (``--split-fractions``, train / val / test), which keeps the proportions at every prefix.
 
 Weather: ``clear`` (default), ``rain``, ``fog``, or ``mixed`` (60 / 20 / 20 % per world).
+
+Sequences
+    ``--sequence-length N`` writes ``N`` consecutive 10 Hz frames of each world
+    (:func:`scenes.synth_frame.synthesize_sequence`, :func:`scenes.sequence.world_at`: actors
+    moved by their velocities, the ego by its speed), each with up to ``--prompts-per-world``
+    samples, in frame order (ids ``first .. first + n - 1``), the frame's sensors under
+    ``sources/w<world>f<k>/`` and a View-of-Delft pose file ``pose/<id>.json`` in both trees
+    (:func:`scenes.sequence.sequence_pose`). A sequence stops before its first frame without a
+    prompt. All frames of a world go to one split. The sidecar's actors are those of the frame
+    (boxes moved), and ``extra["sequence_frame"]`` is the frame's index.
 """
 
 from __future__ import annotations
@@ -51,8 +61,10 @@ from scenes.calib import Calibration, sensor_to_lidar
 from scenes.camera import CameraConfig
 from scenes.durable import append_json_line, drop_torn_tail, read_json_lines
 from scenes.layout import LABEL, LIDAR_FOLDER, sample_file
+from scenes.poses import FRAME_RATE, write_pose
 from scenes.prompts import PHRASINGS
 from scenes.sample_meta import SampleMeta
+from scenes.sequence import sequence_pose
 from scenes.synth_frame import (
     MIXED,
     MIXED_WEATHER,
@@ -63,6 +75,7 @@ from scenes.synth_frame import (
     SynthSettings,
     sensed_actor_ids,
     synthesize,
+    synthesize_sequence,
     world_streams,
 )
 from scenes.weather import WEATHERS
@@ -87,6 +100,7 @@ __all__ = [  # with the settings and one frame from scenes.synth_frame, re-expor
     "main",
     "sensed_actor_ids",
     "synthesize",
+    "synthesize_sequence",
     "world_streams",
     "write_frame",
 ]
@@ -125,15 +139,25 @@ def write_frame(
     settings: SynthSettings,
     lidar_calib: Calibration | None = None,
     radar_calib: Calibration | None = None,
+    sequence_frame: int | None = None,
 ) -> list[str]:
     """Write the first ``count`` prompts of ``frame`` as samples ``first_id, first_id + 1, ...``
-    (calibrations default to ``settings.calibrations()``, which match the camera image)."""
+    (calibrations default to ``settings.calibrations()``, which match the camera image).
+
+    ``sequence_frame``: the frame's index in its world's sequence (``--sequence-length``): its
+    sensors go to ``sources/w<world>f<k>/`` (``w<world>`` for frame 0, as without sequences),
+    every sample gets the frame's pose file (:func:`scenes.sequence.sequence_pose`) and its
+    sidecar records ``extra["sequence_frame"]``. None: no sequence (no pose file).
+    """
     default_lidar, default_radar = settings.calibrations()
     lidar_calib = lidar_calib if lidar_calib is not None else default_lidar
     radar_calib = radar_calib if radar_calib is not None else default_radar
     world = frame.world
+    key = f"w{world.world_id:05d}"
+    if sequence_frame:
+        key += f"f{sequence_frame:03d}"
     files = writer.write_sensors(
-        f"w{world.world_id:05d}",
+        key,
         frame.lidar.points,
         frame.radar.points,
         lidar_calib,
@@ -161,6 +185,7 @@ def write_frame(
                 "seed": settings.seed,
                 "unsensed_actor_ids": unseen,
                 "clutter": [c.to_json() for c in world.clutter],
+                **({"sequence_frame": sequence_frame} if sequence_frame is not None else {}),
             },
         )
         ids.append(
@@ -174,6 +199,12 @@ def write_frame(
                 calib=lidar_calib,
             )
         )
+    if sequence_frame is not None:
+        ego_x = frame.world.ego_speed * sequence_frame / FRAME_RATE
+        pose = sequence_pose(frame.world.world_id, ego_x, lidar_calib)
+        for sid in ids:
+            for tree in writer.trees:
+                write_pose(tree, sid, pose)
     return ids
 
 
@@ -233,6 +264,17 @@ def _read_manifest(out: Path, settings: SynthSettings) -> dict[int, dict]:
     return worlds
 
 
+def _prompted_frames(frames: Sequence[SynthFrame]) -> list[SynthFrame]:
+    """The frames of a sequence up to the first one without a prompt (a sample needs a
+    prompt, and a sequence with a frame missing would not be one of consecutive frames)."""
+    out = []
+    for frame in frames:
+        if not frame.prompts:
+            break
+        out.append(frame)
+    return out
+
+
 def _complete_on_disk(writer: Talk2RadarWriter, ids: Sequence[str]) -> bool:
     return all(sample_file(tree, LABEL, sid).is_file() for tree in writer.trees for sid in ids)
 
@@ -281,16 +323,32 @@ def generate_root(
             ids = list(entry["ids"])
             skipped += 1
         else:
-            frame = synthesize(settings, world_index, radar_to_lidar, lidar_calib)
+            drive = _prompted_frames(
+                synthesize_sequence(
+                    settings, world_index, radar_to_lidar, lidar_calib, settings.sequence_length
+                )
+            )
             ids = []
-            if frame.prompts:
-                count = min(len(frame.prompts), remaining)
-                ids = write_frame(writer, frame, next_id, count, settings, lidar_calib, radar_calib)
+            sequence = settings.sequence_length > 1
+            for k, frame in enumerate(drive):
+                count = min(len(frame.prompts), remaining - len(ids))
+                if count <= 0:
+                    break
+                ids += write_frame(
+                    writer,
+                    frame,
+                    next_id + len(ids),
+                    count,
+                    settings,
+                    lidar_calib,
+                    radar_calib,
+                    sequence_frame=k if sequence else None,
+                )
             entry = {
                 "world": world_index,
                 "first_id": next_id,
                 "ids": ids,
-                "available": len(frame.prompts),
+                "available": sum(len(f.prompts) for f in drive),
             }
             manifest[world_index] = entry
             append_json_line(out / MANIFEST, entry)
@@ -371,6 +429,14 @@ def _parser() -> argparse.ArgumentParser:
         choices=(1, 2, 4),
         help="one camera ray per N x N pixels, upsampled (default 2; 4 is about twice as fast)",
     )
+    p.add_argument(
+        "--sequence-length",
+        type=int,
+        default=1,
+        metavar="N",
+        help="consecutive 10 Hz frames per world: actors move with their velocities, the ego "
+        "with its speed, each frame gets a View-of-Delft pose file (default 1: single frames)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
 
@@ -395,6 +461,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             prompts_per_world=args.prompts_per_world,
             phrasing=args.phrasing,
             camera=_camera_config(args),
+            sequence_length=args.sequence_length,
         )
         report = generate_root(
             args.out, args.frames, settings, args.split_fractions, progress=not args.quiet

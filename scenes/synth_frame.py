@@ -6,7 +6,7 @@ and sensed (LiDAR, accumulated radar, camera image) with its prompts drawn over 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -14,9 +14,11 @@ from scenes.calib import Calibration, vod_lidar_calibration, vod_radar_calibrati
 from scenes.camera import CameraConfig, render_image
 from scenes.layout import RADAR_FOLDER_OF_SCANS
 from scenes.lidar_sim import LidarConfig, LidarScan, simulate_lidar
+from scenes.poses import FRAME_RATE
 from scenes.projection import scale_calibration
 from scenes.prompts import PHRASINGS, Prompt, PromptConfig, generate_prompts
 from scenes.radar_sim import RadarConfig, RadarScan, simulate_radar
+from scenes.sequence import world_at
 from scenes.weather import WEATHERS, Weather
 from scenes.world import RayCaster, World, WorldConfig, generate_world
 
@@ -24,6 +26,10 @@ RADAR_FOLDER = RADAR_FOLDER_OF_SCANS
 """Radar tree per number of accumulated scans (:data:`scenes.layout.RADAR_FOLDER_OF_SCANS`)."""
 MIXED = "mixed"
 MIXED_WEATHER = (("clear", 0.6), ("rain", 0.2), ("fog", 0.2))
+
+
+MAX_SEQUENCE_LENGTH = 100
+"""Longest ``--sequence-length`` (10 s at 10 Hz: straight-line motion is meant for short runs)."""
 
 
 class SynthError(ValueError):
@@ -52,6 +58,8 @@ class SynthSettings:
         phrasing: Prompt wording stream, ``train``, ``heldout`` or ``all``
             (``scenes.prompts.PromptConfig.phrasing``).
         camera: The camera image's settings, or None for no image (``--no-camera``).
+        sequence_length: Consecutive 10 Hz frames written per world (``--sequence-length``;
+            :func:`synthesize_sequence`); 1: one frame, as before sequences existed.
     """
 
     seed: int = 0
@@ -65,6 +73,7 @@ class SynthSettings:
     radar: RadarConfig = field(default_factory=RadarConfig)
     phrasing: str = "train"
     camera: CameraConfig | None = field(default_factory=CameraConfig)
+    sequence_length: int = 1
 
     def __post_init__(self) -> None:
         if self.phrasing not in PHRASINGS:
@@ -77,6 +86,10 @@ class SynthSettings:
             raise SynthError(f"radar_scans must be 1, 3 or 5, got {self.radar_scans}")
         if self.prompts_per_world < 1:
             raise SynthError(f"prompts_per_world must be >= 1, got {self.prompts_per_world}")
+        if not 1 <= self.sequence_length <= MAX_SEQUENCE_LENGTH:
+            raise SynthError(
+                f"sequence_length must be in [1, {MAX_SEQUENCE_LENGTH}], got {self.sequence_length}"
+            )
 
     def key(self) -> dict:
         """The settings recorded in (and compared with) the manifest."""
@@ -90,6 +103,7 @@ class SynthSettings:
             **({"phrasing": self.phrasing} if self.phrasing != "train" else {}),
             # Only with a camera: a root without images records what it did before cameras.
             **({"camera": self.camera.key()} if self.camera is not None else {}),
+            **({"sequence_length": self.sequence_length} if self.sequence_length > 1 else {}),
         }
 
     def calibrations(self) -> tuple[Calibration, Calibration]:
@@ -183,10 +197,55 @@ def synthesize(
         radar_to_lidar: ``(4, 4)`` radar -> LiDAR transform (``scenes.calib.sensor_to_lidar``).
         camera_calib: The LiDAR calibration of the image (default ``settings.calibrations()``).
     """
+    return synthesize_sequence(settings, world_index, radar_to_lidar, camera_calib, length=1)[0]
+
+
+def synthesize_sequence(
+    settings: SynthSettings,
+    world_index: int,
+    radar_to_lidar: np.ndarray,
+    camera_calib: Calibration | None = None,
+    length: int = 1,
+) -> list[SynthFrame]:
+    """``length`` consecutive frames of world ``world_index`` at :data:`scenes.poses.FRAME_RATE`
+    (:func:`scenes.sequence.world_at`: actors moved by their velocities, the ego by its speed),
+    each sensed and prompted as :func:`synthesize` does one; frame 0 is exactly
+    :func:`synthesize`'s frame. Frame ``k > 0`` draws its sensors, prompts and image from
+    ``SeedSequence([seed, world_index, k])``; the weather stays frame 0's.
+    """
     rngs = world_streams(settings.seed, world_index)
     t0 = time.perf_counter()
-    world = generate_world(rngs["world"], world_index, settings.world)
+    first = generate_world(rngs["world"], world_index, settings.world)
     weather = _pick_weather(settings, rngs["weather"])
+    built = time.perf_counter() - t0
+    frames = []
+    for k in range(length):
+        world = first if k == 0 else world_at(first, k / FRAME_RATE)
+        streams = rngs if k == 0 else frame_streams(settings.seed, world_index, k)
+        frame = _sense(settings, world, weather, streams, radar_to_lidar, camera_calib)
+        if k == 0:
+            frame = replace(frame, times=replace(frame.times, world=built))
+        frames.append(frame)
+    return frames
+
+
+def frame_streams(seed: int, world_index: int, frame: int) -> dict[str, np.random.Generator]:
+    """The random streams of frame ``frame >= 1`` of a sequence (named as :func:`world_streams`;
+    the world and weather streams go unused: a sequence keeps its first frame's)."""
+    children = np.random.SeedSequence([seed, world_index, frame]).spawn(6)
+    names = ("world", "weather", "lidar", "radar", "prompts", "camera")
+    return {name: np.random.default_rng(s) for name, s in zip(names, children, strict=True)}
+
+
+def _sense(
+    settings: SynthSettings,
+    world: World,
+    weather: Weather,
+    rngs: dict[str, np.random.Generator],
+    radar_to_lidar: np.ndarray,
+    camera_calib: Calibration | None,
+) -> SynthFrame:
+    """Sense one world (LiDAR, radar, prompts over the sensed actors, the camera image)."""
     t1 = time.perf_counter()
     caster = RayCaster(world)
     lidar = simulate_lidar(caster, rngs["lidar"], settings.lidar, weather)
@@ -212,5 +271,5 @@ def synthesize(
         size = settings.camera.image_size
         image = render_image(world, calib, size, weather, rngs["camera"], settings.camera)
     t5 = time.perf_counter()
-    times = StageTimes(world=t1 - t0, lidar=t2 - t1, radar=t3 - t2, prompts=t4 - t3, camera=t5 - t4)
+    times = StageTimes(lidar=t2 - t1, radar=t3 - t2, prompts=t4 - t3, camera=t5 - t4)
     return SynthFrame(world, weather, lidar, radar, prompts, sensed, times, image)

@@ -1,15 +1,24 @@
 """Real-browser helpers shared by the browser tests and the screenshot scripts: where Debian's
-Chromium is, the flags it runs with (headless, software rendering), and a page-side check of
-viser's scene tree. Not a test module; the ``chromium`` fixture of ``conftest.py`` uses it.
+Chromium is, the flags it runs with (headless, software rendering), a page-side check of
+viser's scene tree, waiting on the server's state (:func:`poll`), where a world point appears on
+the canvas (:func:`pixel_of`, for ground clicks) and opening the Annotate tab
+(:func:`open_annotate`). Not a test module; the ``chromium`` fixture of ``conftest.py`` uses it.
 """
 
 from __future__ import annotations
 
+import math
 import shutil
+import time
+from collections.abc import Callable
 from pathlib import Path
+
+import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
 ARTIFACTS = REPO / "artifacts"
+PAGE_SIZE = (1400, 860)
+"""The browser tests' page size (CSS pixels): ``viewport={"width": 1400, "height": 860}``."""
 CHROMIUM_CANDIDATES = ("/usr/bin/chromium", "/usr/bin/chromium-browser")
 CHROMIUM_ARGS = [
     "--no-sandbox",
@@ -39,3 +48,63 @@ def scene_has(name: str) -> str:
         "() => window.__viserSceneTree !== undefined && "
         f"Object.keys(window.__viserSceneTree.getState()).includes({name!r})"
     )
+
+
+def poll(condition: Callable[[], object], timeout: float, what: str) -> None:
+    """Wait until ``condition()`` holds (checked every 50 ms); fail after ``timeout`` seconds."""
+    deadline = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
+        time.sleep(0.05)
+
+
+def pixel_of(camera, point, page_size: tuple[float, float] | None = None) -> tuple[float, float]:
+    """Where a world point (LiDAR frame) appears on a browser's canvas (full-page canvas).
+
+    viser's camera pose is ``T_world_camera`` in the OpenCV convention (+z forward, +y down) and
+    ``fov`` is the vertical field of view. The camera's ``image_width`` / ``image_height`` are the
+    render size, which the client may keep below the page's (its adaptive pixel ratio): with
+    ``page_size`` (the page's width and height in CSS pixels) the result is in the page's pixels,
+    where a mouse click goes.
+    """
+    w, x, y, z = camera.wxyz
+    rotation = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+    p = rotation.T @ (np.asarray(point, dtype=np.float64) - np.asarray(camera.position))
+    focal = camera.image_height / 2.0 / math.tan(camera.fov / 2.0)
+    u = camera.image_width / 2.0 + focal * p[0] / p[2]
+    v = camera.image_height / 2.0 + focal * p[1] / p[2]
+    if page_size is not None:
+        u *= page_size[0] / camera.image_width
+        v *= page_size[1] / camera.image_height
+    return u, v
+
+
+def open_annotate(page, app, timeout_s: float = 40.0):
+    """Load the app's page, wait for the scene, open the Annotate tab; returns the new browser's
+    :class:`app.annotate_tab.AnnotationPanel` once its draft has a frame."""
+    sessions = set(app.sessions)
+    page.goto(app.url)
+    page.wait_for_function(
+        "() => !document.body.innerText.includes('Connecting...')", timeout=timeout_s * 1000
+    )
+    page.wait_for_function(scene_has("/scene/lidar"), timeout=timeout_s * 1000)
+    page.get_by_role("tab", name="Annotate").click()
+    poll(lambda: set(app.sessions) - sessions, timeout_s, "the session")
+    session = app.sessions[max(set(app.sessions) - sessions)]
+    panel = next(p for p in app.annotations.panels() if p.session is session)
+    poll(lambda: panel.frame is not None, timeout_s, "the draft's frame")
+    return panel
+
+
+def labelled_field(page, label: str):
+    """The text field (``input`` or ``textarea``) of the viser control labelled ``label``
+    (viser's ``<label for=...>`` does not name a text field's id, so ``get_by_label`` misses)."""
+    row = f"//label[normalize-space()='{label}']/ancestor::div[contains(@class,'mantine-Flex-root')][1]"
+    return page.locator(f"xpath={row}").locator("input, textarea").first

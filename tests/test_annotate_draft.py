@@ -169,7 +169,7 @@ def _valid() -> Draft:
 
 INVALID = [
     (_valid().set_prompt("   "), "prompt", "the prompt is empty"),
-    (_valid().set_prompt("two\nlines"), "prompt", "single line"),
+    (_valid().set_prompt("two\nlines"), "prompt", "U+000A (LF)"),
     (Draft().set_prompt("a car"), "boxes", "no boxes: add at least one box, or mark"),
     (
         _valid().set_refers_to_nothing(True),

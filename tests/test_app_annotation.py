@@ -20,6 +20,7 @@ from app.annotate_tab import AnnotationPanel
 from app.annotate_tab.formatting import NO_BOX, option_index, option_pair_id, pair_option
 from app.annotate_tab.view import box_at, ground_hit, wxyz_to_yaw, yaw_to_wxyz
 from scenes.root import Talk2RadarRoot
+from tests.browser_helpers import PAGE_SIZE, pixel_of, poll
 
 # ---------------------------------------------------------------------- pure helpers
 
@@ -120,14 +121,13 @@ def test_place_two_boxes_type_prompt_save_and_find_the_sample(annotating_app, ws
             lambda: "/annotate/gizmo/selected/edges" in client.nodes, 5, "the selected box"
         )
 
-        client.set("Box", "(none)")  # one Class control: with no box selected it sets the next
-        client.pump_until(lambda: panel.selected is None, 5, "no box selected")
-        client.set("Class", "Pedestrian")
+        client.set("New box class", "Pedestrian")  # the next box's; the selected car stays
         client.pump_until(lambda: panel.w.cls.value == "Pedestrian", 5, "the class")
         client.click_ground(10.0, -2.0, ground)
         client.pump_until(lambda: len(panel.draft.boxes) == 2, 5, "the second box")
         second = panel.draft.boxes[1]
         assert second.cls == "Pedestrian" and panel.selected == second.box_id
+        assert panel.draft.boxes[0].cls == "Car"
         client.pump_until(
             lambda: "/annotate/boxes/edges" in client.nodes, 5, "the unselected box drawn"
         )
@@ -326,7 +326,7 @@ def test_fit_to_points_and_use_predictions(annotating_app, ws_client, gt_box) ->
         # The frame's car: points filling gt_box's extent shifted by 2 m per frame, axis-aligned
         # (write_tiny_root draws them between the box's min and max corners: yaw 0).
         car = gt_box + np.array([2.0 * app.frame.index, 0, 0, 0, 0, 0, -gt_box[6]])
-        client.set("Class", "Car")
+        client.set("New box class", "Car")
         client.pump_until(lambda: panel.w.cls.value == "Car", 5, "the class")
         client.click_ground(car[0] + 0.1, car[1], panel.frame.ground_z)
         client.pump_until(lambda: len(panel.draft.boxes) == 1, 5, "a rough box")
@@ -397,38 +397,6 @@ def test_open_edit_and_delete_a_saved_pair(annotating_app, ws_client) -> None:
 # ---------------------------------------------------------------------- in a real browser
 
 
-def pixel_of(camera, point: np.ndarray) -> tuple[float, float]:
-    """Where a world point (LiDAR frame) appears on a browser's canvas (full-page canvas).
-
-    viser's camera pose is ``T_world_camera`` in the OpenCV convention (+z forward, +y down) and
-    ``fov`` is the vertical field of view.
-    """
-    w, x, y, z = camera.wxyz
-    rotation = np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-    p = rotation.T @ (np.asarray(point, dtype=np.float64) - np.asarray(camera.position))
-    focal = camera.image_height / 2.0 / math.tan(camera.fov / 2.0)
-    return (
-        camera.image_width / 2.0 + focal * p[0] / p[2],
-        camera.image_height / 2.0 + focal * p[1] / p[2],
-    )
-
-
-def _poll(condition, timeout: float, what: str) -> None:
-    import time
-
-    deadline = time.monotonic() + timeout
-    while not condition():
-        if time.monotonic() > deadline:
-            raise AssertionError(f"timed out after {timeout} s waiting for {what}")
-        time.sleep(0.05)
-
-
 def drive_annotation(
     app,
     chromium: str,
@@ -468,23 +436,23 @@ def drive_annotation(
                 )
                 page.wait_for_function(scene_has("/scene/lidar"), timeout=timeout_ms)
                 page.get_by_role("tab", name="Annotate").click()
-                _poll(lambda: set(app.sessions) - sessions, timeout_s, "the session")
+                poll(lambda: set(app.sessions) - sessions, timeout_s, "the session")
                 session = app.sessions[max(set(app.sessions) - sessions)]
                 return next(p for p in app.annotations.panels() if p.session is session)
 
             panel = open_tab()
-            _poll(lambda: panel.frame is not None, timeout_s, "the frame")
+            poll(lambda: panel.frame is not None, timeout_s, "the frame")
             start = time.perf_counter()
             for k, (x, y, fit) in enumerate(targets):
                 camera = panel.session.client.camera
-                page.mouse.click(*pixel_of(camera, (x, y, panel.frame.ground_z)))
-                _poll(lambda k=k: len(panel.draft.boxes) == k + 1, timeout_s, f"box {k + 1}")
+                page.mouse.click(*pixel_of(camera, (x, y, panel.frame.ground_z), PAGE_SIZE))
+                poll(lambda k=k: len(panel.draft.boxes) == k + 1, timeout_s, f"box {k + 1}")
                 if fit:
                     placed = panel.draft.boxes[k].box
                     page.get_by_role("button", name="Fit to points").click()
-                    _poll(lambda k=k, b=placed: panel.draft.boxes[k].box != b, timeout_s, "fit")
+                    poll(lambda k=k, b=placed: panel.draft.boxes[k].box != b, timeout_s, "fit")
             page.get_by_role("button", name="Suggest").click()
-            _poll(lambda: panel.draft.prompt.strip() != "", timeout_s, "a suggested prompt")
+            poll(lambda: panel.draft.prompt.strip() != "", timeout_s, "a suggested prompt")
             before_shot = time.perf_counter()
             if before_screenshot is not None:
                 before_screenshot(panel)
@@ -495,7 +463,7 @@ def drive_annotation(
             page.screenshot(path=str(screenshot))
             shot_s = time.perf_counter() - before_shot
             page.get_by_role("button", name="Save pair").click()
-            _poll(lambda: {p.sample_id for p in store.pairs()} - before, timeout_s, "the save")
+            poll(lambda: {p.sample_id for p in store.pairs()} - before, timeout_s, "the save")
             elapsed = time.perf_counter() - start - shot_s  # the screenshot is not the person's
             (sid,) = {p.sample_id for p in store.pairs()} - before
             open_tab()  # a page reload: the pair is listed

@@ -47,7 +47,6 @@ from app.navigation import (
 from app.query_panel import (
     NO_HISTORY,
     PromptHistory,
-    normalise_prompt,
     results_markdown,
     submitted_prompt,
 )
@@ -60,6 +59,7 @@ from app.scene_view import (
     ring_segments,
 )
 from scenes.root import RootError, Talk2RadarRoot
+from scenes.text_policy import collapse_spaces
 
 # ---------------------------------------------------------------------------- colours
 
@@ -228,7 +228,8 @@ def test_submitted_prompt_detects_enter() -> None:
     assert submitted_prompt("the car ahead\n") == "the car ahead"
     assert submitted_prompt("\n") == ""
     assert submitted_prompt("two  cyclists\r\nleft") == "two cyclists left"
-    assert normalise_prompt("  a \t b  ") == "a b"
+    assert collapse_spaces("  a \t b  ") == "a b"
+    assert submitted_prompt("a\x0bb\n") == "a\x0bb"  # left for the text policy to refuse
 
 
 def test_prompt_history_order_dedup_cap() -> None:

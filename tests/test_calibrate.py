@@ -51,10 +51,45 @@ def test_command_writes_the_threshold_into_the_checkpoint(tmp_path: Path, write_
 
     root = write_tiny_root(tmp_path / "root", frames=2)
     path = save_checkpoint(tmp_path / "m.pt", build_model("small", text_encoder="gru"), step=3)
-    assert main(["--data", str(root), "--checkpoint", str(path), "--split", "test"]) == 0
+    args = ["--data", str(root), "--checkpoint", str(path), "--split", "test"]
+    assert main([*args, "--min-prompts", "2"]) == 0
     meta = load_checkpoint(path).checkpoint_metadata
     assert meta["step"] == 3  # the rest of the metadata is kept
     source = meta["operating_threshold_source"]
     assert source["split"] == "test" and source["prompts"] == 2
     assert operating_threshold(load_checkpoint(path)) == meta["operating_threshold"]
     assert main(["--data", str(root / "nowhere"), "--checkpoint", str(path)]) == 2
+
+
+def _one_line_error(capsys: pytest.CaptureFixture) -> str:
+    """The one error line on stderr (beside the progress bar's), no traceback."""
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.startswith("error: ")]
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+def test_a_split_that_cannot_measure_a_threshold_is_refused(
+    tmp_path: Path, write_tiny_root, capsys: pytest.CaptureFixture
+):
+    """Prompts that refer to nothing (any threshold returning nothing scores set F1 100 there),
+    or too few that refer to something: exit 2, one line, the checkpoint byte for byte as it was."""
+    from model import build_model
+    from model.calibrate import MIN_REFERRED_PROMPTS
+    from model.checkpoint import save_checkpoint
+
+    root = write_tiny_root(tmp_path / "root", frames=2)
+    path = save_checkpoint(tmp_path / "m.pt", build_model("small", text_encoder="gru"), step=3)
+    before = path.read_bytes()
+    args = ["--data", str(root), "--checkpoint", str(path), "--split", "test"]
+    assert main(args) == 2  # 2 prompts with a referent, fewer than the minimum
+    line = _one_line_error(capsys)
+    assert "2 of the 2 prompts of split 'test' have a referent" in line
+    assert f"at least {MIN_REFERRED_PROMPTS}" in line and "test.txt" in line
+    for label in (root / "lidar" / "training" / "label_2").glob("*.txt"):
+        label.write_text("")  # every prompt refers to nothing
+    assert main([*args, "--min-prompts", "1"]) == 2
+    assert "0 of the 2 prompts" in _one_line_error(capsys)
+    assert main([*args, "--min-prompts", "0"]) == 2  # never below one referred prompt
+    assert "0 of the 2 prompts" in _one_line_error(capsys)
+    assert path.read_bytes() == before

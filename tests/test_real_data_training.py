@@ -138,3 +138,73 @@ def test_joint_training_on_a_release_and_a_synthetic_root(synth_root, release_ro
     assert code == 0
     meta = torch.load(out / "last.pt", map_location="cpu", weights_only=False)["metadata"]
     assert len(meta["data"]["roots"]) == 2
+
+
+def test_joint_training_with_scene_labels_ignores_outside_the_camera_view(
+    real_format_roots, tmp_path
+):
+    from model import build_model
+    from model.referent_train import detection_targets, in_grid_actors
+    from scenes.scene_labels import SceneLabels
+
+    t2r, vod = real_format_roots
+    frames = FrameDataset(t2r, "train", scene_labels=SceneLabels(vod))
+    item = frames[0]
+    assert item.region is not None and item.from_labels and item.given
+    model = build_model("small")
+    targets = detection_targets(model, [item], [in_grid_actors(item.actors, model)])
+    assert targets.ignore is not None
+    ignored = targets.ignore[0, 0]
+    assert ignored.any() and not ignored.all()
+    # The cells beside the ego, outside the camera's view, are ignored; straight ahead is not.
+    grid = model.head_grid
+    col, row = (int(v) for v in grid.xy_to_cell(np.array([[2.0, 20.0]]))[0])
+    assert bool(ignored[row, col])
+    col, row = (int(v) for v in grid.xy_to_cell(np.array([[20.0, 0.0]]))[0])
+    assert not bool(ignored[row, col])
+
+    out = tmp_path / "run"
+    code = main(
+        [
+            "--data",
+            str(t2r),
+            "--scene-labels",
+            str(vod),
+            "--epochs",
+            "1",
+            "--batch-size",
+            "2",
+            "--val-every",
+            "0",
+            "--out",
+            str(out),
+        ]
+    )
+    assert code == 0 and (out / "last.pt").is_file()
+
+
+def test_a_finished_run_is_calibrated_on_the_validation_split(monkeypatch, tmp_path, capsys):
+    import model.calibrate as calibrate_module
+    from model.calibrate import Calibration
+
+    seen = {}
+
+    def fake(model, data, split="val", limit=0, min_prompts=50):
+        seen["split"] = split
+        return Calibration(0.35, 80.0, 60.0, 120, ())
+
+    monkeypatch.setattr(calibrate_module, "calibrate", fake)
+    release = tmp_path / "release"
+    generate_root(release, 4, SynthSettings(seed=9), split_fractions=(0.5, 0.5, 0.0))
+    shutil.rmtree(meta_dir(release))
+    out = tmp_path / "run"
+    args = ["--data", str(release), "--freeze-scene", "--init-detector"]
+    args += ["checkpoints/tpcnet-small.pt", "--epochs", "1", "--val-every", "0", "--out", str(out)]
+    assert main(args) == 0
+    assert seen == {"split": "val"}
+    assert "operating threshold 0.350" in capsys.readouterr().out
+    meta = load_checkpoint(out / "last.pt").checkpoint_metadata
+    assert meta["operating_threshold"] == 0.35
+    assert meta["operating_threshold_source"]["split"] == "val"
+    # A resume of the finished run still loads (the state and last.pt agree on the step).
+    assert main([*args, "--resume"]) == 0

@@ -207,7 +207,7 @@ def test_referent_model_grounds_a_scene(tiny_root):
 
 
 def test_cached_stage_banks_prompts_and_learns(tiny_root):
-    from model.referent_train import cache_scenes, cached_referent_step, match_detections
+    from model.referent_cache import cache_scenes, cached_referent_step, match_detections
 
     torch.manual_seed(0)
     model = build_model("small", grounding="referent")

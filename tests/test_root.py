@@ -227,7 +227,7 @@ def test_singular_calibration_is_a_calibration_error(root):
 def test_duplicate_split_ids_are_an_error(root):
     path, _, _ = root
     split = path / "lidar" / "ImageSets" / "test.txt"
-    split.write_text("00002\n1\n2\n")  # 2 and 00002 are one id
+    split.write_text("00002\n00001\n00002\n")
     with pytest.raises(RootError, match=r"test\.txt:3: sample 00002 is listed twice"):
         Talk2RadarRoot(path).ids("test")
     split.write_bytes(b"00002\n\xff\n")

@@ -42,8 +42,8 @@ def test_class_index_is_case_insensitive():
 
 def test_fov_mask_is_the_camera_wedge():
     calib = vod_lidar_calibration()
-    xy = np.array([[20.0, 0.0], [20.0, 40.0], [-5.0, 0.0], [5.0, -1.0]])
-    assert fov_mask(xy, calib, IMAGE_SIZE).tolist() == [True, False, False, True]
+    xy = np.array([[20.0, 0.0], [20.0, 40.0], [-5.0, 0.0], [5.0, -1.0], [60.0, 0.0]])
+    assert fov_mask(xy, calib, IMAGE_SIZE).tolist() == [True, False, False, True, False]
 
 
 def test_labelled_boxes_validate():
@@ -62,10 +62,33 @@ def test_ground_over_labelled_boxes_returns_only_those_boxes(tmp_path, write_vod
     boxes, labels = SceneLabels(root).load(sid).metric()
     model = load_checkpoint("checkpoints/tpcnet-small.pt")
     feats = model.encode_scene(sample.lidar, sample.radar, candidates=LabelledBoxes(boxes, labels))
-    assert feats.objects is not None and len(feats.objects) == len(boxes)
+    assert feats.objects is not None and feats.answerable == len(boxes)
+    assert len(feats.objects) >= len(boxes)
     pred = model.ground(feats, "the pedestrian", score_threshold=0.0)
     assert len(pred.boxes) == len(boxes)
     for box in pred.boxes:
         assert np.min(np.abs(boxes - box).sum(axis=1)) < 1e-9
     top = pred.classes[int(np.argmax(pred.scores))]
     assert top == "Pedestrian"
+
+
+def test_with_context_keeps_labels_first_and_drops_duplicates():
+    from model.labelled import with_context
+
+    labelled = LabelledBoxes(
+        np.array([[10.0, 0, -1, 4, 2, 1.5, 0], [20.0, 5, -1, 1, 1, 1.7, 0]]), [0, 1]
+    )
+    proposals = np.array(
+        [
+            [10.3, 0.2, -1, 4, 2, 1.5, 0.1],  # the labelled car again
+            [30.0, -4, -1, 4, 2, 1.5, 0],  # context
+            [20.5, 5.4, -1, 0.8, 0.8, 1.7, 0],  # the pedestrian, proposed as a cyclist
+            [40.0, 0, -1, 4, 2, 1.5, 0],  # context, but over the total
+        ]
+    )
+    boxes, labels, scores = with_context(
+        labelled, np.array([0.9, 0.8]), proposals, np.array([0, 0, 2, 0]), np.ones(4), 3
+    )
+    assert len(boxes) == 3 and labels.tolist() == [0, 1, 0]
+    np.testing.assert_allclose(boxes[2], proposals[1])
+    assert scores[:2].tolist() == [0.9, 0.8]

@@ -13,7 +13,8 @@ import pytest
 import torch
 
 from model.checkpoint import load_checkpoint
-from model.train import TrainConfig, TrainingError, cosine_lr, epoch_batches, train
+from model.train import TrainConfig, cosine_lr, epoch_batches, train
+from model.train_state import RunStateError
 from scenes.kitti import read_label_file
 from scenes.root import Talk2RadarRoot
 from scenes.synth import SynthSettings, generate_root
@@ -76,7 +77,7 @@ def test_loss_falls_and_resume_continues(tiny_root, tmp_path):
     assert len(_losses(out)) == 10
     model = load_checkpoint(out / "last.pt")
     assert model.checkpoint_metadata["step"] == 10
-    with pytest.raises(TrainingError, match=r"different settings.*lr"):
+    with pytest.raises(RunStateError, match=r"different settings.*lr"):
         train(_config(tiny_root, out, max_steps=12, lr=5e-3), resume=True)
 
 

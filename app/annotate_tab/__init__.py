@@ -25,16 +25,18 @@ where. After a save or a deletion into the served root its split is re-read
 
 Using it (a one-box pair: a click and the sentence; see docs/ANNOTATION.md):
 
-- **Click the ground** (with *Click to place* on) to place a box of the *Class* at its typical
-  size (:func:`annotate.default_box`) standing on the frame's ground estimate; the new box is
-  selected. A click inside a draft box's footprint selects that box instead; a click on a
+- **Click the ground** (with *Click to place* on) to place a box of the *New box class* at its
+  typical size (:func:`annotate.default_box`) standing on the frame's ground estimate; the new box
+  is selected. A click inside a draft box's footprint selects that box instead; a click on a
   ready-made box (below) adds it. A box that could not be saved where it would go (outside the
   annotated range or the camera's view) is not placed: a notification says why at once.
 - **Ready-made boxes**: on a root without prompts (View-of-Delft as released) the frame's
   label_2 objects of the metric classes that are not in the draft are drawn (``"+ Car"``) and
   listed under *Object* (nearest first); *Add object* or a click on one adds it.
-- **One Class control**: *Class* is the selected box's class (changing it changes the box) and
-  the class of the next box placed; selecting a box shows its class.
+- **Two class controls**: *New box class* is the class of the next box placed and nothing else
+  (choosing it never changes a placed box: the box just placed stays selected, and an annotator
+  choosing the next class must not relabel it); *Change class* (Boxes folder, shown while a box
+  is selected) relabels the selected box, one undo step.
 - **Drag the gizmo** of the selected box: its arrows and square move it on the ground, its ring
   turns it (yaw). One drag is one undo step (:class:`annotate.DraftEditor`'s ``merge_key``).
 - *Box* picks the selected box; *Length*, *Width*, *Height*, *Yaw (deg)* edit it (the bottom
@@ -56,12 +58,21 @@ Using it (a one-box pair: a click and the sentence; see docs/ANNOTATION.md):
 - *Saved pairs* lists the pairs of the store (re-read on every page load); *Open pair* reopens
   one into the draft (saving then writes a new version), *Delete pair* removes it (after a
   confirmation).
+- **Sentence first on labelled frames** (:mod:`~app.annotate_tab.referents`; a View-of-Delft
+  root, or ``--scene-labels``, with a referent-path model): typing the sentence picks its
+  referents among the frame's labelled boxes; a click on a labelled box toggles it; Enter saves
+  only a pick made for the sentence as it is.
+- *Sequence* (:mod:`~app.annotate_tab.sequence`, on splits with pose files): play a drive,
+  step through it, and *Carry to next frame* (:mod:`annotate.carry`).
+- *Review* (:mod:`~app.annotate_tab.review`): walk a split's saved pairs; approve, reject, or
+  save a fix, each a ``review`` line of the manifest (:mod:`annotate.review`).
 - The draft is drawn into the camera panel too (its ``draft`` layer,
   :func:`~app.annotate_tab.view.draft_layer`).
 
-Hotkeys: viser 1.1.1 has experimental commands (``gui.add_command``) with hotkeys, also listed in
-its command palette (Ctrl/Cmd+K). :data:`~app.annotate_tab.widgets.HOTKEYS` registers Undo, Redo,
-Delete box and Save pair; they act while no text field has the focus (Esc leaves one).
+Keys (:mod:`~app.annotate_tab.keys`): every step of a pair but the ground click has a key
+(:data:`~app.annotate_tab.keys.KEYS`: viser 1.1.1's experimental commands, ``gui.add_command``,
+also listed in its command palette, Ctrl/Cmd+K; they act while no text field has the focus, Esc
+leaves one), P puts the cursor in *Pair prompt*, and the *Keys* folder and key H list them all.
 
 The frame of a draft. Navigation is shared by every browser, so the frame on screen can change
 under a draft. A draft belongs to the frame it was started on (for a reopened pair: the pair's

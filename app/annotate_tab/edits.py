@@ -4,9 +4,9 @@ Each action changes the panel's state through the :class:`annotate.DraftEditor` 
 and redraws only the :class:`~app.annotate_tab.panel.Part` s that show what it changed.
 
 A click in the 3D view selects the draft box under it, else adds the ready-made box under it,
-else places a new box of the *Class*; a box that could not be saved where it would go (outside
-the annotated range or the camera's view, :func:`annotate.validate`'s position and image rules)
-is not placed or added, and a notification says why at once.
+else places a new box of the *New box class*; a box that could not be saved where it would go
+(outside the annotated range or the camera's view, :func:`annotate.validate`'s position and
+image rules) is not placed or added, and a notification says why at once.
 """
 
 from __future__ import annotations
@@ -28,15 +28,13 @@ from annotate import (
     proposals,
     scene_objects,
     suggest_prompt,
-    validate,
 )
 from app.annotate_tab.formatting import option_index, option_ready_index, placement_problem
 from app.annotate_tab.panel import AnnotationPanel, Part
-from app.annotate_tab.view import box_at, box_tag, ground_hit, wxyz_to_yaw
+from app.annotate_tab.referents import ReferentPicker
+from app.annotate_tab.view import box_at, box_tag, ground_hit, screen_axes, wxyz_to_yaw
 from app.query_panel import submitted_prompt
-
-PLACEMENT_FIELDS = (".position", ".image")
-"""Validation fields of a box that say it cannot be saved where it is."""
+from scenes.actors import CLASSES
 
 
 class DraftEdits:
@@ -46,8 +44,9 @@ class DraftEdits:
         panel: The tab's state and drawing.
     """
 
-    def __init__(self, panel: AnnotationPanel) -> None:
+    def __init__(self, panel: AnnotationPanel, referents: ReferentPicker) -> None:
         self.panel = panel
+        self.referents = referents
         self._drag = 0
         """Gizmo drags so far: each drag is one undo step (its ``merge_key``)."""
         self._suggestions = 0
@@ -77,12 +76,23 @@ class DraftEdits:
                 return
             draft = p.editor.draft
             index = box_at(draft.box_array, *hit)
+            labelled = p.labelled()
+            if (
+                index is not None
+                and labelled is not None
+                and labelled.index_of(draft.boxes[index].box) is not None
+            ):  # a labelled box in the pair: a click toggles it out
+                self.referents.by_hand()
+                p.editor.delete_box(draft.boxes[index].box_id)
+                p.refresh(Part.DRAFT)
+                return
             if index is not None:
                 p.selected = draft.boxes[index].box_id
                 p.refresh(Part.SELECTION)
                 return
             ready = box_at(p.ready_boxes, *hit) if p.offers_ready() else None
             if ready is not None:
+                self.referents.by_hand()
                 self._add(p.ready_boxes[ready], p.ready_classes[ready], "ready-made box")
                 return
             cls = p.w.cls.value
@@ -93,8 +103,7 @@ class DraftEdits:
         (then say why). Holds the session's lock."""
         p = self.panel
         assert p.frame is not None
-        report = validate(Draft().add_box(box, cls), p.config(), p.frame.sample.calib)
-        problems = [i.message for i in report.errors if i.field.endswith(PLACEMENT_FIELDS)]
+        problems = p.placement_problems(box, cls)
         if problems:
             p.notify(f"No {what} placed there", placement_problem(problems) + ".")
             return
@@ -108,6 +117,7 @@ class DraftEdits:
             index = option_ready_index(p.w.ready.value)
             if p.frame is None or index is None or index >= len(p.ready_boxes):
                 return
+            self.referents.by_hand()
             self._add(p.ready_boxes[index], p.ready_classes[index], "ready-made box")
 
     async def on_gizmo(self, event: viser.TransformControlsEvent) -> None:
@@ -145,16 +155,97 @@ class DraftEdits:
                 p.selected = draft.boxes[index].box_id
             p.refresh(Part.SELECTION)
 
-    def set_class(self) -> None:
-        """*Class*: the selected box's class (an undo step), and the next new box's."""
+    def change_class(self, cls: str) -> None:
+        """*Change class*: relabel the selected box as ``cls`` (one undo step). The only way a
+        placed box changes class; *New box class* never does."""
+        p = self.panel
+        if cls not in CLASSES:  # a forged message
+            return
+        with p.session.lock:
+            if p.selected is None:
+                p.notify("No box selected", "Select a box first (click it, or keys N / Shift+N).")
+                return
+            if p.editor.draft.get(p.selected).cls != cls:
+                p.editor.set_class(p.selected, cls)
+                p.refresh(Part.DRAFT)
+
+    def cycle_class(self, step: int = 1) -> None:
+        """Relabel the selected box as the next (``step=1``) or previous class of
+        :data:`scenes.CLASSES` (key C / Shift+C)."""
+        p = self.panel
+        with p.session.lock:
+            if p.selected is None:
+                p.notify("No box selected", "Select a box first (click it, or keys N / Shift+N).")
+                return
+            current = p.editor.draft.get(p.selected).cls
+            index = CLASSES.index(current) if current in CLASSES else -step
+            self.change_class(CLASSES[(index + step) % len(CLASSES)])
+
+    def set_new_class(self, cls: str) -> None:
+        """*New box class* set from the keyboard (keys 1, 2, 3); placed boxes keep theirs."""
+        p = self.panel
+        with p.session.lock:
+            if cls in CLASSES:
+                p.w.cls.value = cls
+
+    def select_step(self, step: int) -> None:
+        """Select the next (``step=1``) or previous (``-1``) draft box in list order, wrapping
+        around; with none selected, the first or the last (keys N / Shift+N)."""
+        p = self.panel
+        with p.session.lock:
+            ids = p.editor.draft.box_ids
+            if not ids:
+                return
+            if p.selected in ids:
+                p.selected = ids[(ids.index(p.selected) + step) % len(ids)]
+            else:
+                p.selected = ids[0] if step > 0 else ids[-1]
+            p.refresh(Part.SELECTION)
+
+    def deselect(self) -> None:
+        """Select no box (key Esc)."""
+        p = self.panel
+        with p.session.lock:
+            if p.selected is not None:
+                p.selected = None
+                p.refresh(Part.SELECTION)
+
+    def move_on_screen(self, forward: float, right: float) -> None:
+        """Move the selected box ``forward`` m away from the viewer and ``right`` m to the right
+        on screen, along the nearest LiDAR axes (:func:`~app.annotate_tab.view.screen_axes`;
+        arrow keys). Consecutive moves of one box are one undo step."""
         p = self.panel
         with p.session.lock:
             if p.selected is None:
                 return
-            index = p.editor.draft.index_of(p.selected)
-            if p.editor.draft.boxes[index].cls != p.w.cls.value:
-                p.editor.set_class(p.selected, p.w.cls.value)
-                p.refresh(Part.DRAFT, skip=p.w.cls)
+            camera = p.session.client.camera
+            (fx, fy), (rx, ry) = screen_axes(camera.position, camera.look_at)
+            x, y = p.editor.draft.get(p.selected).box[:2]
+            p.editor.move_box(
+                p.selected,
+                x + forward * fx + right * rx,
+                y + forward * fy + right * ry,
+                merge_key=("keys", "move", p.selected),
+            )
+            p.refresh(Part.DRAFT)
+
+    def turn(self, degrees: float) -> None:
+        """Turn the selected box by ``degrees`` counter-clockwise seen from above (keys Q, E,
+        R); consecutive turns of one box are one undo step."""
+        p = self.panel
+        with p.session.lock:
+            if p.selected is None:
+                return
+            yaw = p.editor.draft.get(p.selected).box[6] + float(np.radians(degrees))
+            p.editor.rotate_box(p.selected, yaw, merge_key=("keys", "turn", p.selected))
+            p.refresh(Part.DRAFT)
+
+    def toggle_nothing(self) -> None:
+        """Mark or unmark the prompt as referring to nothing (key 0)."""
+        p = self.panel
+        with p.session.lock:
+            p.editor.set_refers_to_nothing(not p.editor.draft.refers_to_nothing)
+            p.refresh(Part.TEXT)
 
     def resize(self, source: viser.GuiNumberHandle) -> None:
         p = self.panel
@@ -191,6 +282,8 @@ class DraftEdits:
                 p.accept_edit(p.w.prompt)
             p.editor.set_prompt(entered if entered is not None else value)
             p.refresh(Part.TEXT, skip=p.w.prompt)
+            if entered is None:
+                self.referents.typed()
             return entered is not None
 
     def set_nothing(self) -> None:
@@ -236,13 +329,33 @@ class DraftEdits:
         with p.session.lock:
             if p.selected is None:
                 return
+            self.referents.by_hand()
             p.editor.delete_box(p.selected)
             p.selected = None
             p.refresh(Part.DRAFT)
 
-    def use_predictions(self) -> None:
-        """Add the last answer's boxes on this frame to the draft (one undo step)."""
+    def pick_referents(self) -> None:
+        """Pick the sentence's referents among the frame's labelled boxes now (key L; *Use
+        predictions* on a labelled frame), and let typing pick again."""
         p = self.panel
+        if p.labelled() is None:
+            p.notify("No labelled boxes", "This frame has no labelled boxes to pick among.")
+            return
+        if not p.editor.draft.prompt.strip():
+            p.notify("Write the sentence first", "The referents are picked for the sentence.")
+            return
+        self.referents.auto = True
+        count = self.referents.pick()
+        if count is not None:
+            p.notify("Referents picked", f"{count} labelled box(es) for the sentence.", "green")
+
+    def use_predictions(self) -> None:
+        """Add the last answer's boxes on this frame to the draft (one undo step); on a frame
+        with labelled boxes, pick the sentence's referents among them instead."""
+        p = self.panel
+        if p.labelled() is not None:
+            self.pick_referents()
+            return
         with p.session.lock:
             answer = p.session.answer
             if answer is None:

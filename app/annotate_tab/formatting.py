@@ -148,6 +148,7 @@ def status_markdown(
     unavailable: str | None = None,
     saving_to: Path | None = None,
     last_saved: str | None = None,
+    note: str | None = None,
 ) -> str:
     """The line at the top of the tab: what is being edited, whether its frame is on screen,
     what *Undo* and *Redo* would do.
@@ -163,6 +164,7 @@ def status_markdown(
             served root).
         last_saved: What the last save of this browser wrote (``"pair 00061 (version 1) in
             train"``), or None.
+        note: One more line (how the referents were chosen), or None.
     """
     lines = []
     if unavailable is not None:
@@ -186,6 +188,8 @@ def status_markdown(
             f"This draft belongs to sample {md_text(frame_name)}, not to the frame on screen: its "
             "boxes are hidden. *Back to the draft's frame* shows it; *New pair* starts over."
         )
+    if note:
+        lines.append(f"*{md_text(note)}*")
     undo = history.undo_label if history.can_undo else "-"
     redo = history.redo_label if history.can_redo else "-"
     lines.append(f"Undo: *{md_text(undo)}* · Redo: *{md_text(redo)}*")

@@ -21,6 +21,8 @@ from typing import Protocol
 
 from annotate import AnnotationStore, StoreError
 from app.session import ClientSession
+from scenes.drives import Drives, find_drives
+from scenes.layout import RootError
 from scenes.root import Talk2RadarRoot
 
 log = logging.getLogger(__name__)
@@ -58,6 +60,10 @@ class AnnotationHub:
         self._open_lock = threading.Lock()
         self._views: weakref.WeakValueDictionary[int, PairsView] = weakref.WeakValueDictionary()
         self._lock = threading.Lock()
+        self._drives: tuple[tuple[str, tuple[str, ...]], Drives] | None = None
+        self._drives_lock = threading.Lock()
+        self.drives_error: str | None = None
+        """Why the served split's drives could not be read (None: they could, or not asked)."""
 
     def _open(self) -> None:
         with self._open_lock:
@@ -86,6 +92,21 @@ class AnnotationHub:
         """Why the store could not be opened (None when it could)."""
         self._open()
         return self._error
+
+    def drives(self, root: Talk2RadarRoot, ids: tuple[str, ...]) -> Drives:
+        """The drives of a split list of ``root`` (:func:`scenes.drives.find_drives`), computed
+        once per list and shared by every browser; none when a pose file is malformed
+        (:attr:`drives_error` says which)."""
+        key = (str(root.path), tuple(ids))
+        with self._drives_lock:
+            if self._drives is None or self._drives[0] != key:
+                try:
+                    drives, self.drives_error = find_drives(root, ids), None
+                except (RootError, OSError) as exc:
+                    drives, self.drives_error = Drives(()), str(exc)
+                    log.error("drives of %s: %s", root.path, exc)
+                self._drives = (key, drives)
+            return self._drives[1]
 
     def register(self, view: PairsView) -> None:
         """Keep ``view`` informed of saved and deleted pairs (until its browser leaves)."""

@@ -3,14 +3,28 @@
 The store's work runs outside the session's lock (it takes the store's own lock and may wait for
 another browser's save); after a save or a deletion the served split is re-read (the navigator's
 ``reload``) and every browser's list of saved pairs is refreshed (the hub).
+
+Saves are idempotent per draft version: a save request's key is this tab's token and its
+editor's :attr:`annotate.DraftEditor.version`, so two requests for one draft (a double click, a
+click and Enter, a scripted burst on several threads) save once and both tell the same pair
+(:meth:`annotate.AnnotationStore.save`'s ``request``). A request arriving after that save reset
+the draft, with nothing edited since, is answered with the same result too.
 """
 
 from __future__ import annotations
 
 import logging
+import uuid
 from pathlib import Path
 
-from annotate import ConflictError, SourceFrame, StoreError, ValidationError, is_pristine
+from annotate import (
+    ConflictError,
+    SaveResult,
+    SourceFrame,
+    StoreError,
+    ValidationError,
+    is_pristine,
+)
 from app.annotate_tab.formatting import option_pair_id
 from app.annotate_tab.panel import AnnotationPanel, DraftFrame
 from app.scene_view import estimate_ground_z
@@ -28,6 +42,10 @@ class PairActions:
 
     def __init__(self, panel: AnnotationPanel) -> None:
         self.panel = panel
+        self._token = uuid.uuid4().hex
+        """This tab's part of its save requests' keys."""
+        self._last_save: tuple[int, SaveResult] | None = None
+        """``(editor version after the reset, result)`` of this tab's last save."""
 
     def submit(self) -> None:
         """Enter in *Pair prompt*: save when nothing blocks it, else say what does."""
@@ -40,14 +58,20 @@ class PairActions:
             reasons = report.messages() or [str(p.hub.error)]
             p.notify("Not saved yet", "\n".join(reasons))
 
-    def save(self) -> None:
+    def save(self) -> SaveResult | None:
         """Save the draft (a new pair, or a new version of the reopened pair); the panel's
-        status line then names the pair written, and the box fields are cleared."""
+        status line then names the pair written, and the box fields are cleared. Returns what
+        the store saved (None: nothing, a notification says why; also for a repeated request,
+        which the first one's answer covers)."""
         p = self.panel
         store = p.store
         with p.session.lock:
-            draft, frame = p.editor.draft, p.frame
+            draft, frame, version = p.editor.draft, p.frame, p.editor.version
             split, annotator = p.w.split.value, p.w.annotator.value
+            last = self._last_save
+        if last is not None and last[0] == version:  # saved, nothing edited since
+            self._tell_saved(last[1], again=True)
+            return
         if store is None:
             p.notify("Saving is unavailable", str(p.hub.error), color="red")
             return
@@ -58,7 +82,8 @@ class PairActions:
             source = None
             if draft.sample_id is None:
                 source = SourceFrame.from_root(root, frame.sample.sample_id, sample=frame.sample)
-            result = store.save(draft, source, annotator=annotator, split=split)
+            request = f"{self._token}:{version}"
+            result = store.save(draft, source, annotator=annotator, split=split, request=request)
         except ValidationError as exc:
             p.notify("Cannot save the pair", "\n".join(i.message for i in exc.issues), color="red")
             return
@@ -69,22 +94,35 @@ class PairActions:
             log.error("client %s: save failed: %s", p.session.client_id, exc)
             p.notify("Save failed", str(exc), color="red")
             return
-        warnings = "".join(f"\n{w.message}" for w in result.warnings)
-        where = "new pair" if result.version == 1 else f"version {result.version}"
-        p.notify(
-            f"Saved pair {result.sample_id}",
-            f"{where} in {', '.join(result.record.splits)} of {store.path}.{warnings}",
-            color="green",
-        )
+        self._tell_saved(result, again=result.repeated)
+        if result.repeated:  # the first request resets the draft and refreshes
+            return
         log.info(
             "client %s: saved pair %s v%d", p.session.client_id, result.sample_id, result.version
         )
         with p.session.lock:
-            p.last_saved = f"pair {result.sample_id} ({where}) in {', '.join(result.record.splits)}"
-            p.editor.reset()
-            p.selected = None
-            p.bind_to_screen()
+            p.last_pair = (draft, frame)
+            p.last_saved = f"pair {result.sample_id} ({_where(result)}) in " + ", ".join(
+                result.record.splits
+            )
+            if p.editor.version == version:  # (an edit made meanwhile is kept)
+                p.editor.reset()
+                p.selected = None
+                p.bind_to_screen()
+                self._last_save = (p.editor.version, result)
         self._after_store_change()
+        return result
+
+    def _tell_saved(self, result: SaveResult, again: bool) -> None:
+        p = self.panel
+        warnings = "".join(f"\n{w.message}" for w in result.warnings)
+        where = p.store.path if p.store is not None else p.hub.path
+        p.notify(
+            f"Saved pair {result.sample_id}",
+            f"{_where(result)} in {', '.join(result.record.splits)} of {where}.{warnings}"
+            + ("\n(Already saved: nothing changed since.)" if again else ""),
+            color="green",
+        )
 
     def _after_store_change(self) -> None:
         p = self.panel
@@ -176,3 +214,7 @@ class PairActions:
             return
         p.notify("Pair deleted", f"Pair {sample_id} was removed from its split.", color="green")
         self._after_store_change()
+
+
+def _where(result: SaveResult) -> str:
+    return "new pair" if result.version == 1 else f"version {result.version}"

@@ -19,7 +19,8 @@ first.
 from __future__ import annotations
 
 import enum
-from collections.abc import Callable
+import logging
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -52,12 +53,18 @@ from app.annotate_tab.formatting import (
     status_markdown,
 )
 from app.annotate_tab.hub import AnnotationHub
+from app.annotate_tab.labelled import Labelled, frame_labelled
 from app.annotate_tab.view import DraftView, draft_layer
 from app.annotate_tab.widgets import AnnotationWidgets, build_annotation_widgets
 from app.session import ClientSession
 from app.text import md_text
-from scenes.actors import CLASSES
 from scenes.root import Sample
+
+log = logging.getLogger(__name__)
+
+
+PLACEMENT_FIELDS = (".position", ".image")
+"""Validation fields of a box that say it cannot be saved where it is."""
 
 
 class Part(enum.Flag):
@@ -140,11 +147,19 @@ class AnnotationPanel:
         """The draft's last validation (what *Save pair*'s state shows)."""
         self.last_saved: str | None = None
         """What this browser's last save wrote, shown in the status line."""
+        self.last_pair: tuple[Draft, DraftFrame] | None = None
+        """The draft this browser saved last and its frame (what *Carry to next frame* carries
+        once the draft was emptied by the save)."""
         self._shown: dict[int, object] = {}
         """The value the server last wrote into each edit widget (by ``id``), see :meth:`_show`."""
         self._evidence: tuple[DraftFrame, tuple[object, ...], tuple[BoxEvidence, ...]] | None
         self._evidence = None
         """The last evidence computed: ``(frame, boxes, evidence)``."""
+        self._labelled: tuple[DraftFrame, Labelled | None] | None = None
+        self.note: Callable[[], str | None] = lambda: None
+        """A line for the status (the referent picker's, :mod:`app.annotate_tab.referents`)."""
+        self.referents_for: Callable[[], str | None] = lambda: None
+        """The sentence the draft's labelled boxes were picked for (the referent picker's)."""
 
     # ------------------------------------------------------------------ state
 
@@ -161,9 +176,45 @@ class AnnotationPanel:
         return self.store.validation if self.store is not None else ValidationConfig()
 
     def offers_ready(self) -> bool:
-        """Whether the draft's frame offers ready-made boxes (its root has no prompts, so its
-        label_2 lists every object) and is on screen."""
-        return self.frame is not None and self.frame.sample.prompt is None and self.on_screen()
+        """Whether the draft's frame offers ready-made boxes (its objects are labelled:
+        :meth:`labelled`, or its root has no prompts, so its label_2 lists every object) and is
+        on screen."""
+        if self.frame is None or not self.on_screen():
+            return False
+        return self.frame.sample.prompt is None or self.labelled() is not None
+
+    def placement_problems(self, box: Sequence[float], cls: str) -> list[str]:
+        """Why a box could not be saved where it is on the draft's frame (outside the annotated
+        range or the camera's view: :func:`annotate.validate`'s position and image rules)."""
+        if self.frame is None:
+            return []
+        report = validate(Draft().add_box(box, cls), self.config(), self.frame.sample.calib)
+        return [i.message for i in report.errors if i.field.endswith(PLACEMENT_FIELDS)]
+
+    def labelled(self) -> Labelled | None:
+        """The labelled boxes of the draft's frame that the referent stage can pick for a pair
+        (:func:`~app.annotate_tab.labelled.frame_labelled`, read once per frame, without the
+        boxes a pair could not hold; None: none, or a label file that cannot be read, which is
+        logged)."""
+        frame = self.frame
+        if frame is None:
+            return None
+        cached = self._labelled
+        if cached is None or cached[0] is not frame:
+            try:
+                found = frame_labelled(self.session.options, frame.sample)
+            except Exception as exc:  # a malformed label file: the tab works without them
+                log.error("labelled boxes of sample %s: %s", frame.name, exc)
+                found = None
+            if found is not None:  # only boxes a pair can hold (in range, in the image)
+                keep = [
+                    i
+                    for i, (b, c) in enumerate(zip(found.boxes, found.classes, strict=True))
+                    if not self.placement_problems(b, c)
+                ]
+                found = Labelled(found.boxes[keep], tuple(found.classes[i] for i in keep))
+            cached = self._labelled = (frame, found)
+        return cached[1]
 
     def on_screen(self) -> bool:
         """Whether the frame on screen is the draft's frame."""
@@ -218,8 +269,9 @@ class AnnotationPanel:
                     self._show_boxes(draft, skip)
                 if parts & Part.ANSWER:
                     answer = self.session.answer
-                    w.use_predictions.disabled = not (
-                        visible and answer is not None and len(answer.predictions.boxes) > 0
+                    w.use_predictions.disabled = not visible or (
+                        self.labelled() is None
+                        and (answer is None or not len(answer.predictions.boxes))
                     )
                 if parts & Part.EVIDENCE:
                     w.evidence.content = evidence_markdown(
@@ -242,6 +294,7 @@ class AnnotationPanel:
             unavailable=self.hub.error if self.store is None else None,
             saving_to=self.hub.path if self.hub.separate else None,
             last_saved=self.last_saved,
+            note=self.note(),
         )
 
     def _show_ready(self, draft: Draft) -> None:
@@ -250,9 +303,13 @@ class AnnotationPanel:
         offered = self.offers_ready()
         if offered and self.frame is not None:
             sample = self.frame.sample
-            boxes, classes, _ = proposals(
-                sample.boxes, sample.classes, draft.box_array, limit=10**6
+            labelled = self.labelled()
+            source = (
+                (labelled.boxes, labelled.classes)
+                if labelled is not None
+                else (sample.boxes, sample.classes)
             )
+            boxes, classes, _ = proposals(*source, draft.box_array, limit=10**6)
             order = np.argsort(np.hypot(boxes[:, 0], boxes[:, 1]), kind="stable")
             boxes, classes = boxes[order], tuple(classes[i] for i in order)
         else:
@@ -286,8 +343,6 @@ class AnnotationPanel:
         if selected is None:
             return
         length, width, height, yaw = selected.box[3:]
-        if selected.cls in CLASSES and w.cls is not skip:
-            self._show(w.cls, selected.cls)
         for handle, value in (
             (w.length, length),
             (w.width, width),

@@ -5,32 +5,48 @@ click, the gizmo and the hotkeys to the actions (:class:`~app.annotate_tab.edits
 
 from __future__ import annotations
 
-import logging
 from collections.abc import Callable
 
 import viser
 
 from app.annotate_tab.edits import DraftEdits
 from app.annotate_tab.hub import AnnotationHub
+from app.annotate_tab.keys import (
+    MOVE_FAR,
+    MOVE_STEP,
+    add_help_folder,
+    add_prompt_key,
+    register_keys,
+    show_help,
+)
 from app.annotate_tab.pairs import PairActions
 from app.annotate_tab.panel import AnnotationPanel
-from app.annotate_tab.widgets import HOTKEYS, NEW_PAIR, REDO, UNDO
+from app.annotate_tab.referents import ReferentPicker
+from app.annotate_tab.review import ReviewPanel
+from app.annotate_tab.sequence import SequencePanel
+from app.annotate_tab.widgets import NEW_PAIR, REDO, UNDO
 from app.session import ClientSession
-
-log = logging.getLogger(__name__)
+from scenes.actors import CLASSES
 
 
 def build_annotation_tab(session: ClientSession, hub: AnnotationHub) -> AnnotationPanel:
     """Fill the Annotate tab of one browser (called inside the tab's container)."""
     panel = AnnotationPanel(session, hub)
-    edits = DraftEdits(panel)
+    referents = ReferentPicker(panel)
+    edits = DraftEdits(panel, referents)
     pairs = PairActions(panel)
-    _wire(panel, edits, pairs)
-    _register_hotkeys(panel, edits, pairs)
+    sequence = SequencePanel(panel)
+    review = ReviewPanel(panel, pairs)
+    _wire(panel, edits, pairs, referents)
+    _register_keys(panel, edits, pairs, sequence, review)
     hub.register(panel)
     panel.refresh_pairs()
     panel.refresh()
+    sequence.refresh()
     session.add_frame_listener(panel.on_frame)
+    session.add_frame_listener(lambda _session: sequence.refresh())
+    session.add_frame_listener(lambda _session: referents.prefetch())
+    referents.prefetch()
     session.add_answer_listener(panel.on_answer)
     return panel
 
@@ -40,7 +56,9 @@ def _from_browser(event: viser.GuiEvent) -> bool:
     return event.client is not None
 
 
-def _wire(panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions) -> None:
+def _wire(
+    panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions, referents: ReferentPicker
+) -> None:
     w = panel.w
     scene = panel.session.client.scene
 
@@ -65,7 +83,11 @@ def _wire(panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions) -> None
         handle.on_click(lambda _event: panel.guarded(fn))
 
     on_user(w.box, edits.select_from_list)
-    on_user(w.cls, edits.set_class)
+
+    @w.relabel.on_click
+    def _(event: viser.GuiEvent) -> None:
+        cls = str(event.target.value)
+        panel.guarded(lambda: edits.change_class(cls))
 
     @w.prompt.on_update
     def _(event: viser.GuiEvent) -> None:
@@ -75,8 +97,9 @@ def _wire(panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions) -> None
             panel.accept_edit(w.prompt)
             entered = [False]
             panel.guarded(lambda: entered.__setitem__(0, edits.set_prompt()))
-        if entered[0]:  # Enter: save outside the session's lock (the store's work)
-            panel.guarded(pairs.submit)
+        if entered[0]:  # Enter: save outside the session's lock (the store's work), once the
+            # referents shown were picked for this sentence (referents.ready_to_save)
+            panel.guarded(lambda: referents.ready_to_save() and pairs.submit())
 
     for handle in (w.length, w.width, w.height):
         on_user(handle, lambda h=handle: edits.resize(h))
@@ -101,19 +124,60 @@ def _wire(panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions) -> None
             panel.guarded(action)
 
 
-def _register_hotkeys(panel: AnnotationPanel, edits: DraftEdits, pairs: PairActions) -> None:
-    actions = {
+def _register_keys(
+    panel: AnnotationPanel,
+    edits: DraftEdits,
+    pairs: PairActions,
+    sequence: SequencePanel,
+    review: ReviewPanel,
+) -> None:
+    """The hotkeys of :data:`~app.annotate_tab.keys.KEYS`, the page-side key P and the help."""
+    gui = panel.session.client.gui
+    far, step = MOVE_FAR, MOVE_STEP
+    actions: dict[str, Callable[[], None]] = {
+        "add_ready": edits.add_ready,
+        "use_predictions": edits.use_predictions,
+        "select_next": lambda: edits.select_step(1),
+        "select_previous": lambda: edits.select_step(-1),
+        "deselect": edits.deselect,
+        "class_next": lambda: edits.cycle_class(1),
+        "class_previous": lambda: edits.cycle_class(-1),
+        "move_forward": lambda: edits.move_on_screen(step, 0.0),
+        "move_back": lambda: edits.move_on_screen(-step, 0.0),
+        "move_left": lambda: edits.move_on_screen(0.0, -step),
+        "move_right": lambda: edits.move_on_screen(0.0, step),
+        "move_forward_far": lambda: edits.move_on_screen(far, 0.0),
+        "move_back_far": lambda: edits.move_on_screen(-far, 0.0),
+        "move_left_far": lambda: edits.move_on_screen(0.0, -far),
+        "move_right_far": lambda: edits.move_on_screen(0.0, far),
+        "turn_left": lambda: edits.turn(5.0),
+        "turn_right": lambda: edits.turn(-5.0),
+        "turn_left_fine": lambda: edits.turn(1.0),
+        "turn_right_fine": lambda: edits.turn(-1.0),
+        "turn_quarter": lambda: edits.turn(90.0),
+        "turn_half": lambda: edits.turn(180.0),
+        "fit": edits.fit_selected,
+        "delete": edits.delete_selected,
+        "suggest": edits.suggest,
+        "referents": edits.pick_referents,
+        "nothing": edits.toggle_nothing,
+        "save": pairs.save,
         "undo": edits.undo,
         "redo": edits.redo,
-        "delete": edits.delete_selected,
-        "save": pairs.save,
+        "new_pair": edits.new_pair,
+        "help": lambda: show_help(gui),
+        "play": sequence.toggle_play,
+        "drive_previous": lambda: sequence.step(-1),
+        "drive_next": lambda: sequence.step(1),
+        "carry": sequence.carry,
+        "review_next": lambda: review.step(1),
+        "review_previous": lambda: review.step(-1),
+        "approve": lambda: review.verdict("approved"),
+        "reject": lambda: review.verdict("rejected"),
+        "fix": review.save_fix,
     }
-    gui = panel.session.client.gui
-    for action, key, modifier, label in HOTKEYS:
-        try:
-            command = gui.add_command(label, hotkey=key, modifier=modifier)  # type: ignore[arg-type]
-        except Exception as exc:  # Experimental in viser 1.1.1: the panel works without.
-            log.warning("hotkey %s unavailable: %s", label, exc)
-            return
-        fn = actions[action]
-        command.on_trigger(lambda _event, fn=fn: panel.guarded(fn))
+    for i, cls in enumerate(CLASSES):
+        actions[f"new_class_{i}"] = lambda cls=cls: edits.set_new_class(cls)
+    register_keys(gui, actions, panel.guarded)
+    add_prompt_key(gui)
+    add_help_folder(gui)

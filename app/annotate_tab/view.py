@@ -146,6 +146,29 @@ def wxyz_to_yaw(wxyz: Sequence[float]) -> float:
     return math.atan2(r10, r00)
 
 
+def screen_axes(
+    camera_position: Sequence[float], look_at: Sequence[float]
+) -> tuple[tuple[float, float], tuple[float, float]]:
+    """The ground directions that the arrow keys move a box along: ``(forward, right)`` unit
+    vectors (LiDAR frame x, y), each the LiDAR axis (+-x or +-y) closest to what points up and
+    right on the screen of a camera at ``camera_position`` looking at ``look_at``.
+
+    Snapping to the axes makes steps predictable (0.1 m along x is 0.1 m along x). A camera
+    looking straight down has no forward direction on the ground: +x is taken (the sensor's
+    heading).
+    """
+    d = (
+        np.asarray(look_at, dtype=np.float64)[:2]
+        - np.asarray(camera_position, dtype=np.float64)[:2]
+    )
+    if not np.all(np.isfinite(d)) or float(np.hypot(*d)) < 1e-6:
+        d = np.array([1.0, 0.0])
+    along_x = abs(d[0]) >= abs(d[1])
+    forward = (float(np.sign(d[0])), 0.0) if along_x else (0.0, float(np.sign(d[1])))
+    right = (forward[1], -forward[0])  # turned 90 degrees clockwise seen from above
+    return forward, right
+
+
 def gizmo_scale(box: Sequence[float]) -> float:
     """Size of the gizmo for a box (m): its arrows reach past the box's front (>= 2 m)."""
     return max(2.0, 0.9 * float(max(box[3], box[4])))

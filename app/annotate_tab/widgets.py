@@ -1,10 +1,10 @@
 """The widgets of the Annotate tab: built once per browser, in the tab's container.
 
 :func:`build_annotation_widgets` adds them in the order a person uses them (status, *Pair
-prompt*, *Save pair* with why it is disabled, *Draft*, placing and the one *Class* control, the
-*Boxes* folder with the ready-made boxes and the evidence table, *Sentence*, *Save options*,
-*Saved pairs*) and returns their handles (:class:`AnnotationWidgets`); what they do is wired by
-:mod:`app.annotate_tab.tab`.
+prompt*, *Save pair* with why it is disabled, *Draft*, placing and the *New box class*, the
+*Boxes* folder (the selected box's editor with *Change class*, the ready-made boxes and the
+evidence table), *Sentence*, *Save options*, *Saved pairs*) and returns their handles
+(:class:`AnnotationWidgets`); what they do is wired by :mod:`app.annotate_tab.tab`.
 """
 
 from __future__ import annotations
@@ -21,14 +21,6 @@ SPLITS = DEFAULT_SPLITS
 """Splits offered when saving (the store's default, ``train``, is selected); the store refuses any
 other (a forged websocket message included)."""
 
-HOTKEYS: tuple[tuple[str, str, str | None, str], ...] = (
-    ("undo", "Z", "cmd/ctrl", "Annotate: undo"),
-    ("redo", "Z", "cmd/ctrl+shift", "Annotate: redo"),
-    ("delete", "delete", None, "Annotate: delete the selected box"),
-    ("save", "S", "cmd/ctrl+shift", "Annotate: save the pair"),
-)
-"""``(action, key, modifier, palette label)`` of the hotkeys."""
-
 
 @dataclass(frozen=True)
 class AnnotationWidgets:
@@ -43,6 +35,7 @@ class AnnotationWidgets:
     place: viser.GuiCheckboxHandle
     cls: viser.GuiDropdownHandle
     box: viser.GuiDropdownHandle
+    relabel: viser.GuiButtonGroupHandle
     length: viser.GuiNumberHandle
     width: viser.GuiNumberHandle
     height: viser.GuiNumberHandle
@@ -64,7 +57,15 @@ class AnnotationWidgets:
 
     def box_inputs(self) -> tuple[viser.GuiInputHandle, ...]:
         """The inputs that edit the selected box (hidden while none is selected)."""
-        return (self.length, self.width, self.height, self.yaw, self.fit, self.delete)
+        return (
+            self.relabel,
+            self.length,
+            self.width,
+            self.height,
+            self.yaw,
+            self.fit,
+            self.delete,
+        )
 
     def ready_inputs(self) -> tuple[viser.GuiInputHandle, ...]:
         """The ready-made boxes' inputs (shown where the frame offers label_2 objects)."""
@@ -74,18 +75,28 @@ class AnnotationWidgets:
 UNDO, REDO, NEW_PAIR = "Undo", "Redo", "New pair"
 """Buttons of the *Draft* group."""
 
+PAIR_PROMPT = "Pair prompt"
+"""The label of the sentence's field (the page-side key P finds the field by it)."""
+
+NEW_BOX_CLASS, CHANGE_CLASS = "New box class", "Change class"
+"""Labels of the two class controls: the next box's class, and the selected box's relabel."""
+
 
 def build_annotation_widgets(gui: viser.GuiApi) -> AnnotationWidgets:
     """Add the Annotate tab's widgets to ``gui`` (in the current container).
 
     Order: what is used on every pair first, so that *Save pair* and the reason it is disabled
     are in sight without scrolling (1400 x 860 px): status, *Pair prompt*, *Save pair*, the
-    checks, *Draft*, placing (*Click to place*, the one *Class*), then the folders.
+    checks, *Draft*, placing (*Click to place*, *New box class*), then the folders.
+
+    Two controls, never one, for classes: *New box class* is the class of the next box placed
+    and nothing else (choosing it never touches a placed box); *Change class* (shown while a box
+    is selected) relabels the selected box, one undo step.
     """
     status = gui.add_markdown("Loading...")
     back = gui.add_button("Back to the draft's frame", icon=viser.Icon.ARROW_BACK, visible=False)
     prompt = gui.add_text(
-        "Pair prompt",
+        PAIR_PROMPT,
         "",
         multiline=True,
         hint="The sentence that refers to the boxes. Enter saves the pair when it is ready; "
@@ -101,13 +112,20 @@ def build_annotation_widgets(gui: viser.GuiApi) -> AnnotationWidgets:
         "selects it; a click on a ready-made box adds it",
     )
     cls = gui.add_dropdown(
-        "Class",
+        NEW_BOX_CLASS,
         CLASSES,
         initial_value=CLASSES[0],
-        hint="The selected box's class, and the class of the next box placed",
+        hint="The class of the next box a ground click places (keys 1, 2, 3). It never changes "
+        "a placed box: Change class (Boxes) relabels the selected one",
     )
     with gui.add_folder("Boxes"):
         box = gui.add_dropdown("Box", (NO_BOX,), initial_value=NO_BOX)
+        relabel = gui.add_button_group(
+            CHANGE_CLASS,
+            CLASSES,
+            visible=False,
+            hint="Relabel the selected box (one undo step; key C cycles its class)",
+        )
         size = {"min": 0.1, "max": 20.0, "step": 0.05, "visible": False}
         length = gui.add_number("Length (m)", 4.2, hint="Along the heading", **size)
         width = gui.add_number("Width (m)", 1.8, **size)
@@ -174,6 +192,7 @@ def build_annotation_widgets(gui: viser.GuiApi) -> AnnotationWidgets:
         place=place,
         cls=cls,
         box=box,
+        relabel=relabel,
         length=length,
         width=width,
         height=height,

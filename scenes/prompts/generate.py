@@ -59,6 +59,8 @@ class PromptConfig:
         p_restyle: Probability, each, of another casing, end punctuation or phrase joiner than
             sentence case, a period and spaces.
         p_number_words: Probability of numbers in words before a spelled-out unit.
+        geometry_only: Only attributes a box alone decides (class, depth, side, superlatives of
+            distance): for prompts generated from labelled boxes whose motion is unknown.
     """
 
     attribute_weights: tuple[float, float, float, float] = (0.1, 0.4, 0.35, 0.15)
@@ -71,6 +73,7 @@ class PromptConfig:
     plural_bias: float = 0.5
     tries_per_prompt: int = 40
     phrasing: str = "train"
+    geometry_only: bool = False
     p_frame: float = 0.35
     p_restyle: float = 0.35
     p_number_words: float = 0.3
@@ -143,8 +146,8 @@ def _side_of(f: ActorFeatures) -> Side | None:
 def _sample_predicate(
     f: ActorFeatures, rng: np.random.Generator, cfg: PromptConfig
 ) -> Predicate | None:
-    moving = f.speed > MOVING_SPEED
-    families = ["depth", "motion"]
+    moving = f.speed > MOVING_SPEED and not cfg.geometry_only
+    families = ["depth"] if cfg.geometry_only else ["depth", "motion"]
     side = _side_of(f)
     if side is not None:
         families.append("position")

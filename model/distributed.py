@@ -1,0 +1,174 @@
+"""Several training processes (``torchrun``): process group, devices, collectives, DDP steps.
+
+``torchrun --standalone --nproc_per_node N -m model.train ...`` starts ``N`` processes with
+``RANK``, ``LOCAL_RANK`` and ``WORLD_SIZE`` set; :func:`init_from_env` joins them in one process
+group (``gloo`` on the CPU, ``nccl`` on CUDA, each process on GPU ``LOCAL_RANK``). Every function
+here is also right in one plain process (``world() == 1``): the collectives then return their
+input and :func:`wrap_step` calls the step directly.
+
+A training step of the referent path calls several of the model's methods (the detector, the
+candidate description, the text encoder, the referent stage), not its ``forward``;
+:class:`StepModule` makes the whole step one ``forward``, so that
+:class:`~torch.nn.parallel.DistributedDataParallel` averages the gradients of every parameter the
+step used over the ranks (unused ones, e.g. the referent stage of a rank whose scenes yielded no
+prompt, count as zero: ``find_unused_parameters``).
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from collections.abc import Callable
+from typing import Any
+
+import torch
+import torch.distributed as dist
+from torch import nn
+from torch.nn.parallel import DistributedDataParallel
+
+
+def launched() -> bool:
+    """Whether this process was started by ``torchrun`` with more than one process."""
+    return int(os.environ.get("WORLD_SIZE", "1")) > 1
+
+
+def launch_rank() -> int:
+    """The rank ``torchrun`` gave this process (0 in a plain process), before and after the
+    process group."""
+    return int(os.environ.get("RANK", "0"))
+
+
+def init_from_env(device: str) -> bool:
+    """Join the ``torchrun`` process group (``nccl`` for a CUDA ``device``, else ``gloo``);
+    returns whether this call joined it (False in a plain process, or when already joined: the
+    caller that joined closes it)."""
+    if not launched() or active():
+        return False
+    cuda = device.startswith("cuda")
+    if cuda:
+        torch.cuda.set_device(int(os.environ.get("LOCAL_RANK", "0")))
+    dist.init_process_group("nccl" if cuda else "gloo")
+    return True
+
+
+def close() -> None:
+    """Leave the process group, if one was joined."""
+    if dist.is_available() and dist.is_initialized():
+        dist.destroy_process_group()
+
+
+def active() -> bool:
+    """Whether a process group is joined."""
+    return dist.is_available() and dist.is_initialized()
+
+
+def rank() -> int:
+    """This process's rank (0 in a plain process)."""
+    return dist.get_rank() if active() else 0
+
+
+def world() -> int:
+    """The number of processes (1 in a plain process)."""
+    return dist.get_world_size() if active() else 1
+
+
+def local_device(device: torch.device) -> torch.device:
+    """This process's device: CUDA device ``LOCAL_RANK`` under ``torchrun``, else ``device``."""
+    if device.type == "cuda" and active():
+        return torch.device("cuda", int(os.environ.get("LOCAL_RANK", "0")))
+    return device
+
+
+def _collective_device() -> torch.device:
+    return (
+        torch.device("cuda", torch.cuda.current_device())
+        if dist.get_backend() == "nccl"
+        else (torch.device("cpu"))
+    )
+
+
+def agree_max(value: int) -> int:
+    """The largest ``value`` over the ranks (e.g. a pending signal number, 0 for none)."""
+    if not active():
+        return value
+    t = torch.tensor([value], dtype=torch.int64, device=_collective_device())
+    dist.all_reduce(t, op=dist.ReduceOp.MAX)
+    return int(t.item())
+
+
+def mean(values: list[float]) -> list[float]:
+    """The mean over the ranks of each of ``values`` (for logging)."""
+    if not active():
+        return values
+    t = torch.tensor(values, dtype=torch.float64, device=_collective_device())
+    dist.all_reduce(t)
+    return (t / world()).tolist()
+
+
+def gather(obj: Any) -> list[Any]:
+    """``obj`` of every rank, in rank order (every rank gets the list)."""
+    if not active():
+        return [obj]
+    out: list[Any] = [None] * world()
+    dist.all_gather_object(out, obj)
+    return out
+
+
+def same_on_every_rank(tensors: list[torch.Tensor]) -> bool:
+    """Whether every rank holds the same ``tensors`` (compared by a float64 sum and sum of
+    squares of each): DistributedDataParallel keeps the weights of all ranks identical, so a
+    difference means that gradients were not averaged."""
+    digest = [
+        (float(t.detach().double().sum()), float(t.detach().double().square().sum()))
+        for t in tensors
+    ]
+    return all(other == digest for other in gather(digest))
+
+
+def barrier() -> None:
+    """Wait for every rank."""
+    if active():
+        dist.barrier()
+
+
+class StepModule(nn.Module):
+    """A training step as a module: ``forward(*args)`` is ``step(model, *args)`` (module
+    docstring). Its parameters are ``model``'s."""
+
+    def __init__(self, model: nn.Module, step: Callable[..., Any]) -> None:
+        super().__init__()
+        self.model = model
+        self.step = step
+
+    def forward(self, *args: Any) -> Any:
+        return self.step(self.model, *args)
+
+
+def wrap_step(
+    model: nn.Module, step: Callable[..., Any], find_unused: bool = True
+) -> Callable[..., Any]:
+    """``step`` bound to ``model``: called directly in a plain process, as the forward of a
+    :class:`DistributedDataParallel` :class:`StepModule` under ``torchrun`` (gradients averaged
+    over the ranks during ``backward``; the model's weights broadcast from rank 0 here)."""
+    if not active():
+        return functools.partial(step, model)
+    return DistributedDataParallel(StepModule(model, step), find_unused_parameters=find_unused)
+
+
+__all__ = [
+    "StepModule",
+    "active",
+    "agree_max",
+    "barrier",
+    "close",
+    "gather",
+    "init_from_env",
+    "launch_rank",
+    "launched",
+    "local_device",
+    "mean",
+    "rank",
+    "same_on_every_rank",
+    "world",
+    "wrap_step",
+]

@@ -1,0 +1,133 @@
+"""Both referent-path stages under ``torchrun`` with 2 CPU processes (gloo; issue 24 item 2).
+
+tests/distributed_check.py runs, in one ``torchrun`` launch, the joint stage and the
+``--freeze-scene`` stage (on the shipped detector) through ``model.train.main`` three times each:
+uninterrupted; stopped by SIGINT that only rank 1 receives (both ranks must stop after the same
+step, exit 130 and leave a resumable state with both ranks' RNG states); resumed. The resumed run
+must equal the uninterrupted one bit for bit, and the checkpoint must load. Every checkpoint also
+checks that the ranks hold the same weights (the gradients were averaged). The paper's path under
+torchrun: tests/test_train.py.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from scenes.synth import SynthSettings, generate_root
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+@pytest.mark.slow
+def test_both_referent_stages_train_stop_and_resume_under_torchrun(tmp_path: Path) -> None:
+    root = tmp_path / "root"
+    generate_root(root, 8, SynthSettings(seed=3, prompts_per_world=1), (0.5, 0.25, 0.25))
+    out = tmp_path / "runs"
+    out.mkdir()
+    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(REPO))
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--nnodes", "1", "--nproc_per_node"]
+    cmd += ["2", "--master_addr", "127.0.0.1", "--master_port", str(_free_port())]
+    cmd += [str(REPO / "tests" / "distributed_check.py"), str(root)]
+    cmd += [str(REPO / "checkpoints" / "tpcnet-small.pt"), str(out)]
+    log = tmp_path / "torchrun.log"
+    with open(log, "w") as handle:  # a file, not pipes: two ranks write progress bars at once
+        proc = subprocess.Popen(
+            cmd,
+            cwd=REPO,
+            env=env,
+            stdout=handle,
+            stderr=handle,
+            stdin=subprocess.DEVNULL,
+            start_new_session=True,
+        )
+        try:
+            code = proc.wait(timeout=500)
+        finally:
+            if proc.poll() is None:  # never leave the workers behind
+                os.killpg(proc.pid, signal.SIGKILL)
+    text = log.read_text()
+    assert code == 0, text[-3000:]
+    rank0 = json.loads((out / "report-0.json").read_text())
+    rank1 = json.loads((out / "report-1.json").read_text())
+    assert rank0["guard"] == rank1["guard"] == [True, False]
+    for stage in ("joint", "freeze"):
+        got = rank0[stage]
+        assert got["codes"] == rank1[stage]["codes"] == [0, 130, 0], (stage, got)
+        assert got["stopped"] == [1, 0, 1]  # after step 1 of 2 in epoch 0, on both ranks
+        assert got["step"] == got["loads"] == 4 and got["world"] == 2
+        assert got["rng_differ"]  # each rank's own RNG state is saved
+        assert got["equal"], f"{stage}: the resumed run differs from the uninterrupted one"
+    assert text.count("interrupted by SIGINT: stopped after step 1") == 2  # rank 0, per stage
+    assert "Traceback" not in text
+
+
+def test_amp_bf16_is_cuda_only(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    from model.train import main
+
+    args = ["--data", str(tmp_path / "nowhere"), "--out", str(tmp_path / "run")]
+    assert main([*args, "--amp", "bf16", "--device", "cpu"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["error: --amp bf16 runs on CUDA only (give --device cuda)"]
+
+
+def test_every_stage_steps_under_bfloat16_autocast(tmp_path: Path, write_tiny_root) -> None:
+    """What ``--amp bf16`` runs on CUDA, under the CPU's bfloat16 autocast (no GPU here): the
+    outputs come out in bfloat16, the losses and the decoding run in float32, and the gradients
+    are finite."""
+    import numpy as np
+    import torch
+
+    from model import build_model
+    from model.losses import grounding_loss
+    from model.referent_cache import cache_scenes, cached_referent_step
+    from model.referent_train import ReferentTrainConfig, float32_output, referent_step
+    from model.targets import collate_targets, draw_targets
+    from model.train import init_from
+    from scenes.dataset import GroundingDataset, collate
+    from scenes.frame_dataset import FrameDataset
+
+    root = tmp_path / "root"
+    generate_root(root, 4, SynthSettings(seed=3, prompts_per_world=1), (0.5, 0.25, 0.25))
+    cfg = ReferentTrainConfig(prompts_per_scene=4)
+    model = build_model("small", grounding="referent")
+    init_from(model, str(REPO / "checkpoints" / "tpcnet-small.pt"))
+    scenes = FrameDataset(root, "train")
+    frames = [scenes[i] for i in range(len(scenes))]
+    cached, bank = cache_scenes(model, scenes, 8, progress=False)
+    model.train()
+    autocast = torch.autocast("cpu", torch.bfloat16)
+    with autocast:
+        joint = referent_step(model, frames, np.random.default_rng(0), cfg)
+        frozen = cached_referent_step(model, cached, bank, np.random.default_rng(0), cfg)
+    assert joint.prompts > 0 and frozen.prompts > 0
+    for loss in (joint.total, frozen.total):
+        assert loss.dtype == torch.float32 and torch.isfinite(loss)
+    (joint.total + frozen.total).backward()
+    paper = build_model("small", text_encoder="gru").train()
+    batch = collate([GroundingDataset(root, "train")[0]])
+    with autocast:
+        out = paper(list(batch.lidar), list(batch.radar), list(batch.prompts))
+    assert out.heatmap.dtype == torch.bfloat16
+    targets = collate_targets(
+        [draw_targets(batch.boxes[0], batch.classes[0], paper.head_grid, paper.cfg.head)]
+    )
+    terms = grounding_loss(float32_output(out), targets)
+    assert terms.total.dtype == torch.float32 and torch.isfinite(terms.total)
+    terms.total.backward()
+    for m in (model, paper):
+        grads = [p.grad for p in m.parameters() if p.grad is not None]
+        assert grads and all(torch.isfinite(g).all() for g in grads)
