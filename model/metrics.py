@@ -67,6 +67,7 @@ from __future__ import annotations
 import enum
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -796,16 +797,35 @@ def evaluate_frames(
     if extra:
         shown = ", ".join(extra[:5]) + (f" and {len(extra) - 5} more" if len(extra) > 5 else "")
         raise ValueError(f"detections for {len(extra)} frame(s) without ground truth: {shown}")
-    frames = [
-        _prepare(
-            FrameObjects.from_labels(gt[f]), FrameObjects.from_labels(dt.get(f, ())), devkit_offsets
-        )
-        for f in sorted(gt)
-    ]
+    content = tuple((f, tuple(gt[f]), tuple(dt.get(f, ()))) for f in sorted(gt))
+    return _evaluate_content(content, devkit_offsets)
+
+
+@lru_cache(maxsize=64)
+def _evaluate_content(
+    content: tuple[tuple[str, tuple[ObjectLabel, ...], tuple[ObjectLabel, ...]], ...],
+    devkit_offsets: bool,
+) -> VodResult:
+    """:func:`evaluate_frames` of ``(frame id, ground truth, detections)`` triples. Labels are
+    frozen values and the result too, so an evaluation asked for again (a report rescored from
+    the files it wrote) is not computed again, nor a frame prepared again (the per-prompt-type
+    tables score subsets of the same frames)."""
+    frames = [_prepared_frame(g, d, devkit_offsets) for _, g, d in content]
+    gt = {f: g for f, g, _ in content}
+    dt = {f: d for f, _, d in content if d}
     return VodResult(
         entire_area=evaluate_area(frames, corridor=False),
         roi=evaluate_area(frames, corridor=True),
         num_frames=len(frames),
         unknown_gt_classes=unknown_class_counts(gt),
-        unknown_dt_classes=unknown_class_counts({f: dt[f] for f in gt if f in dt}),
+        unknown_dt_classes=unknown_class_counts(dt),
     )
+
+
+@lru_cache(maxsize=8192)
+def _prepared_frame(
+    gt: tuple[ObjectLabel, ...], dt: tuple[ObjectLabel, ...], devkit_offsets: bool
+) -> _PreparedFrame:
+    """One frame's objects and overlaps (read only afterwards: shared by every evaluation of
+    the same labels)."""
+    return _prepare(FrameObjects.from_labels(gt), FrameObjects.from_labels(dt), devkit_offsets)

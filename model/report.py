@@ -291,7 +291,7 @@ def evaluate_predictions(
         sample = pred.sample
         sid = sample.sample_id
         gt[sid] = list(sample.labels)
-        dt[sid] = pred.labels
+        dt[sid] = _as_written(pred.labels)  # as the files will hold them (rescored at no cost)
         tags[sid] = sample_tags(sample)
         seconds.append(pred.seconds)
         where = f"{root.path}: sample {sid}"
