@@ -129,9 +129,10 @@ def run(
         tuple(rows),
         ("Wall clock of the whole command: start-up, loading, every sample, metrics, files.",),
     )
+    suffix = "" if eval_threads is None else f"_{eval_threads}thread"
     return BenchResult(
-        name="eval_throughput",
-        title="Evaluation throughput (`model.evaluate`, 300 prompts)",
+        name=f"eval_throughput{suffix}",
+        title=f"Evaluation throughput (`model.evaluate`, 300 prompts, {threads})",
         machine=machine,
         tables=(table,),
         findings=tuple(findings),

@@ -47,7 +47,7 @@ BENCHMARKS = (
     "soak",
 )
 """Benchmarks of this package, in the order of the document (``bench/<name>.py``)."""
-MANUAL = ("floor_1thread", "eval_throughput")
+MANUAL = ("floor_1thread", "eval_throughput", "eval_throughput_1thread")
 """Sections that come from their stored results only, run by hand with the command in their
 section: the floor benchmark on one thread (``python -m bench.floor --threads 1 --name
 floor_1thread``) and the evaluation throughput (it compares with an older checkout)."""
