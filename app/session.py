@@ -213,7 +213,8 @@ class ClientSession:
         with gui.add_folder("Scene"):
             self.nav = build_navigation_panel(gui, len(self.navigator))
         tabs = gui.add_tab_group()
-        sample_prompt = (self.sample.prompt or "") if self.sample is not None else ""
+        shown = self.frame or self.navigator.frame  # the frame this panel will show first
+        sample_prompt = (shown.sample.prompt or "") if shown is not None else ""
         with tabs.add_tab("Query", icon=viser.Icon.MESSAGE):
             self.query = build_query_panel(
                 gui,

@@ -58,7 +58,24 @@ def _connect(app, ws_client):
     session = app.sessions[(set(app.sessions) - before).pop()]
     panel = next(p for p in app.annotations.panels() if p.session is session)
     client.pump_until(lambda: panel.frame is not None, 5, "the draft's frame")
+    client.pump_until(  # the connection's own writes have arrived
+        lambda: _shown(client, "Prompt") == session.query.prompt.value, 5, "the prompt box"
+    )
     return client, session, panel
+
+
+def _shown(client, label: str) -> object:
+    """The value the browser shows in the widget ``label``: its creation's, then the last the
+    server wrote."""
+    uuid, value = client.gui[label], None
+    for m in client.messages:
+        if m.get("uuid") != uuid:
+            continue
+        if m["type"] == "GuiUpdateMessage" and "value" in m["updates"]:
+            value = m["updates"]["value"]
+        elif m["type"] != "GuiUpdateMessage" and "value" in m:
+            value = m["value"]
+    return value
 
 
 def _writes(client, label: str, since: int) -> list[object]:
