@@ -490,11 +490,8 @@ class ClientSession:
                 self.report_error("An extension failed", exc)
 
     def close(self) -> None:
-        """Forget this browser (it left): drop pending answers, the frame, answer, listeners."""
+        """Forget this browser (it disconnected): pending answers are dropped. What it held is
+        collected soon after (:class:`app.memory.MemoryReaper`; the answer stays readable)."""
         with self.lock:
             self.closed = True
             self._generation += 1
-            self.frame = None
-            self.answer = None
-            self._frame_listeners.clear()
-            self._answer_listeners.clear()
