@@ -24,7 +24,9 @@ beside this one; default ``bench/results/<name>_baseline.json`` where it exists)
 from __future__ import annotations
 
 import argparse
+import importlib
 import math
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -39,7 +41,7 @@ from bench.floor_measure import (
     measure,
     warm_up,
 )
-from bench.latency_measure import DETECT_NAMES, REFERENT, load_path_model
+from bench.latency_measure import CHECKPOINT, DETECT_NAMES, REFERENT, load_path_model
 from bench.measure import summarize
 from bench.report import (
     RESULTS_DIR,
@@ -52,6 +54,7 @@ from bench.report import (
     read_result,
 )
 from bench.vod_frames import LIDAR_POINTS, RADAR_POINTS, vod_frames
+from model.tpcnet import TPCNet
 
 ENCODE_TARGET = 2.0
 GROUND_TARGET = 4.0
@@ -189,6 +192,7 @@ def run(
     prompts: int = 3,
     name: str = "floor",
     baseline: Path | None = None,
+    baseline_package: Path | None = None,
 ) -> BenchResult:
     """Measure (see the module docstring)."""
     start = time.perf_counter()
@@ -197,14 +201,22 @@ def run(
     n_repeats = repeats or (2 if quick else 5)
     loaded = load_path_model(REFERENT, "small", "cpu")
     model = loaded.model
+    models = {"now": model}
+    if baseline_package is not None:
+        models = {"baseline": load_baseline_package(baseline_package), "now": model}
     with tempfile.TemporaryDirectory(prefix="floor-vod-") as tmp:
         chosen = vod_frames(Path(tmp), n_frames, prompts=max(prompts, 1))
-    warm_up(model, chosen[0])
-    measured = measure(model, chosen, n_repeats, prompts)
+    for m in models.values():
+        warm_up(m, chosen[0])
+    runs = measure(models, chosen, n_repeats, prompts)
+    measured = runs["now"]
     s = summary(measured)
     base_path = baseline if baseline is not None else RESULTS_DIR / f"{name}{BASELINE_SUFFIX}.json"
     is_baseline = name.endswith(BASELINE_SUFFIX)
-    base, base_cmd = (None, None) if is_baseline else _baseline(base_path)
+    if "baseline" in runs:
+        base, base_cmd = summary(runs["baseline"]), None
+    else:
+        base, base_cmd = (None, None) if is_baseline else _baseline(base_path)
     tables = [ratio_table(s, base)]
     detect_note = (
         "The model's own `SceneTimings`; detection: neck, head, decoding and candidate "
@@ -271,10 +283,17 @@ def run(
         "measured just before it, so the ratios hold under the load of that moment, the times "
         "less so (see the load average above).",
     ]
-    if base is not None:
+    if baseline_package is not None:
+        findings.append(
+            f"Baseline: the code before issue 20's changes, measured in this run call by call "
+            f"beside this checkout (package `model_base` under `{baseline_package}`, made by "
+            f"`{MAKE_BASELINE}`)."
+        )
+    elif base is not None:
         findings.append(f"Baseline ({base_path.name}): `{base_cmd}`.")
     data = {
         "summary": s,
+        "baseline_summary": base,
         "frames": [f.sample_id for f in chosen],
         "lidar_points": lidar,
         "radar_points": radar,
@@ -294,6 +313,24 @@ def run(
     )
 
 
+MAKE_BASELINE = (
+    "git archive 46e8685 model | tar -x -C DIR && mv DIR/model DIR/model_base && sed -i -E "
+    "'s/^(\\s*)(from|import) model([. ])/\\1\\2 model_base\\3/' DIR/model_base/*.py"
+)
+"""How the baseline package was made (46e8685: main before issue 20's changes)."""
+
+
+def load_baseline_package(directory: Path) -> TPCNet:
+    """The shipped checkpoint loaded by an older copy of ``model`` renamed ``model_base`` (its
+    imports rewritten) under ``directory``, in eval mode, beside this repository's ``model``."""
+    if not (directory / "model_base" / "checkpoint.py").is_file():
+        raise SystemExit(f"error: {directory}/model_base/checkpoint.py not found; make it with: "
+                         f"{MAKE_BASELINE}")  # fmt: skip
+    sys.path.insert(0, str(directory))
+    checkpoint = importlib.import_module("model_base.checkpoint")
+    return checkpoint.load_checkpoint(CHECKPOINT).eval()
+
+
 def _call_data(c: TimedCall) -> dict:
     return {
         "kind": c.kind,
@@ -311,6 +348,13 @@ def options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--repeats", type=int, default=None, help="rounds (default 5, quick 2)")
     parser.add_argument("--prompts", type=int, default=3, help="prompts per frame (default 3)")
     parser.add_argument("--name", default="floor", help="results file stem (default floor)")
+    parser.add_argument(
+        "--baseline-package",
+        type=Path,
+        default=None,
+        help="a folder holding an older copy of model/ as package model_base: measured in the "
+        "same run, call by call beside this checkout",
+    )
     parser.add_argument(
         "--baseline",
         type=Path,

@@ -163,50 +163,76 @@ def warm_up(model: TPCNet, frame: VodFrame) -> None:
 
 
 def measure(
-    model: TPCNet, frames: list[VodFrame], repeats: int, prompts: int, progress: bool = True
-) -> FloorRun:
+    models: dict[str, TPCNet],
+    frames: list[VodFrame],
+    repeats: int,
+    prompts: int,
+    progress: bool = True,
+) -> dict[str, FloorRun]:
     """``repeats`` rounds over ``frames``: per frame ``encode_scene``, then ``ground`` of up to
     ``prompts`` of its prompts (the text cache off: each is new to the text encoder), each call
     after a fresh :func:`matmul_rate`; and once per round the detection stage part by part from
-    outside (:func:`bench.latency_measure.measure_detect_parts`)."""
+    outside (:func:`bench.latency_measure.measure_detect_parts`). Several models (this code and
+    an older copy of it) take turns call by call, the first alternating frame by frame, so that
+    all see the same load."""
     from tqdm import tqdm
 
-    enc_flops = {f.sample_id: encode_flops(model, f) for f in frames}
-    run = FloorRun(detect_parts={k: [] for k in DETECT_PARTS})
-    old = text_cache(model, 0)
+    names = list(models)
+    enc_flops = {k: {f.sample_id: encode_flops(m, f) for f in frames} for k, m in models.items()}
+    runs = {k: FloorRun(detect_parts={p: [] for p in DETECT_PARTS}) for k in names}
+    old = {k: text_cache(m, 0) for k, m in models.items()}
     try:
-        features = {f.sample_id: model.encode_scene(f.lidar, f.radar) for f in frames}
-        gr_flops = {
-            (f.sample_id, p): ground_flops(model, features[f.sample_id], p)
-            for f in frames
-            for p in f.prompts[:prompts]
-        }
+        gr_flops: dict[str, dict[tuple[str, str], dict[str, int]]] = {}
+        for k, m in models.items():
+            feats = {f.sample_id: m.encode_scene(f.lidar, f.radar) for f in frames}
+            gr_flops[k] = {
+                (f.sample_id, p): ground_flops(m, feats[f.sample_id], p)
+                for f in frames
+                for p in f.prompts[:prompts]
+            }
         workloads = [
             SceneWorkload(int(f.sample_id), f.lidar, f.radar, f.prompts, (), ()) for f in frames
         ]
+        turn = 0
         for _ in tqdm(range(repeats), desc="floor", unit="round", disable=not progress):
             for f in frames:
-                rate = matmul_rate()
-                feats, ms = _timed(lambda f=f: model.encode_scene(f.lidar, f.radar))
-                assert isinstance(feats, SceneFeatures)
-                stages = {k: float(getattr(feats.timings, k)) for k in ENCODE_STAGES}
-                run.calls.append(
-                    TimedCall("encode", f.sample_id, rate, ms, stages, enc_flops[f.sample_id])
-                )
-                for p in f.prompts[:prompts]:
+                order = names if turn % 2 == 0 else names[::-1]
+                turn += 1
+                features = {}
+                for k in order:
+                    model, sid = models[k], f.sample_id
                     rate = matmul_rate()
-                    pred, ms = _timed(lambda p=p, feats=feats: model.ground(feats, p))
-                    stages = {k: float(getattr(pred.timings, k)) for k in GROUND_STAGES}  # type: ignore[attr-defined]
-                    run.calls.append(
-                        TimedCall(
-                            "ground", f.sample_id, rate, ms, stages, gr_flops[(f.sample_id, p)]
-                        )
+                    feats, ms = _timed(lambda m=model, f=f: m.encode_scene(f.lidar, f.radar))
+                    assert isinstance(feats, SceneFeatures)
+                    features[k] = feats
+                    stages = {s: float(getattr(feats.timings, s)) for s in ENCODE_STAGES}
+                    runs[k].calls.append(
+                        TimedCall("encode", sid, rate, ms, stages, enc_flops[k][sid])
                     )
-            run.detect_rates.append(matmul_rate())
-            parts, _, counts = measure_detect_parts(model, workloads, "cpu")
-            for k, v in parts.items():
-                run.detect_parts[k] += v
-            run.candidates += counts
+                for p in f.prompts[:prompts]:
+                    for k in order:
+                        model, feats = models[k], features[k]
+                        rate = matmul_rate()
+                        pred, ms = _timed(lambda m=model, x=feats, p=p: m.ground(x, p))
+                        timings = pred.timings  # type: ignore[attr-defined]
+                        stages = {s: float(getattr(timings, s)) for s in GROUND_STAGES}
+                        runs[k].calls.append(
+                            TimedCall(
+                                "ground",
+                                f.sample_id,
+                                rate,
+                                ms,
+                                stages,
+                                gr_flops[k][(f.sample_id, p)],
+                            )
+                        )
+            for k in order:
+                runs[k].detect_rates.append(matmul_rate())
+                parts, _, counts = measure_detect_parts(models[k], workloads, "cpu")
+                for part, v in parts.items():
+                    runs[k].detect_parts[part] += v
+                runs[k].candidates += counts
     finally:
-        text_cache(model, old)
-    return run
+        for k, m in models.items():
+            text_cache(m, old[k])
+    return runs

@@ -113,6 +113,8 @@ def voxelize(
         keys_of_point = keys_of_point + batch.index_select(0, selected) * (ny * nx)
     # One stable sort groups the points by pillar and keeps their input order within a pillar.
     order = _stable_order(keys_of_point, len(clouds) * ny * nx)
+    if device.type == "cpu" and order.numel():
+        return _group_cpu(points, selected, keys_of_point, order, max_points, len(clouds))
     keys, pillar_sorted, counts = torch.unique_consecutive(
         keys_of_point[order], return_inverse=True, return_counts=True
     )
@@ -125,6 +127,34 @@ def voxelize(
         keys=keys,
         counts=counts.clamp(max=max_points),
         batch_size=len(clouds),
+    )
+
+
+def _group_cpu(
+    points: Tensor,
+    selected: Tensor,
+    keys_of_point: Tensor,
+    order: Tensor,
+    max_points: int,
+    batch_size: int,
+) -> Pillars:
+    """The grouping of :func:`voxelize` in NumPy on the CPU (the same arrays as the tensor
+    form, in about a third of its time: its boolean masks and gathers are cheaper there)."""
+    o = order.numpy()
+    sorted_keys = keys_of_point.numpy()[o]
+    new = np.empty(len(sorted_keys), dtype=bool)
+    new[0] = True
+    np.not_equal(sorted_keys[1:], sorted_keys[:-1], out=new[1:])
+    first = np.flatnonzero(new)
+    pillar = np.cumsum(new) - 1
+    kept = np.arange(len(sorted_keys)) - first[pillar] < max_points
+    counts = np.minimum(np.diff(np.append(first, len(sorted_keys))), max_points)
+    return Pillars(
+        points=points.index_select(0, torch.from_numpy(selected.numpy()[o[kept]])),
+        pillar_of_point=torch.from_numpy(pillar[kept]),
+        keys=torch.from_numpy(sorted_keys[first]),
+        counts=torch.from_numpy(counts),
+        batch_size=batch_size,
     )
 
 
@@ -188,9 +218,9 @@ class PillarEncoder(nn.Module):
         sums.index_add_(0, pillars.pillar_of_point, xyz)
         mean = sums / pillars.counts.unsqueeze(1).to(pts.dtype)
         ny, nx = self.grid.shape
-        key = pillars.keys[pillars.pillar_of_point]
-        col = (key % nx).to(pts.dtype)
-        row = ((key // nx) % ny).to(pts.dtype)
+        # Each pillar's centre once, then gathered with its mean (the same values per point).
+        col = (pillars.keys % nx).to(pts.dtype)
+        row = ((pillars.keys // nx) % ny).to(pts.dtype)
         centre = torch.stack(
             [
                 self.grid.x_min + (col + 0.5) * self.grid.cell,
@@ -199,9 +229,13 @@ class PillarEncoder(nn.Module):
             ],
             dim=1,
         )
-        return torch.cat(
-            [pts * self.scale, xyz - mean[pillars.pillar_of_point], xyz - centre], dim=1
-        )
+        per_pillar = torch.cat([mean, centre], dim=1).index_select(0, pillars.pillar_of_point)
+        f = self.num_features
+        out = torch.empty(pts.shape[0], f + 6, device=pts.device, dtype=pts.dtype)
+        torch.mul(pts, self.scale, out=out[:, :f])
+        torch.sub(xyz, per_pillar[:, :3], out=out[:, f : f + 3])
+        torch.sub(xyz, per_pillar[:, 3:], out=out[:, f + 3 :])
+        return out
 
     def _pooled(self, pillars: Pillars) -> Tensor:
         """``(P, C)``: per pillar the max over its points of ``ReLU(BN(Linear(features)))``.
