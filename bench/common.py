@@ -119,11 +119,14 @@ def bench_main(
     run: Callable[..., BenchResult],
     argv: Sequence[str] | None = None,
     description: str = "",
+    default_threads: int = DEFAULT_THREADS,
+    options: Callable[[argparse.ArgumentParser], None] | None = None,
 ) -> int:
     """Command line shared by the benchmarks: ``[--quick] [--threads N] [--out-dir DIR]``.
 
-    Sets torch's intra-op threads (default :data:`DEFAULT_THREADS`), runs ``run(quick=...,
-    command=...)``, prints the Markdown and writes the JSON.
+    Sets torch's intra-op threads (default ``default_threads``), runs ``run(quick=...,
+    command=..., **own)``, prints the Markdown and writes the JSON; ``options`` adds a
+    benchmark's own arguments to the parser, passed to ``run`` by their ``dest`` names.
     """
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = argparse.ArgumentParser(prog=f"python -m {module}", description=description)
@@ -133,15 +136,19 @@ def bench_main(
     parser.add_argument(
         "--threads",
         type=int,
-        default=DEFAULT_THREADS,
-        help=f"torch intra-op CPU threads (default {DEFAULT_THREADS}, as the app's launch.py)",
+        default=default_threads,
+        help=f"torch intra-op CPU threads (default {default_threads}"
+        + (", as the app's launch.py)" if default_threads == DEFAULT_THREADS else ")"),
     )
     parser.add_argument("--out-dir", type=Path, default=RESULTS_DIR, help="where the JSON goes")
+    if options is not None:
+        options(parser)
     args = parser.parse_args(argv)
     if args.threads < 1:
         parser.error(f"--threads must be >= 1, got {args.threads}")
     torch.set_num_threads(args.threads)
-    result = run(quick=args.quick, command=command_line(module, argv))
+    own = {k: v for k, v in vars(args).items() if k not in ("quick", "threads", "out_dir")}
+    result = run(quick=args.quick, command=command_line(module, argv), **own)
     print(result.to_markdown())
     path = write_result(result, args.out_dir)
     print(f"wrote {path}")

@@ -10,6 +10,8 @@ app calls: ``model.encode_scene(lidar, radar)`` and ``model.ground(features, pro
 from __future__ import annotations
 
 import cProfile
+import importlib
+import inspect
 import os
 import pstats
 import time
@@ -25,7 +27,7 @@ from bench.report import REPO
 from bench.workloads import SceneWorkload
 from model import build_model
 from model.decode import decode
-from model.grounder import SceneMaps, referent_heatmap
+from model.grounder import referent_heatmap
 from model.tpcnet import SceneFeatures, TPCNet, as_points
 
 CHECKPOINT = REPO / "checkpoints" / "tpcnet-small.pt"
@@ -347,6 +349,12 @@ def measure_detect_parts(
     out: dict[str, list[float]] = {k: [] for k in DETECT_PARTS}
     reported, counts = [], []
     cfg = model.cfg
+    decode_fn, maps_type = _own_decoding(model)
+    limit = (
+        {"limit": cfg.referent.max_candidates}
+        if "limit" in inspect.signature(decode_fn).parameters
+        else {}
+    )
     for scene in scenes:
         reported.append(float(model.encode_scene(scene.lidar, scene.radar).timings.detect))
         with torch.no_grad():
@@ -368,12 +376,14 @@ def measure_detect_parts(
             head = model.head(neck)
             out["head"].append(_lap(device, t0))
             t0 = time.perf_counter()
-            dets = decode(head, model.head_grid, cfg.head, cfg.referent.candidate_threshold)[0]
+            dets = decode_fn(
+                head, model.head_grid, cfg.head, cfg.referent.candidate_threshold, **limit
+            )[0]
             torch.sigmoid(head.heatmap[0]).float().cpu().numpy()
             out["decode"].append(_lap(device, t0))
             t0 = time.perf_counter()
             keep = slice(0, cfg.referent.max_candidates)
-            maps = SceneMaps(
+            maps = maps_type(
                 neck[0],
                 own["l"][0][0] if "l" in own else None,
                 own["r"][0][0] if "r" in own else None,
@@ -389,6 +399,18 @@ def measure_detect_parts(
             out["candidates"].append(_lap(device, t0))
             counts.append(len(objects))
     return out, reported, counts
+
+
+def _own_decoding(model: TPCNet) -> tuple[Callable[..., list], type]:
+    """The ``decode`` function and ``SceneMaps`` class of the package ``model`` comes from (this
+    repository's ``model``, or an older copy of it loaded beside it by :mod:`bench.floor`), so
+    that its stage is timed as its own ``encode_scene`` runs it (``decode``'s ``limit`` where it
+    has one)."""
+    package = type(model).__module__.rsplit(".", 1)[0]
+    return (
+        importlib.import_module(f"{package}.decode").decode,
+        importlib.import_module(f"{package}.grounder").SceneMaps,
+    )
 
 
 def compare_threads(

@@ -37,8 +37,20 @@ from bench.common import (
     read_result,
 )
 
-BENCHMARKS = ("latency", "fusion_cost", "graph_cost", "model_size", "train_throughput", "soak")
+BENCHMARKS = (
+    "latency",
+    "floor",
+    "fusion_cost",
+    "graph_cost",
+    "model_size",
+    "train_throughput",
+    "soak",
+)
 """Benchmarks of this package, in the order of the document (``bench/<name>.py``)."""
+MANUAL = ("floor_1thread", "eval_throughput")
+"""Sections that come from their stored results only, run by hand with the command in their
+section: the floor benchmark on one thread (``python -m bench.floor --threads 1 --name
+floor_1thread``) and the evaluation throughput (it compares with an older checkout)."""
 
 SYNTH = "synth"
 SYNTH_SCRIPT = REPO / "bench" / "bench_synth.py"
@@ -81,6 +93,26 @@ MISS_NOTES: dict[str, str] = {
         "score tensors alone are 19.5 GiB, more than this machine can hold), which is the "
         "quadratic cost the FLOP ratio shows. Fix, if the measured ratio matters more than "
         "bounded memory: a larger `mhca_chunk`."
+    ),
+    "`encode_scene` time / FLOP floor": (
+        "**`encode_scene` against its FLOP floor.** The floor section's stage tables say where "
+        "the time above the floor goes: the pillar encoders (no FLOPs to speak of: grouping "
+        "~190k points into pillars, one pass over the cloud), BACA's attention (skinny matrix "
+        "products and softmaxes over `L x 144` scores, bound by memory, not arithmetic), "
+        "decoding and candidate description (no FLOPs: peaks, NMS, point evidence). With two "
+        "threads on shared cores each operation also waits for the slower thread; the same "
+        "benchmark with `--threads 1` shows the single-core ratio."
+    ),
+    "`ground` (new prompt) time / FLOP floor": (
+        "**`ground` against its FLOP floor.** MiniLM for one prompt is 15-30 matrix rows "
+        "against 42 MB of weights read once per prompt: bound by memory bandwidth more than by "
+        "arithmetic; the referent stage is some 60 small operations whose overhead exceeds "
+        "their FLOPs."
+    ),
+    "`model.evaluate` prompts/s": (
+        "**Evaluation throughput.** The evaluation section times the whole command; with the "
+        "cores shared, each run's start-up, reading and metrics are as slow as the load makes "
+        "them."
     ),
     "KNN / DGGF": (
         "**Graph cost.** The model's default form of DGGF's graph (`dynamic_max_relative`, "
@@ -239,7 +271,7 @@ def render(
         parts += ["", "### Failed in this run", ""]
         parts += [f"- `{name}`: {why}" for name, why in failures.items()]
     parts.append("")
-    for name in BENCHMARKS:
+    for name in (*BENCHMARKS, *MANUAL):
         if name in results:
             section = results[name].to_markdown()
             if name in failures:
@@ -260,9 +292,9 @@ def _anchor(title: str) -> str:
 
 
 def load_results(directory: Path = RESULTS_DIR) -> dict[str, BenchResult]:
-    """The results of :data:`BENCHMARKS` present in ``directory``."""
+    """The results of :data:`BENCHMARKS` and :data:`MANUAL` present in ``directory``."""
     out = {}
-    for name in BENCHMARKS:
+    for name in (*BENCHMARKS, *MANUAL):
         path = directory / f"{name}.json"
         if path.is_file():
             out[name] = read_result(path)
@@ -282,7 +314,7 @@ def main(argv: list[str] | None = None) -> int:
         help="run only these; the document keeps the others' previous results",
     )
     parser.add_argument(
-        "--threads", type=int, help="torch threads of every benchmark (default: theirs, 1)"
+        "--threads", type=int, help="torch threads of every benchmark (default: theirs: 1, floor 2)"
     )
     parser.add_argument(
         "--no-run", action="store_true", help="only rebuild docs/PERFORMANCE.md from the results"

@@ -128,6 +128,55 @@ def calibrate(
     return choose_threshold(answers)
 
 
+def calibrate_file(
+    path: str | Path,
+    data: str | Path,
+    split: str = "val",
+    limit: int = 0,
+    min_prompts: int = MIN_REFERRED_PROMPTS,
+    dry_run: bool = False,
+) -> Calibration:
+    """Calibrate the checkpoint at ``path`` on ``split`` of ``data`` and, unless ``dry_run``,
+    store the threshold and its source in it (``python -m model.calibrate``; training calls it at
+    the end of a referent-path run).
+
+    Raises:
+        CalibrationError: the split cannot measure a threshold (the checkpoint is untouched).
+    """
+    from model.checkpoint import load_checkpoint, save_checkpoint
+
+    model = load_checkpoint(path)
+    cal = calibrate(model, data, split, limit, min_prompts)
+    if not dry_run:
+        meta = dict(model.checkpoint_metadata)
+        meta["operating_threshold"] = cal.threshold
+        meta["operating_threshold_source"] = {
+            "root": str(Path(data).resolve()),
+            "split": split,
+            "prompts": cal.prompts,
+            "set_f1": round(cal.set_f1, 2),
+            "exact_set": round(cal.exact_set, 2),
+        }
+        save_checkpoint(path, model, **meta)
+    return cal
+
+
+def calibrate_run(path: Path, data: str | Path, split: str) -> None:
+    """Calibrate a finished training run's ``last.pt`` (``path``) on ``split`` of ``data``; a
+    split that cannot measure a threshold leaves it at the uncalibrated 0.5, with a notice."""
+    from scenes.layout import RootError
+
+    try:
+        cal = calibrate_file(path, data, split)
+    except (CalibrationError, RootError) as exc:
+        print(f"not calibrated: {exc}", file=sys.stderr)
+        return
+    print(
+        f"operating threshold {cal.threshold:.3f} (set F1 {cal.set_f1:.1f} on {cal.prompts} "
+        f"{split} prompts) stored in {path}"
+    )
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         prog="python -m model.calibrate", description=__doc__.split("\n")[0]
@@ -144,12 +193,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         help=f"prompts with a referent the split must hold (default {MIN_REFERRED_PROMPTS})",
     )
     a = p.parse_args(argv)
-    from model.checkpoint import CheckpointError, load_checkpoint, save_checkpoint
+    from model.checkpoint import CheckpointError
     from scenes.root import RootError
 
     try:
-        model = load_checkpoint(a.checkpoint)
-        cal = calibrate(model, a.data, a.split, a.limit, a.min_prompts)
+        cal = calibrate_file(
+            a.checkpoint, a.data, a.split, a.limit, a.min_prompts, dry_run=a.dry_run
+        )
         for t, f1, exact in cal.curve:
             mark = "  <- chosen" if t == cal.threshold else ""
             print(f"threshold {t:.3f}: set F1 {f1:5.1f}  exact-set {exact:5.1f}{mark}")
@@ -158,16 +208,6 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{cal.exact_set:.1f} on {cal.prompts} prompts of {a.data} {a.split})"
         )
         if not a.dry_run:
-            meta = dict(model.checkpoint_metadata)
-            meta["operating_threshold"] = cal.threshold
-            meta["operating_threshold_source"] = {
-                "root": str(Path(a.data).resolve()),
-                "split": a.split,
-                "prompts": cal.prompts,
-                "set_f1": round(cal.set_f1, 2),
-                "exact_set": round(cal.exact_set, 2),
-            }
-            save_checkpoint(a.checkpoint, model, **meta)
             print(f"wrote operating_threshold into {a.checkpoint}")
     except (CheckpointError, RootError, ValueError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)

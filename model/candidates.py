@@ -96,66 +96,113 @@ def geometry_features(boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray)
     return out
 
 
-def _near_boxes(points: np.ndarray, boxes: np.ndarray, margin: float) -> np.ndarray:
-    """Indices (ascending) of the ``points (N, >=2)`` that may lie in a box grown by ``margin``.
+def _box_pairs(
+    points: np.ndarray, boxes: np.ndarray, margin: float, use_z: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every (box, point) pair with the point inside the box grown by ``margin`` (BEV footprint,
+    and ``|z - box z| <= h / 2 + margin`` with ``use_z``), for all ``K`` boxes at once.
 
-    A superset of every box's points: each box marks the cells of a 1 m grid under its bounding
-    square (half-width ``hypot(l/2 + margin, w/2 + margin)`` plus 1 mm, which contains the grown
-    footprint at any yaw), and a point is kept when its cell is marked (cells are found by
-    truncation, which may keep a few more points, never fewer). One pass over the points and no
-    sort, so that the exact per-box tests of :func:`_in_footprints` see only the points near a
-    box instead of the whole cloud.
+    Args:
+        points: ``(N, >=3)`` float32 or float64, LiDAR frame.
+        boxes: ``(K, 7)`` float64.
+
+    Returns:
+        ``(box, point)`` int64 index arrays ``(P,)``, sorted by box, then by the point's x, then by
+        the point's index (the order of a stable sort of the cloud by x), the order each box's
+        sums were defined in (the features are the same bit for bit). A point also needs ``box x - r <= x < box x + r`` with ``r`` half the box's diagonal plus
+        ``margin`` (the x range each box searched in a cloud sorted by x, which the features
+        were defined and the model trained with; it clips the grown box's corners).
+
+    One pass over the cloud: a grid of :data:`_CELL` cells, each box marking the cells under the
+    axis-aligned bounding box of its grown footprint (cut to its x range, plus 1 mm), and each
+    point in a marked cell paired with the boxes marking it; only those pairs get the exact test,
+    in float64. The cells are found in the points' own precision: a point of a footprint is at
+    least 1 mm inside its marked rectangle, far more than float32 rounding.
     """
-    half = np.hypot(boxes[:, 3] / 2 + margin, boxes[:, 4] / 2 + margin) + 1e-3
-    x0 = float((boxes[:, 0] - half).min())
-    y0 = float((boxes[:, 1] - half).min())
-    c0 = np.floor(boxes[:, 0] - half - x0).astype(np.int64) + 1
-    c1 = np.floor(boxes[:, 0] + half - x0).astype(np.int64) + 1
-    r0 = np.floor(boxes[:, 1] - half - y0).astype(np.int64) + 1
-    r1 = np.floor(boxes[:, 1] + half - y0).astype(np.int64) + 1
-    # Cell i + 1 holds [x0 + i, x0 + i + 1); row/column 0 and the last one stay empty (outside).
-    occupied = np.zeros((int(c1.max()) + 2, int(r1.max()) + 2), dtype=bool)
-    for a, b, c, d in zip(c0.tolist(), c1.tolist(), r0.tolist(), r1.tolist(), strict=True):
-        occupied[a : b + 1, c : d + 1] = True
-    col = np.clip(points[:, 0] - (x0 - 1.0), 0.0, occupied.shape[0] - 1).astype(np.intp)
-    row = np.clip(points[:, 1] - (y0 - 1.0), 0.0, occupied.shape[1] - 1).astype(np.intp)
-    return np.flatnonzero(occupied[col, row])
-
-
-def _in_footprints(points: np.ndarray, boxes: np.ndarray, margin: float, use_z: bool) -> list:
-    """Indices of ``points (N, >=3)`` inside each box grown by ``margin`` (list of K arrays).
-
-    Each box tests the points within its bounding circle's x range (``box x -/+ r``, ``r`` =
-    half the box diagonal + ``margin``) against the grown box, and returns them in the order of
-    a stable sort of the points by x. Only the points near some box (:func:`_near_boxes`, a
-    superset of every box's points) are sorted, and all (box, point) pairs of the x ranges are
-    tested at once, so the cost is one pass over the cloud plus ``M log M + sum of range sizes``
-    for the ``M`` points near a box.
-    """
-    if len(boxes) == 0:
-        return []
-    if len(points) == 0:
-        return [np.zeros(0, dtype=np.int64) for _ in boxes]
-    near = _near_boxes(points, boxes, margin)
-    order = near[np.argsort(points[near, 0], kind="stable")]
-    sub = points[order]
+    k = len(boxes)
+    empty = np.zeros(0, dtype=np.int64)
+    if k == 0 or len(points) == 0:
+        return empty, empty
+    cos, sin = np.cos(boxes[:, 6]), np.sin(boxes[:, 6])
+    # Half-extents of each grown footprint's axis-aligned bounding box, and of its x range
+    # (below), plus 1 mm.
+    length, width = boxes[:, 3] / 2 + margin, boxes[:, 4] / 2 + margin
     r = 0.5 * np.hypot(boxes[:, 3], boxes[:, 4]) + margin
-    lo = np.searchsorted(sub[:, 0], boxes[:, 0] - r)
-    hi = np.searchsorted(sub[:, 0], boxes[:, 0] + r)
-    sizes = np.maximum(hi - lo, 0)
-    # Pair j belongs to box which[j] and is point pos[j] of the sorted near set.
-    which = np.repeat(np.arange(len(boxes)), sizes)
-    starts = np.cumsum(sizes) - sizes
-    pos = np.arange(len(which)) - np.repeat(starts - lo, sizes)
-    box, p = boxes[which], sub[pos]
-    dx, dy = p[:, 0] - box[:, 0], p[:, 1] - box[:, 1]
-    c, s = np.cos(box[:, 6]), np.sin(box[:, 6])
+    ex = np.minimum(np.abs(length * cos) + np.abs(width * sin), r) + 1e-3
+    ey = np.abs(length * sin) + np.abs(width * cos) + 1e-3
+    x0 = float((boxes[:, 0] - ex).min())
+    y0 = float((boxes[:, 1] - ey).min())
+    c0 = np.floor((boxes[:, 0] - ex - x0) / _CELL).astype(np.int64)
+    c1 = np.floor((boxes[:, 0] + ex - x0) / _CELL).astype(np.int64)
+    r0 = np.floor((boxes[:, 1] - ey - y0) / _CELL).astype(np.int64)
+    r1 = np.floor((boxes[:, 1] + ey - y0) / _CELL).astype(np.int64)
+    cols, rows = int(c1.max()) + 1, int(r1.max()) + 1
+    # One read of each strided column, then contiguous arithmetic (in the points' precision).
+    fx, fy = (points[:, 0] - x0) / _CELL, (points[:, 1] - y0) / _CELL
+    cand = np.flatnonzero((fx >= 0) & (fx < cols) & (fy >= 0) & (fy < rows))
+    col = np.minimum(fx[cand].astype(np.int64), cols - 1)
+    row = np.minimum(fy[cand].astype(np.int64), rows - 1)
+    cell = col * rows + row
+    # The boxes of each cell, as a CSR list (box indices ascending within a cell).
+    width = r1 - r0 + 1
+    cells = (c1 - c0 + 1) * width
+    owner = np.repeat(np.arange(k), cells)
+    local = np.arange(len(owner)) - np.repeat(np.cumsum(cells) - cells, cells)
+    marked = (c0[owner] + local // width[owner]) * rows + r0[owner] + local % width[owner]
+    box_of_cell = owner[np.argsort(marked, kind="stable")]
+    count = np.bincount(marked, minlength=cols * rows)
+    first = np.cumsum(count) - count
+    per_point = count[cell]
+    near = per_point > 0
+    cand, cell, per_point = cand[near], cell[near], per_point[near]
+    total = int(per_point.sum())
+    point = np.repeat(cand, per_point)
+    slot = np.repeat(first[cell] - (np.cumsum(per_point) - per_point), per_point)
+    box = box_of_cell[slot + np.arange(total)]
+    # The exact test (the same arithmetic as a box against each of its points).
+    p = np.asarray(points[point, :3], dtype=np.float64)
+    dx, dy = p[:, 0] - boxes[box, 0], p[:, 1] - boxes[box, 1]
+    c, s = cos[box], sin[box]
     lx, ly = dx * c + dy * s, -dx * s + dy * c
-    keep = (np.abs(lx) <= box[:, 3] / 2 + margin) & (np.abs(ly) <= box[:, 4] / 2 + margin)
+    keep = (np.abs(lx) <= (boxes[:, 3] / 2 + margin)[box]) & (
+        np.abs(ly) <= (boxes[:, 4] / 2 + margin)[box]
+    )
     if use_z:
-        keep &= np.abs(p[:, 2] - box[:, 2]) <= box[:, 5] / 2 + margin
-    counts = np.bincount(which[keep], minlength=len(boxes))
-    return np.split(order[pos[keep]], np.cumsum(counts)[:-1])
+        keep &= np.abs(p[:, 2] - boxes[box, 2]) <= (boxes[:, 5] / 2 + margin)[box]
+    # And within ``r`` of the centre along x, ``r`` = half the box's diagonal + margin (less than
+    # the grown box's half-diagonal: the features were defined, and the model trained, so).
+    keep &= (p[:, 0] >= (boxes[:, 0] - r)[box]) & (p[:, 0] < (boxes[:, 0] + r)[box])
+    box, point = box[keep], point[keep]
+    order = _by_box_then_x(box, point, points[point, 0], k, len(points))
+    return box[order], point[order]
+
+
+_CELL = 0.5
+"""Side (m) of the cells that pair points with boxes (:func:`_box_pairs`)."""
+
+
+def _by_box_then_x(box: np.ndarray, point: np.ndarray, x: np.ndarray, k: int, n: int) -> np.ndarray:
+    """The permutation that sorts pairs (given in ascending ``point`` order) by box, then x, then
+    point: one sort of unique 64-bit keys where they fit (float32 x: its bits in an
+    order-preserving form, -0.0 as +0.0), else two stable sorts."""
+    box_bits, point_bits = max(k - 1, 1).bit_length(), max(n - 1, 1).bit_length()
+    if x.dtype == np.float32 and box_bits + 32 + point_bits <= 64:
+        bits = (x + np.float32(0.0)).view(np.uint32)  # x + 0 turns -0.0 into +0.0
+        ordered = np.where(bits >> 31, ~bits, bits | np.uint32(1 << 31)).astype(np.uint64)
+        key = (box.astype(np.uint64) << np.uint64(32 + point_bits)) | (
+            ordered << np.uint64(point_bits)
+        )
+        return np.argsort(key | point.astype(np.uint64))
+    by_x = np.argsort(x, kind="stable")
+    return by_x[np.argsort(box[by_x].astype(np.int16 if k < 2**15 else np.int64), kind="stable")]
+
+
+def _segments(box: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Boxes that hold points, and where their runs of ``box`` (sorted) start and how long
+    they are."""
+    counts = np.bincount(box, minlength=k)
+    has = np.flatnonzero(counts)
+    return has, (np.cumsum(counts) - counts)[has], counts[has]
 
 
 def _mean(values: np.ndarray) -> float:
@@ -166,16 +213,37 @@ def _mean(values: np.ndarray) -> float:
 
 def lidar_evidence(boxes: np.ndarray, lidar: np.ndarray) -> np.ndarray:
     """LiDAR evidence ``(K, LIDAR_EVIDENCE)``: log(1 + points in the box grown by
-    :data:`LIDAR_MARGIN`), mean intensity / 255, height spread of those points (m), whether any."""
+    :data:`LIDAR_MARGIN`), mean intensity / 255, height spread of those points (m), whether any.
+
+    ``lidar``: ``(N, 4)`` (float32 as the model gets it, or float64); all boxes are served by one
+    pass over the cloud (:func:`_box_pairs`).
+    """
     b = _boxes(boxes)
-    pts = np.asarray(lidar, dtype=np.float64).reshape(-1, 4)
+    pts = _points(lidar, 4)
     out = np.zeros((len(b), LIDAR_EVIDENCE), dtype=np.float32)
-    for i, idx in enumerate(_in_footprints(pts, b, LIDAR_MARGIN, use_z=True)):
-        if len(idx):
-            p = pts[idx]
-            z = p[:, 2]
-            out[i] = (np.log1p(len(idx)), _mean(p[:, 3]) / 255.0, z.max() - z.min(), 1.0)
+    box, idx = _box_pairs(pts, b, LIDAR_MARGIN, use_z=True)
+    if len(idx) == 0:
+        return out
+    p = np.asarray(pts[idx], dtype=np.float64)
+    has, starts, counts = _segments(box, len(b))
+    z = p[:, 2]
+    spread = np.maximum.reduceat(z, starts) - np.minimum.reduceat(z, starts)
+    intensity = [
+        _mean(p[s : s + n, 3]) for s, n in zip(starts.tolist(), counts.tolist(), strict=True)
+    ]
+    out[has, 0] = np.log1p(counts)
+    out[has, 1] = np.asarray(intensity) / 255.0
+    out[has, 2] = spread
+    out[has, 3] = 1.0
     return out
+
+
+def _points(points: np.ndarray, features: int) -> np.ndarray:
+    """``points`` as an ``(N, features)`` float32 or float64 array (not copied when it is one)."""
+    arr = np.asarray(points)
+    if arr.dtype not in (np.float32, np.float64):
+        arr = arr.astype(np.float64)
+    return arr.reshape(-1, features)
 
 
 def _scan_slope(values: np.ndarray, t: np.ndarray, denom: float) -> float:
@@ -196,24 +264,27 @@ def radar_evidence(boxes: np.ndarray, radar: np.ndarray) -> np.ndarray:
     units of :data:`SPEED_SCALE` m/s.
     """
     b = _boxes(boxes)
-    pts = np.asarray(radar, dtype=np.float64).reshape(-1, 7)
+    pts = _points(radar, 7)
     out = np.zeros((len(b), RADAR_EVIDENCE), dtype=np.float32)
-    for i, idx in enumerate(_in_footprints(pts, b, RADAR_MARGIN, use_z=False)):
-        if not len(idx):
-            continue
-        p = pts[idx]
+    box, idx = _box_pairs(pts, b, RADAR_MARGIN, use_z=False)
+    if len(idx) == 0:
+        return out
+    all_p = np.asarray(pts[idx], dtype=np.float64)
+    has, starts, counts = _segments(box, len(b))
+    for i, s, n in zip(has.tolist(), starts.tolist(), counts.tolist(), strict=True):
+        p = all_p[s : s + n]
         vc, times = p[:, 5], p[:, 6]
         vc_mean = _mean(vc)
         spread = vc - vc_mean
         t = times - _mean(times)
         denom = float(np.add.reduce(t * t))
         out[i] = (
-            np.log1p(len(idx)),
+            np.log1p(n),
             np.log1p(np.count_nonzero(times == 0)),
             _mean(p[:, 4]) / SPEED_SCALE,
             vc_mean / SPEED_SCALE,
             np.median(vc) / SPEED_SCALE,
-            np.sqrt(np.add.reduce(spread * spread) / len(vc)) / SPEED_SCALE,
+            np.sqrt(np.add.reduce(spread * spread) / n) / SPEED_SCALE,
             _mean(p[:, 3]) / 10.0,
             _scan_slope(p[:, 0], t, denom),
             _scan_slope(p[:, 1], t, denom),

@@ -9,8 +9,10 @@ Per batch item (CenterPoint's decoder, spec section 3.7, with the anchor of sect
    round trip through :func:`model.targets.draw_targets` is exact up to float32 storage of the
    small offset), ``z`` as regressed, ``(l, w, h) = exp(log size)``,
    ``yaw = atan2(sin, cos)`` wrapped to ``[-pi, pi)``;
-5. rotated NMS per class with the exact BEV IoU of :func:`scenes.boxes.bev_iou`
-   (``HeadConfig.nms_iou``), then the ``HeadConfig.max_detections`` best boxes by score.
+5. rotated NMS per class with the exact BEV IoU of :func:`scenes.boxes.paired_bev_iou`
+   (``HeadConfig.nms_iou``), then the ``HeadConfig.max_detections`` best boxes by score: one
+   greedy pass over all classes in descending score order (:func:`class_nms`), which stops once
+   that many boxes are kept and compares only boxes whose bounding circles overlap.
 
 Decoded centres are not filtered by the grid range: a box whose near corner is inside the grid may
 have its centre just outside it, and it is still a valid detection.
@@ -28,7 +30,7 @@ from model.grid import BevGrid
 from model.head import NUM_CLASSES, REGRESSION_CHANNELS, HeadConfig, HeadOutput
 from model.targets import cell_centres
 from scenes.actors import CLASSES
-from scenes.boxes import bev_iou, wrap_yaw
+from scenes.boxes import paired_bev_iou, wrap_yaw
 
 
 @dataclass(frozen=True)
@@ -74,28 +76,72 @@ def rotated_nms(
     scores = np.asarray(scores, dtype=np.float64).reshape(-1)
     if len(boxes) != len(scores):
         raise ValueError(f"rotated_nms: {len(boxes)} boxes but {len(scores)} scores")
-    order = np.argsort(-scores, kind="stable")
-    # Bounding circles rule out most pairs before the exact polygon IoU.
-    radius = 0.5 * np.hypot(boxes[:, 3], boxes[:, 4])
-    suppressed = np.zeros(len(boxes), dtype=bool)
-    keep: list[int] = []
-    for pos, i in enumerate(order):
-        if suppressed[i]:
-            continue
-        keep.append(int(i))
-        if max_keep is not None and len(keep) >= max_keep:
-            break
-        rest = order[pos + 1 :]
-        rest = rest[~suppressed[rest]]
-        if len(rest) == 0:
-            continue
-        dist = np.hypot(boxes[rest, 0] - boxes[i, 0], boxes[rest, 1] - boxes[i, 1])
-        rest = rest[dist < radius[rest] + radius[i]]
-        if len(rest) == 0:
-            continue
-        iou = np.asarray(bev_iou(boxes[i : i + 1], boxes[rest]))[0]
-        suppressed[rest[iou > iou_threshold]] = True
-    return np.asarray(keep, dtype=np.int64)
+    labels = np.zeros(len(boxes), dtype=np.int64)
+    return class_nms(boxes, scores, labels, iou_threshold, max_keep)
+
+
+def class_nms(
+    boxes: np.ndarray,
+    scores: np.ndarray,
+    labels: np.ndarray,
+    iou_threshold: float,
+    max_keep: int | None = None,
+) -> np.ndarray:
+    """Greedy rotated NMS within each class, all classes in one pass.
+
+    The result is that of :func:`rotated_nms` run on each class, merged by descending score
+    (ties: the lower class, then the lower index) and cut to ``max_keep``. Boxes are visited in
+    that order and a box is suppressed by a kept box of its class whose IoU with it exceeds
+    ``iou_threshold``; the visit stops once ``max_keep`` boxes are kept, so that only the boxes
+    before that point are ever compared. Comparisons are vectorised: per block of the visit
+    order, the pairs (earlier kept or in-block box, in-block box) of one class whose bounding
+    circles overlap get their exact IoU (:func:`scenes.boxes.paired_bev_iou`) in one call; the
+    first block holds ``4 * max_keep`` boxes (at least 64), which usually suffices.
+
+    Args:
+        boxes: ``(K, 7)`` LiDAR frame; scores ``(K,)``; labels ``(K,)`` int class indices.
+
+    Returns:
+        ``(M,)`` int64 indices into ``boxes`` of the kept boxes, in the order above.
+    """
+    n = len(boxes)
+    limit = n if max_keep is None else min(int(max_keep), n)
+    if n == 0 or limit <= 0:
+        return np.zeros(0, dtype=np.int64)
+    order = np.lexsort((np.arange(n), labels, -scores))
+    b, lab = boxes[order], labels[order]
+    radius = 0.5 * np.hypot(b[:, 3], b[:, 4])
+    suppressed = np.zeros(n, dtype=bool)
+    kept: list[int] = []
+    start, size = 0, max(4 * limit, 64)
+    while start < n and len(kept) < limit:
+        end = min(n, start + size)
+        # Earlier boxes only matter where they were kept.
+        first = np.concatenate([np.asarray(kept, dtype=np.int64), np.arange(start, end)])
+        block = np.arange(start, end)
+        pair = (first[:, None] < block[None, :]) & (lab[first][:, None] == lab[block][None, :])
+        dist = np.hypot(b[first, 0][:, None] - b[block, 0], b[first, 1][:, None] - b[block, 1])
+        pair &= dist < radius[first][:, None] + radius[block][None, :]
+        fi, bj = np.nonzero(pair)
+        i, j = first[fi], block[bj]
+        hit = paired_bev_iou(b[i], b[j]) > iou_threshold
+        i, j = i[hit], j[hit]
+        # Suppressions by boxes kept before this block; then the block in order.
+        before = i < start
+        suppressed[j[before]] = True
+        later: dict[int, list[int]] = {}
+        for a, c in zip(i[~before].tolist(), j[~before].tolist(), strict=True):
+            later.setdefault(a, []).append(c)
+        for p in range(start, end):
+            if suppressed[p]:
+                continue
+            kept.append(p)
+            if len(kept) >= limit:
+                break
+            for c in later.get(p, ()):
+                suppressed[c] = True
+        start, size = end, n
+    return order[np.asarray(kept, dtype=np.int64)]
 
 
 def _decode_one(
@@ -104,8 +150,10 @@ def _decode_one(
     grid: BevGrid,
     cfg: HeadConfig,
     threshold: float,
+    limit: int,
 ) -> Detections:
-    """Decode one item: ``heatmap (3, H, W)`` logits and ``regression (8, H, W)``."""
+    """Decode one item: ``heatmap (3, H, W)`` logits and ``regression (8, H, W)``; at most
+    ``limit`` boxes."""
     _, H, W = heatmap.shape
     scores = torch.sigmoid(heatmap.float())
     pooled = F.max_pool2d(scores[None], kernel_size=3, stride=1, padding=1)[0]
@@ -129,15 +177,7 @@ def _decode_one(
     boxes = np.concatenate([centres, reg[:, 2:3], np.exp(reg[:, 3:6]), yaw[:, None]], axis=1)
     scores_np = top_scores.detach().cpu().numpy().astype(np.float64)
 
-    kept: list[np.ndarray] = []
-    for c in range(NUM_CLASSES):
-        idx = np.flatnonzero(labels == c)
-        if len(idx):
-            kept.append(
-                idx[rotated_nms(boxes[idx], scores_np[idx], cfg.nms_iou, cfg.max_detections)]
-            )
-    sel = np.concatenate(kept)
-    sel = sel[np.argsort(-scores_np[sel], kind="stable")][: cfg.max_detections]
+    sel = class_nms(boxes, scores_np, labels, cfg.nms_iou, limit)
     return Detections(
         boxes=boxes[sel],
         scores=scores_np[sel],
@@ -148,7 +188,11 @@ def _decode_one(
 
 @torch.no_grad()
 def decode(
-    out: HeadOutput, grid: BevGrid, cfg: HeadConfig, score_threshold: float | None = None
+    out: HeadOutput,
+    grid: BevGrid,
+    cfg: HeadConfig,
+    score_threshold: float | None = None,
+    limit: int | None = None,
 ) -> list[Detections]:
     """Decode a batch of head outputs into boxes.
 
@@ -157,6 +201,8 @@ def decode(
         grid: The head's BEV grid; ``grid.shape`` must equal ``(H, W)``.
         cfg: Head configuration (top-K, threshold, NMS IoU, cap).
         score_threshold: Overrides ``cfg.score_threshold`` when given.
+        limit: Keep at most this many boxes (when below ``cfg.max_detections``): the first
+            ``limit`` of the full result, found without visiting the boxes after them.
 
     Returns:
         One :class:`Detections` per batch item (LiDAR frame boxes).
@@ -176,4 +222,5 @@ def decode(
     if hm.shape[0] != reg.shape[0]:
         raise ValueError(f"decode: batch sizes differ: {hm.shape[0]} vs {reg.shape[0]}")
     threshold = cfg.score_threshold if score_threshold is None else float(score_threshold)
-    return [_decode_one(hm[b], reg[b], grid, cfg, threshold) for b in range(hm.shape[0])]
+    keep = cfg.max_detections if limit is None else min(cfg.max_detections, int(limit))
+    return [_decode_one(hm[b], reg[b], grid, cfg, threshold, keep) for b in range(hm.shape[0])]

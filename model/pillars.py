@@ -79,31 +79,42 @@ def voxelize(
         raise ValueError("voxelize needs at least one point cloud (batch size 0)")
     num_features = clouds[0].shape[1]
     device = clouds[0].device
-    points = torch.cat([c.reshape(-1, num_features) for c in clouds], dim=0)
-    batch = torch.repeat_interleave(
-        torch.arange(len(clouds), device=device),
-        torch.tensor([c.shape[0] for c in clouds], device=device),
-    )
+    batch = None
+    if len(clouds) == 1:  # the app's case: no copy of the cloud, no batch index
+        points = clouds[0].reshape(-1, num_features)
+    else:
+        points = torch.cat([c.reshape(-1, num_features) for c in clouds], dim=0)
+        batch = torch.repeat_interleave(
+            torch.arange(len(clouds), device=device),
+            torch.tensor([c.shape[0] for c in clouds], device=device),
+        )
     ny, nx = grid.shape
-    col = torch.floor((points[:, 0] - grid.x_min) / grid.cell).long()
-    row = torch.floor((points[:, 1] - grid.y_min) / grid.cell).long()
+    x, y, z = points[:, 0], points[:, 1], points[:, 2]
     inside = (
-        (points[:, 0] >= grid.x_min)
-        & (points[:, 0] < grid.x_max)
-        & (points[:, 1] >= grid.y_min)
-        & (points[:, 1] < grid.y_max)
-        & (points[:, 2] >= z_min)
-        & (points[:, 2] < z_max)
-        & (col >= 0)
-        & (col < nx)
-        & (row >= 0)
-        & (row < ny)
+        (x >= grid.x_min)
+        & (x < grid.x_max)
+        & (y >= grid.y_min)
+        & (y < grid.y_max)
+        & (z >= z_min)
+        & (z < z_max)
     )
-    # One index of the points in range (cheaper than masking four tensors), gathered once at the end.
+    # One index of the points in range (cheaper than masking four tensors), gathered once at the
+    # end; cells are computed for those points only, and checked (rounding can put a point just
+    # below x_max into column nx).
     selected = torch.nonzero(inside).squeeze(1)
-    keys_of_point = ((batch * ny + row) * nx + col).index_select(0, selected)
+    col = torch.floor((x.index_select(0, selected) - grid.x_min) / grid.cell).long()
+    row = torch.floor((y.index_select(0, selected) - grid.y_min) / grid.cell).long()
+    in_grid = (col >= 0) & (col < nx) & (row >= 0) & (row < ny)
+    if not bool(in_grid.all()):
+        keep = torch.nonzero(in_grid).squeeze(1)
+        selected, col, row = selected[keep], col[keep], row[keep]
+    keys_of_point = row * nx + col
+    if batch is not None:
+        keys_of_point = keys_of_point + batch.index_select(0, selected) * (ny * nx)
     # One stable sort groups the points by pillar and keeps their input order within a pillar.
     order = _stable_order(keys_of_point, len(clouds) * ny * nx)
+    if device.type == "cpu" and order.numel():
+        return _group_cpu(points, selected, keys_of_point, order, max_points, len(clouds))
     keys, pillar_sorted, counts = torch.unique_consecutive(
         keys_of_point[order], return_inverse=True, return_counts=True
     )
@@ -116,6 +127,34 @@ def voxelize(
         keys=keys,
         counts=counts.clamp(max=max_points),
         batch_size=len(clouds),
+    )
+
+
+def _group_cpu(
+    points: Tensor,
+    selected: Tensor,
+    keys_of_point: Tensor,
+    order: Tensor,
+    max_points: int,
+    batch_size: int,
+) -> Pillars:
+    """The grouping of :func:`voxelize` in NumPy on the CPU (the same arrays as the tensor
+    form, in about a third of its time: its boolean masks and gathers are cheaper there)."""
+    o = order.numpy()
+    sorted_keys = keys_of_point.numpy()[o]
+    new = np.empty(len(sorted_keys), dtype=bool)
+    new[0] = True
+    np.not_equal(sorted_keys[1:], sorted_keys[:-1], out=new[1:])
+    first = np.flatnonzero(new)
+    pillar = np.cumsum(new) - 1
+    kept = np.arange(len(sorted_keys)) - first[pillar] < max_points
+    counts = np.minimum(np.diff(np.append(first, len(sorted_keys))), max_points)
+    return Pillars(
+        points=points.index_select(0, torch.from_numpy(selected.numpy()[o[kept]])),
+        pillar_of_point=torch.from_numpy(pillar[kept]),
+        keys=torch.from_numpy(sorted_keys[first]),
+        counts=torch.from_numpy(counts),
+        batch_size=batch_size,
     )
 
 
@@ -179,9 +218,9 @@ class PillarEncoder(nn.Module):
         sums.index_add_(0, pillars.pillar_of_point, xyz)
         mean = sums / pillars.counts.unsqueeze(1).to(pts.dtype)
         ny, nx = self.grid.shape
-        key = pillars.keys[pillars.pillar_of_point]
-        col = (key % nx).to(pts.dtype)
-        row = ((key // nx) % ny).to(pts.dtype)
+        # Each pillar's centre once, then gathered with its mean (the same values per point).
+        col = (pillars.keys % nx).to(pts.dtype)
+        row = ((pillars.keys // nx) % ny).to(pts.dtype)
         centre = torch.stack(
             [
                 self.grid.x_min + (col + 0.5) * self.grid.cell,
@@ -190,9 +229,39 @@ class PillarEncoder(nn.Module):
             ],
             dim=1,
         )
-        return torch.cat(
-            [pts * self.scale, xyz - mean[pillars.pillar_of_point], xyz - centre], dim=1
-        )
+        per_pillar = torch.cat([mean, centre], dim=1).index_select(0, pillars.pillar_of_point)
+        f = self.num_features
+        out = torch.empty(pts.shape[0], f + 6, device=pts.device, dtype=pts.dtype)
+        torch.mul(pts, self.scale, out=out[:, :f])
+        torch.sub(xyz, per_pillar[:, :3], out=out[:, f : f + 3])
+        torch.sub(xyz, per_pillar[:, 3:], out=out[:, f + 3 :])
+        return out
+
+    def _pooled(self, pillars: Pillars) -> Tensor:
+        """``(P, C)``: per pillar the max over its points of ``ReLU(BN(Linear(features)))``.
+
+        With running statistics (eval mode) BatchNorm is ``a * h + b`` per channel, and it and
+        ReLU are monotone: the max of ``ReLU(BN(h))`` over a pillar is ``ReLU(BN(max h))`` where
+        ``a >= 0`` and ``ReLU(BN(min h))`` where ``a < 0`` (rounding is monotone too, so the
+        values are the same bit for bit). So the pillars are pooled first, from the linear map
+        with the ``a < 0`` channels' weights negated (``max(-h) = -min(h)`` exactly), and
+        normalised after: the per-point BatchNorm and ReLU are not computed. In training the
+        statistics are the points', and every point is normalised.
+        """
+        channels = self.out_channels
+        index = pillars.pillar_of_point.unsqueeze(1).expand(-1, channels)
+        x = self.point_features(pillars)
+        if self.norm.training:
+            h = torch.relu(_batch_norm_points(self.norm, self.linear(x)))
+            sign = None
+        else:
+            sign = torch.where(self.norm.weight >= 0, 1.0, -1.0).to(x.dtype)
+            h = F.linear(x, self.linear.weight * sign[:, None])
+        pooled = torch.zeros(pillars.keys.numel(), channels, device=h.device, dtype=h.dtype)
+        pooled = pooled.scatter_reduce(0, index, h, reduce="amax", include_self=False)
+        if sign is None:
+            return pooled
+        return torch.relu(self.norm(pooled * sign))
 
     def forward(self, clouds: Sequence[Tensor]) -> Tensor:
         """Encode a batch of clouds.
@@ -218,13 +287,9 @@ class PillarEncoder(nn.Module):
         if pillars.keys.numel() == 0:
             canvas = torch.zeros(channels, pillars.batch_size * ny * nx, device=device)
         else:
-            h = self.linear(self.point_features(pillars))
-            h = torch.relu(_batch_norm_points(self.norm, h))
-            index = pillars.pillar_of_point.unsqueeze(1).expand(-1, channels)
-            pooled = torch.zeros(pillars.keys.numel(), channels, device=device, dtype=h.dtype)
-            pooled = pooled.scatter_reduce(0, index, h, reduce="amax", include_self=False)
+            pooled = self._pooled(pillars)
             canvas = torch.zeros(
-                channels, pillars.batch_size * ny * nx, device=device, dtype=h.dtype
+                channels, pillars.batch_size * ny * nx, device=device, dtype=pooled.dtype
             )
             canvas.index_copy_(1, pillars.keys, pooled.t())
         return canvas.view(channels, pillars.batch_size, ny, nx).permute(1, 0, 2, 3).contiguous()

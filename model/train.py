@@ -474,6 +474,10 @@ def main(argv: list[str] | None = None) -> int:
         print(
             f"done: {state.step} steps, {state.epoch} epochs, best val 3D mAP {state.best_map:.2f}"
         )
+        if cfg.grounding == "referent" and cfg.calibrate and state.epoch >= cfg.epochs:
+            from model.calibrate import calibrate_run
+
+            calibrate_run(Path(cfg.out) / LAST_FILE, cfg.roots()[0].path, cfg.val_split)
     return 0
 
 

@@ -60,6 +60,7 @@ class TrainConfig:
     scene_labels: tuple[str, ...] = ()
     init_detector: str | None = None
     label_prompts: int = 0
+    calibrate: bool = True
 
     def __post_init__(self) -> None:
         for name in ("data", "data_weights", "scene_labels"):
@@ -208,6 +209,14 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
         type=int,
         default=0,
         help="--freeze-scene: cache only the first N training scenes (0: all)",
+    )
+    p.add_argument(
+        "--calibrate",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="referent path: at the end of the run, choose the operating threshold on the first "
+        "root's validation split (python -m model.calibrate) and store it in last.pt (default: "
+        "on; a split with too few referred prompts leaves it uncalibrated, with a notice)",
     )
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
     p.add_argument(

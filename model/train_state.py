@@ -124,6 +124,7 @@ FREE_ON_RESUME = frozenset(
         "bank_prompts",
         "init",
         "init_detector",
+        "calibrate",
     }
 )
 """Settings a resumed run may change (every other one must be the run's)."""

@@ -167,18 +167,36 @@ def _pairwise(a: np.ndarray, b: np.ndarray, with_height: bool, chunk: int = 6553
     corners_a, corners_b = bev_corners(a), bev_corners(b)
     for start in range(0, len(ia), chunk):
         sa, sb = ia[start : start + chunk], ib[start : start + chunk]
-        inter = _intersection_area(corners_a[sa], corners_b[sb])
-        area_a = a[sa, 3] * a[sa, 4]
-        area_b = b[sb, 3] * b[sb, 4]
-        if with_height:
-            top = np.minimum(a[sa, 2] + a[sa, 5] / 2, b[sb, 2] + b[sb, 5] / 2)
-            bottom = np.maximum(a[sa, 2] - a[sa, 5] / 2, b[sb, 2] - b[sb, 5] / 2)
-            inter = inter * np.clip(top - bottom, 0.0, None)
-            area_a = area_a * a[sa, 5]
-            area_b = area_b * b[sb, 5]
-        union = area_a + area_b - inter
-        out[sa, sb] = np.where(union > 0, inter / np.maximum(union, _EPS), 0.0)
+        out[sa, sb] = _paired(a[sa], b[sb], corners_a[sa], corners_b[sb], with_height)
     return np.clip(out, 0.0, 1.0)
+
+
+def _paired(
+    a: np.ndarray, b: np.ndarray, corners_a: np.ndarray, corners_b: np.ndarray, with_height: bool
+) -> np.ndarray:
+    """IoU ``(P,)`` of the box pairs ``a[i]``, ``b[i]`` (BEV corners given), before clipping."""
+    inter = _intersection_area(corners_a, corners_b)
+    area_a = a[:, 3] * a[:, 4]
+    area_b = b[:, 3] * b[:, 4]
+    if with_height:
+        top = np.minimum(a[:, 2] + a[:, 5] / 2, b[:, 2] + b[:, 5] / 2)
+        bottom = np.maximum(a[:, 2] - a[:, 5] / 2, b[:, 2] - b[:, 5] / 2)
+        inter = inter * np.clip(top - bottom, 0.0, None)
+        area_a = area_a * a[:, 5]
+        area_b = area_b * b[:, 5]
+    union = area_a + area_b - inter
+    return np.where(union > 0, inter / np.maximum(union, _EPS), 0.0)
+
+
+def paired_bev_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Exact rotated BEV IoU ``(P,)`` of the pairs ``a[i]``, ``b[i]`` (``a``, ``b``: ``(P, 7)``):
+    the values :func:`bev_iou` gives for those pairs, without the rest of the matrix."""
+    a, b = _as_boxes(a), _as_boxes(b)
+    if len(a) != len(b):
+        raise ValueError(f"paired_bev_iou: {len(a)} boxes against {len(b)}")
+    if len(a) == 0:
+        return np.zeros(0)
+    return np.clip(_paired(a, b, bev_corners(a), bev_corners(b), False), 0.0, 1.0)
 
 
 def bev_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -10,6 +10,7 @@ from scenes.boxes import (
     iou3d,
     nearest_bev_corner,
     nearest_edge_midpoint,
+    paired_bev_iou,
     points_in_boxes,
     wrap_yaw,
 )
@@ -116,3 +117,17 @@ def test_nearest_corner_and_edge():
     # Straight ahead, the rear edge is strictly nearest.
     ahead = np.array([[10, 0, 0, 4, 2, 1.5, 0]])
     np.testing.assert_allclose(nearest_edge_midpoint(ahead)[0], [8, 0])
+
+
+def test_paired_iou_is_the_matrix_at_those_pairs():
+    rng = np.random.default_rng(2)
+    a = np.column_stack([rng.uniform(0, 6, (60, 2)), np.zeros(60), rng.uniform(0.5, 4, (60, 3)),
+                         rng.uniform(-3, 3, 60)])  # fmt: skip
+    b = a[rng.permutation(60)] + np.r_[rng.normal(0, 0.5, 2), np.zeros(5)]
+    full = bev_iou(a, b)
+    assert (full > 0).sum() > 60  # overlapping and disjoint pairs
+    i, j = np.meshgrid(np.arange(60), np.arange(60), indexing="ij")
+    assert np.array_equal(paired_bev_iou(a[i.ravel()], b[j.ravel()]), full.ravel())
+    assert paired_bev_iou(np.zeros((0, 7)), np.zeros((0, 7))).shape == (0,)
+    with pytest.raises(ValueError, match="against"):
+        paired_bev_iou(a[:2], b[:3])

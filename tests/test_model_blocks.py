@@ -199,6 +199,37 @@ def test_stable_order_is_the_stable_argsort(key_space: int) -> None:
     )
 
 
+def test_eval_pillars_pool_before_normalising_bit_for_bit() -> None:
+    # In eval mode the encoder pools the linear map first and normalises per pillar (issue 20):
+    # the same canvas as normalising every point and pooling after, also with BatchNorm scales
+    # of both signs and points on cell borders and just below x_max.
+    torch.manual_seed(3)
+    enc = _lidar_encoder().eval()
+    with torch.no_grad():
+        enc.norm.weight.copy_(torch.tensor([1.5, -0.7, 0.0, -2.0]))
+        enc.norm.bias.copy_(torch.tensor([0.1, 0.3, -0.2, 0.05]))
+        enc.norm.running_mean.copy_(torch.randn(4))
+        enc.norm.running_var.copy_(torch.rand(4) + 0.5)
+    pts = torch.cat(
+        [
+            torch.rand(5000, 4) * torch.tensor([51.2, 51.2, 5.0, 255.0])
+            - torch.tensor([0.0, 25.6, 3.0, 0.0]),
+            torch.tensor([[0.32, 0.0, 0.0, 1.0], [51.2 - 1e-6, 0.0, 0.0, 1.0]]),
+        ]
+    )
+    with torch.no_grad():
+        canvas = enc([pts])
+        pillars = voxelize([pts], GRID, -3.0, 2.0, 32)
+        h = torch.relu(enc.norm(enc.linear(enc.point_features(pillars))))
+        index = pillars.pillar_of_point.unsqueeze(1).expand(-1, 4)
+        pooled = torch.zeros(pillars.keys.numel(), 4).scatter_reduce(
+            0, index, h, reduce="amax", include_self=False
+        )
+        want = torch.zeros(4, 160 * 160).index_copy_(1, pillars.keys, pooled.t())
+    assert torch.equal(canvas, want.view(1, 4, 160, 160))
+    assert (canvas[0, 1] > 0).any() and (canvas[0, 3] > 0).any()  # negative scales pooled
+
+
 def test_pillar_encoder_trains_with_a_single_point() -> None:
     enc = _lidar_encoder().train()
     canvas = enc([torch.tensor([[1.0, 1.0, 0.0, 3.0]])])

@@ -10,6 +10,7 @@ from model.predict import (
     iterate_predictions,
     operating_threshold,
     prediction_labels,
+    read_ahead,
     scene_key,
     write_predictions,
 )
@@ -114,3 +115,30 @@ def test_samples_sharing_sensor_files_are_encoded_once(tmp_path):
     again = _FakeModel()
     list(iterate_predictions(again, root, ids, progress=False, cache_scenes=0))
     assert again.encoded == 6
+
+
+def test_read_ahead_keeps_the_order_reads_ahead_and_raises_in_place():
+    import threading
+
+    started: list[str] = []
+    b_started, gate = threading.Event(), threading.Event()
+
+    def read(sid: str) -> str:
+        started.append(sid)
+        if sid == "b":
+            b_started.set()
+            gate.wait(5)
+        if sid == "c":
+            raise ValueError("c is unreadable")
+        return sid.upper()
+
+    got = read_ahead(read, ["a", "b", "c", "d"], ahead=2)
+    assert next(got) == "A"
+    assert b_started.wait(5)  # b is read while A is in use, before it is asked for
+    gate.set()
+    assert next(got) == "B"
+    with pytest.raises(ValueError, match="c is unreadable"):
+        next(got)
+    assert started[:3] == ["a", "b", "c"]
+    assert list(read_ahead(lambda s: s * 2, ["x", "y"], ahead=5)) == ["xx", "yy"]
+    assert list(read_ahead(lambda s: s, [], ahead=2)) == []

@@ -181,3 +181,30 @@ def test_joint_training_with_scene_labels_ignores_outside_the_camera_view(
         ]
     )
     assert code == 0 and (out / "last.pt").is_file()
+
+
+def test_a_finished_run_is_calibrated_on_the_validation_split(monkeypatch, tmp_path, capsys):
+    import model.calibrate as calibrate_module
+    from model.calibrate import Calibration
+
+    seen = {}
+
+    def fake(model, data, split="val", limit=0, min_prompts=50):
+        seen["split"] = split
+        return Calibration(0.35, 80.0, 60.0, 120, ())
+
+    monkeypatch.setattr(calibrate_module, "calibrate", fake)
+    release = tmp_path / "release"
+    generate_root(release, 4, SynthSettings(seed=9), split_fractions=(0.5, 0.5, 0.0))
+    shutil.rmtree(meta_dir(release))
+    out = tmp_path / "run"
+    args = ["--data", str(release), "--freeze-scene", "--init-detector"]
+    args += ["checkpoints/tpcnet-small.pt", "--epochs", "1", "--val-every", "0", "--out", str(out)]
+    assert main(args) == 0
+    assert seen == {"split": "val"}
+    assert "operating threshold 0.350" in capsys.readouterr().out
+    meta = load_checkpoint(out / "last.pt").checkpoint_metadata
+    assert meta["operating_threshold"] == 0.35
+    assert meta["operating_threshold_source"]["split"] == "val"
+    # A resume of the finished run still loads (the state and last.pt agree on the step).
+    assert main([*args, "--resume"]) == 0

@@ -384,6 +384,22 @@ def test_fast_point_evidence_is_bit_identical_to_the_reference(seed):
     )
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_point_evidence_is_the_same_from_float32_and_float64_clouds(seed):
+    # float32 clouds (the model's) order each box's points by one sort of integer keys, others
+    # by two stable sorts; both must be the reference order, -0.0 and +0.0 being equal x.
+    boxes, lidar, radar = _scene_like(seed)
+    lidar[::11, 0] = np.where(np.abs(lidar[::11, 0]) < 0.05, -0.0, lidar[::11, 0])
+    lidar[1::11, 0] = np.where(np.abs(lidar[1::11, 0]) < 0.05, 0.0, lidar[1::11, 0])
+    for fast, ref, pts in (
+        (lidar_evidence, _reference_lidar_evidence, lidar),
+        (radar_evidence, _reference_radar_evidence, radar),
+    ):
+        want = ref(boxes, pts).tobytes()
+        assert fast(boxes, pts).tobytes() == want
+        assert fast(boxes, pts.astype(np.float64)).tobytes() == want
+
+
 def test_fast_point_evidence_matches_on_a_generated_scene(tiny_root):
     root = Talk2RadarRoot(tiny_root)
     sample = root.load(root.ids("train")[0])

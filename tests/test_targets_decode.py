@@ -363,3 +363,63 @@ def test_rotated_nms_max_keep_is_a_prefix_of_the_full_run():
     assert len(full) > 10
     for k in (1, 5, 10, len(full), len(full) + 3):
         assert rotated_nms(boxes, scores, 0.2, max_keep=k).tolist() == full[:k].tolist()
+
+
+def _greedy_reference(boxes, scores, labels, iou_threshold):
+    """Per class, the plain greedy NMS over the whole IoU matrix; merged by descending score
+    (ties: lower class, then lower index) as the decoder has always merged the classes."""
+    from scenes.boxes import bev_iou
+
+    kept = []
+    for c in np.unique(labels):
+        idx = np.flatnonzero(labels == c)
+        order = idx[np.argsort(-scores[idx], kind="stable")]
+        iou = bev_iou(boxes[order], boxes[order])
+        alive = np.ones(len(order), dtype=bool)
+        for i in range(len(order)):
+            if alive[i]:
+                kept.append(order[i])
+                alive[i + 1 :] &= ~(iou[i, i + 1 :] > iou_threshold)
+    kept = np.asarray(kept, dtype=np.int64)
+    return kept[np.lexsort((kept, labels[kept], -scores[kept]))]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_class_nms_is_per_class_greedy_nms_merged_by_score(seed):
+    from model.decode import class_nms
+
+    rng = np.random.default_rng(seed)
+    n = 400  # more than one block (4 * max_keep) for the small caps below
+    boxes = np.column_stack(
+        [
+            rng.uniform(0, 15, n),
+            rng.uniform(-8, 8, n),
+            np.zeros(n),
+            rng.uniform(0.5, 4.5, n),
+            rng.uniform(0.5, 2.0, n),
+            np.ones(n),
+            rng.uniform(-3, 3, n),
+        ]
+    )
+    scores = np.round(rng.random(n), 2)  # many ties, across and within classes
+    labels = rng.integers(0, 3, n)
+    want = _greedy_reference(boxes, scores, labels, 0.2)
+    assert 40 < len(want) < n
+    assert class_nms(boxes, scores, labels, 0.2).tolist() == want.tolist()
+    for cap in (1, 7, 40, len(want), len(want) + 5):
+        assert class_nms(boxes, scores, labels, 0.2, cap).tolist() == want[:cap].tolist()
+    assert class_nms(boxes[:0], scores[:0], labels[:0], 0.2).tolist() == []
+
+
+def test_decode_limit_is_a_prefix_of_the_full_decode():
+    torch.manual_seed(0)
+    out = HeadOutput(torch.randn(1, 3, 100, 100) - 1.0, torch.randn(1, 8, 100, 100) * 0.3)
+    cfg = _cfg(score_threshold=0.05)
+    (full,) = decode(out, GRID, cfg)
+    assert len(full.boxes) == cfg.max_detections
+    for limit in (1, 13, cfg.max_detections, cfg.max_detections + 10):
+        (part,) = decode(out, GRID, cfg, limit=limit)
+        k = min(limit, cfg.max_detections)
+        np.testing.assert_array_equal(part.boxes, full.boxes[:k])
+        np.testing.assert_array_equal(part.scores, full.scores[:k])
+        assert part.classes == full.classes[:k]

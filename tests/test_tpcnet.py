@@ -242,6 +242,17 @@ def test_non_finite_points_are_rejected_before_the_network(small_model: TPCNet) 
     assert not called
 
 
+def test_huge_finite_points_are_accepted() -> None:
+    # The finiteness check sums the cloud first; a sum that overflows is looked at row by row.
+    from model.tpcnet import as_points
+
+    huge = np.full((4, 4), 3e38, np.float32)
+    assert as_points(huge, 4, "LiDAR cloud 0").shape == (4, 4)
+    huge[2, 3] = -np.inf
+    with pytest.raises(NonFiniteInputError, match="row 2"):
+        as_points(huge, 4, "LiDAR cloud 0")
+
+
 def test_wrong_shapes_and_missing_sensors() -> None:
     torch.manual_seed(0)
     lidar, radar = make_scene(0)

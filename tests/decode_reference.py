@@ -1,0 +1,153 @@
+"""Reference outputs of decoding, candidate description and ``ground`` (issue 20): the inputs, the
+outputs and their file. Not a test module; ``tests/test_decode_reference.py`` compares today's
+code with the file.
+
+Regenerate (only when a change of the outputs is intended, and say so in docs/RESULTS.md)::
+
+    python -m tests.decode_reference
+
+which rewrites :data:`REFERENCE` and records in it the commit it ran on (``commit``), the
+generator version and torch's version. The committed file was made on the code before issue 20's
+speed-ups (see ``commit`` in the file).
+
+Inputs, all on this machine's CPU with one torch thread:
+
+- frames: worlds :data:`WORLDS` of the synthetic generator (seed :data:`SEED`, a single radar
+  scan, no camera; the default forward-half LiDAR, about 110k-135k points) and their prompts;
+- the shipped checkpoint ``checkpoints/tpcnet-small.pt`` (referent path): per frame the
+  candidates of ``encode_scene`` (boxes, labels, scores and every feature tensor) and
+  ``ground`` of each prompt (boxes, scores, labels, in the order returned);
+- an untrained ``small`` model (``torch.manual_seed(0)``), whose head is ~0.1 everywhere, so that
+  hundreds of peaks reach rotated NMS: :func:`model.decode.decode` of its head output on the
+  first frame at the head's threshold and at the candidate threshold.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+REPO = Path(__file__).resolve().parents[1]
+REFERENCE = Path(__file__).resolve().parent / "data" / "decode_reference.npz"
+CHECKPOINT = REPO / "checkpoints" / "tpcnet-small.pt"
+SEED = 3
+WORLDS = (0, 1, 2)
+PROMPTS = 2
+
+
+def reference_frames() -> list[tuple[np.ndarray, np.ndarray, tuple[str, ...]]]:
+    """``(lidar (N, 4), radar (M, 7), prompts)`` of each world of :data:`WORLDS`."""
+    from scenes.calib import sensor_to_lidar, vod_lidar_calibration, vod_radar_calibration
+    from scenes.synth_frame import SynthSettings, synthesize
+
+    settings = SynthSettings(seed=SEED, radar_scans=1, prompts_per_world=PROMPTS, camera=None)
+    radar_to_lidar = sensor_to_lidar(vod_lidar_calibration(), vod_radar_calibration())
+    out = []
+    for index in WORLDS:
+        frame = synthesize(settings, index, radar_to_lidar)
+        out.append(
+            (
+                np.ascontiguousarray(frame.lidar.points, dtype=np.float32),
+                np.ascontiguousarray(frame.radar.points, dtype=np.float32),
+                tuple(p.text for p in frame.prompts),
+            )
+        )
+    return out
+
+
+def _tensor(t: torch.Tensor | None) -> np.ndarray:
+    return np.zeros((0, 0), np.float32) if t is None else t.detach().cpu().numpy()
+
+
+def shipped_outputs(frames: list) -> dict[str, np.ndarray]:
+    """Candidates and answers of the shipped checkpoint on ``frames`` (keys ``f<i>/...``)."""
+    from model.checkpoint import load_checkpoint
+
+    model = load_checkpoint(CHECKPOINT).eval()
+    out: dict[str, np.ndarray] = {}
+    for i, (lidar, radar, prompts) in enumerate(frames):
+        features = model.encode_scene(lidar, radar)
+        o = features.objects
+        assert o is not None
+        for name in ("boxes", "labels", "scores"):
+            out[f"f{i}/cand_{name}"] = np.asarray(getattr(o, name))
+        for name in ("geometry", "fused", "lidar", "radar"):
+            out[f"f{i}/cand_{name}"] = _tensor(getattr(o, name))
+        out[f"f{i}/prompts"] = np.array(prompts)
+        for j, prompt in enumerate(prompts):
+            pred = model.ground(features, prompt)
+            out[f"f{i}/p{j}/boxes"] = pred.boxes
+            out[f"f{i}/p{j}/scores"] = pred.scores
+            out[f"f{i}/p{j}/labels"] = pred.labels
+    return out
+
+
+def untrained_outputs(frames: list) -> dict[str, np.ndarray]:
+    """Decoded boxes of an untrained model's head on the first frame (many peaks)."""
+    from model import build_model
+    from model.decode import decode
+    from model.tpcnet import as_points
+
+    torch.manual_seed(0)
+    model = build_model("small", grounding="referent").eval()
+    lidar, radar, _ = frames[0]
+    out: dict[str, np.ndarray] = {}
+    with torch.no_grad():
+        head, _ = model.detect([as_points(lidar, 4, "lidar")], [as_points(radar, 7, "radar")])
+        cfg = model.cfg
+        for key, threshold in (
+            ("head", cfg.head.score_threshold),
+            ("cand", cfg.referent.candidate_threshold),
+        ):
+            dets = decode(head, model.head_grid, cfg.head, threshold)[0]
+            out[f"untrained/{key}/boxes"] = dets.boxes
+            out[f"untrained/{key}/scores"] = dets.scores
+            out[f"untrained/{key}/labels"] = dets.labels
+    return out
+
+
+def reference_outputs() -> dict[str, np.ndarray]:
+    """Everything the reference file holds, from the code as it is now."""
+    torch.set_num_threads(1)
+    frames = reference_frames()
+    return {**shipped_outputs(frames), **untrained_outputs(frames)}
+
+
+def _commit() -> str:
+    try:
+        head = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True, text=True, check=True
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=REPO,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+    return head + (" (with uncommitted changes)" if dirty else "")
+
+
+def main() -> int:
+    from scenes.synth_frame import GENERATOR_VERSION
+
+    outputs = reference_outputs()
+    meta = {
+        "commit": np.array(_commit()),
+        "generator_version": np.array(GENERATOR_VERSION),
+        "torch_version": np.array(torch.__version__),
+    }
+    REFERENCE.parent.mkdir(parents=True, exist_ok=True)
+    np.savez_compressed(REFERENCE, **outputs, **meta)
+    print(f"wrote {REFERENCE} ({REFERENCE.stat().st_size} bytes, commit {meta['commit']})")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,51 @@
+"""Decoding, candidate description and ``ground`` give what the code before issue 20's speed-ups
+gave: the same candidates (boxes, labels, scores, every feature), the same answers and the same
+decoded boxes of an untrained head with hundreds of peaks, within 1e-6 (reference file and its
+regeneration: :mod:`tests.decode_reference`)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from tests.decode_reference import REFERENCE, reference_outputs
+
+TOLERANCE = 1e-6
+
+
+@pytest.fixture(scope="module")
+def reference() -> dict[str, np.ndarray]:
+    with np.load(REFERENCE) as data:
+        return {k: data[k] for k in data.files}
+
+
+@pytest.fixture(scope="module")
+def current() -> dict[str, np.ndarray]:
+    return reference_outputs()
+
+
+def test_reference_inputs_are_todays_generator(reference) -> None:
+    from scenes.synth_frame import GENERATOR_VERSION
+
+    assert int(reference["generator_version"]) == GENERATOR_VERSION, (
+        "the generator changed since the reference was made: its frames are other inputs; "
+        "regenerate with `python -m tests.decode_reference` on the code before the change"
+    )
+
+
+def test_same_outputs_as_the_reference(reference, current) -> None:
+    expected = {k: v for k, v in reference.items() if "/" in k}
+    assert sorted(current) == sorted(expected)
+    for key, want in expected.items():
+        got = current[key]
+        assert got.shape == want.shape, f"{key}: shape {got.shape}, reference {want.shape}"
+        if want.dtype.kind in "iUb":
+            np.testing.assert_array_equal(got, want, err_msg=key)
+        else:
+            np.testing.assert_allclose(got, want, rtol=0, atol=TOLERANCE, err_msg=key)
+
+
+def test_the_untrained_head_exercises_nms(reference) -> None:
+    # The case is only a test of NMS if many boxes survive the threshold: all 50 slots are full.
+    assert len(reference["untrained/cand/boxes"]) == 50
+    assert len(reference["untrained/head/boxes"]) == 50
