@@ -24,6 +24,7 @@ from scenes.layout import (
     PROMPT,
     SAMPLE_FILES,
     SAMPLE_FOLDERS,
+    is_frame_id,
     meta_dir,
     meta_file,
     radar_folders_in,
@@ -157,9 +158,10 @@ class RootFiles:
 
 
 def int_or_none(text: str) -> int | None:
-    """The id on a line of a split list (None for anything but digits)."""
+    """The id on a line of a split list (None for anything but a frame id:
+    :func:`scenes.layout.is_frame_id`, the one id rule)."""
     text = text.strip()
-    return int(text) if text.isdigit() else None
+    return int(text) if is_frame_id(text) else None
 
 
 def read_list(path: Path) -> list[str]:
@@ -174,7 +176,7 @@ def max_stem(folder: Path) -> int:
         with os.scandir(folder) as it:
             for entry in it:
                 stem = entry.name.split(".", 1)[0]
-                if stem.isdigit():
+                if is_frame_id(stem):
                     best = max(best, int(stem))
     return best
 

@@ -1,13 +1,13 @@
 """What a browser leaves behind when it goes: collected soon after, and handed back to the system.
 
-Why it is needed (measured, see docs/PERFORMANCE.md "Memory per connection"): a session's GUI
-callbacks are closures over the session, which holds its viser client, whose GUI holds the
-callbacks: a reference cycle, as in any callback-style GUI. CPython frees a cycle only in a
-collection of the generation it has reached, and a session lives long enough to reach the
-oldest one, whose full collections are rare in a process holding a model (hundreds of thousands
-of long-lived objects: a full collection waits for a quarter as many new survivors). Meanwhile
-each browser that left kept its point buffers, camera images and viser's per-client state,
-about 9 MB: the server grew from 531 MB to 1.6 GB over 125 connections. Breaking every cycle by
+Why it is needed: a session's GUI callbacks are closures over the session, which holds its viser
+client, whose GUI holds the callbacks: a reference cycle, as in any callback-style GUI. CPython
+frees a cycle only in a collection of the generation it has reached, and a session lives long
+enough to reach the oldest one, whose full collections are rare in a process holding a model
+(hundreds of thousands of long-lived objects: a full collection waits for a quarter as many new
+survivors). Meanwhile each browser that left kept its point buffers, camera images and viser's
+per-client state (``python -m bench.soak --baseline``: the server before grew from 635 MB to
+1,752 MB over 300 visits; docs/PERFORMANCE.md, "Memory per connection"). Breaking every cycle by
 hand would be fragile (any new callback brings it back), so the app collects.
 
 :class:`MemoryReaper`: a daemon thread that, after a browser left (:meth:`MemoryReaper.schedule`),

@@ -2,8 +2,9 @@
 
 Navigation is **shared** by every browser (the issue: "several browsers share the scene"): the app
 holds one current frame, and previous / next / a frame number typed in any browser moves every
-browser to that frame (each one's predictions are cleared and its prompt box gets the new
-sample's own prompt). Query results, display settings and the camera stay per browser.
+browser to that frame (each one's predictions are cleared; the prompt box of the browser that
+moved takes the new sample's own prompt unless its person typed there, the others' boxes are left
+alone: :class:`app.query_panel.PromptField`). Query results, display settings and the camera stay per browser.
 
 Frames are loaded on demand through :class:`FrameStore`, which keeps the last few in memory
 (loading a synthetic frame reads three small files). Previous / next wrap around the split.

@@ -213,7 +213,8 @@ class ClientSession:
         with gui.add_folder("Scene"):
             self.nav = build_navigation_panel(gui, len(self.navigator))
         tabs = gui.add_tab_group()
-        sample_prompt = (self.sample.prompt or "") if self.sample is not None else ""
+        shown = self.frame or self.navigator.frame  # the frame this panel will show first
+        sample_prompt = (shown.sample.prompt or "") if shown is not None else ""
         with tabs.add_tab("Query", icon=viser.Icon.MESSAGE):
             self.query = build_query_panel(
                 gui,
@@ -490,11 +491,8 @@ class ClientSession:
                 self.report_error("An extension failed", exc)
 
     def close(self) -> None:
-        """Forget this browser (it left): drop pending answers, the frame, answer, listeners."""
+        """Forget this browser (it disconnected): pending answers are dropped. What it held is
+        collected soon after (:class:`app.memory.MemoryReaper`; the answer stays readable)."""
         with self.lock:
             self.closed = True
             self._generation += 1
-            self.frame = None
-            self.answer = None
-            self._frame_listeners.clear()
-            self._answer_listeners.clear()

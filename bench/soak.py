@@ -12,7 +12,8 @@ after a pause of :data:`SETTLE_SECONDS` (*at rest*).
 The target: after ``--warm-up`` cycles (the frame, feature and text caches fill, the allocator
 settles), RSS at rest stays within ``--bound`` MB of its value then. ``--baseline PATH`` serves the same
 workload with another checkout's ``launch.py`` as well (e.g. ``git worktree add /tmp/before
-aa2a985``: the code before issue 21) and puts its RSS beside this checkout's.
+aa2a985``: the code before issue 21), side by side, each cycle visiting both in turn (the same
+load for both, so their seconds per visit compare), and puts its RSS beside this checkout's.
 
 The client speaks viser 1.1.1's websocket protocol directly (``websockets``, ``msgpack``,
 ``zstd``), as the web client does: a benchmark imports neither ``app`` nor the tests.
@@ -160,31 +161,42 @@ def serve(launch: Path, root: Path, work: Path) -> tuple[subprocess.Popen, int]:
     raise TimeoutError(f"{shlex.join(cmd)} did not listen within {START_TIMEOUT:g} s")
 
 
-def soak(launch: Path, root: Path, work: Path, cycles: int, every: int, desc: str) -> dict:
-    """RSS of a server of ``launch`` every ``every`` cycles, busy and at rest (cycle 0: after
-    one warm visit), and the seconds spent visiting."""
-    proc, port = serve(launch, root, work)
+def soak(launches: dict[str, Path], root: Path, work: Path, cycles: int, every: int) -> dict:
+    """RSS of a server of each ``launches`` entry every ``every`` cycles, busy and at rest
+    (cycle 0: after one warm visit), and the seconds spent visiting each. The servers run side
+    by side and each cycle visits them in turn, so that they see the same load."""
+    servers: dict[str, tuple[subprocess.Popen, int]] = {}
     try:
-        visit(port)  # the model is warm and the first frame encoded
-        busy, rest = {0: rss_mb(proc.pid)}, {}
-        time.sleep(SETTLE_SECONDS)
-        rest[0] = rss_mb(proc.pid)
-        visiting = 0.0
-        for cycle in tqdm(range(1, cycles + 1), desc=desc, unit="visit"):
-            start = time.monotonic()
-            visit(port)
-            visiting += time.monotonic() - start
+        for name, launch in launches.items():
+            servers[name] = serve(launch, root, work)
+        for _, port in servers.values():
+            visit(port)  # the model is warm and the first frame encoded
+        out = {n: {"busy_mb": {}, "rest_mb": {}, "seconds": 0.0} for n in servers}
+
+        def read(cycle: int) -> None:
+            for n, (proc, _) in servers.items():
+                out[n]["busy_mb"][cycle] = rss_mb(proc.pid)
+            time.sleep(SETTLE_SECONDS)
+            for n, (proc, _) in servers.items():
+                out[n]["rest_mb"][cycle] = rss_mb(proc.pid)
+
+        read(0)
+        for cycle in tqdm(range(1, cycles + 1), desc=" and ".join(servers), unit="visit"):
+            for n, (_, port) in servers.items():
+                start = time.monotonic()
+                visit(port)
+                out[n]["seconds"] += time.monotonic() - start
             if cycle % every == 0:
-                busy[cycle] = rss_mb(proc.pid)
-                time.sleep(SETTLE_SECONDS)
-                rest[cycle] = rss_mb(proc.pid)
-        return {"busy_mb": busy, "rest_mb": rest, "seconds": visiting}
+                read(cycle)
+        return out
     finally:
-        proc.terminate()
-        try:
-            proc.wait(30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
+        for proc, _ in servers.values():
+            proc.terminate()
+        for proc, _ in servers.values():
+            try:
+                proc.wait(30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
 
 
 def growth(rss: dict[int, float], warm_up: int) -> float:
@@ -223,10 +235,7 @@ def run(args: argparse.Namespace, command: str) -> BenchResult:
         work = Path(tmp)
         root = work / "root"
         generate_root(root, args.frames, SynthSettings(seed=0))
-        results = {
-            name: soak(path, root, work, args.cycles, args.every, name)
-            for name, path in runs.items()
-        }
+        results = soak(runs, root, work, args.cycles, args.every)
     names = list(results)
     cycles = sorted(results[names[0]]["rest_mb"])
     kinds = ("busy_mb", "rest_mb")
@@ -263,7 +272,7 @@ def run(args: argparse.Namespace, command: str) -> BenchResult:
         + ".",
         f"A visit: connect, panel and scene, *Next*, the prompt {PROMPT!r} and its answer, "
         f"disconnect; {', '.join(f'{n}: {per_visit[n]:.2f} s a visit' for n in names)} "
-        "(the runs are one after the other: the machine's load may differ).",
+        "(the servers run side by side, visited in turn: the same load).",
         f"Root: synthetic, {args.frames} frames, seed 0, split {SPLIT!r}; the bundled checkpoint.",
     ]
     data = {

@@ -58,7 +58,24 @@ def _connect(app, ws_client):
     session = app.sessions[(set(app.sessions) - before).pop()]
     panel = next(p for p in app.annotations.panels() if p.session is session)
     client.pump_until(lambda: panel.frame is not None, 5, "the draft's frame")
+    client.pump_until(  # the connection's own writes have arrived
+        lambda: _shown(client, "Prompt") == session.query.prompt.value, 5, "the prompt box"
+    )
     return client, session, panel
+
+
+def _shown(client, label: str) -> object:
+    """The value the browser shows in the widget ``label``: its creation's, then the last the
+    server wrote."""
+    uuid, value = client.gui[label], None
+    for m in client.messages:
+        if m.get("uuid") != uuid:
+            continue
+        if m["type"] == "GuiUpdateMessage" and "value" in m["updates"]:
+            value = m["updates"]["value"]
+        elif m["type"] != "GuiUpdateMessage" and "value" in m:
+            value = m["value"]
+    return value
 
 
 def _writes(client, label: str, since: int) -> list[object]:
@@ -296,8 +313,10 @@ def _rss_mb() -> float:
 SOAK_CYCLES = 200
 SOAK_CHECK_EVERY = 50
 SOAK_BOUND_MB = 40.0
-"""RSS may grow at most this much from the first check to the last (before the fix it grew by
-about 1.5 MB a connection when no full collection happened, 9 MB with the default data)."""
+"""RSS may grow at most this much from the first check to the last. Here (tiny frames, no camera
+image, this process's own allocations triggering full collections now and then) the code before
+the fix kept 8 to 30 departed sessions in memory at the checks and grew by about 18 MB; the
+long measurement with camera images: ``python -m bench.soak`` (docs/PERFORMANCE.md)."""
 
 REAP_SECONDS = 10.0
 """How long a check waits for the departed sessions to be collected (the app's reaper runs 0.5 s

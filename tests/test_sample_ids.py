@@ -129,3 +129,11 @@ def test_file_names_follow_the_same_rule(
             root_frame_ids(Talk2RadarRoot(root), "all")
     finally:
         named.unlink()
+
+
+def test_the_annotation_store_reads_split_lists_by_the_one_id_rule():
+    from annotate.tree import int_or_none
+
+    assert int_or_none("00042") == 42
+    for bad in ("٤٢٠٠٠", "42", "0_0010", "+0004", "000042"):
+        assert int_or_none(bad) is None, bad
