@@ -40,13 +40,14 @@ conjunction takes the least margin, a negation the opposite. The conditions:
 by centre range ``hypot(x, y)`` (and the nearest-point depth must rank the same actor there, so
 "closest" means the same either way), ``leftmost`` / ``rightmost`` by ``y`` (and the bearing
 must rank the same actor: left in the lane and left in the view agree), ``fastest`` /
-``slowest`` by speed among the moving (a borderline mover refuses), ``nearest_to`` by centre
-distance to a reference actor. RefusalError when fewer actors than ``index`` match or the picked value
-lies within the rank gap of its neighbours: 1.5 m of range or distance, 1.0 m of ``y``, 1.0 m/s.
+``slowest`` by speed among the moving (a borderline mover refuses; so does a standing actor for
+``slowest``, which it might be said to be), ``nearest_to`` by centre distance to a reference
+actor. Refused when fewer actors than ``index`` match or the picked value lies within the rank
+gap of its neighbours: 1.5 m of range or distance, 1.0 m of ``y``, 1.0 m/s.
 
 **Exclusion** removes the actors matching ``except.where`` (with the same borderline rule) or the
-one at ``except.rank`` from the set; refused when nothing is left ("all ... except" presumes
-more). ``one`` ("the X") refuses unless exactly one actor is referred to. ``out_of_class`` queries
+one at ``except.rank`` from the set; refused when nothing is left or nothing is removed ("all
+... except" presumes both). ``one`` ("the X") refuses unless exactly one actor is referred to. ``out_of_class`` queries
 (a bus, a dog, nonsense) refer to nothing, in every scene.
 """
 
@@ -275,6 +276,8 @@ class _Scene:
             for a in cands:
                 if abs(_moving(a)) < 1.0:
                     raise RefusalError(f"actor {a.actor_id} is a borderline mover")
+                if rank.key == "slowest" and not a.is_moving:
+                    raise RefusalError(f"actor {a.actor_id} stands still: is it the slowest?")
             cands = [a for a in cands if a.is_moving]
         if rank.key == "nearest_to" and rank.ref is not None:
             ref = self.reference(rank.ref)
@@ -311,8 +314,8 @@ class _Scene:
         if query.exclusion is not None:
             removed = self._excluded(picked, query.exclusion)
             picked = [a for a in picked if a.actor_id not in removed]
-            if not picked:
-                raise RefusalError("nothing is left after the exclusion")
+            if not picked or not removed:
+                raise RefusalError(f"the exclusion leaves {len(picked)} and removes {len(removed)}")
         if query.one and len(picked) != 1:
             raise RefusalError(f"'the' one actor, but {len(picked)} match")
         return tuple(sorted(a.actor_id for a in picked))

@@ -86,7 +86,10 @@ def test_ranks_and_their_gaps() -> None:
     assert ids({"class": "Car", "rank": {"by": "leftmost", "index": 1}}, SCENE) == (0,)
     assert ids({"class": "Car", "rank": {"by": "rightmost", "index": 2}}, SCENE) == (2,)
     assert ids({"class": "Car", "rank": {"by": "fastest", "index": 2}}, SCENE) == (2,)
-    assert ids({"class": "Car", "rank": {"by": "slowest", "index": 1}}, SCENE) == (2,)
+    # slowest: cars 0 and 3 stand still, so "the slowest car" could be either: refused
+    assert ids({"class": "Car", "rank": {"by": "slowest", "index": 1}}, SCENE) is None
+    moving = {"class": "Car", "where": [{"op": "moving"}], "rank": {"by": "slowest", "index": 1}}
+    assert ids(moving, SCENE) == (2,)
     assert ids({"class": "Car", "rank": {"by": "nearest", "index": 5}}, SCENE) is None
     # two pedestrians 1 m apart in range: too close to tell the second nearest
     close = [actor(0, "Pedestrian", 10.0, 0.5), actor(1, "Pedestrian", 11.0, -0.5)]
@@ -106,6 +109,9 @@ def test_exclusion() -> None:
     # one pedestrian: "all except the nearest" leaves nothing, refused
     lone = [actor(0, "Pedestrian", 10.0, 0.0)]
     assert ids({"class": "Pedestrian", "except": {"rank": {"by": "nearest"}}}, lone) is None
+    # nothing to remove ("all cars except the ones behind us"): refused too
+    behind = {"where": [{"op": "depth_within", "m": -10}]}
+    assert ids({"class": "Car", "except": behind}, SCENE) is None
 
 
 def test_relations() -> None:
