@@ -115,7 +115,9 @@ def cache_scenes(
             prompts = frame_prompts(item, rng, prompts_per_scene, pcfg, label_prompts)
             # A prompt is kept when it refers to nothing (the empty answer is an answer: things
             # outside the classes, attributes nothing here has) or to a detected object.
-            usable = [(text, refs) for text, refs in prompts if not refs or np.isin(ids, refs).any()]
+            usable = [
+                (text, refs) for text, refs in prompts if not refs or np.isin(ids, refs).any()
+            ]
             scenes.append(
                 CachedScene(
                     cpu,
