@@ -54,7 +54,7 @@ one at ``except.rank`` from the set; refused when nothing is left or nothing is 
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from scenes.actors import MOVING_SPEED, Actor
@@ -326,7 +326,7 @@ class _Scene:
         return {a.actor_id for a in self.matching(picked, exclusion.where)[0]}
 
 
-_SECOND_KEYS = {
+_SECOND_KEYS: dict[str, Callable[[Actor], float]] = {
     "nearest": depth,
     "farthest": lambda a: -depth(a),
     "leftmost": lambda a: -math.atan2(float(a.box[1]), float(a.box[0])),
@@ -335,7 +335,7 @@ _SECOND_KEYS = {
 """The other reading of a rank (nearest-point depth for range, bearing for y); both must agree."""
 
 
-def _rank_key(rank: Rank, scene: _Scene) -> tuple[object, str]:
+def _rank_key(rank: Rank, scene: _Scene) -> tuple[Callable[[Actor], float], str]:
     """The sort key (ascending = first) of a rank and its gap kind."""
     if rank.key == "nearest":
         return centre_range, "range"
