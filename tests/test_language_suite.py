@@ -63,15 +63,25 @@ def _random_world(rng: np.random.Generator, n: int) -> list[Actor]:
     return out
 
 
+def _generator_configs() -> list[PromptConfig]:
+    """Every wording of the generator: its phrasings, and its languages where it has several
+    (issue 23's extended language adds ``PromptConfig.language``)."""
+    languages = ("base", "extended") if "language" in PromptConfig.__dataclass_fields__ else (None,)
+    return [
+        PromptConfig(phrasing=p) if lang is None else PromptConfig(phrasing=p, language=lang)
+        for p in ("train", "heldout")
+        for lang in languages
+    ]
+
+
 def test_no_sentence_is_one_the_generator_writes() -> None:
     rng = np.random.default_rng(23)
     generated: set[str] = set()
-    for phrasing in ("train", "heldout"):
-        config = PromptConfig(phrasing=phrasing)
-        for _ in range(150):
+    for config in _generator_configs():
+        for _ in range(120):
             world = _random_world(rng, int(rng.integers(4, 14)))
             generated |= {_normal(p.text) for p in generate_prompts(world, rng, 8, config=config)}
-    assert len(generated) > 1000
+    assert len(generated) > 1500
     clash = [s.text for s in load_suite().sentences if _normal(s.text) in generated]
     assert not clash, clash
 
