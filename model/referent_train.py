@@ -59,7 +59,7 @@ from model.tpcnet import TPCNet, as_points
 from scenes.actors import CLASSES, Actor
 from scenes.calib import Calibration
 from scenes.frame_dataset import AnnotatedRegion, FrameItem
-from scenes.prompts import Prompt, PromptConfig, generate_prompts
+from scenes.prompts import Prompt, PromptConfig, generate_prompts, perturb
 
 MATCH_DISTANCE = {"Car": 2.0, "Pedestrian": 1.0, "Cyclist": 1.2}
 """A detection within this BEV centre distance (m) of a same-class actor is that actor."""
@@ -80,6 +80,8 @@ class ReferentTrainConfig:
         phrasing: Phrasing stream of the generated prompts (``PromptConfig.phrasing``).
         label_prompts: Labels-source frames with scene labels: prompts generated per frame from
             its labelled boxes, beside the given ones (:func:`frame_prompts`).
+        language: Families of the generated prompts (``PromptConfig.language``).
+        text_noise: Share of generated prompts reworded by :func:`scenes.prompts.perturb`.
     """
 
     prompts_per_scene: int = 8
@@ -91,6 +93,12 @@ class ReferentTrainConfig:
     listwise_weight: float = 0.5
     phrasing: str = "train"
     label_prompts: int = 0
+    language: str = "base"
+    text_noise: float = 0.0
+
+    def prompt_config(self) -> PromptConfig:
+        """The generator's settings of these prompts."""
+        return PromptConfig(phrasing=self.phrasing, language=self.language)
 
 
 @dataclass(frozen=True)
@@ -237,7 +245,7 @@ def referent_step(
     with torch.no_grad():
         dets = decode(out, model.head_grid, model.cfg.head, model.cfg.referent.candidate_threshold)
         heat = torch.sigmoid(out.heatmap.detach()).cpu().numpy()
-    pcfg = prompt_config or PromptConfig(phrasing=cfg.phrasing)
+    pcfg = prompt_config or cfg.prompt_config()
     scenes, texts, rows, target_rows = [], [], [], []
     for b, frame in enumerate(frames):
         if not actors[b]:
@@ -257,7 +265,7 @@ def referent_step(
         usable = [
             (text, refs)
             for text, refs in frame_prompts(
-                frame, rngs[b], cfg.prompts_per_scene, pcfg, cfg.label_prompts
+                frame, rngs[b], cfg.prompts_per_scene, pcfg, cfg.label_prompts, cfg.text_noise
             )
             if set(refs) <= set(ids.tolist())
         ]
@@ -285,22 +293,40 @@ def frame_prompts(
     count: int,
     config: PromptConfig,
     label_prompts: int = 0,
+    text_noise: float = 0.0,
 ) -> list[tuple[str, tuple[int, ...]]]:
     """``(text, referent actor ids)`` of a frame's training prompts: the prompts that come with
     it (labels source, all of them), or ``count`` generated from its actors (sidecar source).
 
     ``label_prompts``: on a labels-source frame with complete labels (scene labels), that many
     more prompts generated from its labelled boxes, of the attributes a box alone decides
-    (``PromptConfig.geometry_only``: class, depth, side; the boxes' motion is unknown)."""
+    (``PromptConfig.geometry_only``: class, depth, side; the boxes' motion is unknown).
+
+    ``text_noise``: the share of generated prompts reworded by :func:`scenes.prompts.perturb`
+    (the meaning kept); given prompts are kept as written."""
     if not frame.generates_prompts:
         given = [(g.text, g.referent_ids) for g in frame.given]
         if label_prompts <= 0 or frame.region is None:
             return given
         geometry = replace(config, geometry_only=True)
         extra: list[Prompt] = generate_prompts(frame.actors, rng, label_prompts, config=geometry)
-        return given + [(p.text, tuple(p.referent_ids)) for p in extra]
+        return given + _noisy(extra, rng, text_noise)
     prompts: list[Prompt] = generate_prompts(frame.actors, rng, count, config=config)
-    return [(p.text, tuple(p.referent_ids)) for p in prompts]
+    return _noisy(prompts, rng, text_noise)
+
+
+def _noisy(
+    prompts: Sequence[Prompt], rng: np.random.Generator, share: float
+) -> list[tuple[str, tuple[int, ...]]]:
+    """``(text, referent ids)`` of generated prompts, ``share`` of them reworded (no draw at 0,
+    so runs without noise repeat earlier ones)."""
+    out = []
+    for p in prompts:
+        text = p.text
+        if share > 0 and rng.random() < share:
+            text = perturb(text, rng)
+        out.append((text, tuple(p.referent_ids)))
+    return out
 
 
 def detection_targets(

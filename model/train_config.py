@@ -61,6 +61,8 @@ class TrainConfig:
     init_detector: str | None = None
     label_prompts: int = 0
     calibrate: bool = True
+    language: str = "base"
+    text_noise: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("data", "data_weights", "scene_labels"):
@@ -83,6 +85,10 @@ class TrainConfig:
                 raise TrainingError(f"{flag} must be >= 1, got {getattr(self, name)}")
         if self.amp not in ("none", "bf16"):
             raise TrainingError(f"--amp must be none or bf16, got {self.amp!r}")
+        if self.language not in ("base", "extended"):
+            raise TrainingError(f"--language must be base or extended, got {self.language!r}")
+        if not 0.0 <= self.text_noise <= 1.0:
+            raise TrainingError(f"--text-noise must be in [0, 1], got {self.text_noise}")
         if self.grounding not in ("referent", "tpcnet"):
             raise TrainingError(f"--grounding must be referent or tpcnet, got {self.grounding!r}")
         if Path(self.out).exists() and not Path(self.out).is_dir():
@@ -203,6 +209,21 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
         help="referent path, roots with --scene-labels: prompts generated per frame from its "
         "labelled boxes (class, depth and side only: their motion is unknown) beside the given "
         "one (default 0: given prompts only)",
+    )
+    p.add_argument(
+        "--language",
+        default="base",
+        choices=["base", "extended"],
+        help="referent path: the generated prompts' families (scenes.prompts.PromptConfig."
+        "language): base, or extended with things outside the classes and unsatisfiable "
+        "attributes (the empty answer), negation, exclusion, ordinals, relations and counting",
+    )
+    p.add_argument(
+        "--text-noise",
+        type=float,
+        default=0.0,
+        help="referent path: share of generated prompts reworded by scenes.prompts.perturb "
+        "(filler-word dropout, synonyms, typos, casing; the meaning kept), default 0",
     )
     p.add_argument(
         "--scene-limit",

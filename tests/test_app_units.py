@@ -9,6 +9,7 @@ import types
 import numpy as np
 import pytest
 
+from app.answer_words import answer_sentence
 from app.boxes_view import (
     GT_STYLE,
     PRED_STYLE,
@@ -253,10 +254,25 @@ def test_results_markdown_lists_boxes_and_latency() -> None:
         waited_ms=0.0,
         modality="radar",
         score_threshold=0.3,
+        prompt="the <b>car</b> and the cyclist",
     )
     text = results_markdown(answer, np.array([0.71, np.nan]), latency_ms=55.4)
+    assert text.startswith("1 car and 1 cyclist match.")
     assert "**2 boxes** in **55 ms**" in text and "cached" in text and "Radar" in text
     assert "| 0 | Car | 0.90 | 0.71 |" in text and "| 1 | Cyclist | 0.40 | - |" in text
+
+
+def test_the_answer_is_said_in_words() -> None:
+    assert answer_sentence("the bus", ()) == (
+        "No object here matches; I find cars, pedestrians and cyclists."
+    )
+    assert answer_sentence("the car", ("Car",)) == "1 car matches."
+    both = ("Pedestrian", "Car", "Pedestrian")
+    assert answer_sentence("the people and the car", both) == "2 pedestrians and 1 car match."
+    assert answer_sentence("How many pedestrians are there?", both[::2]) == (
+        "2: 2 pedestrians (boxed)."
+    )
+    assert answer_sentence("x", (), known=("Car",)) == "No object here matches; I find cars."
 
 
 # ---------------------------------------------------------------------------- engine inputs
