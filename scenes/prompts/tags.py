@@ -80,7 +80,7 @@ _SPEED_UNIT = (
 _SPEED_UNIT_RE = re.compile(_SPEED_UNIT)
 _SPEED_PHRASE = re.compile(rf"(?:{NUMBER_PATTERN}\s*)?{_SPEED_UNIT}")
 _LATERAL_EXTREME = re.compile(r"\b(?:farthest|furthest)\s+(?:to\s+(?:the|our)\s+)?(?:left|right)\b")
-_EGO_PHRASE = re.compile(r"\bego[- ]?(?:car|vehicle)s?\b|\bour (?:car|vehicle)\b")
+_EGO_PHRASE = re.compile(r"\bego[- ]?(?:car|vehicle)s?\b|\b(?:our|my) (?:car|vehicle)\b")
 _DEPTH_HINT = re.compile(r"\d|\bm\b|met(?:er|re)|ahead|away")
 _DEPTH_PHRASE = re.compile(
     rf"{NUMBER_PATTERN}\s*(?:m|meters?|metres?)\b(?!/)(?:\s+(?:ahead|away))?"
@@ -98,6 +98,9 @@ _MOTION_WORDS = re.compile(
     r"\bmov(?:e|es|ing)\b|\bstationary\b|\bparked\b|\bparking\b|\bstopped\b|\bstatic\b"
     r"|\bstanding still\b|\bstandstill\b|\bat rest\b|\bmotion\w*|\bapproach\w*|\btowards?\b"
     r"|\baway\b|\bcross(?:es|ing)?\b|\boncoming\b|\breced\w*|\bleaving\b|\bour way\b"
+    r"|\bunderway\b|\bon the go\b|\bhalted\b|\bstanding\b|\bstood\b|\bsitting still\b"
+    r"|\bnot going anywhere\b|\bat a stop\b|\bwaiting\b|\bcoming\b|\bclosing in\b"
+    r"|\bour direction\b|\bacross\b"
 )
 _POSITION_WORDS = re.compile(
     r"\bleft\w*|\bright(?:most|wards?)?\b|\bfront\b|\bbehind\b|\bbeside\b|\bnext to\b"
@@ -106,8 +109,20 @@ _POSITION_WORDS = re.compile(
 _CLASS_WORDS = re.compile(
     r"\b(?:cars?|vehicles?|automobiles?|autos?|trucks?|vans?|bus(?:es)?|pedestrians?|persons?"
     r"|people|man|men|woman|women|child(?:ren)?|kids?|walkers?|cyclists?|bicyclists?|bicycles?"
-    r"|bikes?|bikers?|riders?|motorcyclists?|motorbikes?|scooters?)\b"
+    r"|bikes?|bikers?|riders?|motorcyclists?|motorbikes?|scooters?|sedans?|motorcars?|hatchbacks?"
+    r"|humans?|individuals?|passers?-by|peds?)\b"
 )
+
+
+_COUNT_QUESTION = re.compile(r"\bhow many\b|\bcount\b|\bnumber of\b|\bhow much\b")
+
+
+def is_count_question(text: str) -> bool:
+    """Whether a text asks for a count ("how many cars are parked?", "count the cyclists",
+    "number of pedestrians on the left?"): the words "how many", "how much", "count" (not
+    "counting") or "number of", any case. Works on any typed text; the referents of a count
+    question are the counted objects, and the answer says their number."""
+    return _COUNT_QUESTION.search(text.lower()) is not None
 
 
 def infer_tags(text: str) -> frozenset[str]:
