@@ -48,6 +48,7 @@ from scenes.prompts.families import (
     Ordinal,
     Related,
     Relation,
+    relation_holds,
     unsatisfiable,
 )
 from scenes.prompts.features import ActorFeatures, ReferableRegion, actor_features
@@ -278,20 +279,29 @@ def _reference(sc: _Scene, r: ActorFeatures) -> Predicate | None:
 
 def _relation(sc: _Scene) -> Prompt | None:
     relation = list(Relation)[int(sc.rng.integers(len(Relation)))]
-    t = sc.anchor()
     if relation is Relation.BETWEEN:
-        cls = CLASSES[int(sc.rng.integers(len(CLASSES)))]
-        reference = Predicate(cls)
-        if len(sc.analyse(reference).ids) != 2:
+        reference = Predicate(sc.anchor().cls)
+        ref_ids = sc.analyse(reference).ids
+        if len(ref_ids) != 2:
             return None
     else:
         r = sc.anchor()
-        if r.actor_id == t.actor_id:
-            return None
         ref = _reference(sc, r)
         if ref is None:
             return None
-        reference = ref
+        reference, ref_ids = ref, (r.actor_id,)
+    refs = [f for f in sc.inside if f.actor_id in ref_ids]
+    others = [f for f in sc.inside if f.actor_id not in ref_ids]
+    if relation is not Relation.CLOSEST_TO:
+        if (
+            relation is Relation.BETWEEN
+            and math.dist((refs[0].x, refs[0].y), (refs[1].x, refs[1].y)) < 4.0
+        ):
+            return None
+        others = [f for f in others if relation_holds(relation, f, refs)]
+    if not others:
+        return None
+    t = others[int(sc.rng.integers(len(others)))]
     target = Predicate(t.cls if sc.rng.random() < 0.85 else None)
     expr = Related(target, relation, reference)
     out = expr.analyse(sc.feats, sc.region)

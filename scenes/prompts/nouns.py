@@ -78,7 +78,7 @@ _WORDS = (
     "traffic light", "traffic signal", "stop sign", "yield sign", "speed limit sign", "road sign",
     "street sign", "traffic sign", "direction sign", "warning sign", "parking sign",
     "no entry sign", "billboard", "advertisement", "poster", "banner", "flag", "signpost",
-    "pedestrian signal", "railway signal", "traffic camera", "speed camera", "road marking",
+    "walk signal", "railway signal", "traffic camera", "speed camera", "road marking",
     "arrow on the road",
     # street furniture
     "street lamp", "lamp post", "lamppost", "street light", "light pole", "utility pole", "pole",

@@ -80,7 +80,7 @@ EXTRA: dict[str, tuple[str, ...]] = {
     "depth.beyond": ("past the {d} mark", "further out than {d}",
                      "more than {d} in front of {us}", "beyond the {d} mark"),
     "extreme.nearest": ("closest {n} to {us}", "{n} nearest {us}"),
-    "extreme.farthest": ("{n} farthest away", "{n} furthest away"),
+    "extreme.farthest": ("{n} at the greatest distance", "{n} farthest out"),
     "extreme.lateral": ("{n} on the extreme {side}",),
     "extreme.fastest": ("{n} going fastest", "quickest-going {n}"),
 }

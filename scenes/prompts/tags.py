@@ -100,7 +100,7 @@ _MOTION_WORDS = re.compile(
     r"|\baway\b|\bcross(?:es|ing)?\b|\boncoming\b|\breced\w*|\bleaving\b|\bour way\b"
     r"|\bunderway\b|\bon the go\b|\bhalted\b|\bstanding\b|\bstood\b|\bsitting still\b"
     r"|\bnot going anywhere\b|\bat a stop\b|\bwaiting\b|\bcoming\b|\bclosing in\b"
-    r"|\bour direction\b|\bacross\b"
+    r"|\bour direction\b|\bacross\b|\bincoming\b|\bgetting closer\b"
 )
 _POSITION_WORDS = re.compile(
     r"\bleft\w*|\bright(?:most|wards?)?\b|\bfront\b|\bbehind\b|\bbeside\b|\bnext to\b"
