@@ -211,6 +211,21 @@ def test_count_is_the_counted_set_and_count_questions_are_detected():
         assert not is_count_question(text)
 
 
+def test_direction_of_travel():
+    from scenes.prompts.families import Direction, Travel
+
+    w = hand_world()  # car 0 drives away along +x, car 1 comes along -x, cyclist 5 along +x
+    assert analyse(Predicate(None, (Travel(Direction.SAME),)), w).ids == (0, 5)
+    assert analyse(Predicate("Car", (Travel(Direction.OPPOSITE),)), w).ids == (1,)
+    # The crossing pedestrian (velocity along -y) travels neither way.
+    assert analyse(Predicate("Pedestrian", (Travel(Direction.SAME),)), w).ids == ()
+    diagonal = [make_actor(0, "Car", 20.0, 0.0, 0.0, (3.0, 2.0), CAR)]  # 33.7 degrees off +x
+    assert not analyse(Predicate("Car", (Travel(Direction.SAME),)), diagonal).crisp
+    for text in ("the cars heading the same way as us", "cyclists coming the other way"):
+        assert infer_tags(text) == {"class", "motion"}
+    assert infer_tags("the car on the opposite side") == {"class", "position"}
+
+
 # ---------------------------------------------------------------------------------------------
 # Base unchanged
 # ---------------------------------------------------------------------------------------------

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -43,21 +43,28 @@ from scenes.prompts.compose_render import (
 )
 from scenes.prompts.families import (
     Count,
+    Direction,
     Exclusion,
     Not,
     Ordinal,
     Related,
     Relation,
+    Travel,
+    analyse_cached,
     relation_holds,
     unsatisfiable,
 )
 from scenes.prompts.features import ActorFeatures, ReferableRegion, actor_features
 from scenes.prompts.nouns import OUT_OF_CLASS, nonsense
 from scenes.prompts.phrasing import CLASS_KEYS
-from scenes.prompts.predicate import Predicate, Resolution, analyse_features
+from scenes.prompts.predicate import Predicate, Resolution
 from scenes.prompts.render import Prompt, Style, render_with_variants
 from scenes.prompts.sampling import FAMILIES, PromptConfig, depth_atom, sample_predicate, side_of
 from scenes.prompts.tags import infer_tags
+
+P_TRAVEL = 0.3
+"""Share of attribute prompts with a heading or motion atom whose anchor travels along our axis
+that say it as a direction of travel ("heading the same way as us")."""
 
 FAMILY_TRIES = 12
 """Draws of one family before another family is drawn (keeps the realised shares near the rates)."""
@@ -74,12 +81,16 @@ class _Scene:
     words: np.random.Generator
     cfg: PromptConfig
     style: Style
+    cache: dict = field(default_factory=dict)
 
     def anchor(self) -> ActorFeatures:
         return self.inside[int(self.rng.integers(len(self.inside)))]
 
     def analyse(self, pred: Predicate) -> Resolution:
-        return analyse_features(pred, self.feats, self.region)
+        return analyse_cached(self.cache, self.feats, self.region, pred)
+
+    def resolve(self, expr: Exclusion | Ordinal | Related | Count) -> Resolution:
+        return expr.analyse(self.feats, self.region, self.cache)
 
     def ok(self, res: Resolution) -> bool:
         return not res.conflicts and (res.crisp or not self.cfg.require_crisp)
@@ -119,10 +130,23 @@ def _render(sc: _Scene) -> dict:
 # ---- families ---------------------------------------------------------------------------------
 
 
+def _with_travel(pred: Predicate, f: ActorFeatures, sc: _Scene) -> Predicate:
+    """``pred`` with its heading or motion atom said as a direction of travel
+    (:class:`~scenes.prompts.families.Travel`), sometimes, where one is clearly true of ``f``."""
+    directions = [d for d in Direction if Travel(d).holds(f, -1.0)]
+    motion = [a for a in pred.atoms if a.family in ("heading", "motion")]
+    if not directions or not motion or sc.rng.random() >= P_TRAVEL:
+        return pred
+    rest = tuple(a for a in pred.atoms if a.family not in ("heading", "motion"))
+    return Predicate(pred.cls, (*rest, Travel(directions[0])), pred.extreme)
+
+
 def _attribute(sc: _Scene) -> Prompt | None:
-    pred = sample_predicate(sc.anchor(), sc.rng, sc.cfg)
+    f = sc.anchor()
+    pred = sample_predicate(f, sc.rng, sc.cfg)
     if pred is None:
         return None
+    pred = _with_travel(pred, f, sc)
     res = sc.analyse(pred)
     if not res.usable or not sc.ok(res):
         return None
@@ -236,7 +260,7 @@ def _exclusion(sc: _Scene) -> Prompt | None:
             return None
         removed = Predicate(base.cls, (*base.atoms, atom))
     expr = Exclusion(base, removed)
-    out = expr.analyse(sc.feats, sc.region)
+    out = sc.resolve(expr)
     if not out.ids or not sc.ok(out):
         return None
     n_removed = len(res.ids) - len(out.ids)
@@ -255,7 +279,7 @@ def _ordinal(sc: _Scene) -> Prompt | None:
         return None
     rank = int(sc.rng.integers(2, min(4, len(res.ids)) + 1))
     expr = Ordinal(base, extreme, rank)
-    out = expr.analyse(sc.feats, sc.region)
+    out = sc.resolve(expr)
     if not out.ids or not sc.ok(out):
         return None
     text, variants = render_ordinal(expr, sc.words, **_render(sc))
@@ -304,7 +328,7 @@ def _relation(sc: _Scene) -> Prompt | None:
     t = others[int(sc.rng.integers(len(others)))]
     target = Predicate(t.cls if sc.rng.random() < 0.85 else None)
     expr = Related(target, relation, reference)
-    out = expr.analyse(sc.feats, sc.region)
+    out = sc.resolve(expr)
     if not out.ids or not sc.ok(out):
         return None
     text, variants = render_relation(expr, len(out.ids), sc.words, **_render(sc))
@@ -317,7 +341,7 @@ def _count(sc: _Scene) -> Prompt | None:
     if base is None:
         return None
     expr = Count(base)
-    res = expr.analyse(sc.feats, sc.region)
+    res = sc.resolve(expr)
     if res.conflicts or not (res.crisp if res.ids else unsatisfiable(base, sc.feats, sc.region)):
         return None
     text, variants = render_count(expr, sc.words, **_render(sc))

@@ -10,6 +10,9 @@ referents do not change within one unit of threshold slack. Definitions (LiDAR f
 * :class:`Not` -- negation of any atom: true of an actor where the atom is false. Inside a
   :class:`Predicate` it is the complement within the class and the other atoms; with slack ``s``
   it is ``not atom.holds(f, -s)``, so crispness rejects an actor near the atom's threshold.
+* :class:`Travel` -- a heading atom: moving with the velocity within 30 degrees of our direction
+  of travel (+x, "heading the same way as us") or of the opposite one (-x, "coming the other
+  way"), told apart by the sign of the ground radial velocity.
 * unsatisfiable -- a plain :class:`Predicate` that resolves to no actor, crisp: no actor satisfies
   it even with one unit of slack (loosened), and no guard-band actor does.
 * :class:`Exclusion` -- ``base`` minus ``removed``: ``removed`` is ``base`` plus one atom
@@ -43,11 +46,28 @@ import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import ClassVar
 
 from scenes.actors import MOVING_SPEED
-from scenes.prompts.atoms import SLACK_MOTION, Atom, Extreme
+from scenes.prompts.atoms import SLACK_ANGLE, SLACK_MOTION, Atom, Extreme
 from scenes.prompts.features import ActorFeatures, ReferableRegion
 from scenes.prompts.predicate import Predicate, Resolution, analyse_features
+
+Cache = dict[Predicate, Resolution]
+"""Resolutions of predicates over one scene (the generator's memo; keyed by predicate only, so
+one cache serves one ``(feats, region)``)."""
+
+
+def analyse_cached(
+    cache: Cache | None, feats: Sequence[ActorFeatures], region: ReferableRegion, pred: Predicate
+) -> Resolution:
+    """:func:`~scenes.prompts.predicate.analyse_features`, memoised in ``cache`` (None: not)."""
+    if cache is None:
+        return analyse_features(pred, feats, region)
+    res = cache.get(pred)
+    if res is None:
+        res = cache[pred] = analyse_features(pred, feats, region)
+    return res
 
 
 @dataclass(frozen=True)
@@ -75,6 +95,42 @@ class Not(Atom):
         return Not(self.atom.flipped())
 
 
+class Direction(enum.Enum):
+    """Direction of travel relative to ours (:class:`Travel`)."""
+
+    SAME = "same"
+    OPPOSITE = "opposite"
+
+
+TRAVEL_MAX_ANGLE_DEG = 30.0
+"""Largest angle (degrees) between a :class:`Travel` actor's velocity and the x axis."""
+
+
+@dataclass(frozen=True)
+class Travel(Atom):
+    """Moving along our direction of travel (``SAME``: velocity within 30 degrees of +x, "heading
+    the same way as us") or against it (``OPPOSITE``: within 30 degrees of -x, "coming the other
+    way"). Inside the camera's field of view the sign of the ground radial velocity tells +x from
+    -x (a velocity within 30 degrees of the axis and a line of sight within 32 degrees of it are
+    at most 62 degrees apart). Slack moves the speed threshold and the angle."""
+
+    direction: Direction
+    family: ClassVar[str] = "heading"
+    tag: ClassVar[str] = "motion"
+
+    @property
+    def slot(self) -> str:
+        """Its phrase's slot (:mod:`scenes.prompts.phrasing_more`)."""
+        return f"travel.{self.direction.value}"
+
+    def holds(self, f: ActorFeatures, slack: float = 0.0) -> bool:
+        if f.speed <= MOVING_SPEED - SLACK_MOTION * slack:
+            return False
+        if f.crossing_angle_deg < 90.0 - TRAVEL_MAX_ANGLE_DEG - SLACK_ANGLE * slack:
+            return False
+        return f.radial_velocity > 0 if self.direction is Direction.SAME else f.radial_velocity < 0
+
+
 def negated(pred: Predicate) -> Atom | None:
     """The :class:`Not` atom of a predicate (None when it has none)."""
     return next((a for a in pred.atoms if isinstance(a, Not)), None)
@@ -95,9 +151,11 @@ class Exclusion:
         if not same or not (plus_atom or self.removed.extreme is not None):
             raise ValueError("Exclusion: removed must be base plus one atom or a superlative")
 
-    def analyse(self, feats: Sequence[ActorFeatures], region: ReferableRegion) -> Resolution:
-        b = analyse_features(self.base, feats, region)
-        r = analyse_features(self.removed, feats, region)
+    def analyse(
+        self, feats: Sequence[ActorFeatures], region: ReferableRegion, cache: Cache | None = None
+    ) -> Resolution:
+        b = analyse_cached(cache, feats, region, self.base)
+        r = analyse_cached(cache, feats, region, self.removed)
         ids = tuple(sorted(set(b.ids) - set(r.ids)))
         crisp = b.crisp and r.crisp and bool(r.ids) and set(r.ids) < set(b.ids)
         return Resolution(ids, b.conflicts, crisp)
@@ -118,8 +176,10 @@ class Ordinal:
         if self.base.extreme is not None or not 2 <= self.rank <= 4:
             raise ValueError(f"Ordinal: rank {self.rank} not in 2..4 or base has a superlative")
 
-    def analyse(self, feats: Sequence[ActorFeatures], region: ReferableRegion) -> Resolution:
-        b = analyse_features(self.base, feats, region)
+    def analyse(
+        self, feats: Sequence[ActorFeatures], region: ReferableRegion, cache: Cache | None = None
+    ) -> Resolution:
+        b = analyse_cached(cache, feats, region, self.base)
         by_id = {f.actor_id: f for f in feats}
         ranked = sorted((by_id[i] for i in b.ids), key=lambda f: (-self.extreme.key(f), f.actor_id))
         if len(ranked) < self.rank:
@@ -200,9 +260,11 @@ class Related:
         """How many actors the reference must resolve to."""
         return 2 if self.relation is Relation.BETWEEN else 1
 
-    def analyse(self, feats: Sequence[ActorFeatures], region: ReferableRegion) -> Resolution:
-        ref = analyse_features(self.reference, feats, region)
-        t = analyse_features(self.target, feats, region)
+    def analyse(
+        self, feats: Sequence[ActorFeatures], region: ReferableRegion, cache: Cache | None = None
+    ) -> Resolution:
+        ref = analyse_cached(cache, feats, region, self.reference)
+        t = analyse_cached(cache, feats, region, self.target)
         conflicts = tuple(sorted(set(ref.conflicts) | set(t.conflicts)))
         if len(ref.ids) != self.n_references:
             return Resolution((), conflicts, False)
@@ -244,8 +306,10 @@ class Count:
         if self.base.extreme is not None:
             raise ValueError("Count: the counted set has no superlative")
 
-    def analyse(self, feats: Sequence[ActorFeatures], region: ReferableRegion) -> Resolution:
-        return analyse_features(self.base, feats, region)
+    def analyse(
+        self, feats: Sequence[ActorFeatures], region: ReferableRegion, cache: Cache | None = None
+    ) -> Resolution:
+        return analyse_cached(cache, feats, region, self.base)
 
     def flipped(self) -> Count:
         return Count(self.base.flipped())
@@ -266,12 +330,15 @@ def unsatisfiable(pred: Predicate, feats: Sequence[ActorFeatures], region: Refer
 
 __all__ = [
     "Count",
+    "Direction",
     "Exclusion",
     "Expression",
     "Not",
     "Ordinal",
     "Related",
     "Relation",
+    "Travel",
+    "analyse_cached",
     "negated",
     "relation_holds",
     "unsatisfiable",

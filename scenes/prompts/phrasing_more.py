@@ -124,6 +124,15 @@ FAMILY_SLOTS: dict[str, Slot] = {
                               "not closer than {d}", "not less than {d} ahead")),
     "neg.depth.beyond": Slot(("not beyond {d}", "not further than {d}",
                               "{rel} {nbe} more than {d} ahead", "not farther than {d} away")),
+    # ---- direction of travel (families.Travel) --------------------------------------------
+    "travel.same": Slot(("heading the same way as {us}", "leaving in the same direction as {us}",
+                         "going in the same direction as {us}", "moving the same way as {us}",
+                         "{verb} in the same direction as {us}", "{rel} {be} going our way",
+                         "travelling in our direction of travel")),
+    "travel.opposite": Slot(("coming the other way", "heading the opposite way to {us}",
+                             "{verb} in the opposite direction", "going the opposite way",
+                             "moving in the opposite direction to {us}",
+                             "{rel} {be} coming the other way")),
     # ---- exclusion --------------------------------------------------------------------------
     "excl.det": Slot(("all the", "all", "all of the", "the", "every one of the")),
     "excl.join": Slot(("except", "but", "except for", "other than", "apart from", "besides",

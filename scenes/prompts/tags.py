@@ -114,6 +114,11 @@ _CLASS_WORDS = re.compile(
 )
 
 
+_TRAVEL = re.compile(
+    r"\b(?:same|opposite) (?:way|direction)\b|\bother way\b|\bdirection of travel\b"
+    r"|\bgoing our way\b"
+)
+
 _COUNT_QUESTION = re.compile(r"\bhow many\b|\bcount\b|\bnumber of\b|\bhow much\b")
 
 
@@ -135,6 +140,9 @@ def infer_tags(text: str) -> frozenset[str]:
       "2 metres per second"); the phrase is removed, so its "metres" is not a depth. Also the
       words speed*, velocity, fast*, slow*, quick*, per hour / second, kph, kmh, mph, mps.
     * position: "farthest / furthest (to the) left / right" (removed, so it is not a depth).
+    * motion: a direction of travel ("the same way / direction", "the opposite way / direction",
+      "the other way", "direction of travel", "going our way"; removed, so "opposite" is not a
+      position).
     * depth: a number with a metre unit ("20 m", "15 meters", "twenty metres away"), a number
       followed by "ahead"/"away", "far away", or the words metres/distance/distant/nearest/
       closest/farthest/furthest. These depth phrases are removed before the rules below, so
@@ -154,6 +162,9 @@ def infer_tags(text: str) -> frozenset[str]:
     if _LATERAL_EXTREME.search(s):
         tags.add("position")
         s = _LATERAL_EXTREME.sub(" ", s)
+    if _TRAVEL.search(s):
+        tags.add("motion")
+        s = _TRAVEL.sub(" ", s)
     if _DEPTH_HINT.search(s) and _DEPTH_PHRASE.search(s):
         tags.add("depth")
         s = _DEPTH_PHRASE.sub(" ", s)
