@@ -294,6 +294,23 @@ def test_perturb_keeps_negators_numbers_ordinals_and_class_nouns():
     assert changed > 500
 
 
+def test_p_perturb_rewrites_texts_and_keeps_referents():
+    world = random_worlds(3, 1)[0]
+    for language in ("base", "extended"):
+        plain = generate_prompts(
+            world, np.random.default_rng(4), 8, config=PromptConfig(language=language)
+        )
+        noisy = generate_prompts(
+            world,
+            np.random.default_rng(4),
+            8,
+            config=PromptConfig(language=language, p_perturb=1.0),
+        )
+        assert [p.referent_ids for p in noisy] == [p.referent_ids for p in plain]
+        assert [p.tags for p in noisy] == [p.tags for p in plain]
+        assert any(a.text != b.text for a, b in zip(plain, noisy, strict=True))
+
+
 # ---------------------------------------------------------------------------------------------
 # Extended generation
 # ---------------------------------------------------------------------------------------------

@@ -9,12 +9,14 @@ referents: count is not a filter, it is said from the resolved set.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 
 import numpy as np
 
 from scenes.actors import Actor
 from scenes.prompts.extended import generate_extended
 from scenes.prompts.features import DEFAULT_REGION, ReferableRegion, actor_features
+from scenes.prompts.noise import perturb
 from scenes.prompts.predicate import Predicate, analyse_features
 from scenes.prompts.render import Prompt, render_with_variants
 from scenes.prompts.sampling import PromptConfig, sample_predicate
@@ -38,7 +40,8 @@ def generate_prompts(
     conflicts, is crisp (unless ``config.require_crisp`` is False) and neither the predicate nor
     the text was emitted before. Fewer than ``n`` prompts come back when the scene does not admit
     ``n`` (none when no actor is referable). Deterministic for a given ``rng`` state.
-    ``config`` defaults to :class:`PromptConfig()`. With ``config.language == "extended"`` the
+    ``config`` defaults to :class:`PromptConfig()`. ``config.p_perturb`` > 0 rewrites that share
+    of the texts with :func:`scenes.prompts.noise.perturb` (referents and tags kept). With ``config.language == "extended"`` the
     prompts come from :func:`scenes.prompts.extended.generate_extended` (every family of
     :data:`~scenes.prompts.sampling.FAMILIES`, some with an empty referent set).
 
@@ -54,7 +57,26 @@ def generate_prompts(
         raise ValueError(f"generate_prompts: n must be >= 0, got {n}")
     config = config if config is not None else PromptConfig()
     if config.language == "extended":
-        return generate_extended(actors, rng, n, region=region, config=config)
+        out = generate_extended(actors, rng, n, region=region, config=config)
+    else:
+        out = _generate_base(actors, rng, n, region, config)
+    if config.p_perturb <= 0.0 or not out:
+        return out
+    noise = np.random.default_rng(int(rng.integers(2**63)))
+    return [
+        replace(p, text=perturb(p.text, noise)) if noise.random() < config.p_perturb else p
+        for p in out
+    ]
+
+
+def _generate_base(
+    actors: Sequence[Actor],
+    rng: np.random.Generator,
+    n: int,
+    region: ReferableRegion,
+    config: PromptConfig,
+) -> list[Prompt]:
+    """The base language's prompts (:func:`generate_prompts`)."""
     feats = actor_features(actors)
     inside = [f for f in feats if region.contains(f)]
     out: list[Prompt] = []

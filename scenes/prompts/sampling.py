@@ -89,6 +89,9 @@ class PromptConfig:
             attribute prompts. A family the scene does not admit is redrawn, so realised shares
             drift towards the families every scene admits (out-of-class, attribute).
         p_nonsense: ``extended`` only: share of out-of-class prompts that are nonsense text.
+        p_perturb: Probability of rewriting each prompt's text with
+            :func:`scenes.prompts.noise.perturb` (meaning kept: referents and tags stay); 0 draws
+            nothing, so the prompts are those without the option.
     """
 
     attribute_weights: tuple[float, float, float, float] = (0.1, 0.4, 0.35, 0.15)
@@ -108,6 +111,7 @@ class PromptConfig:
     language: Literal["base", "extended"] = "base"
     family_rates: tuple[float, float, float, float, float, float, float] = EXTENDED_RATES
     p_nonsense: float = 0.1
+    p_perturb: float = 0.0
 
     def __post_init__(self) -> None:
         w = self.attribute_weights
@@ -123,6 +127,7 @@ class PromptConfig:
             "p_restyle",
             "p_number_words",
             "p_nonsense",
+            "p_perturb",
         )
         for name in probabilities:
             p = getattr(self, name)
