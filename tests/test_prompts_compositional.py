@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from scenes.prompts import (
+    HELDOUT_VARIANTS,
     DepthBeyond,
     DepthWithin,
     Exclusion,
@@ -337,6 +338,7 @@ def test_extended_generates_every_family_with_exact_referents(extended):
             families[p.family] += 1
             assert p.text.strip() and len(p.text.split()) <= 22
             assert is_count_question(p.text) == (p.family == "count"), p.text
+            assert not set(p.variants) & HELDOUT_VARIANTS, p.text  # the train stream
             if p.family == "out_of_class":
                 assert p.referent_ids == () and p.predicate is None
             elif p.expression is not None:

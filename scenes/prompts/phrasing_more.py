@@ -29,7 +29,7 @@ EXTRA: dict[str, tuple[str, ...]] = {
         "could you show me {np}?", "i need {np}", "tell me where {np} {be}", "spot {np}",
         "pick out {np}", "{np}?", "help me find {np}", "outline {np}", "draw a box around {np}",
         "can you spot {np}?", "where on earth {be} {np}?", "hey, find {np}", "show me where {np} {be}",
-        "i want to see {np}", "let me see {np}", "which object {be} {np}?",
+        "i want to see {np}", "let me see {np}",
     ),
     "ego": ("my car", "the ego", "my vehicle"),
     "noun.car": (
@@ -134,9 +134,9 @@ FAMILY_SLOTS: dict[str, Slot] = {
                              "moving in the opposite direction to {us}",
                              "{rel} {be} coming the other way")),
     # ---- exclusion --------------------------------------------------------------------------
-    "excl.det": Slot(("all the", "all", "all of the", "the", "every one of the")),
-    "excl.join": Slot(("except", "but", "except for", "other than", "apart from", "besides",
-                       "excluding", "but not")),
+    "excl.det": Slot(("all the", "all", "all of the", "the")),
+    "excl.join": Slot(("except", "but", "except for", "other than", "apart from", "excluding",
+                       "but not")),
     "excl.nearest": Slot(("nearest one", "closest one", "one closest to {us}", "nearest",
                           "closest")),
     "excl.farthest": Slot(("farthest one", "furthest one", "one farthest away",
