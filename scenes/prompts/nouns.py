@@ -146,8 +146,6 @@ _FILLER = (
     "abc",
     "xyz",
     "nothing",
-    "something",
-    "whatever",
     "ok",
     "hmm",
 )

@@ -119,13 +119,13 @@ _TRAVEL = re.compile(
     r"|\bgoing our way\b"
 )
 
-_COUNT_QUESTION = re.compile(r"\bhow many\b|\bcount\b|\bnumber of\b|\bhow much\b")
+_COUNT_QUESTION = re.compile(r"\bhow many\b|\bcount\b|\bnumber of\b")
 
 
 def is_count_question(text: str) -> bool:
     """Whether a text asks for a count ("how many cars are parked?", "count the cyclists",
-    "number of pedestrians on the left?"): the words "how many", "how much", "count" (not
-    "counting") or "number of", any case. Works on any typed text; the referents of a count
+    "number of pedestrians on the left?"): the words "how many", "count" (not "counting") or
+    "number of", any case. Works on any typed text; the referents of a count
     question are the counted objects, and the answer says their number."""
     return _COUNT_QUESTION.search(text.lower()) is not None
 
