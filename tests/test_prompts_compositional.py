@@ -409,6 +409,26 @@ def test_out_of_class_nouns_name_no_class():
         assert singular != plural or singular in ("sheep", "deer", "fish")
 
 
+def test_out_of_class_nouns_split_between_the_streams():
+    from scenes.prompts.nouns import HELDOUT_NOUNS, nouns_for
+
+    assert 0.25 < len(HELDOUT_NOUNS) / len(OUT_OF_CLASS) < 0.4
+    assert set(nouns_for("train")) | set(nouns_for("heldout")) == set(OUT_OF_CLASS)
+    assert not set(nouns_for("train")) & HELDOUT_NOUNS
+    world = random_worlds(2, 1)[0]
+    for phrasing, heldout in (("train", False), ("heldout", True)):
+        cfg = PromptConfig(
+            language="extended",
+            phrasing=phrasing,
+            family_rates=(1, 0, 0, 0, 0, 0, 0),
+            p_nonsense=0.0,
+        )
+        prompts = generate_prompts(world, np.random.default_rng(0), 30, config=cfg)
+        assert len(prompts) >= 20 and all(p.family == "out_of_class" for p in prompts)
+        for p in prompts:
+            assert (p.variants[0][len("ooc:") :] in HELDOUT_NOUNS) == heldout, p.text
+
+
 def test_synth_writes_and_reads_an_extended_root(tmp_path):
     from scenes.root import Talk2RadarRoot
     from scenes.synth import SynthSettings, main

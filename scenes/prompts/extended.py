@@ -55,12 +55,14 @@ from scenes.prompts.families import (
     unsatisfiable,
 )
 from scenes.prompts.features import ActorFeatures, ReferableRegion, actor_features
-from scenes.prompts.nouns import OUT_OF_CLASS, nonsense
-from scenes.prompts.phrasing import CLASS_KEYS
+from scenes.prompts.nouns import nonsense, nouns_for
+from scenes.prompts.phrasing import CLASS_KEYS, PHRASINGS
 from scenes.prompts.predicate import Predicate, Resolution
 from scenes.prompts.render import Prompt, Style, render_with_variants
 from scenes.prompts.sampling import FAMILIES, PromptConfig, depth_atom, sample_predicate, side_of
 from scenes.prompts.tags import infer_tags
+
+_NOUNS = {p: nouns_for(p) for p in PHRASINGS}
 
 P_TRAVEL = 0.3
 """Share of attribute prompts with a heading or motion atom whose anchor travels along our axis
@@ -175,7 +177,8 @@ def _out_of_class(sc: _Scene) -> Prompt | None:
         if "class" in infer_tags(text):
             return None
         return _prompt(text, (), (), infer_tags(text), None, "out_of_class", None)
-    noun = OUT_OF_CLASS[int(sc.rng.integers(len(OUT_OF_CLASS)))]
+    nouns = _NOUNS[sc.cfg.phrasing]
+    noun = nouns[int(sc.rng.integers(len(nouns)))]
     atoms: tuple[Atom, ...] = ()
     extreme = None
     if sc.rng.random() < 0.55:
@@ -187,6 +190,7 @@ def _out_of_class(sc: _Scene) -> Prompt | None:
     pred = Predicate(None, atoms, extreme)
     n = 1 if extreme is not None or sc.rng.random() < 0.6 else 2
     text, variants = render_plain(pred, n, sc.words, noun=noun, **_render(sc))
+    variants = (f"ooc:{noun}", *variants)
     return _prompt(text, variants, (), infer_tags(text), None, "out_of_class", None)
 
 

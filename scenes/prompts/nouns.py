@@ -2,7 +2,8 @@
 
 :data:`OUT_OF_CLASS` lists common street things as ``singular|plural``: other vehicles, animals,
 signs and signals, street furniture, buildings, vegetation, road features, objects. A prompt
-naming one of them refers to nothing. Left out on purpose, because a class may cover them or a
+naming one of them refers to nothing. A third of them are held out of the ``train`` phrasing
+stream (:data:`HELDOUT_NOUNS`), to measure nouns never trained on. Left out on purpose, because a class may cover them or a
 person may mean one: car-like vehicles (van, taxi, SUV, jeep, pickup, police car, ambulance,
 minivan, camper), two-wheelers a cyclist may ride (motorbike, motorcycle, scooter, moped,
 e-bike, tricycle), and people (child, jogger, skateboarder, wheelchair user, stroller, rider).
@@ -11,6 +12,8 @@ e-bike, tricycle), and people (child, jogger, skateboarder, wheelchair user, str
 """
 
 from __future__ import annotations
+
+import zlib
 
 import numpy as np
 
@@ -130,6 +133,28 @@ def _plural(word: str) -> str:
 
 OUT_OF_CLASS: tuple[str, ...] = tuple(dict.fromkeys(f"{w}|{_plural(w)}" for w in _WORDS))
 """Out-of-class things as ``singular|plural`` (module docstring)."""
+
+HELDOUT_NOUN_SHARE = 1.0 / 3.0
+
+
+def _heldout_nouns() -> frozenset[str]:
+    ranked = sorted(OUT_OF_CLASS, key=lambda e: (zlib.crc32(f"ooc:{e}".encode()), e))
+    return frozenset(ranked[: round(len(ranked) * HELDOUT_NOUN_SHARE)])
+
+
+HELDOUT_NOUNS = _heldout_nouns()
+"""The out-of-class nouns of the ``heldout`` phrasing stream: a third, ranked by CRC-32 of
+``ooc:singular|plural`` like the phrasing split (:mod:`scenes.prompts.phrasing`); the ``train``
+stream names only the others, ``all`` every one."""
+
+
+def nouns_for(phrasing: str) -> tuple[str, ...]:
+    """The out-of-class nouns a phrasing stream draws from (``train``, ``heldout`` or ``all``)."""
+    if phrasing == "all":
+        return OUT_OF_CLASS
+    heldout = phrasing == "heldout"
+    return tuple(e for e in OUT_OF_CLASS if (e in HELDOUT_NOUNS) == heldout)
+
 
 _LETTERS = "abcdefghijklmnopqrstuvwxyz"
 _KEYBOARD_RUNS = ("qwerty", "asdf", "zxcv", "hjkl", "uiop", "qwertz", "yxcvb", "poiuy", "lkjh")
