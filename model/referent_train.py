@@ -59,7 +59,7 @@ from model.tpcnet import TPCNet, as_points
 from scenes.actors import CLASSES, Actor
 from scenes.calib import Calibration
 from scenes.frame_dataset import AnnotatedRegion, FrameItem
-from scenes.prompts import Prompt, PromptConfig, generate_prompts, perturb
+from scenes.prompts import Prompt, PromptConfig, generate_prompts
 
 MATCH_DISTANCE = {"Car": 2.0, "Pedestrian": 1.0, "Cyclist": 1.2}
 """A detection within this BEV centre distance (m) of a same-class actor is that actor."""
@@ -98,7 +98,9 @@ class ReferentTrainConfig:
 
     def prompt_config(self) -> PromptConfig:
         """The generator's settings of these prompts."""
-        return PromptConfig(phrasing=self.phrasing, language=self.language)
+        return PromptConfig(
+            phrasing=self.phrasing, language=self.language, p_perturb=self.text_noise
+        )
 
 
 @dataclass(frozen=True)
@@ -265,7 +267,7 @@ def referent_step(
         usable = [
             (text, refs)
             for text, refs in frame_prompts(
-                frame, rngs[b], cfg.prompts_per_scene, pcfg, cfg.label_prompts, cfg.text_noise
+                frame, rngs[b], cfg.prompts_per_scene, pcfg, cfg.label_prompts
             )
             if set(refs) <= set(ids.tolist())
         ]
@@ -293,40 +295,23 @@ def frame_prompts(
     count: int,
     config: PromptConfig,
     label_prompts: int = 0,
-    text_noise: float = 0.0,
 ) -> list[tuple[str, tuple[int, ...]]]:
     """``(text, referent actor ids)`` of a frame's training prompts: the prompts that come with
     it (labels source, all of them), or ``count`` generated from its actors (sidecar source).
 
     ``label_prompts``: on a labels-source frame with complete labels (scene labels), that many
     more prompts generated from its labelled boxes, of the attributes a box alone decides
-    (``PromptConfig.geometry_only``: class, depth, side; the boxes' motion is unknown).
-
-    ``text_noise``: the share of generated prompts reworded by :func:`scenes.prompts.perturb`
-    (the meaning kept); given prompts are kept as written."""
+    (``PromptConfig.geometry_only``: class, depth, side; the boxes' motion is unknown). Given
+    prompts are kept as written; generated ones are reworded as ``config.p_perturb`` says."""
     if not frame.generates_prompts:
         given = [(g.text, g.referent_ids) for g in frame.given]
         if label_prompts <= 0 or frame.region is None:
             return given
         geometry = replace(config, geometry_only=True)
         extra: list[Prompt] = generate_prompts(frame.actors, rng, label_prompts, config=geometry)
-        return given + _noisy(extra, rng, text_noise)
+        return given + [(p.text, tuple(p.referent_ids)) for p in extra]
     prompts: list[Prompt] = generate_prompts(frame.actors, rng, count, config=config)
-    return _noisy(prompts, rng, text_noise)
-
-
-def _noisy(
-    prompts: Sequence[Prompt], rng: np.random.Generator, share: float
-) -> list[tuple[str, tuple[int, ...]]]:
-    """``(text, referent ids)`` of generated prompts, ``share`` of them reworded (no draw at 0,
-    so runs without noise repeat earlier ones)."""
-    out = []
-    for p in prompts:
-        text = p.text
-        if share > 0 and rng.random() < share:
-            text = perturb(text, rng)
-        out.append((text, tuple(p.referent_ids)))
-    return out
+    return [(p.text, tuple(p.referent_ids)) for p in prompts]
 
 
 def detection_targets(

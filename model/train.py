@@ -244,6 +244,7 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
         label_prompts=cfg.label_prompts,
         language=cfg.language,
         text_noise=cfg.text_noise,
+        phrasing=cfg.phrasing,
     )
 
     state = TrainState()
@@ -298,8 +299,7 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
                     progress=rank == 0,
                     label_prompts=cfg.label_prompts,
                     known=bank,
-                    language=cfg.language,
-                    text_noise=cfg.text_noise,
+                    prompt_config=referent_cfg.prompt_config(),
                 )
                 into += part
                 bank.entries.update(part_bank.entries)

@@ -63,6 +63,7 @@ class TrainConfig:
     calibrate: bool = True
     language: str = "base"
     text_noise: float = 0.0
+    phrasing: str = "train"
 
     def __post_init__(self) -> None:
         for name in ("data", "data_weights", "scene_labels"):
@@ -87,6 +88,8 @@ class TrainConfig:
             raise TrainingError(f"--amp must be none or bf16, got {self.amp!r}")
         if self.language not in ("base", "extended"):
             raise TrainingError(f"--language must be base or extended, got {self.language!r}")
+        if self.phrasing not in ("train", "heldout", "all"):
+            raise TrainingError(f"--phrasing must be train, heldout or all, got {self.phrasing!r}")
         if not 0.0 <= self.text_noise <= 1.0:
             raise TrainingError(f"--text-noise must be in [0, 1], got {self.text_noise}")
         if self.grounding not in ("referent", "tpcnet"):
@@ -217,6 +220,14 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
         help="referent path: the generated prompts' families (scenes.prompts.PromptConfig."
         "language): base, or extended with things outside the classes and unsatisfiable "
         "attributes (the empty answer), negation, exclusion, ordinals, relations and counting",
+    )
+    p.add_argument(
+        "--phrasing",
+        default="train",
+        choices=["train", "heldout", "all"],
+        help="referent path: the generated prompts' wording variants (scenes.prompts.phrasing): "
+        "train (default; the held-out variants stay unseen, so a root written with --phrasing "
+        "heldout measures new wording), heldout, or all",
     )
     p.add_argument(
         "--text-noise",

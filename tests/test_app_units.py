@@ -257,7 +257,7 @@ def test_results_markdown_lists_boxes_and_latency() -> None:
         prompt="the <b>car</b> and the cyclist",
     )
     text = results_markdown(answer, np.array([0.71, np.nan]), latency_ms=55.4)
-    assert text.startswith("1 car and 1 cyclist match.")
+    assert text.startswith(r"1 car and 1 cyclist match\.")  # escaped: shown as text
     assert "**2 boxes** in **55 ms**" in text and "cached" in text and "Radar" in text
     assert "| 0 | Car | 0.90 | 0.71 |" in text and "| 1 | Cyclist | 0.40 | - |" in text
 

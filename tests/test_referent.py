@@ -446,3 +446,30 @@ def test_fast_referent_heatmap_is_bit_identical_to_the_reference(seed):
             _reference_heatmap(detection, np.zeros((0, 7)), labels[:0], probs[:0], grid, "corner")
         ).tobytes()
     )
+
+
+def test_extended_language_banks_empty_answers_and_reworded_prompts(tiny_root):
+    """``--language extended --text-noise``: the bank holds prompts whose right answer is no box
+    (an all-zero target row) and reworded ones; the base bank is what it always was."""
+    from model.referent_cache import cache_scenes
+    from model.train_config import TrainConfig, TrainingError, parse_args
+
+    flags = ["--language", "extended", "--text-noise", "0.5", "--phrasing", "all"]
+    cfg, _ = parse_args(["--data", str(tiny_root), "--out", "/tmp/x", *flags])
+    assert (cfg.language, cfg.text_noise, cfg.phrasing) == ("extended", 0.5, "all")
+    with pytest.raises(TrainingError, match="--text-noise"):
+        TrainConfig(data=str(tiny_root), out="/tmp/x", text_noise=1.5)
+    rcfg = ReferentTrainConfig(language="extended", text_noise=1.0)
+    assert rcfg.prompt_config().p_perturb == 1.0
+    torch.manual_seed(0)
+    model = build_model("small", grounding="referent")
+    frames = FrameDataset(Talk2RadarRoot(tiny_root), "train")
+    base, _ = cache_scenes(model, frames, 12, progress=False)
+    extended, _ = cache_scenes(
+        model, frames, 12, progress=False, prompt_config=rcfg.prompt_config()
+    )
+    empty = [t for s in extended for t in s.targets if not t.any()]
+    assert empty, "extended prompts include answers with no box"
+    assert not any(not t.any() for s in base for t in s.targets)
+    base_texts = {t for s in base for t in s.prompts}
+    assert not base_texts & {t for s in extended for t in s.prompts}
