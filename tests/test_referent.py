@@ -22,8 +22,9 @@ from model.referent import CandidateBatch, ReferentStage, referent_loss
 from model.referent_train import ReferentTrainConfig, referent_step
 from model.text import tokenize_with_numbers
 from scenes.actors import Actor
+from scenes.augment import mirror_actor
 from scenes.dataset import AugmentConfig
-from scenes.frame_dataset import FrameDataset, SensorAugment, flip_actor, scene_ids
+from scenes.frame_dataset import FrameDataset, SensorAugment, scene_ids
 from scenes.root import Talk2RadarRoot
 from scenes.synth import SynthSettings, generate_root
 
@@ -140,7 +141,7 @@ def test_frame_dataset_one_item_per_scene_and_flip(tiny_root):
     worlds = {root.load_meta(i).world_id for i in root.ids("train")}
     assert len(scene_ids(root, "train")) == len(worlds)
     a = Actor(1, "Car", np.array([10.0, 2.0, 0.0, 4.0, 2.0, 1.5, 0.3]), np.array([1.0, 0.5]))
-    f = flip_actor(a)
+    f = mirror_actor(a)
     assert f.box[1] == -2.0 and f.box[6] == pytest.approx(-0.3) and f.velocity[1] == -0.5
     assert f.radial_velocity == pytest.approx(a.radial_velocity)
     item = FrameDataset(root, "train")[0]
