@@ -12,6 +12,10 @@ Fixtures (test modules take them by name; none imports another test module):
 - ``torch_threads(count)``: a context manager running torch with ``count`` threads.
 - ``serve_app(root, model, **config)``: a context manager serving the app on a free port (started
   and warmed up; stopped on exit).
+- ``untrained_model(grounding, **overrides)``: the small preset with weights drawn from a fixed
+  seed (the same model every call), in eval mode, on either grounding path; ``grounding``: a
+  module-scoped parameter, ``"tpcnet"`` (the paper's path) then ``"referent"`` (the shipped
+  path), so that a module's app fixture taking it runs the module's tests on both paths.
 - ``ws_client(port)``: a :class:`BrowserLikeClient` speaking viser's websocket protocol.
 - ``chromium``: Debian's Chromium (the test skips without it); ``chromium_args``: its flags.
 """
@@ -107,6 +111,31 @@ def serve_app(root: Path, model: object, timeout: float = 60.0, **config: object
         yield app
     finally:
         app.stop()
+
+
+GROUNDINGS = ("tpcnet", "referent")
+"""The two grounding paths (``model.config.ModelConfig.grounding``): the paper's, the shipped one."""
+
+
+def untrained_model(grounding: str = "tpcnet", seed: int = 0, **overrides: object):
+    """``build_model("small", grounding=grounding, **overrides)`` in eval mode, its random
+    weights drawn from ``seed`` (torch's global random state is left as it was), so that a test
+    sees the same untrained model every run."""
+    from model import build_model
+
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        return build_model("small", grounding=grounding, **overrides).eval()
+
+
+@pytest.fixture(name="untrained_model", scope="session")
+def _untrained_model() -> Callable[..., torch.nn.Module]:
+    return untrained_model
+
+
+@pytest.fixture(name="grounding", scope="module", params=GROUNDINGS)
+def _grounding(request: pytest.FixtureRequest) -> str:
+    return request.param
 
 
 @pytest.fixture(name="write_tiny_root", scope="session")
