@@ -19,7 +19,7 @@ from app.camera_image import (
 from app.colors import GT_COLOR, class_color
 from app.scene_view import camera_view_pose
 from scenes.calib import CAMERA_IN_LIDAR, IMAGE_SIZE, VOD_INTRINSICS, vod_lidar_calibration
-from scenes.layout import IMAGE, LIDAR_FOLDER, sample_file
+from scenes.layout import IMAGE, LIDAR_FOLDER, RADAR_FOLDERS, sample_file
 from scenes.projection import project_points
 
 WHITE = (255, 255, 255)
@@ -111,8 +111,8 @@ def test_camera_view_pose_is_the_vod_camera() -> None:
 def vod_app(tmp_path_factory, write_vod_root, torch_threads, serve_app, untrained_model, grounding):
     """The app on a View-of-Delft root served directly, on each grounding path."""
     root = write_vod_root(tmp_path_factory.mktemp("camera") / "vod", frames=3)
-    for image in root.glob("*/training/image_2/00001.jpg"):  # no image (in any tree)
-        image.unlink()
+    for tree in (LIDAR_FOLDER, *RADAR_FOLDERS):  # no image (in any tree)
+        sample_file(root / tree, IMAGE, "00001").unlink(missing_ok=True)
     sample_file(root / LIDAR_FOLDER, IMAGE, "00002").write_bytes(b"\xff\xd8 broken")
     with torch_threads(1):
         model = untrained_model(grounding, text_encoder="gru", head__score_threshold=0.0)

@@ -16,6 +16,7 @@ from model.checkpoint import load_checkpoint
 from model.train import TrainConfig, cosine_lr, epoch_batches, train
 from model.train_state import RunStateError
 from scenes.kitti import read_label_file
+from scenes.layout import LIDAR_FOLDER, split_file
 from scenes.root import Talk2RadarRoot
 from scenes.synth import SynthSettings, generate_root
 
@@ -182,7 +183,7 @@ def test_evaluate_command_writes_parsable_files(tiny_root, tmp_path):
     done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-3000:]
     assert "mAP by prompt type" in done.stdout and "Entire annotated area" in done.stdout
-    test_ids = (tiny_root / "lidar" / "ImageSets" / "test.txt").read_text().split()
+    test_ids = split_file(tiny_root / LIDAR_FOLDER, "test").read_text().split()
     files = sorted(p.stem for p in preds.glob("*.txt"))
     assert files == sorted(test_ids)  # one file per frame, empty ones included
     for f in preds.glob("*.txt"):
@@ -194,7 +195,7 @@ def test_evaluate_command_writes_parsable_files(tiny_root, tmp_path):
 
 
 def test_evaluate_rejects_an_empty_split(tiny_root, tmp_path):
-    (tiny_root / "lidar" / "ImageSets" / "empty.txt").write_text("")
+    split_file(tiny_root / LIDAR_FOLDER, "empty").write_text("")
     cmd = [
         sys.executable,
         "-m",
