@@ -201,8 +201,14 @@ def test_referent_model_grounds_a_scene(tiny_root):
     assert len(pred.boxes) == len(features.objects)
     assert np.all(np.diff(pred.scores) <= 0) and np.all((pred.scores >= 0) & (pred.scores <= 1))
     assert pred.heatmaps.shape == (3, 80, 80) and pred.timings.referent > 0
-    high = model.ground(features, "the nearest car on the left", score_threshold=0.99)
-    assert np.all(high.scores >= 0.99)
+    # A cut between two scores keeps exactly the candidates above it, in the same order.
+    k = len(pred.scores) // 2
+    assert k > 0 and pred.scores[k - 1] > pred.scores[k]
+    cut = float(pred.scores[k - 1] + pred.scores[k]) / 2.0
+    high = model.ground(features, "the nearest car on the left", score_threshold=cut)
+    assert 0 < len(high.scores) == k < len(pred.scores)
+    np.testing.assert_allclose(high.scores, pred.scores[:k], atol=1e-6)
+    np.testing.assert_allclose(high.boxes, pred.boxes[:k], atol=1e-6)
     with pytest.raises(ValueError, match="forward"):
         model([sample.lidar], [sample.radar], ["the car"])
 
