@@ -14,6 +14,19 @@ import torch
 
 from model.training_data import DataSpecError, RootSpec, root_specs
 
+LABEL_PROMPTS = 24
+"""``--label-prompts`` when a root has scene labels and the flag is not given: prompts generated
+per frame from its labelled boxes beside its given one (docs/RESULTS.md, "Real-format roots":
+with 1,080 given prompts the referent stage learns the class and little more; with 24 such
+prompts it learns the attributes)."""
+
+LABELLED_PROMPTS_PER_SCENE = 4
+"""``--prompts-per-scene`` when every root has scene labels and the flag is not given (a frame
+holds its given prompt and :data:`LABEL_PROMPTS` more; measured beside the label prompts)."""
+
+GENERATED_PROMPTS_PER_SCENE = 8
+"""``--prompts-per-scene`` otherwise (prompts generated per scene and step)."""
+
 
 class TrainingError(RuntimeError):
     """Training cannot go on (bad data, non-finite loss); the message says why."""
@@ -51,7 +64,7 @@ class TrainConfig:
     flip_probability: float = 0.5
     grounding: str = "referent"
     init: str | None = None
-    prompts_per_scene: int = 8
+    prompts_per_scene: int | None = None
     sensor_augment: bool = True
     freeze_scene: bool = False
     bank_prompts: int = 24
@@ -59,17 +72,28 @@ class TrainConfig:
     data_weights: tuple[float, ...] = ()
     scene_labels: tuple[str, ...] = ()
     init_detector: str | None = None
-    label_prompts: int = 0
+    label_prompts: int | None = None
     calibrate: bool = True
+    language: str = "base"
+    text_noise: float = 0.0
+    phrasing: str = "train"
 
     def __post_init__(self) -> None:
         for name in ("data", "data_weights", "scene_labels"):
             value = getattr(self, name)
             object.__setattr__(self, name, (value,) if isinstance(value, str) else tuple(value))
         try:
-            self.roots()
+            roots = self.roots()
         except DataSpecError as exc:
             raise TrainingError(str(exc)) from exc
+        labelled = [r.scene_labels is not None for r in roots]
+        if self.label_prompts is None:
+            object.__setattr__(self, "label_prompts", LABEL_PROMPTS if any(labelled) else 0)
+        if self.prompts_per_scene is None:
+            per_scene = LABELLED_PROMPTS_PER_SCENE if all(labelled) else GENERATED_PROMPTS_PER_SCENE
+            object.__setattr__(self, "prompts_per_scene", per_scene)
+        if self.label_prompts < 0:
+            raise TrainingError(f"--label-prompts must be >= 0, got {self.label_prompts}")
         if self.init and self.init_detector:
             raise TrainingError("give --init or --init-detector, not both")
         if self.grounding != "referent" and (len(self.data) > 1 or self.scene_labels):
@@ -83,6 +107,12 @@ class TrainConfig:
                 raise TrainingError(f"{flag} must be >= 1, got {getattr(self, name)}")
         if self.amp not in ("none", "bf16"):
             raise TrainingError(f"--amp must be none or bf16, got {self.amp!r}")
+        if self.language not in ("base", "extended"):
+            raise TrainingError(f"--language must be base or extended, got {self.language!r}")
+        if self.phrasing not in ("train", "heldout", "all"):
+            raise TrainingError(f"--phrasing must be train, heldout or all, got {self.phrasing!r}")
+        if not 0.0 <= self.text_noise <= 1.0:
+            raise TrainingError(f"--text-noise must be in [0, 1], got {self.text_noise}")
         if self.grounding not in ("referent", "tpcnet"):
             raise TrainingError(f"--grounding must be referent or tpcnet, got {self.grounding!r}")
         if Path(self.out).exists() and not Path(self.out).is_dir():
@@ -155,8 +185,9 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     p.add_argument(
         "--prompts-per-scene",
         type=int,
-        default=8,
-        help="referent path: prompts generated per scene and step",
+        default=None,
+        help=f"referent path: prompts per scene and step (default {GENERATED_PROMPTS_PER_SCENE}; "
+        f"{LABELLED_PROMPTS_PER_SCENE} when every root has --scene-labels)",
     )
     p.add_argument("--radar-folder", default="auto", help="radar tree, 'auto' or 'none'")
     p.add_argument("--val-every", type=int, default=1, help="validate every N epochs (0: never)")
@@ -199,10 +230,33 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     p.add_argument(
         "--label-prompts",
         type=int,
-        default=0,
+        default=None,
         help="referent path, roots with --scene-labels: prompts generated per frame from its "
         "labelled boxes (class, depth and side only: their motion is unknown) beside the given "
-        "one (default 0: given prompts only)",
+        f"one (default {LABEL_PROMPTS} with --scene-labels; 0: given prompts only)",
+    )
+    p.add_argument(
+        "--language",
+        default="base",
+        choices=["base", "extended"],
+        help="referent path: the generated prompts' families (scenes.prompts.PromptConfig."
+        "language): base, or extended with things outside the classes and unsatisfiable "
+        "attributes (the empty answer), negation, exclusion, ordinals, relations and counting",
+    )
+    p.add_argument(
+        "--phrasing",
+        default="train",
+        choices=["train", "heldout", "all"],
+        help="referent path: the generated prompts' wording variants (scenes.prompts.phrasing): "
+        "train (default; the held-out variants stay unseen, so a root written with --phrasing "
+        "heldout measures new wording), heldout, or all",
+    )
+    p.add_argument(
+        "--text-noise",
+        type=float,
+        default=0.0,
+        help="referent path: share of generated prompts reworded by scenes.prompts.perturb "
+        "(filler-word dropout, synonyms, typos, casing; the meaning kept), default 0",
     )
     p.add_argument(
         "--scene-limit",
@@ -235,4 +289,11 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     return cfg, a.resume
 
 
-__all__ = ["TrainConfig", "TrainingError", "parse_args"]
+__all__ = [
+    "GENERATED_PROMPTS_PER_SCENE",
+    "LABELLED_PROMPTS_PER_SCENE",
+    "LABEL_PROMPTS",
+    "TrainConfig",
+    "TrainingError",
+    "parse_args",
+]
