@@ -167,3 +167,7 @@ def test_runner_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
     # the oracle's no-box rate on out-of-class sentences is 0: it boxes every object
     assert result["families"]["oracle"]["out_of_class"]["empty"] == 0.0
     assert len(result["per_sentence"]) == len(load_suite(path).sentences)
+    # rewording cases were also grounded in the generator's own wording, the same cases
+    pairs = result["rewording_vs_generator_wording"]
+    assert pairs["generator wording"]["cases"] == pairs["rewording, same cases"]["cases"] > 0
+    assert "generator wording" in text
