@@ -160,7 +160,7 @@ def run(quick: bool = False, command: str = "python -m bench.graph_cost") -> Ben
             _, c, h, w = x.shape
             n = h * w
             k = graph_k[i]
-            block = model.text_fusion[i]
+            block = model.grounding.text_fusion[i]
             text = tokens[..., : model.text_encoder.out_dim]
             dggf_label = f"DGGF dynamic axial graph, K = {k}"
             knn_label = f"KNN graph, k = {KNN_K}"

@@ -143,7 +143,7 @@ def interleaved_ms(
 @dataclass(frozen=True)
 class FlopCount:
     """FLOPs of one call: ``total`` and per module (fully qualified names as FlopCounterMode
-    reports them, e.g. ``"TPCNet.lidar.pillars"``; ``"Global"`` is the total)."""
+    reports them, e.g. ``"TPCNet.scene.lidar.pillars"``; ``"Global"`` is the total)."""
 
     total: int
     by_module: dict[str, int]

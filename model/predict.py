@@ -28,6 +28,7 @@ import torch
 from tqdm import tqdm
 
 from model.labelled import LabelledBoxes
+from model.referent_head import UNCALIBRATED_REFERENT
 from scenes.calib import IMAGE_SIZE, Calibration, bottom_centres
 from scenes.kitti import ObjectLabel, boxes_to_labels, write_label_file
 from scenes.root import Sample, Talk2RadarRoot
@@ -81,10 +82,6 @@ def prediction_labels(
         if in_image and in_range:
             kept.append(label)
     return kept
-
-
-UNCALIBRATED_REFERENT = 0.5
-"""Operating threshold of a referent-path checkpoint that was never calibrated."""
 
 
 def operating_threshold(model: torch.nn.Module) -> float:

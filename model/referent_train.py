@@ -2,7 +2,7 @@
 
 Per batch of ``B`` scenes (:class:`scenes.frame_dataset.FrameItem`):
 
-1. The text-agnostic detector (:meth:`model.tpcnet.TPCNet.detect`) runs once per scene and is
+1. The text-agnostic detector (:meth:`model.scene_encoder.SceneEncoder.detect`) runs once per scene and is
    trained on *every* actor in the head grid (focal heatmap + smooth-L1, eq. 18).
 2. Candidates per scene: every actor in the grid, its box slightly jittered (the detector's boxes
    are never exact) and its detection score read off the current heatmap at its anchor cell, plus
@@ -34,13 +34,13 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from model.decode import decode
 from model.grid import BevGrid
 from model.grounder import SceneCandidates, stack_candidates
 from model.head import HeadOutput
 from model.labelled import anchor_scores
 from model.losses import LossTerms, grounding_loss
 from model.referent import CandidateBatch, referent_loss
+from model.referent_head import referent_head
 from model.targets import (
     BatchTargets,
     anchor_points,
@@ -172,8 +172,7 @@ def _prompt_losses(
         None if batch.radar is None else batch.radar.to(device),
         batch.padding.to(device),
     )
-    assert model.referent is not None
-    logits = model.referent(batch, text.tokens, text.numbers, text.padding_mask)
+    logits = referent_head(model).stage(batch, text.tokens, text.numbers, text.padding_mask)
     target = torch.zeros_like(logits)
     for i, t in enumerate(targets):
         target[i, : len(t)] = torch.from_numpy(t).to(device)
@@ -224,6 +223,7 @@ def referent_step(
     one generator drawn from scene after scene, or one per scene (then a scene's jitter and
     prompts do not depend on the others of the batch: :func:`model.train.item_rngs`)."""
     device = model.device
+    head = referent_head(model)
     rngs = _per_item(rng, len(frames))
     lidar = [as_points(f.lidar, 4, "LiDAR").to(device) for f in frames]
     radar = [as_points(f.radar, 7, "radar").to(device) for f in frames]
@@ -235,7 +235,7 @@ def referent_step(
     out = float32_output(out)  # the losses and the decoding in float32 under autocast
     det = grounding_loss(out, targets)
     with torch.no_grad():
-        dets = decode(out, model.head_grid, model.cfg.head, model.cfg.referent.candidate_threshold)
+        dets = head.proposals(model.scene, out, limit=None)
         heat = torch.sigmoid(out.heatmap.detach()).cpu().numpy()
     pcfg = prompt_config or PromptConfig(phrasing=cfg.phrasing)
     scenes, texts, rows, target_rows = [], [], [], []
@@ -263,7 +263,7 @@ def referent_step(
         ]
         if not usable:
             continue
-        cands = model.candidates(boxes, labels, scores, maps[b], frame.lidar, frame.radar)
+        cands = head.describe(model.scene, boxes, labels, scores, maps[b], frame.lidar, frame.radar)
         scene_index = len(scenes)
         scenes.append(cands)
         for text, refs in usable:

@@ -276,8 +276,10 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
     cached = None
     if referent and cfg.freeze_scene:
         # Only the referent stage learns; every scene is encoded once by the frozen detector.
-        for name, p in model.named_parameters():
-            p.requires_grad_(name.startswith("referent."))
+        for p in model.parameters():
+            p.requires_grad_(False)
+        for p in model.grounding.parameters():
+            p.requires_grad_(True)
         if cfg.text_encoder not in (None, "minilm"):
             raise TrainingError("--freeze-scene banks frozen MiniLM prompt features: use minilm")
         cached, mirrored, bank = [], [], TextBank({})
@@ -298,7 +300,7 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
                 )
                 into += part
                 bank.entries.update(part_bank.entries)
-    params = [p for p in model.parameters() if p.requires_grad]
+    params = [p for p in model.parameters_in_checkpoint_order() if p.requires_grad]
     optimizer = torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay, foreach=True)
     if run is not None:
         optimizer.load_state_dict(run.optimizer)

@@ -216,14 +216,14 @@ def test_cached_stage_banks_prompts_and_learns(tiny_root):
     assert set(bank.entries) == {t for s in scenes for t in s.prompts}
     for p in model.parameters():
         p.requires_grad_(False)
-    for p in model.referent.parameters():
+    for p in model.grounding.parameters():
         p.requires_grad_(True)
-    opt = torch.optim.AdamW(model.referent.parameters(), lr=3e-3)
+    opt = torch.optim.AdamW(model.grounding.parameters(), lr=3e-3)
     cfg = ReferentTrainConfig(prompts_per_scene=6)
     usable = [s for s in scenes if s.prompts]
     assert usable, "the (seeded, untrained) detector should propose some actor of these scenes"
     losses = []
-    model.referent.train()
+    model.grounding.train()
     for _ in range(15):
         loss = cached_referent_step(model, usable, bank, np.random.default_rng(0), cfg)
         opt.zero_grad()
