@@ -52,8 +52,10 @@ CLASS_TAG = "class"
 ACC_IOUS: tuple[float, float] = (0.25, 0.5)
 """3D IoU thresholds of Acc@0.25 and Acc@0.5."""
 
-GROUPS: tuple[str, ...] = ("class_only", "attribute", "single", "multiple")
-"""Prompt groups: no attribute tag / some attribute tag; one referent / two or more."""
+GROUPS: tuple[str, ...] = ("class_only", "attribute", "single", "multiple", "empty")
+"""Prompt groups: no attribute tag / some attribute tag; one referent / two or more / none (the
+right answer is no box: things outside the classes, attributes nothing in the scene has; its
+exact-set share is the share of such prompts answered with no box)."""
 
 
 def _min_overlap(cls: str, source: str) -> float:
@@ -160,12 +162,14 @@ class PromptOutcome:
         return bool(self.tags - {CLASS_TAG})
 
     def groups(self) -> tuple[str, ...]:
-        """The :data:`GROUPS` this prompt belongs to (no single/multiple without referents)."""
+        """The :data:`GROUPS` this prompt belongs to."""
         out = ["attribute" if self.is_attribute else "class_only"]
         if self.num_referents == 1:
             out.append("single")
         elif self.num_referents > 1:
             out.append("multiple")
+        else:
+            out.append("empty")
         return tuple(out)
 
 

@@ -113,12 +113,10 @@ def cache_scenes(
             ids = match_detections(objects.boxes, objects.labels, item.actors)
             rng = np.random.default_rng((seed, 11, i))
             prompts = frame_prompts(item, rng, prompts_per_scene, pcfg, label_prompts)
-            # A generated prompt needs a detected referent; a given one is kept when it refers to
-            # nothing (the empty answer is an answer) or to at least one detected object.
+            # A prompt is kept when it refers to nothing (the empty answer is an answer: things
+            # outside the classes, attributes nothing here has) or to a detected object.
             usable = [
-                (text, refs)
-                for text, refs in prompts
-                if np.isin(ids, refs).any() or (not refs and not item.generates_prompts)
+                (text, refs) for text, refs in prompts if not refs or np.isin(ids, refs).any()
             ]
             scenes.append(
                 CachedScene(

@@ -97,13 +97,15 @@ def test_empty_predictions_and_prompt_without_referents():
     assert (o.num_predicted, o.true_positives) == (0, 0) and o.f1 == 0.0 and not o.exact
     nothing = prompt_outcome("2", {"class"}, boxes([]), boxes([]), threshold=0.1)
     assert nothing.hit_25 is None and nothing.f1 == 1.0 and nothing.exact
-    assert nothing.groups() == ("class_only",)
+    assert nothing.groups() == ("class_only", "empty")
     spurious = prompt_outcome("3", {"class"}, boxes([(CAR, "Car", 0.9)]), boxes([]), 0.1)
     assert spurious.hit_25 is None and spurious.f1 == 0.0 and not spurious.exact
     s = summarize([o, nothing, spurious])
     assert s.prompts == 3 and s.acc_prompts == 1 and s.acc_25 == 0.0
     assert s.set_f1 == pytest.approx(100 / 3) and s.exact == pytest.approx(100 / 3)
     assert (s.referents, s.predicted, s.true_positives) == (1, 1, 0)
+    empty = grounding_metrics([o, nothing, spurious], 0.1).by_group["empty"]
+    assert empty.prompts == 2 and empty.exact == pytest.approx(50.0)  # one of two left empty
 
 
 def test_multiple_referents_one_to_one_by_score():
@@ -156,6 +158,7 @@ def test_aggregates_and_splits():
         prompt_outcome("c", {"motion"}, boxes([(PED, "Pedestrian", 0.9)]), two, 0.5),
     ]
     m = grounding_metrics(outcomes, 0.5)
+    assert "empty" not in m.by_group
     o = m.overall
     assert o.prompts == 3 and o.acc_prompts == 3
     assert o.acc_25 == pytest.approx(200 / 3)
