@@ -29,7 +29,7 @@ from bench.measure import count_flops
 from bench.model_parts import model_parts
 from bench.vod_frames import VodFrame
 from bench.workloads import SceneWorkload
-from model.tpcnet import SceneFeatures, TPCNet
+from model import SceneFeatures, TPCNet
 
 MATMUL_N = 1024
 """Side of the square float32 matmul that measures the machine's rate."""

@@ -24,11 +24,15 @@ from bench.measure import synchronize
 from bench.model_parts import keep_candidates, model_parts
 from bench.report import REPO
 from bench.workloads import SceneWorkload
-from model import build_model
-from model.decode import decode
-from model.grounder import referent_heatmap
-from model.referent_head import referent_head
-from model.tpcnet import SceneFeatures, TPCNet, as_points
+from model import (
+    SceneFeatures,
+    TPCNet,
+    as_points,
+    build_model,
+    decode,
+    referent_head,
+    referent_heatmap,
+)
 
 CHECKPOINT = REPO / "checkpoints" / "tpcnet-small.pt"
 """The checkpoint the app serves (``make run``): the referent path once it is trained for it."""
@@ -142,7 +146,7 @@ def load_path_model(spec: PathSpec, preset: str, device: str) -> LoadedModel:
     candidates = [CHECKPOINT] if spec.key == "referent" else [FAITHFUL_CHECKPOINT, CHECKPOINT]
     why = []
     if preset == "small":
-        from model.checkpoint import CheckpointError, load_checkpoint, read_checkpoint
+        from model import CheckpointError, load_checkpoint, read_checkpoint
 
         for path in candidates:
             rel = path.relative_to(REPO)
@@ -185,7 +189,7 @@ def prompt_pairs(scenes: list[SceneWorkload]) -> list[tuple[SceneWorkload, str]]
 
 
 def _answer(model: TPCNet, scores: np.ndarray) -> int:
-    from model.predict import operating_threshold
+    from model import operating_threshold
 
     return int(np.sum(scores >= operating_threshold(model)))
 
@@ -304,7 +308,7 @@ def measure_outside_referent(
 ) -> dict[str, list[float]]:
     """The referent path's ``ground`` stages timed from outside the model: ``text`` (the model's
     ``text_encoder``), ``referent`` (the referent head's ``refer`` on the scene's ``features.objects``, sigmoid
-    to numpy) and ``decode`` (ranking and :func:`model.grounder.referent_heatmap`)."""
+    to numpy) and ``decode`` (ranking and :func:`model.referent.scene_candidates.referent_heatmap`)."""
     out: dict[str, list[float]] = {k: [] for k in REFERENT.ground_stages}
     features: dict[int, SceneFeatures] = {}
     for scene, prompt in prompt_pairs(scenes)[:limit]:

@@ -2,7 +2,7 @@
 model (a scene encoder and a grounding head: ``model.scene``, ``model.grounding``) and for an
 older copy of ``model`` loaded beside it by :mod:`bench.floor` (``--baseline-package``: its
 parts were attributes of the model itself). The stages run are the model's own pipeline
-(:meth:`model.scene_encoder.SceneEncoder.sensors`, the FPN, the head, the referent head's
+(:meth:`model.nets.scene_encoder.SceneEncoder.sensors`, the FPN, the head, the referent head's
 ``proposals`` and ``describe``) wherever the model has it."""
 
 from __future__ import annotations
@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from torch import Tensor, nn
+
+from model import SceneMaps
 
 
 @dataclass(frozen=True)
@@ -48,9 +50,9 @@ class ModelParts:
 def model_parts(model: nn.Module) -> ModelParts:
     """The parts of ``model`` (this code's or an older copy's, module docstring)."""
     package = type(model).__module__.rsplit(".", 1)[0]
-    maps_type = importlib.import_module(f"{package}.grounder").SceneMaps
     cfg = model.cfg
     if hasattr(model, "scene"):
+        maps_type = SceneMaps
         scene, head = model.scene, model.grounding
 
         def sensors(lidar: Tensor, radar: Tensor):
@@ -74,6 +76,7 @@ def model_parts(model: nn.Module) -> ModelParts:
             describe,
             getattr(head, "refer", None),
         )
+    maps_type = importlib.import_module(f"{package}.grounder").SceneMaps
     decode_fn = importlib.import_module(f"{package}.decode").decode
     limit = (
         {"limit": cfg.referent.max_candidates}

@@ -31,9 +31,7 @@ from bench.common import (
     machine_info,
     synthetic_scenes,
 )
-from model import build_model
-from model.text import load_minilm, tokenize
-from model.tpcnet import TPCNet
+from model import TPCNet, build_model, load_minilm, tokenize
 
 PROMPT = "the moving cyclists about 15 metres ahead on the left"
 

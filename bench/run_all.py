@@ -120,7 +120,7 @@ MISS_NOTES: dict[str, str] = {
         "without gradients than the roll loop of the same graph (`dynamic_max_relative_loop`, "
         "same values): the graph section's finding gives both ratios to KNN. The model "
         "already switches to the roll loop when no gradient is recorded "
-        "(`model/dggf.py`), so `ground` runs the faster form."
+        "(`model/nets/dggf.py`), so `ground` runs the faster form."
     ),
 }
 """Explanations added under the target summary for each missed target (by name prefix)."""

@@ -10,11 +10,11 @@ Every option the paper's ablations compare is a field here, not a fork of the co
 - ``fusion.agent_size``: the context-agent map ``h x w`` (default 12 x 12, section IV-A; table VI).
 - ``text_fusion.kind``: ``"dggf"`` (section III-D) or ``"ggf"`` (Talk2Radar's static gated graph
   fusion, table IX); ``text_fusion.graph_k``: the roll step ``K`` per stage (default 8, 4, 2).
-- ``head.anchor``: ``"corner"``, ``"edge"`` or ``"center"`` (table VII), see :mod:`model.head`.
+- ``head.anchor``: ``"corner"``, ``"edge"`` or ``"center"`` (table VII), see :mod:`model.head.detector`.
 - ``text.encoder``: ``"minilm"`` (frozen, pretrained) or ``"gru"`` (Bi-GRU from scratch, table IX).
 - ``grounding``: ``"tpcnet"`` (the paper: DGGF conditions the BEV on the sentence and the C3D-RECHead
   heatmap ranks the referred boxes) or ``"referent"`` (Talk2PC: a text-agnostic C3D-RECHead proposes
-  every object and :mod:`model.referent` scores each candidate against the prompt's tokens;
+  every object and :mod:`model.referent.stage` scores each candidate against the prompt's tokens;
   ``referent`` holds its sizes). ``ModelConfig()`` keeps the paper's path; the training command
   line defaults to ``referent``, the product's path.
 
@@ -46,8 +46,8 @@ import typing
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from model.grid import BevGrid
-from model.head import HeadConfig
+from model.head.detector import HeadConfig
+from model.nets.grid import BevGrid
 
 Modalities = Literal["lidar", "radar", "both"]
 FusionKind = Literal["baca", "bi_mhca", "lidar_query", "radar_query", "conv_gate"]
@@ -276,7 +276,7 @@ class FpnConfig:
 
 @dataclass(frozen=True)
 class ReferentConfig:
-    """The referent stage (:mod:`model.referent`), used when ``ModelConfig.grounding`` is
+    """The referent stage (:mod:`model.referent.stage`), used when ``ModelConfig.grounding`` is
     ``"referent"``.
 
     Attributes:
@@ -289,7 +289,7 @@ class ReferentConfig:
         candidate_threshold: Smallest detection score of a candidate.
         min_score: Smallest referent probability :meth:`TPCNet.ground` returns when no threshold
             is given (the operating threshold that decides the returned *set* is stored in the
-            checkpoint, see :func:`model.predict.operating_threshold`).
+            checkpoint, see :func:`model.evaluation.predict.operating_threshold`).
     """
 
     dim: int = 128

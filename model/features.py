@@ -16,8 +16,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from model.grid import BevGrid
-from model.grounder import SceneCandidates
+from model.nets.grid import BevGrid
+from model.referent.scene_candidates import SceneCandidates
 
 PointsLike = np.ndarray | Tensor
 
@@ -73,7 +73,7 @@ class SceneFeatures:
         timings: Time per stage of the encoding.
         objects: ``grounding="referent"`` only: the text-agnostic detections of the scene as
             referent-stage candidates, and the detector's ``(3, H, W)`` sigmoid heatmaps.
-        answerable: With labelled candidates (:mod:`model.labelled`): the first this many
+        answerable: With labelled candidates (:mod:`model.referent.labelled`): the first this many
             candidates are the labelled boxes, the only possible answers (the rest is context).
             None: every candidate may be an answer.
     """

@@ -1,7 +1,7 @@
 """The interface of a grounding head: what turns the shared scene encoder's output and a prompt's
 text features into an answer. Two heads implement it (``ModelConfig.grounding``):
-:class:`model.paper_head.PaperGrounding` (the paper's DGGF + C3D-RECHead ranking) and
-:class:`model.referent_head.ReferentGrounding` (the referent stage over the detector's
+:class:`model.head.paper.PaperGrounding` (the paper's DGGF + C3D-RECHead ranking) and
+:class:`model.referent.head.ReferentGrounding` (the referent stage over the detector's
 candidates). :class:`model.tpcnet.TPCNet` holds one and never asks which.
 """
 
@@ -12,10 +12,10 @@ from collections.abc import Sequence
 from torch import Tensor, nn
 
 from model.features import Answer, PointsLike, SceneFeatures
-from model.head import HeadOutput
-from model.labelled import LabelledBoxes
-from model.scene_encoder import SceneEncoder
-from model.text import TextFeatures
+from model.head.detector import HeadOutput
+from model.nets.scene_encoder import SceneEncoder
+from model.nets.text import TextFeatures
+from model.referent.labelled import LabelledBoxes
 
 
 class GroundingHead(nn.Module):
@@ -31,7 +31,7 @@ class GroundingHead(nn.Module):
 
     @property
     def uncalibrated_threshold(self) -> float:
-        """The operating threshold of a checkpoint never calibrated (``model.calibrate``)."""
+        """The operating threshold of a checkpoint never calibrated (``model.training.calibrate``)."""
         raise NotImplementedError
 
     def encode(

@@ -1,8 +1,8 @@
-"""TPCNet (fig. 3, section III-A): the shared scene encoder (:mod:`model.scene_encoder`), the text
+"""TPCNet (fig. 3, section III-A): the shared scene encoder (:mod:`model.nets.scene_encoder`), the text
 encoder and one grounding head (:mod:`model.grounding_head`), assembled from a
 :class:`model.config.ModelConfig`; ``cfg.grounding`` picks the head: ``tpcnet`` the paper's DGGF
-+ C3D-RECHead ranking (:mod:`model.paper_head`), ``referent`` the referent stage over the
-detector's candidates (:mod:`model.referent_head`).
++ C3D-RECHead ranking (:mod:`model.head.paper`), ``referent`` the referent stage over the
+detector's candidates (:mod:`model.referent.head`).
 
 The sensor branches and the LiDAR-radar fusion do not depend on the text, so the model splits in
 two calls for the app: :meth:`TPCNet.encode_scene` (once per scene) and :meth:`TPCNet.ground`
@@ -42,14 +42,14 @@ from model.features import (
     SceneTimings,
     as_points,
 )
-from model.grounder import SceneMaps
 from model.grounding_head import GroundingHead
-from model.head import HeadOutput
-from model.labelled import LabelledBoxes
-from model.paper_head import PaperGrounding
-from model.referent_head import ReferentGrounding
-from model.scene_encoder import SceneEncoder
-from model.text import build_text_encoder, validate_prompt
+from model.head.detector import HeadOutput
+from model.head.paper import PaperGrounding
+from model.nets.scene_encoder import SceneEncoder
+from model.nets.text import build_text_encoder, validate_prompt
+from model.referent.head import ReferentGrounding
+from model.referent.labelled import LabelledBoxes
+from model.referent.scene_candidates import SceneMaps
 
 CHECKPOINT_NAMES = {
     "lidar": "scene.lidar",
@@ -159,7 +159,7 @@ class TPCNet(nn.Module):
             radar: ``(M, 7)`` radar points in the LiDAR frame; ignored by a LiDAR-only model.
             candidates: Referent path only: the frame's labelled boxes, among which the referent
                 stage then chooses instead of the detector's proposals (each gets the detector's
-                score at its anchor cell, :func:`model.labelled.anchor_scores`).
+                score at its anchor cell, :func:`model.referent.labelled.anchor_scores`).
 
         Returns:
             :class:`SceneFeatures` with ``lr_i`` of shape ``(1, C_i, H_i, W_i)``.
@@ -187,7 +187,7 @@ class TPCNet(nn.Module):
                 (``cfg.head.score_threshold`` for the paper's path, a decoded heatmap peak;
                 ``cfg.referent.min_score`` for the referent stage, a referent probability); the
                 returned *set* at the checkpoint's operating threshold is
-                :func:`model.predict.operating_threshold`'s business.
+                :func:`model.evaluation.predict.operating_threshold`'s business.
 
         Returns:
             :class:`Predictions` (boxes, scores, class names, sigmoid heatmaps, grid, timings).
@@ -226,10 +226,10 @@ class TPCNet(nn.Module):
             prompts: ``B`` prompts.
 
         Returns:
-            :class:`model.head.HeadOutput` with ``heatmap (B, 3, H, W)`` logits and
+            :class:`model.head.detector.HeadOutput` with ``heatmap (B, 3, H, W)`` logits and
             ``regression (B, 8, H, W)`` on :attr:`head_grid`; train it with
-            :func:`model.losses.grounding_loss`. The referent path trains through
-            :meth:`detect` and its head (:mod:`model.referent_train`).
+            :func:`model.head.losses.grounding_loss`. The referent path trains through
+            :meth:`detect` and its head (:mod:`model.training.referent_step`).
         """
         return self.grounding.forward_batch(self.scene, self.text_encoder, lidar, radar, prompts)
 

@@ -18,7 +18,7 @@ Inputs, all on this machine's CPU with one torch thread:
   candidates of ``encode_scene`` (boxes, labels, scores and every feature tensor) and
   ``ground`` of each prompt (boxes, scores, labels, in the order returned);
 - an untrained ``small`` model (``torch.manual_seed(0)``), whose head is ~0.1 everywhere, so that
-  hundreds of peaks reach rotated NMS: :func:`model.decode.decode` of its head output on the
+  hundreds of peaks reach rotated NMS: :func:`model.head.decode.decode` of its head output on the
   first frame at the head's threshold and at the candidate threshold.
 """
 
@@ -89,7 +89,7 @@ def shipped_outputs(frames: list) -> dict[str, np.ndarray]:
 def untrained_outputs(frames: list) -> dict[str, np.ndarray]:
     """Decoded boxes of an untrained model's head on the first frame (many peaks)."""
     from model import build_model
-    from model.decode import decode
+    from model.head.decode import decode
     from model.tpcnet import as_points
 
     torch.manual_seed(0)

@@ -123,8 +123,8 @@ def _exactly_answered_attribute_prompt(root: Path, model) -> tuple[int, str, int
     attribute, whose frame holds same-class actors that are *not* referents (so a class-only
     answer would be wrong), and which the model, called directly, answers with exactly the
     referent set at its operating threshold."""
-    from model.grounding_metrics import PromptBoxes, prompt_outcome
-    from model.predict import operating_threshold
+    from model.evaluation.grounding import PromptBoxes, prompt_outcome
+    from model.evaluation.predict import operating_threshold
     from scenes.root import Talk2RadarRoot
 
     r = Talk2RadarRoot(root)

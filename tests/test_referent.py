@@ -8,19 +8,19 @@ import pytest
 import torch
 
 from model import build_model
-from model.candidates import (
+from model.config import ReferentConfig
+from model.nets.grid import BevGrid
+from model.nets.numerals import number_spans, token_numeric_features
+from model.nets.text import tokenize_with_numbers
+from model.referent.candidates import (
     geometry_features,
     lidar_evidence,
     nearest_depth,
     pool_bev,
     radar_evidence,
 )
-from model.config import ReferentConfig
-from model.grid import BevGrid
-from model.numerals import number_spans, token_numeric_features
-from model.referent import CandidateBatch, ReferentStage, referent_loss
-from model.referent_train import ReferentTrainConfig, referent_step
-from model.text import tokenize_with_numbers
+from model.referent.stage import CandidateBatch, ReferentStage, referent_loss
+from model.training.referent_step import ReferentTrainConfig, referent_step
 from scenes.actors import Actor
 from scenes.dataset import AugmentConfig
 from scenes.frame_dataset import FrameDataset, SensorAugment, flip_actor, scene_ids
@@ -207,7 +207,7 @@ def test_referent_model_grounds_a_scene(tiny_root):
 
 
 def test_cached_stage_banks_prompts_and_learns(tiny_root):
-    from model.referent_cache import cache_scenes, cached_referent_step, match_detections
+    from model.training.referent_cache import cache_scenes, cached_referent_step, match_detections
 
     torch.manual_seed(0)
     model = build_model("small", grounding="referent")
@@ -306,7 +306,7 @@ def _reference_radar_evidence(boxes, radar):
 
 
 def _reference_heatmap(detection, boxes, labels, probabilities, grid, anchor, sigma_cells=1.5):
-    from model.targets import anchor_points
+    from model.head.targets import anchor_points
 
     _, h, w = detection.shape
     weight = np.zeros_like(detection, dtype=np.float32)
@@ -416,7 +416,7 @@ def test_fast_point_evidence_matches_on_a_generated_scene(tiny_root):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_fast_referent_heatmap_is_bit_identical_to_the_reference(seed):
-    from model.grounder import referent_heatmap
+    from model.referent.scene_candidates import referent_heatmap
 
     rng = np.random.default_rng(seed)
     grid = BevGrid(0.0, 51.2, -25.6, 25.6, 0.64)

@@ -11,12 +11,12 @@ import torch
 
 from model import build_config, build_model
 from model.config import ALIASES, ConfigError
-from model.decode import decode
-from model.grid import BevGrid
-from model.head import HeadOutput
-from model.losses import grounding_loss
-from model.targets import collate_targets, draw_targets
-from model.text import EmptyPromptError
+from model.head.decode import decode
+from model.head.detector import HeadOutput
+from model.head.losses import grounding_loss
+from model.head.targets import collate_targets, draw_targets
+from model.nets.grid import BevGrid
+from model.nets.text import EmptyPromptError
 from model.tpcnet import MissingSensorError, NonFiniteInputError, TPCNet
 
 COARSE = BevGrid(0.0, 51.2, -25.6, 25.6, 1.28)  # 40 x 40 pillars: fast option tests

@@ -22,7 +22,7 @@ from collections.abc import Iterable, Sequence
 
 import numpy as np
 
-from model.grounding_metrics import CLASS_TAG, PromptBoxes
+from model.evaluation.grounding import CLASS_TAG, PromptBoxes
 from scenes.actors import Actor
 from scenes.prompts import DEFAULT_REGION, ActorFeatures, ReferableRegion
 from scenes.root import SampleMeta

@@ -7,17 +7,17 @@ stopped, in one :func:`scenes.durable.atomic_file` replace:
   metadata);
 - ``optimizer``: the optimiser's ``state_dict``;
 - ``schedule``: the planned total steps and warm-up (the learning rate is a pure function of the
-  step, :func:`model.train.cosine_lr`, so the step is the scheduler's whole state);
+  step, :func:`model.training.loop.cosine_lr`, so the step is the scheduler's whole state);
 - ``progress``: :class:`TrainState`, whose ``epoch`` and ``step_in_epoch`` are the sampler's
   position (an epoch's batches are a permutation seeded by ``(seed, epoch)``,
-  :func:`model.train.epoch_batches`, and a resumed epoch skips its first ``step_in_epoch``);
+  :func:`model.training.loop.epoch_batches`, and a resumed epoch skips its first ``step_in_epoch``);
 - ``rng``: every random state of every rank (:func:`rng_state`: Python ``random``, NumPy's global
   generator, torch's CPU generator and, where CUDA is in use, every CUDA generator), one entry per
   rank in rank order. The NumPy generators of the datasets, the augmentations and the prompt
   generation are no state: each is created where it is used from ``(seed, epoch, item)`` or
   ``(seed, step, item)``, so the position restores them;
 - ``world``: the number of processes that trained (a resume needs the same);
-- ``config``: the run's :class:`model.train.TrainConfig` as a dict.
+- ``config``: the run's :class:`model.training.loop.TrainConfig` as a dict.
 
 ``last.pt`` is derived: the same checkpoint payload, written (atomically) after the state file.
 A resume reads the state file only and rewrites ``last.pt`` from it when a crash came between the

@@ -1,8 +1,8 @@
-"""Counting the answers of class prompts against full labels (:mod:`model.class_prompts`' core).
+"""Counting the answers of class prompts against full labels (:mod:`model.evaluation.class_prompts`' core).
 
 Pure functions on ``(K, 7)`` float boxes ``x, y, z, l, w, h, yaw`` in the LiDAR frame (x forward,
 y left, z up, metres; z at the geometric centre, yaw counter-clockwise about +z). See
-:mod:`model.class_prompts` for what "target", "found" and "false box" mean.
+:mod:`model.evaluation.class_prompts` for what "target", "found" and "false box" mean.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from model.metrics import MIN_OVERLAPS
+from model.evaluation.metrics import MIN_OVERLAPS
 from scenes.actors import CLASSES
 from scenes.boxes import bev_iou, iou3d
 from scenes.calib import (

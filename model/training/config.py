@@ -12,7 +12,7 @@ from pathlib import Path
 
 import torch
 
-from model.training_data import DataSpecError, RootSpec, root_specs
+from model.training.data import DataSpecError, RootSpec, root_specs
 
 
 class TrainingError(RuntimeError):
@@ -89,7 +89,7 @@ class TrainConfig:
             raise TrainingError(f"--out {self.out} is a file; give a run folder")
 
     def roots(self) -> tuple[RootSpec, ...]:
-        """The training roots (:func:`model.training_data.root_specs`)."""
+        """The training roots (:func:`model.training.data.root_specs`)."""
         return root_specs(self.data, self.data_weights, self.scene_labels)
 
     def model_overrides(self) -> dict[str, str]:

@@ -1,6 +1,6 @@
 """Ground a whole split and score it: the official VoD result plus the paper's breakdowns.
 
-- Overall: :func:`model.metrics.evaluate_frames` over every frame of the split.
+- Overall: :func:`model.evaluation.metrics.evaluate_frames` over every frame of the split.
 - Per prompt type (the paper's table III): frames grouped by their prompt's type tags (``depth``,
   ``velocity``, ``motion``, ``position``); a prompt with several tags counts in each. Tags come from
   the sample's sidecar where present, else from :func:`scenes.prompts.infer_tags` on the text (so
@@ -9,16 +9,16 @@
   spanning 10 meters". An object's depth is its camera-frame forward distance (the label's
   ``location.z``); ground truth and detections are both restricted to the bin, then scored.
 
-- Grounding per prompt (:mod:`model.grounding_metrics`): top-box Acc@0.25 / Acc@0.5 and the set
-  metrics at the operating threshold (:func:`model.predict.operating_threshold`), overall, per
+- Grounding per prompt (:mod:`model.evaluation.grounding`): top-box Acc@0.25 / Acc@0.5 and the set
+  metrics at the operating threshold (:func:`model.evaluation.predict.operating_threshold`), overall, per
   prompt type and per group; with ``baselines=True`` also for the language-blind oracle and the
-  class-noun prompt (:mod:`model.baselines`), each with its official mAP. They judge the boxes as
+  class-noun prompt (:mod:`model.evaluation.baselines`), each with its official mAP. They judge the boxes as
   ``ground`` returns them (LiDAR frame, before the prediction files' image / range filter), against
   the referents of ``label_2``.
 
 Thresholds: the model grounds each prompt once, decoding at ``min(decode, operating)``; the boxes
 scoring at least the decode threshold (``score_threshold``, default
-:func:`model.predict.decode_threshold`, what ``ground`` returns by itself) make the prediction files and the mAP (unchanged by the operating
+:func:`model.evaluation.predict.decode_threshold`, what ``ground`` returns by itself) make the prediction files and the mAP (unchanged by the operating
 threshold), the boxes scoring at least the operating threshold make the answer set.
 
 All AP values are the entire-area 3D mAP at 11 recall points unless a table says otherwise.
@@ -32,8 +32,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 import torch
 
-from model.baselines import class_noun_prompt, named_class, oracle_boxes, unsensed_ids
-from model.grounding_metrics import (
+from model.evaluation.baselines import class_noun_prompt, named_class, oracle_boxes, unsensed_ids
+from model.evaluation.grounding import (
     GroundingMetrics,
     PromptBoxes,
     PromptOutcome,
@@ -41,14 +41,14 @@ from model.grounding_metrics import (
     grounding_metrics,
     prompt_outcome,
 )
-from model.labelled import LabelledBoxes
-from model.metrics import VodResult, evaluate_frames
-from model.predict import (
+from model.evaluation.metrics import VodResult, evaluate_frames
+from model.evaluation.predict import (
     decode_threshold,
     iterate_predictions,
     operating_threshold,
     prediction_labels,
 )
+from model.referent.labelled import LabelledBoxes
 from scenes.actors import CLASSES, Actor
 from scenes.kitti import ObjectLabel, format_label_line, parse_label_line
 from scenes.prompts import infer_tags
@@ -238,9 +238,9 @@ def evaluate_predictions(
 
     Args:
         score_threshold: Decode threshold of the prediction files and the mAP (None:
-            :func:`model.predict.decode_threshold`).
+            :func:`model.evaluation.predict.decode_threshold`).
         operating: Operating threshold of the set metrics (None:
-            :func:`model.predict.operating_threshold`).
+            :func:`model.evaluation.predict.operating_threshold`).
         baselines: Also score the class-noun prompt and the language-blind oracle (the oracle
             needs every frame's objects: the scene labels where given, else the sidecar; without
             either it is left out with a note).

@@ -24,14 +24,14 @@ from dataclasses import dataclass
 import torch
 from torch import Tensor, nn
 
-from model.baca import build_fusion
-from model.backbone import SecondBackbone
 from model.config import LIDAR_FEATURES, RADAR_FEATURES, ModelConfig
 from model.features import Clock, MissingSensorError, PointsLike, SceneTimings, as_points
-from model.fpn import SecondFpn
-from model.grounder import SceneMaps
-from model.head import C3DRecHead, HeadOutput
-from model.pillars import PillarEncoder
+from model.head.detector import C3DRecHead, HeadOutput
+from model.nets.baca import build_fusion
+from model.nets.backbone import SecondBackbone
+from model.nets.fpn import SecondFpn
+from model.nets.pillars import PillarEncoder
+from model.referent.scene_candidates import SceneMaps
 
 
 class SensorBranch(nn.Module):

@@ -2,7 +2,7 @@
 
 Per batch of ``B`` scenes (:class:`scenes.frame_dataset.FrameItem`):
 
-1. The text-agnostic detector (:meth:`model.scene_encoder.SceneEncoder.detect`) runs once per scene and is
+1. The text-agnostic detector (:meth:`model.nets.scene_encoder.SceneEncoder.detect`) runs once per scene and is
    trained on *every* actor in the head grid (focal heatmap + smooth-L1, eq. 18).
 2. Candidates per scene: every actor in the grid, its box slightly jittered (the detector's boxes
    are never exact) and its detection score read off the current heatmap at its anchor cell, plus
@@ -13,7 +13,7 @@ Per batch of ``B`` scenes (:class:`scenes.frame_dataset.FrameItem`):
    One encoded scene thus serves many prompts, and same-class actors are the hard negatives. A prompt
    whose referents are not all candidates (outside the head grid) is skipped.
 4. The referent stage scores every candidate for every prompt: BCE + a listwise term
-   (:func:`model.referent.referent_loss`). The pooled BEV features carry gradients back into the
+   (:func:`model.referent.stage.referent_loss`). The pooled BEV features carry gradients back into the
    backbones, so the scene features learn what the words need.
 
 A second, cheaper stage (``python -m model.train ... --freeze-scene``) trains the referent stage
@@ -34,27 +34,27 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from model.grid import BevGrid
-from model.grounder import SceneCandidates, stack_candidates
-from model.head import HeadOutput
-from model.labelled import anchor_scores
-from model.losses import LossTerms, grounding_loss
-from model.referent import CandidateBatch, referent_loss
-from model.referent_head import referent_head
-from model.targets import (
+from model.head.detector import HeadOutput
+from model.head.losses import LossTerms, grounding_loss
+from model.head.targets import (
     BatchTargets,
     anchor_points,
     collate_targets,
     draw_targets,
     grid_cell_centres,
 )
-from model.text import (
+from model.nets.grid import BevGrid
+from model.nets.text import (
     MiniLMTextEncoder,
     TextFeatures,
     encode_minilm_batched,
     pad_features,
     validate_prompt,
 )
+from model.referent.head import referent_head
+from model.referent.labelled import anchor_scores
+from model.referent.scene_candidates import SceneCandidates, stack_candidates
+from model.referent.stage import CandidateBatch, referent_loss
 from model.tpcnet import TPCNet, as_points
 from scenes.actors import CLASSES, Actor
 from scenes.calib import Calibration
@@ -162,7 +162,7 @@ def _prompt_losses(
 ) -> tuple[Tensor, Tensor]:
     """Referent losses of ``N`` prompts: prompt ``i`` asks about ``scenes[rows[i]]``, its encoded
     text is row ``i`` of ``text`` and ``targets[i]`` marks its referents among that scene's
-    candidates (``(K_scene,)`` float32). Returns :func:`model.referent.referent_loss`."""
+    candidates (``(K_scene,)`` float32). Returns :func:`model.referent.stage.referent_loss`."""
     device = model.device
     batch = stack_candidates(scenes).index(torch.tensor(list(rows)))
     batch = CandidateBatch(
@@ -221,7 +221,7 @@ def referent_step(
 ) -> ReferentLoss:
     """Losses of one batch of scenes (module docstring); call ``.total.backward()``. ``rng`` is
     one generator drawn from scene after scene, or one per scene (then a scene's jitter and
-    prompts do not depend on the others of the batch: :func:`model.train.item_rngs`)."""
+    prompts do not depend on the others of the batch: :func:`model.training.loop.item_rngs`)."""
     device = model.device
     head = referent_head(model)
     rngs = _per_item(rng, len(frames))

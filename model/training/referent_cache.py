@@ -16,9 +16,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
-from model.grounder import SceneCandidates
-from model.losses import LossTerms
-from model.referent_train import (
+from model.head.losses import LossTerms
+from model.nets.text import encode_minilm_batched, pad_features
+from model.referent.scene_candidates import SceneCandidates
+from model.tpcnet import TPCNet
+from model.training.referent_step import (
     MATCH_DISTANCE,
     ReferentLoss,
     ReferentTrainConfig,
@@ -26,8 +28,6 @@ from model.referent_train import (
     _prompt_losses,
     frame_prompts,
 )
-from model.text import encode_minilm_batched, pad_features
-from model.tpcnet import TPCNet
 from scenes.actors import CLASSES, Actor
 from scenes.boxes import match_by_centre
 from scenes.frame_dataset import FrameDataset
@@ -73,7 +73,7 @@ class TextBank:
     entries: dict
 
     def features(self, texts: Sequence[str], device: torch.device):
-        """:class:`model.text.TextFeatures` of ``texts`` (all in the bank)."""
+        """:class:`model.nets.text.TextFeatures` of ``texts`` (all in the bank)."""
         return pad_features([self.entries[t] for t in texts], device)
 
 

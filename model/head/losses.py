@@ -8,8 +8,8 @@
   cells; at least 1). The sigmoid is clamped to ``[1e-4, 1 - 1e-4]`` as in CenterPoint so that
   ``log`` stays finite.
 - Regression: the 8 channels ``(dx, dy, z, log l, log w, log h, sin yaw, cos yaw)`` of
-  :class:`model.head.HeadOutput` are gathered at each box's anchor cell, compared with the targets
-  of :func:`model.targets.draw_targets` by smooth-L1, summed over the channels (eq. 18's sum over
+  :class:`model.head.detector.HeadOutput` are gathered at each box's anchor cell, compared with the targets
+  of :func:`model.head.targets.draw_targets` by smooth-L1, summed over the channels (eq. 18's sum over
   ``Lambda``; yaw is represented by its sine and cosine, as in CenterPoint) and averaged over the
   valid boxes of the batch (``mask``; at least 1). Boxes outside the grid, ignored classes and
   padding are masked out, so a batch without boxes gives the heatmap loss only (no NaN).
@@ -26,8 +26,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from model.head import REGRESSION_CHANNELS, HeadOutput
-from model.targets import BatchTargets
+from model.head.detector import REGRESSION_CHANNELS, HeadOutput
+from model.head.targets import BatchTargets
 
 SIGMOID_CLAMP = 1e-4
 """The predicted heatmap probability is clamped to ``[SIGMOID_CLAMP, 1 - SIGMOID_CLAMP]``."""
@@ -103,7 +103,7 @@ def grounding_loss(
 
     Args:
         out: Head outputs ``heatmap (B, 3, H, W)``, ``regression (B, 8, H, W)``.
-        targets: :class:`model.targets.BatchTargets` on the same grid and device.
+        targets: :class:`model.head.targets.BatchTargets` on the same grid and device.
         beta: Weight of the regression term (the paper's 0.25).
         smooth_l1_beta: Transition point of the smooth-L1 loss.
 

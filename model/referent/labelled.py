@@ -23,8 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from model.grid import BevGrid
-from model.targets import anchor_points
+from model.head.targets import anchor_points
+from model.nets.grid import BevGrid
 from scenes.actors import CLASSES
 from scenes.boxes import bev_iou
 

@@ -1,4 +1,4 @@
-"""Decoding C3D-RECHead outputs into 3D boxes (the inverse of :mod:`model.targets`).
+"""Decoding C3D-RECHead outputs into 3D boxes (the inverse of :mod:`model.head.targets`).
 
 Per batch item (CenterPoint's decoder, spec section 3.7, with the anchor of section III-E):
 
@@ -6,7 +6,7 @@ Per batch item (CenterPoint's decoder, spec section 3.7, with the anchor of sect
 2. peaks: cells equal to the maximum of their 3x3 neighbourhood (max-pool NMS);
 3. the ``HeadConfig.top_k`` highest peaks over all classes, then ``score >= score_threshold``;
 4. box centre = anchor cell centre + ``(dx, dy)`` (metres, LiDAR frame; computed in float64 so the
-   round trip through :func:`model.targets.draw_targets` is exact up to float32 storage of the
+   round trip through :func:`model.head.targets.draw_targets` is exact up to float32 storage of the
    small offset), ``z`` as regressed, ``(l, w, h) = exp(log size)``,
    ``yaw = atan2(sin, cos)`` wrapped to ``[-pi, pi)``;
 5. rotated NMS per class with the exact BEV IoU of :func:`scenes.boxes.paired_bev_iou`
@@ -26,9 +26,9 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from model.grid import BevGrid
-from model.head import NUM_CLASSES, REGRESSION_CHANNELS, HeadConfig, HeadOutput
-from model.targets import cell_centres
+from model.head.detector import NUM_CLASSES, REGRESSION_CHANNELS, HeadConfig, HeadOutput
+from model.head.targets import cell_centres
+from model.nets.grid import BevGrid
 from scenes.actors import CLASSES
 from scenes.boxes import paired_bev_iou, wrap_yaw
 

@@ -1,6 +1,6 @@
 """Grounding metrics: does the answer to a prompt hold exactly the objects the prompt refers to?
 
-The official mAP (:mod:`model.metrics`) pools every detection of a split and ranks them by score, so
+The official mAP (:mod:`model.evaluation.metrics`) pools every detection of a split and ranks them by score, so
 a detector that ignores every word but the class noun scores well on it. These metrics judge each
 prompt's answer on its own, as the referring-expression literature does (ScanRefer, Mono3DVG).
 
@@ -19,7 +19,7 @@ Per prompt:
 - **Set metrics at the operating threshold** ``t``: the predicted boxes with ``score >= t`` (the
   decoder's rule) are matched one-to-one to the referents, greedily in descending score order: each
   takes the free referent of its class with the largest 3D IoU strictly above the class's official
-  minimum overlap (:data:`model.metrics.MIN_OVERLAPS`, 3D: 0.5 Car, 0.25 Pedestrian / Cyclist;
+  minimum overlap (:data:`model.evaluation.metrics.MIN_OVERLAPS`, 3D: 0.5 Car, 0.25 Pedestrian / Cyclist;
   "strictly above" as the official protocol). With ``TP`` matches, ``P`` kept boxes and ``R``
   referents: precision ``TP / P``, recall ``TP / R`` (0 where the denominator is 0), F1
   ``2 TP / (P + R)`` (1 where ``P = R = 0``: nothing asked, nothing answered); the prompt is an
@@ -40,7 +40,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from model.metrics import MIN_OVERLAPS
+from model.evaluation.metrics import MIN_OVERLAPS
 from scenes.boxes import iou3d
 
 GROUNDING_TYPES: tuple[str, ...] = ("class", "depth", "velocity", "motion", "position")

@@ -1,7 +1,7 @@
 """C3D-RECHead: anchor-point heatmaps and box regression (paper section III-E, eqs. 13-17, fig. 7).
 
 The head turns the fused BEV feature map ``(B, C, H, W)`` (rows ``iy`` along +y, columns ``ix``
-along +x; see :mod:`model.grid`) into
+along +x; see :mod:`model.nets.grid`) into
 
 - ``heatmap (B, 3, H, W)``: raw logits, one channel per class in the order of
   :data:`scenes.actors.CLASSES` (Car, Pedestrian, Cyclist). A box's heatmap peaks at its *anchor

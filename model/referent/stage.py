@@ -4,7 +4,7 @@ TPCNet's only text path into the BEV is DGGF's per-channel gate from one max-poo
 (eqs. 9-11). It cannot compare a cell's depth with "beyond 40 m", a radar velocity with "toward us",
 or one object with another ("the nearest", "the two"), and measured so: it picks objects by class.
 This stage sits after a text-agnostic C3D-RECHead and decides per candidate (see
-:mod:`model.candidates` for what a candidate carries):
+:mod:`model.referent.candidates` for what a candidate carries):
 
 1. Candidate tokens: an MLP of the explicit geometry, plus a LiDAR-derived and a radar-derived
    embedding (each the BEV features of that sensor's backbone pooled at the box, with that sensor's
@@ -12,7 +12,7 @@ This stage sits after a text-agnostic C3D-RECHead and decides per candidate (see
    are scaled by a *prompt-conditioned gate* (sigmoid of a linear map of the mean text token): the
    sentence decides which sensor to trust (the paper's argument for fusion, made per prompt).
 2. Text tokens: the frozen MiniLM token features concatenated with the value of the number each
-   token belongs to (:mod:`model.numerals`), projected to ``dim`` and contextualised by one
+   token belongs to (:mod:`model.nets.numerals`), projected to ``dim`` and contextualised by one
    self-attention layer.
 3. ``layers`` decoder blocks over the candidates: self-attention among candidates (superlatives and
    counts need comparisons), cross-attention to the text tokens, feed-forward (pre-norm).
@@ -30,9 +30,9 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from model.candidates import GEOMETRY_FEATURES, LIDAR_EVIDENCE, RADAR_EVIDENCE
 from model.config import ReferentConfig
-from model.numerals import NUMERIC_FEATURES
+from model.nets.numerals import NUMERIC_FEATURES
+from model.referent.candidates import GEOMETRY_FEATURES, LIDAR_EVIDENCE, RADAR_EVIDENCE
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """The paper's grounding head (``grounding="tpcnet"``, section III-C/D): DGGF (or GGF) gates each
 fused stage with the prompt's tokens, then the shared FPN and C3D-RECHead rank the referred boxes
 by their heatmap peaks. Training: :meth:`PaperGrounding.forward_batch` and
-:meth:`PaperGrounding.loss` (:func:`model.losses.grounding_loss`)."""
+:meth:`PaperGrounding.loss` (:func:`model.head.losses.grounding_loss`)."""
 
 from __future__ import annotations
 
@@ -11,16 +11,16 @@ import torch
 from torch import Tensor, nn
 
 from model.config import ModelConfig
-from model.decode import decode
-from model.dggf import DynamicGatedGraphFusion, GatedGraphFusion
 from model.features import Answer, Clock, GroundTimings, PointsLike, SceneFeatures
 from model.grounding_head import GroundingHead
-from model.head import HeadOutput
-from model.labelled import LabelledBoxes
-from model.losses import LossTerms, grounding_loss
-from model.scene_encoder import SceneEncoder
-from model.targets import BatchTargets
-from model.text import TextFeatures, validate_prompt
+from model.head.decode import decode
+from model.head.detector import HeadOutput
+from model.head.losses import LossTerms, grounding_loss
+from model.head.targets import BatchTargets
+from model.nets.dggf import DynamicGatedGraphFusion, GatedGraphFusion
+from model.nets.scene_encoder import SceneEncoder
+from model.nets.text import TextFeatures, validate_prompt
+from model.referent.labelled import LabelledBoxes
 
 
 class PaperGrounding(GroundingHead):
@@ -130,5 +130,5 @@ class PaperGrounding(GroundingHead):
 
     @staticmethod
     def loss(out: HeadOutput, targets: BatchTargets) -> LossTerms:
-        """:func:`model.losses.grounding_loss` of :meth:`forward_batch`'s output."""
+        """:func:`model.head.losses.grounding_loss` of :meth:`forward_batch`'s output."""
         return grounding_loss(out, targets)

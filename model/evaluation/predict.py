@@ -27,8 +27,8 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from model.labelled import LabelledBoxes
-from model.referent_head import UNCALIBRATED_REFERENT
+from model.referent.head import UNCALIBRATED_REFERENT
+from model.referent.labelled import LabelledBoxes
 from scenes.calib import IMAGE_SIZE, Calibration, bottom_centres
 from scenes.kitti import ObjectLabel, boxes_to_labels, write_label_file
 from scenes.root import Sample, Talk2RadarRoot

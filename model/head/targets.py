@@ -2,7 +2,7 @@
 
 For every ground-truth box (LiDAR frame, ``x, y, z, l, w, h, yaw``) of a metric class:
 
-1. the *anchor point* is chosen by ``HeadConfig.anchor`` (see :mod:`model.head`): the BEV corner
+1. the *anchor point* is chosen by ``HeadConfig.anchor`` (see :mod:`model.head.detector`): the BEV corner
    nearest the LiDAR origin (default), the midpoint of the nearest edge (eq. 17), or the centre;
 2. the *anchor cell* is the head-grid cell ``(iy, ix)`` containing the anchor point; boxes whose
    anchor lies outside the grid get ``mask = False`` and draw nothing;
@@ -13,11 +13,11 @@ For every ground-truth box (LiDAR frame, ``x, y, z, l, w, h, yaw``) of a metric 
    its well-known division by 2 rather than by ``2a``, kept as in CenterNet/CenterPoint so that the
    radii match theirs.);
 4. the regression target is ``(dx, dy, z, log l, log w, log h, sin yaw, cos yaw)`` with
-   ``(dx, dy) = centre_xy - anchor_cell_centre_xy`` in metres. Decoding (:mod:`model.decode`)
+   ``(dx, dy) = centre_xy - anchor_cell_centre_xy`` in metres. Decoding (:mod:`model.head.decode`)
    adds the same offset to the same cell centre, so it is the exact inverse.
 
 The flat cell index of the anchor cell is ``iy * W + ix`` (row-major over the ``(H, W)`` canvas),
-which is what :func:`model.losses.grounding_loss` gathers the regression map with.
+which is what :func:`model.head.losses.grounding_loss` gathers the regression map with.
 
 Box classes outside :data:`scenes.actors.CLASSES` are ignored: they stay in the arrays (so index
 ``k`` still means input box ``k``) with ``label = -1`` and ``mask = False``.
@@ -33,8 +33,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from model.grid import BevGrid
-from model.head import NUM_CLASSES, REGRESSION_CHANNELS, HeadConfig
+from model.head.detector import NUM_CLASSES, REGRESSION_CHANNELS, HeadConfig
+from model.nets.grid import BevGrid
 from scenes.actors import CLASSES
 from scenes.boxes import nearest_bev_corner, nearest_edge_midpoint
 

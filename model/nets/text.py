@@ -48,7 +48,7 @@ from torch import Tensor, nn
 from torch.nn.utils.rnn import pack_padded_sequence, pad_packed_sequence
 
 from model.config import TextConfig
-from model.numerals import token_numeric_features
+from model.nets.numerals import token_numeric_features
 
 LOG = logging.getLogger(__name__)
 
@@ -74,7 +74,7 @@ class TextFeatures:
         padding_mask: ``(B, L)`` bool, True where position ``j`` of prompt ``b`` is padding.
         truncated: Per prompt, whether it exceeded the token limit and was cut.
         numbers: ``(B, L, NUMERIC_FEATURES)`` float32 value of the number each token belongs to
-            (:mod:`model.numerals`; zero for other tokens and at padding).
+            (:mod:`model.nets.numerals`; zero for other tokens and at padding).
     """
 
     tokens: Tensor
@@ -273,7 +273,7 @@ def tokenize(prompt: str, max_tokens: int) -> tuple[list[int], bool]:
 
 def tokenize_with_numbers(prompt: str, max_tokens: int) -> tuple[list[int], np.ndarray, bool]:
     """:func:`tokenize` plus the ``(len(ids), NUMERIC_FEATURES)`` numeric features of each token
-    (:func:`model.numerals.token_numeric_features`; zero for [CLS] and [SEP])."""
+    (:func:`model.nets.numerals.token_numeric_features`; zero for [CLS] and [SEP])."""
     enc = load_tokenizer().encode(prompt, add_special_tokens=True)
     ids = list(enc.ids)
     offsets = [tuple(o) for o in enc.offsets]

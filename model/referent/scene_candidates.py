@@ -2,7 +2,7 @@
 
 :func:`describe_candidates` turns boxes (detections at inference, actors plus false detections in
 training) and the scene's BEV maps into the per-candidate tensors of
-:class:`model.referent.CandidateBatch`; :func:`stack_candidates` pads several scenes into one
+:class:`model.referent.stage.CandidateBatch`; :func:`stack_candidates` pads several scenes into one
 batch; :func:`referent_heatmap` draws what the app shows: the detector's class heatmaps kept where
 a candidate the sentence refers to sits (a Gaussian at each candidate's anchor cell, weighted by
 its referent probability), so that a person sees where the answer is and how sure it is.
@@ -12,8 +12,8 @@ Maps (all on the head grid, ``(C, H, W)``, ``[c, iy, ix]``):
 - ``fused``: the FPN output (what the C3D-RECHead reads), pooled at the box centre and at the
   box's anchor point (the corner nearest the ego vehicle by default), so ``2 * C_fpn`` values;
 - ``lidar`` / ``radar``: stage 1 of that sensor's backbone (before the LiDAR-radar fusion), pooled
-  at the centre and the anchor, plus :func:`model.candidates.lidar_evidence` /
-  :func:`model.candidates.radar_evidence` from the raw points.
+  at the centre and the anchor, plus :func:`model.referent.candidates.lidar_evidence` /
+  :func:`model.referent.candidates.radar_evidence` from the raw points.
 """
 
 from __future__ import annotations
@@ -26,15 +26,15 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from model.candidates import (
+from model.head.targets import anchor_points
+from model.nets.grid import BevGrid
+from model.referent.candidates import (
     geometry_features,
     lidar_evidence,
     pool_bev,
     radar_evidence,
 )
-from model.grid import BevGrid
-from model.referent import CandidateBatch
-from model.targets import anchor_points
+from model.referent.stage import CandidateBatch
 
 
 @dataclass(frozen=True)

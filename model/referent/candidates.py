@@ -20,7 +20,7 @@ false positives. For each candidate this module computes, as pure numpy function
 learned part of each candidate's description.
 
 Scales: every feature is brought to roughly unit range by the constants below, so that the
-referent stage can compare them with the numbers of a prompt (see :mod:`model.numerals`) through
+referent stage can compare them with the numbers of a prompt (see :mod:`model.nets.numerals`) through
 plain linear layers.
 """
 
@@ -31,7 +31,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from model.grid import BevGrid
+from model.nets.grid import BevGrid
 from scenes.actors import CLASSES
 from scenes.boxes import bev_corners
 
@@ -297,7 +297,7 @@ def pool_bev(feature_map: Tensor, grid: BevGrid, xy: Tensor) -> Tensor:
     """Bilinear samples of a BEV map at metric positions.
 
     Args:
-        feature_map: ``(C, H, W)`` on ``grid`` (``[c, iy, ix]``, see :mod:`model.grid`).
+        feature_map: ``(C, H, W)`` on ``grid`` (``[c, iy, ix]``, see :mod:`model.nets.grid`).
         grid: The map's grid.
         xy: ``(K, 2)`` positions in the LiDAR frame (metres), on the map's device.
 

@@ -1,10 +1,10 @@
 """The referent grounding head (``grounding="referent"``, the shipped checkpoint): the shared
 detector proposes every object of a scene once (:meth:`ReferentGrounding.encode`: decoding at the
-candidate threshold, :func:`model.grounder.describe_candidates`); per prompt only the text encoder
-and the referent stage (:class:`model.referent.ReferentStage`) run, and the answer is the
+candidate threshold, :func:`model.referent.scene_candidates.describe_candidates`); per prompt only the text encoder
+and the referent stage (:class:`model.referent.stage.ReferentStage`) run, and the answer is the
 candidates whose referent probability reaches the threshold, with
-:func:`model.grounder.referent_heatmap` as its heatmap. Training: :meth:`proposals`,
-:meth:`describe`, :meth:`refer` and :meth:`loss` (:mod:`model.referent_train`)."""
+:func:`model.referent.scene_candidates.referent_heatmap` as its heatmap. Training: :meth:`proposals`,
+:meth:`describe`, :meth:`refer` and :meth:`loss` (:mod:`model.training.referent_step`)."""
 
 from __future__ import annotations
 
@@ -16,7 +16,6 @@ import torch
 from torch import Tensor, nn
 
 from model.config import ModelConfig
-from model.decode import Detections, decode
 from model.features import (
     Answer,
     Clock,
@@ -24,19 +23,20 @@ from model.features import (
     PointsLike,
     SceneFeatures,
 )
-from model.grounder import (
+from model.grounding_head import GroundingHead
+from model.head.decode import Detections, decode
+from model.head.detector import HeadOutput
+from model.nets.scene_encoder import SceneEncoder
+from model.nets.text import TextFeatures
+from model.referent.labelled import LabelledBoxes, anchor_scores, with_context
+from model.referent.scene_candidates import (
     SceneCandidates,
     SceneMaps,
     describe_candidates,
     referent_heatmap,
     stack_candidates,
 )
-from model.grounding_head import GroundingHead
-from model.head import HeadOutput
-from model.labelled import LabelledBoxes, anchor_scores, with_context
-from model.referent import ReferentStage, referent_loss
-from model.scene_encoder import SceneEncoder
-from model.text import TextFeatures
+from model.referent.stage import ReferentStage, referent_loss
 from scenes.actors import CLASSES
 
 UNCALIBRATED_REFERENT = 0.5
@@ -53,7 +53,7 @@ class ReferentGrounding(GroundingHead):
         super().__init__()
         self.cfg = cfg
         first = cfg.backbone.channels[0]
-        # Candidate maps are pooled at two points (centre, anchor): see model.grounder.
+        # Candidate maps are pooled at two points (centre, anchor): see model.referent.scene_candidates.
         self.stage = ReferentStage(
             cfg.referent,
             text_dim,
@@ -87,7 +87,7 @@ class ReferentGrounding(GroundingHead):
         lidar: np.ndarray | None,
         radar: np.ndarray | None,
     ) -> SceneCandidates:
-        """:func:`model.grounder.describe_candidates` with this model's grid and anchor."""
+        """:func:`model.referent.scene_candidates.describe_candidates` with this model's grid and anchor."""
         return describe_candidates(
             boxes,
             labels,
@@ -111,7 +111,7 @@ class ReferentGrounding(GroundingHead):
 
     @staticmethod
     def loss(logits: Tensor, targets: Tensor, padding: Tensor) -> tuple[Tensor, Tensor]:
-        """:func:`model.referent.referent_loss`: BCE and the listwise term."""
+        """:func:`model.referent.stage.referent_loss`: BCE and the listwise term."""
         return referent_loss(logits, targets, padding)
 
     def encode(
@@ -211,7 +211,7 @@ class ReferentGrounding(GroundingHead):
     ) -> HeadOutput:
         raise ValueError(
             "forward() is the paper's text-conditioned pass; a grounding='referent' model "
-            "trains through detect() and its referent head (model.referent_train)"
+            "trains through detect() and its referent head (model.training.referent_step)"
         )
 
 
