@@ -200,8 +200,13 @@ def test_referent_model_grounds_a_scene(tiny_root):
     assert len(pred.boxes) == len(features.objects)
     assert np.all(np.diff(pred.scores) <= 0) and np.all((pred.scores >= 0) & (pred.scores <= 1))
     assert pred.heatmaps.shape == (3, 80, 80) and pred.timings.referent > 0
-    high = model.ground(features, "the nearest car on the left", score_threshold=0.99)
-    assert np.all(high.scores >= 0.99)
+    # The threshold keeps exactly the candidates scoring at least it, in the same order.
+    assert len(np.unique(pred.scores)) >= 2
+    cut = float(np.median(np.unique(pred.scores)))
+    high = model.ground(features, "the nearest car on the left", score_threshold=cut)
+    assert 0 < len(high.scores) < len(pred.scores)
+    np.testing.assert_array_equal(high.scores, pred.scores[pred.scores >= cut])
+    np.testing.assert_array_equal(high.boxes, pred.boxes[pred.scores >= cut])
     with pytest.raises(ValueError, match="forward"):
         model([sample.lidar], [sample.radar], ["the car"])
 
