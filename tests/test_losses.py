@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 import torch
 
-from model.head.detector import C3DRecHead, HeadConfig, HeadOutput
+from model.config import HeadConfig
+from model.head.detector import C3DRecHead, HeadOutput
 from model.head.losses import focal_heatmap_loss, gather_regression, grounding_loss
 from model.head.targets import BatchTargets, collate_targets, draw_targets
 from model.nets.grid import BevGrid

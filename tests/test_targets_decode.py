@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 import torch
 
+from model.config import HeadConfig
 from model.head.decode import Detections, decode, rotated_nms
-from model.head.detector import HeadConfig, HeadOutput
+from model.head.detector import HeadOutput
 from model.head.targets import collate_targets, draw_targets, gaussian_radius
 from model.nets.grid import BevGrid
 

@@ -26,7 +26,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from model.head.detector import NUM_CLASSES, REGRESSION_CHANNELS, HeadConfig, HeadOutput
+from model.config import HeadConfig
+from model.head.detector import NUM_CLASSES, REGRESSION_CHANNELS, HeadOutput
 from model.head.targets import cell_centres
 from model.nets.grid import BevGrid
 from scenes.actors import CLASSES

@@ -40,15 +40,12 @@ no compiled extensions in this project.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
 import torch
 from torch import Tensor, nn
 
+from model.config import HeadConfig
 from scenes.actors import CLASSES
-
-ANCHORS: tuple[str, ...] = ("corner", "edge", "center")
-"""Valid values of :attr:`HeadConfig.anchor`."""
 
 NUM_CLASSES = len(CLASSES)
 """Heatmap channels: Car, Pedestrian, Cyclist."""
@@ -58,56 +55,6 @@ REGRESSION_CHANNELS = 8
 
 REGRESSION_GROUPS: tuple[tuple[str, int], ...] = (("offset", 2), ("z", 1), ("size", 3), ("rot", 2))
 """Regression branches in channel order; their widths add up to :data:`REGRESSION_CHANNELS`."""
-
-
-@dataclass(frozen=True)
-class HeadConfig:
-    """Configuration of the C3D-RECHead, its targets and its decoding.
-
-    Attributes:
-        anchor: Where a box's heatmap peaks: ``"corner"`` (nearest BEV corner to the ego vehicle),
-            ``"edge"`` (midpoint of the nearest edge, eq. 17) or ``"center"`` (CenterPoint).
-        head_channels: Width of the shared conv and of every branch.
-        score_threshold: Minimum sigmoid score a decoded peak must reach.
-        nms_iou: BEV IoU above which rotated NMS suppresses the lower-scoring box of the same class.
-        max_detections: Cap on the boxes returned per sample after NMS.
-        min_radius: Smallest Gaussian radius (cells) drawn on the target heatmap.
-        gaussian_overlap: ``min_overlap`` of CenterPoint's Gaussian radius.
-        top_k: Peaks taken from the heatmap (over all classes) before the score threshold and NMS.
-        heatmap_bias: Initial bias of the heatmap logits (-2.19 = logit of about 0.1).
-    """
-
-    anchor: Literal["corner", "edge", "center"] = "corner"
-    head_channels: int = 64
-    score_threshold: float = 0.1
-    nms_iou: float = 0.2
-    max_detections: int = 50
-    min_radius: int = 2
-    gaussian_overlap: float = 0.1
-    top_k: int = 500
-    heatmap_bias: float = -2.19
-
-    def __post_init__(self) -> None:
-        if self.anchor not in ANCHORS:
-            raise ValueError(f"HeadConfig.anchor must be one of {ANCHORS}, got {self.anchor!r}")
-        if self.head_channels < 1:
-            raise ValueError(f"HeadConfig.head_channels must be >= 1, got {self.head_channels}")
-        if not 0.0 <= self.score_threshold < 1.0:
-            raise ValueError(
-                f"HeadConfig.score_threshold must be in [0, 1), got {self.score_threshold}"
-            )
-        if not 0.0 < self.nms_iou <= 1.0:
-            raise ValueError(f"HeadConfig.nms_iou must be in (0, 1], got {self.nms_iou}")
-        if self.max_detections < 1:
-            raise ValueError(f"HeadConfig.max_detections must be >= 1, got {self.max_detections}")
-        if self.min_radius < 0:
-            raise ValueError(f"HeadConfig.min_radius must be >= 0, got {self.min_radius}")
-        if not 0.0 < self.gaussian_overlap < 1.0:
-            raise ValueError(
-                f"HeadConfig.gaussian_overlap must be in (0, 1), got {self.gaussian_overlap}"
-            )
-        if self.top_k < 1:
-            raise ValueError(f"HeadConfig.top_k must be >= 1, got {self.top_k}")
 
 
 @dataclass(frozen=True)

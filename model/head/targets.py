@@ -33,7 +33,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from model.head.detector import NUM_CLASSES, REGRESSION_CHANNELS, HeadConfig
+from model.config import HeadConfig
+from model.head.detector import NUM_CLASSES, REGRESSION_CHANNELS
 from model.nets.grid import BevGrid
 from scenes.actors import CLASSES
 from scenes.boxes import nearest_bev_corner, nearest_edge_midpoint

@@ -1,52 +1,13 @@
-"""Configuration of TPCNet: frozen dataclasses, one per part, nested in :class:`ModelConfig`.
-
-Every option the paper's ablations compare is a field here, not a fork of the code:
-
-- ``modalities``: ``"lidar"``, ``"radar"`` or ``"both"`` (tables I, III, IV).
-- ``fusion.kind``: the LiDAR-radar fusion, ``"baca"`` (section III-C) or the alternatives of tables V
-  and VIII: ``"bi_mhca"`` (bidirectional vanilla multi-head cross attention), ``"lidar_query"`` and
-  ``"radar_query"`` (one direction of BACA only) and ``"conv_gate"`` (a convolutional gate in the
-  spirit of AGN).
-- ``fusion.agent_size``: the context-agent map ``h x w`` (default 12 x 12, section IV-A; table VI).
-- ``text_fusion.kind``: ``"dggf"`` (section III-D) or ``"ggf"`` (Talk2Radar's static gated graph
-  fusion, table IX); ``text_fusion.graph_k``: the roll step ``K`` per stage (default 8, 4, 2).
-- ``head.anchor``: ``"corner"``, ``"edge"`` or ``"center"`` (table VII), see :mod:`model.head.detector`.
-- ``text.encoder``: ``"minilm"`` (frozen, pretrained) or ``"gru"`` (Bi-GRU from scratch, table IX).
-- ``grounding``: ``"tpcnet"`` (the paper: DGGF conditions the BEV on the sentence and the C3D-RECHead
-  heatmap ranks the referred boxes) or ``"referent"`` (Talk2PC: a text-agnostic C3D-RECHead proposes
-  every object and :mod:`model.referent.stage` scores each candidate against the prompt's tokens;
-  ``referent`` holds its sizes). ``ModelConfig()`` keeps the paper's path; the training command
-  line defaults to ``referent``, the product's path.
-
-Two presets (:func:`preset`):
-
-- ``small``: 0.32 m pillars, 160 x 160 over x in [0, 51.2], y in [-25.6, 25.6], z in [-3, 2]; PFN
-  32, backbone 32/48/64 with 1/2/2 extra layers, neck 3 x 24, head 24, one attention head: about
-  0.6 M parameters and 2.7 GFLOP per scene + prompt. The neck brings all stages to stage-1
-  resolution (80 x 80, 0.64 m cells). Measured on the 2-core development CPU (idle, 60 k LiDAR +
-  800 radar points): ``encode_scene`` about 45 ms, ``ground`` about 23 ms on a cached prompt and
-  31 ms on a new one; a training step at batch 4 about 0.8 s.
-- ``paper``: 0.16 m pillars, 320 x 320 over the same range, PFN 64, SECOND backbone widths
-  64/128/256 with 3/5/5 layers, SECOND-FPN 128/128/128 with upsample strides 0.5/1/2 as in
-  Talk2Radar's CenterPoint configuration (80 x 80 head grid, 0.64 m cells).
-
-Both presets keep the paper's caps of 32 points per LiDAR pillar and 10 per radar pillar (IV-A) and
-Talk2Radar's 30-token text limit.
-
-Serialisation: :meth:`ModelConfig.to_dict` gives plain Python types (dicts, lists, str, int,
-float, bool), :meth:`ModelConfig.from_dict` rebuilds the config and raises :class:`ConfigError`
-naming the dotted field (e.g. ``fusion.agent_size``) on an unknown, missing or mistyped field.
-"""
+"""The sections of :class:`ModelConfig`, one frozen dataclass per part (see :mod:`model.config`)."""
 
 from __future__ import annotations
 
-import dataclasses
-import types
 import typing
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
-from model.head.detector import HeadConfig
+from model.config.errors import ConfigError, check_choice, check_positive_ints
+from model.config.serial import apply_overrides, from_plain, to_plain
 from model.nets.grid import BevGrid
 
 Modalities = Literal["lidar", "radar", "both"]
@@ -54,36 +15,17 @@ FusionKind = Literal["baca", "bi_mhca", "lidar_query", "radar_query", "conv_gate
 TextFusionKind = Literal["dggf", "ggf"]
 TextEncoderKind = Literal["minilm", "gru"]
 GroundingKind = Literal["tpcnet", "referent"]
+AnchorKind = Literal["corner", "edge", "center"]
+PresetName = Literal["small", "paper"]
+
+ANCHORS: tuple[str, ...] = typing.get_args(AnchorKind)
+"""Anchor kinds of :attr:`HeadConfig.anchor`."""
 
 LIDAR_FEATURES = 4
 """LiDAR point features: x, y, z, intensity."""
 
 RADAR_FEATURES = 7
 """Radar point features: x, y, z, rcs, v_r, v_r_compensated, time."""
-
-
-class ConfigError(ValueError):
-    """An invalid configuration value, or a serialised config that does not match the code.
-
-    Attributes:
-        field: The offending field's name within its section, when known.
-    """
-
-    def __init__(self, message: str, field: str | None = None) -> None:
-        super().__init__(message)
-        self.field = field
-
-
-def _choice(owner: str, name: str, value: object, choices: tuple[str, ...]) -> None:
-    if value not in choices:
-        raise ConfigError(f"{owner}.{name} must be one of {choices}, got {value!r}", name)
-
-
-def _positive_ints(owner: str, name: str, values: tuple[int, ...], length: int) -> None:
-    if len(values) != length or any(int(v) != v or v < 1 for v in values):
-        raise ConfigError(
-            f"{owner}.{name} must be {length} positive integers, got {values!r}", name
-        )
 
 
 @dataclass(frozen=True)
@@ -146,8 +88,8 @@ class BackboneConfig:
     strides: tuple[int, ...] = (2, 2, 2)
 
     def __post_init__(self) -> None:
-        _positive_ints("BackboneConfig", "channels", self.channels, 3)
-        _positive_ints("BackboneConfig", "strides", self.strides, 3)
+        check_positive_ints("BackboneConfig", "channels", self.channels, 3)
+        check_positive_ints("BackboneConfig", "strides", self.strides, 3)
         if len(self.layers) != 3 or any(v < 0 for v in self.layers):
             raise ConfigError(
                 f"BackboneConfig.layers must be 3 values >= 0, got {self.layers!r}", "layers"
@@ -180,8 +122,8 @@ class FusionConfig:
     mhca_chunk: int = 1024
 
     def __post_init__(self) -> None:
-        _choice("FusionConfig", "kind", self.kind, typing.get_args(FusionKind))
-        _positive_ints("FusionConfig", "agent_size", self.agent_size, 2)
+        check_choice("FusionConfig", "kind", self.kind, typing.get_args(FusionKind))
+        check_positive_ints("FusionConfig", "agent_size", self.agent_size, 2)
         for name in ("heads", "mhca_chunk"):
             if getattr(self, name) < 1:
                 raise ConfigError(
@@ -210,7 +152,7 @@ class TextConfig:
     gru_hidden: int = 64
 
     def __post_init__(self) -> None:
-        _choice("TextConfig", "encoder", self.encoder, typing.get_args(TextEncoderKind))
+        check_choice("TextConfig", "encoder", self.encoder, typing.get_args(TextEncoderKind))
         if self.max_tokens < 3:
             raise ConfigError(
                 f"TextConfig.max_tokens must be >= 3, got {self.max_tokens}", "max_tokens"
@@ -243,8 +185,8 @@ class TextFusionConfig:
     ggf_k: int = 2
 
     def __post_init__(self) -> None:
-        _choice("TextFusionConfig", "kind", self.kind, typing.get_args(TextFusionKind))
-        _positive_ints("TextFusionConfig", "graph_k", self.graph_k, 3)
+        check_choice("TextFusionConfig", "kind", self.kind, typing.get_args(TextFusionKind))
+        check_positive_ints("TextFusionConfig", "graph_k", self.graph_k, 3)
         for name in ("ffn_ratio", "ggf_k"):
             if getattr(self, name) < 1:
                 raise ConfigError(
@@ -267,7 +209,7 @@ class FpnConfig:
     output_stride: int = 2
 
     def __post_init__(self) -> None:
-        _positive_ints("FpnConfig", "out_channels", self.out_channels, 3)
+        check_positive_ints("FpnConfig", "out_channels", self.out_channels, 3)
         if self.output_stride < 1:
             raise ConfigError(
                 f"FpnConfig.output_stride must be >= 1, got {self.output_stride}", "output_stride"
@@ -319,6 +261,56 @@ class ReferentConfig:
 
 
 @dataclass(frozen=True)
+class HeadConfig:
+    """Configuration of the C3D-RECHead, its targets and its decoding.
+
+    Attributes:
+        anchor: Where a box's heatmap peaks: ``"corner"`` (nearest BEV corner to the ego vehicle),
+            ``"edge"`` (midpoint of the nearest edge, eq. 17) or ``"center"`` (CenterPoint).
+        head_channels: Width of the shared conv and of every branch.
+        score_threshold: Minimum sigmoid score a decoded peak must reach.
+        nms_iou: BEV IoU above which rotated NMS suppresses the lower-scoring box of the same class.
+        max_detections: Cap on the boxes returned per sample after NMS.
+        min_radius: Smallest Gaussian radius (cells) drawn on the target heatmap.
+        gaussian_overlap: ``min_overlap`` of CenterPoint's Gaussian radius.
+        top_k: Peaks taken from the heatmap (over all classes) before the score threshold and NMS.
+        heatmap_bias: Initial bias of the heatmap logits (-2.19 = logit of about 0.1).
+    """
+
+    anchor: AnchorKind = "corner"
+    head_channels: int = 64
+    score_threshold: float = 0.1
+    nms_iou: float = 0.2
+    max_detections: int = 50
+    min_radius: int = 2
+    gaussian_overlap: float = 0.1
+    top_k: int = 500
+    heatmap_bias: float = -2.19
+
+    def __post_init__(self) -> None:
+        if self.anchor not in ANCHORS:
+            raise ValueError(f"HeadConfig.anchor must be one of {ANCHORS}, got {self.anchor!r}")
+        if self.head_channels < 1:
+            raise ValueError(f"HeadConfig.head_channels must be >= 1, got {self.head_channels}")
+        if not 0.0 <= self.score_threshold < 1.0:
+            raise ValueError(
+                f"HeadConfig.score_threshold must be in [0, 1), got {self.score_threshold}"
+            )
+        if not 0.0 < self.nms_iou <= 1.0:
+            raise ValueError(f"HeadConfig.nms_iou must be in (0, 1], got {self.nms_iou}")
+        if self.max_detections < 1:
+            raise ValueError(f"HeadConfig.max_detections must be >= 1, got {self.max_detections}")
+        if self.min_radius < 0:
+            raise ValueError(f"HeadConfig.min_radius must be >= 0, got {self.min_radius}")
+        if not 0.0 < self.gaussian_overlap < 1.0:
+            raise ValueError(
+                f"HeadConfig.gaussian_overlap must be in (0, 1), got {self.gaussian_overlap}"
+            )
+        if self.top_k < 1:
+            raise ValueError(f"HeadConfig.top_k must be >= 1, got {self.top_k}")
+
+
+@dataclass(frozen=True)
 class ModelConfig:
     """The whole TPCNet configuration."""
 
@@ -334,8 +326,8 @@ class ModelConfig:
     referent: ReferentConfig = field(default_factory=ReferentConfig)
 
     def __post_init__(self) -> None:
-        _choice("ModelConfig", "modalities", self.modalities, typing.get_args(Modalities))
-        _choice("ModelConfig", "grounding", self.grounding, typing.get_args(GroundingKind))
+        check_choice("ModelConfig", "modalities", self.modalities, typing.get_args(Modalities))
+        check_choice("ModelConfig", "grounding", self.grounding, typing.get_args(GroundingKind))
         strides = self.backbone.cumulative_strides
         if self.fpn.output_stride not in strides:
             raise ConfigError(
@@ -373,176 +365,13 @@ class ModelConfig:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain nested dict (JSON- and ``torch.load(weights_only=True)``-safe)."""
-        return _to_plain(self)
+        return to_plain(self)
 
     @staticmethod
     def from_dict(data: dict[str, Any]) -> ModelConfig:
         """Inverse of :meth:`to_dict`; raises :class:`ConfigError` naming the offending field."""
-        return _from_plain(ModelConfig, data, "")
+        return from_plain(ModelConfig, data, "")
 
     def replace(self, **overrides: Any) -> ModelConfig:
         """A copy with overrides, see :func:`apply_overrides`."""
         return apply_overrides(self, **overrides)
-
-
-# --------------------------------------------------------------------------- (de)serialisation
-
-
-def _to_plain(value: Any) -> Any:
-    if dataclasses.is_dataclass(value) and not isinstance(value, type):
-        return {f.name: _to_plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
-    if isinstance(value, tuple | list):
-        return [_to_plain(v) for v in value]
-    return value
-
-
-def _convert(tp: Any, value: Any, path: str) -> Any:
-    """Check ``value`` against the annotation ``tp`` and convert lists to tuples."""
-    origin = typing.get_origin(tp)
-    if dataclasses.is_dataclass(tp):
-        return _from_plain(tp, value, path)
-    if origin is Literal:
-        choices = typing.get_args(tp)
-        if value not in choices:
-            raise ConfigError(f"config field {path!r}: {value!r} is not one of {choices}", path)
-        return value
-    if origin is tuple:
-        if not isinstance(value, list | tuple):
-            raise ConfigError(f"config field {path!r}: expected a list, got {value!r}", path)
-        args = typing.get_args(tp)
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_convert(args[0], v, f"{path}[{i}]") for i, v in enumerate(value))
-        if len(args) != len(value):
-            raise ConfigError(
-                f"config field {path!r}: expected {len(args)} values, got {value!r}", path
-            )
-        return tuple(
-            _convert(a, v, f"{path}[{i}]") for i, (a, v) in enumerate(zip(args, value, strict=True))
-        )
-    if origin in (typing.Union, types.UnionType):
-        for arg in typing.get_args(tp):
-            if arg is type(None) and value is None:
-                return None
-            try:
-                return _convert(arg, value, path)
-            except ConfigError:
-                continue
-        raise ConfigError(f"config field {path!r}: {value!r} matches none of {tp}", path)
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"config field {path!r}: expected a bool, got {value!r}", path)
-        return value
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"config field {path!r}: expected an int, got {value!r}", path)
-        return value
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, int | float):
-            raise ConfigError(f"config field {path!r}: expected a float, got {value!r}", path)
-        return float(value)
-    if tp is str:
-        if not isinstance(value, str):
-            raise ConfigError(f"config field {path!r}: expected a str, got {value!r}", path)
-        return value
-    raise ConfigError(f"config field {path!r}: unsupported annotation {tp!r}", path)
-
-
-def _from_plain(cls: type, data: Any, prefix: str) -> Any:
-    where = prefix or cls.__name__
-    if not isinstance(data, dict):
-        raise ConfigError(f"config field {where!r}: expected a mapping, got {type(data).__name__}")
-    hints = typing.get_type_hints(cls)
-    names = [f.name for f in dataclasses.fields(cls)]
-    unknown = sorted(set(data) - set(names))
-    if unknown:
-        path = f"{prefix}.{unknown[0]}" if prefix else unknown[0]
-        raise ConfigError(
-            f"config field {path!r} is unknown to this code ({cls.__name__} has {names})"
-        )
-    missing = [n for n in names if n not in data]
-    if missing:
-        path = f"{prefix}.{missing[0]}" if prefix else missing[0]
-        raise ConfigError(f"config field {path!r} is missing", path)
-    kwargs = {}
-    for name in names:
-        path = f"{prefix}.{name}" if prefix else name
-        kwargs[name] = _convert(hints[name], data[name], path)
-    try:
-        return cls(**kwargs)
-    except ConfigError as exc:
-        if exc.field is None:
-            raise ConfigError(f"config section {where!r}: {exc}") from exc
-        path = f"{prefix}.{exc.field}" if prefix else exc.field
-        raise ConfigError(f"config field {path!r}: {exc}", path) from exc
-    except (ValueError, TypeError) as exc:
-        raise ConfigError(f"config section {where!r}: {exc}") from exc
-
-
-# --------------------------------------------------------------------------- presets, overrides
-
-ALIASES: dict[str, str] = {
-    "fusion": "fusion.kind",
-    "agent_size": "fusion.agent_size",
-    "text_fusion": "text_fusion.kind",
-    "graph_k": "text_fusion.graph_k",
-    "anchor": "head.anchor",
-    "text_encoder": "text.encoder",
-}
-"""Short override names accepted by :func:`apply_overrides` (and ``build_model``)."""
-
-
-def small_config() -> ModelConfig:
-    """The CPU preset (see the module docstring)."""
-    return ModelConfig()
-
-
-def paper_config() -> ModelConfig:
-    """The paper's sizes (see the module docstring); meant for a GPU."""
-    return ModelConfig(
-        pillars=PillarConfig(grid=BevGrid(0.0, 51.2, -25.6, 25.6, 0.16), channels=64),
-        backbone=BackboneConfig(channels=(64, 128, 256), layers=(3, 5, 5)),
-        fusion=FusionConfig(heads=4),
-        text_fusion=TextFusionConfig(ffn_ratio=4),
-        fpn=FpnConfig(out_channels=(128, 128, 128), output_stride=4),
-        head=HeadConfig(head_channels=64),
-    )
-
-
-PRESETS = {"small": small_config, "paper": paper_config}
-
-
-def preset(name: str) -> ModelConfig:
-    """The named preset (``small`` or ``paper``)."""
-    if name not in PRESETS:
-        raise ConfigError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}")
-    return PRESETS[name]()
-
-
-def apply_overrides(cfg: ModelConfig, **overrides: Any) -> ModelConfig:
-    """A copy of ``cfg`` with overrides applied.
-
-    Keys are a top-level field (``modalities="lidar"``), a short alias from :data:`ALIASES`
-    (``fusion="bi_mhca"``, ``anchor="center"``, ``text_encoder="gru"``, ``agent_size=(8, 8)``,
-    ``graph_k=(4, 4, 2)``, ``text_fusion="ggf"``) or a section and field joined by a double
-    underscore (``head__score_threshold=0.3``, ``fusion__heads=2``). Values are validated by the
-    dataclasses; whole sections (e.g. ``head=HeadConfig(...)``) may be passed too.
-    """
-    data = cfg.to_dict()
-    sections = {f.name for f in dataclasses.fields(ModelConfig)}
-    for key, value in overrides.items():
-        path = ALIASES.get(key, key.replace("__", "."))
-        parts = path.split(".")
-        if parts[0] not in sections:
-            raise ConfigError(
-                f"unknown override {key!r}; use a field of ModelConfig {sorted(sections)}, "
-                f"an alias {sorted(ALIASES)} or 'section__field'"
-            )
-        node = data
-        for part in parts[:-1]:
-            if not isinstance(node.get(part), dict):
-                raise ConfigError(f"unknown override {key!r}: {part!r} is not a config section")
-            node = node[part]
-        if parts[-1] not in node:
-            raise ConfigError(f"unknown override {key!r}: no field {path!r}")
-        node[parts[-1]] = _to_plain(value)
-    return ModelConfig.from_dict(data)
