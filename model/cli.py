@@ -74,8 +74,12 @@ def _base(tp: Any) -> Any:
 
 
 def flag_name(field: dataclasses.Field) -> str:
-    """The flag of a field."""
-    return field.metadata.get("flag") or "--" + field.name.replace("_", "-")
+    """The flag of a field: ``--field-name``, ``--no-field-name`` for a switch that is on by
+    default, or the one :func:`option` names."""
+    if field.metadata.get("flag"):
+        return field.metadata["flag"]
+    switch_off = field.default is True and not field.metadata.get("negatable")
+    return ("--no-" if switch_off else "--") + field.name.replace("_", "-")
 
 
 def _default(field: dataclasses.Field) -> Any:
@@ -110,7 +114,7 @@ def add_options(parser: argparse.ArgumentParser, cls: type, only: tuple[str, ...
                 kw["default"] = list(_default(f))
             if item is not str:
                 kw["type"] = item
-            if name != "--" + f.name.replace("_", "-"):
+            if f.metadata.get("flag"):
                 kw["metavar"] = name.lstrip("-").replace("-", "_").upper()
             parser.add_argument(name, **kw)
             continue

@@ -7,60 +7,140 @@ how they combine. :class:`TrainConfig` is stored in every checkpoint and run sta
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Literal
 
 import torch
 
+from model.cli import add_options, from_args, option
+from model.config import (
+    AnchorKind,
+    FusionKind,
+    GroundingKind,
+    Modalities,
+    PresetName,
+    TextEncoderKind,
+    TextFusionKind,
+)
 from model.training.data import DataSpecError, RootSpec, root_specs
+
+AmpKind = Literal["none", "bf16"]
+"""``--amp``: no autocast, or bfloat16 autocast of the forward passes (CUDA only)."""
+
+
+def default_device() -> str:
+    """``cuda`` where CUDA is available, else ``cpu`` (the default of ``--device``)."""
+    return "cuda" if torch.cuda.is_available() else "cpu"
 
 
 class TrainingError(RuntimeError):
     """Training cannot go on (bad data, non-finite loss); the message says why."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TrainConfig:
-    """Everything that defines a training run (stored in the checkpoints)."""
+    """Everything that defines a training run (stored in the checkpoints). Each field is one flag
+    of ``python -m model.train`` (:mod:`model.cli`); ``on_resume`` marks the settings a resumed
+    run may change (:data:`model.training.state.FREE_ON_RESUME`)."""
 
-    data: tuple[str, ...]
-    out: str
-    preset: str = "small"
-    epochs: int = 20
-    batch_size: int = 4
-    lr: float = 1e-3
-    weight_decay: float = 5e-4
-    warmup_steps: int = 50
-    grad_clip: float = 35.0
-    modalities: str | None = None
-    fusion: str | None = None
-    text_fusion: str | None = None
-    anchor: str | None = None
-    text_encoder: str | None = None
-    radar_folder: str = "auto"
-    train_split: str = "train"
-    val_split: str = "val"
-    val_every: int = 1
-    val_limit: int = 0
-    seed: int = 0
-    device: str = "cpu"
-    amp: str = "none"
-    max_steps: int = 0
-    stop_epoch: int = 0
-    log_every: int = 10
-    flip_probability: float = 0.5
-    grounding: str = "referent"
-    init: str | None = None
-    prompts_per_scene: int = 8
-    sensor_augment: bool = True
-    freeze_scene: bool = False
-    bank_prompts: int = 24
-    scene_limit: int = 0
-    data_weights: tuple[float, ...] = ()
-    scene_labels: tuple[str, ...] = ()
-    init_detector: str | None = None
-    label_prompts: int = 0
-    calibrate: bool = True
+    data: tuple[str, ...] = option(
+        help="Talk2Radar root; give it several times to train on several roots at once"
+    )
+    data_weights: tuple[float, ...] = option(
+        (),
+        flag="--data-weight",
+        help="referent path: times each frame of the matching --data root (in order) is seen "
+        "per epoch (default 1)",
+    )
+    scene_labels: tuple[str, ...] = option(
+        (),
+        help="referent path: the View-of-Delft root whose label_2 lists every object of the "
+        "matching --data root's frames (in order; 'none' for a root without); such a root trains "
+        "on its labels and prompts only, never a sidecar",
+    )
+    out: str = option(help="run folder, e.g. runs/NAME")
+    preset: PresetName = option("small")
+    epochs: int = option(20, on_resume=True)
+    batch_size: int = option(4)
+    lr: float = option(1e-3)
+    weight_decay: float = option(5e-4)
+    warmup_steps: int = option(50)
+    modalities: Modalities | None = option(None)
+    fusion: FusionKind | None = option(None)
+    text_fusion: TextFusionKind | None = option(None)
+    anchor: AnchorKind | None = option(None)
+    text_encoder: TextEncoderKind | None = option(None)
+    grounding: GroundingKind = option(
+        "referent",
+        help="referent: text-agnostic detector + referent stage (default); tpcnet: the paper's "
+        "DGGF + C3D-RECHead ranking",
+    )
+    init: str | None = option(
+        None,
+        on_resume=True,
+        help="copy matching weights from this checkpoint before training (new runs)",
+    )
+    init_detector: str | None = option(
+        None,
+        on_resume=True,
+        help="copy only the scene encoder and detector from this checkpoint; the referent stage "
+        "starts from scratch (new runs)",
+    )
+    prompts_per_scene: int = option(
+        8, on_resume=True, help="referent path: prompts generated per scene and step"
+    )
+    radar_folder: str = option("auto", help="radar tree, 'auto' or 'none'")
+    train_split: str = option("train", help="the split trained on (default train)")
+    val_split: str = option("val", help="the split validated and calibrated on (default val)")
+    val_every: int = option(1, on_resume=True, help="validate every N epochs (0: never)")
+    val_limit: int = option(0, on_resume=True, help="validate on the first N frames only")
+    seed: int = option(0)
+    device: str = option(default_factory=default_device, on_resume=True)
+    amp: AmpKind = option(
+        "none",
+        on_resume=True,
+        help="bf16: bfloat16 autocast of the forward passes (CUDA only)",
+    )
+    max_steps: int = option(0, on_resume=True, help="stop after N steps (0: all epochs)")
+    stop_epoch: int = option(
+        0,
+        on_resume=True,
+        help="stop after this many epochs but keep the --epochs learning-rate schedule "
+        "(a budget cut; --resume without it goes on)",
+    )
+    log_every: int = option(10, on_resume=True)
+    flip_probability: float = option(0.5)
+    sensor_augment: bool = option(
+        True,
+        help="referent path: no intensity / dropout / radar-count / single-scan augmentation",
+    )
+    freeze_scene: bool = option(
+        False,
+        help="referent path: train only the referent stage on scenes encoded once by the frozen "
+        "detector (use with --init RUN/last.pt of a joint run)",
+    )
+    bank_prompts: int = option(
+        24, on_resume=True, help="--freeze-scene: prompts generated and encoded once per scene"
+    )
+    label_prompts: int = option(
+        0,
+        help="referent path, roots with --scene-labels: prompts generated per frame from its "
+        "labelled boxes (class, depth and side only: their motion is unknown) beside the given "
+        "one (default 0: given prompts only)",
+    )
+    scene_limit: int = option(
+        0, help="--freeze-scene: cache only the first N training scenes (0: all)"
+    )
+    calibrate: bool = option(
+        True,
+        negatable=True,
+        on_resume=True,
+        help="referent path: at the end of the run, choose the operating threshold on the first "
+        "root's validation split (python -m model.calibrate) and store it in last.pt (default: "
+        "on; a split with too few referred prompts leaves it uncalibrated, with a notice)",
+    )
+    grad_clip: float = option(35.0, cli=False)
 
     def __post_init__(self) -> None:
         for name in ("data", "data_weights", "scene_labels"):
@@ -101,123 +181,7 @@ class TrainConfig:
 def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     """Parse the command line into a :class:`TrainConfig` and the resume flag."""
     p = argparse.ArgumentParser(prog="python -m model.train", description=__doc__.split("\n")[0])
-    p.add_argument(
-        "--data",
-        required=True,
-        action="append",
-        help="Talk2Radar root; give it several times to train on several roots at once",
-    )
-    p.add_argument(
-        "--data-weight",
-        type=float,
-        action="append",
-        default=[],
-        help="referent path: times each frame of the matching --data root (in order) is seen "
-        "per epoch (default 1)",
-    )
-    p.add_argument(
-        "--scene-labels",
-        action="append",
-        default=[],
-        help="referent path: the View-of-Delft root whose label_2 lists every object of the "
-        "matching --data root's frames (in order; 'none' for a root without); such a root trains "
-        "on its labels and prompts only, never a sidecar",
-    )
-    p.add_argument("--out", required=True, help="run folder, e.g. runs/NAME")
-    p.add_argument("--preset", default="small", choices=["small", "paper"])
-    p.add_argument("--epochs", type=int, default=20)
-    p.add_argument("--batch-size", type=int, default=4)
-    p.add_argument("--lr", type=float, default=1e-3)
-    p.add_argument("--weight-decay", type=float, default=5e-4)
-    p.add_argument("--warmup-steps", type=int, default=50)
-    p.add_argument("--modalities", choices=["lidar", "radar", "both"])
-    p.add_argument(
-        "--fusion", choices=["baca", "bi_mhca", "lidar_query", "radar_query", "conv_gate"]
-    )
-    p.add_argument("--text-fusion", choices=["dggf", "ggf"])
-    p.add_argument("--anchor", choices=["corner", "edge", "center"])
-    p.add_argument("--text-encoder", choices=["minilm", "gru"])
-    p.add_argument(
-        "--grounding",
-        default="referent",
-        choices=["referent", "tpcnet"],
-        help="referent: text-agnostic detector + referent stage (default); tpcnet: the paper's "
-        "DGGF + C3D-RECHead ranking",
-    )
-    p.add_argument(
-        "--init", help="copy matching weights from this checkpoint before training (new runs)"
-    )
-    p.add_argument(
-        "--init-detector",
-        help="copy only the scene encoder and detector from this checkpoint; the referent stage "
-        "starts from scratch (new runs)",
-    )
-    p.add_argument(
-        "--prompts-per-scene",
-        type=int,
-        default=8,
-        help="referent path: prompts generated per scene and step",
-    )
-    p.add_argument("--radar-folder", default="auto", help="radar tree, 'auto' or 'none'")
-    p.add_argument("--val-every", type=int, default=1, help="validate every N epochs (0: never)")
-    p.add_argument("--val-limit", type=int, default=0, help="validate on the first N frames only")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
-    p.add_argument(
-        "--amp",
-        default="none",
-        choices=["none", "bf16"],
-        help="bf16: bfloat16 autocast of the forward passes (CUDA only)",
-    )
-    p.add_argument("--max-steps", type=int, default=0, help="stop after N steps (0: all epochs)")
-    p.add_argument(
-        "--stop-epoch",
-        type=int,
-        default=0,
-        help="stop after this many epochs but keep the --epochs learning-rate schedule "
-        "(a budget cut; --resume without it goes on)",
-    )
-    p.add_argument("--log-every", type=int, default=10)
-    p.add_argument("--flip-probability", type=float, default=0.5)
-    p.add_argument(
-        "--no-sensor-augment",
-        action="store_true",
-        help="referent path: no intensity / dropout / radar-count / single-scan augmentation",
-    )
-    p.add_argument(
-        "--freeze-scene",
-        action="store_true",
-        help="referent path: train only the referent stage on scenes encoded once by the frozen "
-        "detector (use with --init RUN/last.pt of a joint run)",
-    )
-    p.add_argument(
-        "--bank-prompts",
-        type=int,
-        default=24,
-        help="--freeze-scene: prompts generated and encoded once per scene",
-    )
-    p.add_argument(
-        "--label-prompts",
-        type=int,
-        default=0,
-        help="referent path, roots with --scene-labels: prompts generated per frame from its "
-        "labelled boxes (class, depth and side only: their motion is unknown) beside the given "
-        "one (default 0: given prompts only)",
-    )
-    p.add_argument(
-        "--scene-limit",
-        type=int,
-        default=0,
-        help="--freeze-scene: cache only the first N training scenes (0: all)",
-    )
-    p.add_argument(
-        "--calibrate",
-        action=argparse.BooleanOptionalAction,
-        default=True,
-        help="referent path: at the end of the run, choose the operating threshold on the first "
-        "root's validation split (python -m model.calibrate) and store it in last.pt (default: "
-        "on; a split with too few referred prompts leaves it uncalibrated, with a notice)",
-    )
+    add_options(p, TrainConfig)
     p.add_argument("--resume", action="store_true", help="continue the run in --out")
     p.add_argument(
         "--threads",
@@ -228,11 +192,7 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     a = p.parse_args(argv)
     if a.threads:
         torch.set_num_threads(a.threads)
-    given = {f.name: getattr(a, f.name) for f in fields(TrainConfig) if hasattr(a, f.name)}
-    cfg = TrainConfig(
-        **given, data_weights=tuple(a.data_weight), sensor_augment=not a.no_sensor_augment
-    )
-    return cfg, a.resume
+    return from_args(TrainConfig, a), a.resume
 
 
 __all__ = ["TrainConfig", "TrainingError", "parse_args"]

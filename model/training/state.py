@@ -51,6 +51,8 @@ from model.checkpoint import (
     read_checkpoint,
     write_payload,
 )
+from model.cli import resumable_fields
+from model.training.config import TrainConfig
 from scenes.durable import atomic_file, atomic_write_text, read_json_lines
 
 STATE_FILE = "train_state.pt"
@@ -110,24 +112,9 @@ class RunState:
     world: int
 
 
-FREE_ON_RESUME = frozenset(
-    {
-        "epochs",
-        "max_steps",
-        "stop_epoch",
-        "val_every",
-        "val_limit",
-        "log_every",
-        "device",
-        "amp",
-        "prompts_per_scene",
-        "bank_prompts",
-        "init",
-        "init_detector",
-        "calibrate",
-    }
-)
-"""Settings a resumed run may change (every other one must be the run's)."""
+FREE_ON_RESUME = resumable_fields(TrainConfig)
+"""Settings a resumed run may change (every other one must be the run's): the fields of
+:class:`model.training.config.TrainConfig` marked ``on_resume``."""
 
 
 def check_resumable(config: dict[str, Any], run: RunState, world: int) -> None:
