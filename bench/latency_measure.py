@@ -25,6 +25,7 @@ from bench.model_parts import keep_candidates, model_parts
 from bench.report import REPO
 from bench.workloads import SceneWorkload
 from model import (
+    CheckpointMeta,
     SceneFeatures,
     TPCNet,
     as_points,
@@ -162,7 +163,8 @@ def load_path_model(spec: PathSpec, preset: str, device: str) -> LoadedModel:
                 why.append(f"`{rel}` has grounding {grounding!r}")
                 continue
             model = load_checkpoint(path, device=device)
-            step = model.checkpoint_metadata.get("step", "?")
+            step = CheckpointMeta.of(model).step
+            step = "?" if step is None else step
             return LoadedModel(
                 model, f"trained checkpoint `{rel}` (step {step})", f"`{path.name}`", True
             )

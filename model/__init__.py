@@ -4,7 +4,7 @@ What other packages may use (and the only names they import from ``model``)::
 
     build_model(preset="small", **overrides) -> TPCNet     build_config(...) -> ModelConfig
     load_checkpoint(path, device) / save_checkpoint / read_checkpoint / CheckpointError
-    DEFAULT_CHECKPOINT
+    DEFAULT_CHECKPOINT                                      CheckpointMeta (checkpoint metadata)
     TPCNet, SceneFeatures, Predictions, as_points           LabelledBoxes (labelled candidates)
     GroundingModel, PredictionsView, GridExtent, ModelSettings   (the typed protocol, no torch)
     operating_threshold(model), UNCALIBRATED_REFERENT       score_directories (the VoD metric)
@@ -38,6 +38,7 @@ if TYPE_CHECKING:
         read_checkpoint,
         save_checkpoint,
     )
+    from model.checkpoint_meta import CheckpointMeta
     from model.config import FusionConfig, ModelConfig, preset
     from model.evaluate import score_directories
     from model.evaluation.predict import operating_threshold
@@ -60,6 +61,7 @@ if TYPE_CHECKING:
 
 _EXPORTS = {
     "CheckpointError": "model.checkpoint",
+    "CheckpointMeta": "model.checkpoint_meta",
     "DEFAULT_CHECKPOINT": "model.checkpoint",
     "load_checkpoint": "model.checkpoint",
     "read_checkpoint": "model.checkpoint",
@@ -100,6 +102,7 @@ __all__ = [
     "DEFAULT_CHECKPOINT",
     "UNCALIBRATED_REFERENT",
     "CheckpointError",
+    "CheckpointMeta",
     "FusionConfig",
     "GridExtent",
     "GroundingModel",

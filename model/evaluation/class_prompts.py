@@ -49,6 +49,7 @@ import torch
 from PIL import Image
 
 from model.checkpoint import DEFAULT_CHECKPOINT
+from model.checkpoint_meta import CheckpointMeta
 from model.evaluation.class_prompt_counts import (
     CLASS_PROMPTS,
     METRIC_NAMES,
@@ -417,11 +418,11 @@ def run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     config = ScoringConfig(
         float(threshold), args.max_range, args.fov, tuple(float(t) for t in args.sweep)
     )
-    meta = getattr(model, "checkpoint_metadata", {}) or {}
+    meta = CheckpointMeta.of(model)
     print(
         f"data: {args.data} ({len(ids)} frames, split {args.split}, radar "
-        f"{root.radar_folder or 'none'}); checkpoint {args.checkpoint} (step {meta.get('step')}, "
-        f"epoch {meta.get('epoch')}); threshold {threshold:g} "
+        f"{root.radar_folder or 'none'}); checkpoint {args.checkpoint} (step {meta.step}, "
+        f"epoch {meta.epoch}); threshold {threshold:g} "
         f"({'--threshold' if args.threshold is not None else 'checkpoint'})"
     )
     if talk2radar:
@@ -441,8 +442,8 @@ def run(args: argparse.Namespace, argv: Sequence[str]) -> int:
             "radar_folder": root.radar_folder,
             "checkpoint": str(args.checkpoint),
             "checkpoint_sha256": _sha256(args.checkpoint),
-            "checkpoint_step": meta.get("step"),
-            "checkpoint_epoch": meta.get("epoch"),
+            "checkpoint_step": meta.step,
+            "checkpoint_epoch": meta.epoch,
             "threshold_source": "--threshold" if args.threshold is not None else "checkpoint",
             "command": " ".join(["python -m model.class_prompts", *argv]),
             **report.to_dict(),

@@ -27,6 +27,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from model.checkpoint_meta import CheckpointMeta
 from model.referent.head import UNCALIBRATED_REFERENT
 from model.referent.labelled import LabelledBoxes
 from scenes.calib import IMAGE_SIZE, Calibration, bottom_centres
@@ -95,8 +96,7 @@ def operating_threshold(model: torch.nn.Module) -> float:
     Raises:
         ValueError: the stored value is not a number in ``[0, 1)`` (the message names the field).
     """
-    meta = getattr(model, "checkpoint_metadata", None) or {}
-    value = meta.get("operating_threshold")
+    value = CheckpointMeta.of(model).operating_threshold
     if value is None:
         if getattr(model.cfg, "grounding", "tpcnet") == "referent":
             return UNCALIBRATED_REFERENT

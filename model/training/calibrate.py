@@ -144,20 +144,22 @@ def calibrate_file(
         CalibrationError: the split cannot measure a threshold (the checkpoint is untouched).
     """
     from model.checkpoint import load_checkpoint, save_checkpoint
+    from model.checkpoint_meta import CheckpointMeta
 
     model = load_checkpoint(path)
     cal = calibrate(model, data, split, limit, min_prompts)
     if not dry_run:
-        meta = dict(model.checkpoint_metadata)
-        meta["operating_threshold"] = cal.threshold
-        meta["operating_threshold_source"] = {
-            "root": str(Path(data).resolve()),
-            "split": split,
-            "prompts": cal.prompts,
-            "set_f1": round(cal.set_f1, 2),
-            "exact_set": round(cal.exact_set, 2),
-        }
-        save_checkpoint(path, model, **meta)
+        meta = CheckpointMeta.of(model).replace(
+            operating_threshold=cal.threshold,
+            operating_threshold_source={
+                "root": str(Path(data).resolve()),
+                "split": split,
+                "prompts": cal.prompts,
+                "set_f1": round(cal.set_f1, 2),
+                "exact_set": round(cal.exact_set, 2),
+            },
+        )
+        save_checkpoint(path, model, **meta.to_dict())
     return cal
 
 

@@ -40,6 +40,7 @@ from tqdm import tqdm
 
 from model import build_model
 from model.checkpoint import checkpoint_payload, model_from_payload, write_payload
+from model.checkpoint_meta import CheckpointMeta
 from model.head.losses import grounding_loss
 from model.head.targets import collate_targets, draw_targets
 from model.training import distributed
@@ -318,14 +319,14 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
         total_steps = min(total_steps, cfg.max_steps)
     if rank == 0:
         out.mkdir(parents=True, exist_ok=True)
-    metadata = {
-        "train_config": asdict(cfg),
-        "data": {
+    metadata = CheckpointMeta(
+        train_config=asdict(cfg),
+        data={
             "root": str(Path(specs[0].path).resolve()),
             "roots": [str(Path(spec.path).resolve()) for spec in specs],
             "train_samples": len(dataset),
         },
-    }
+    )
 
     def checkpoint(best: bool) -> None:
         """Every rank's RNG state to rank 0, which writes the run state and ``last.pt``; the
@@ -334,8 +335,8 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
             raise TrainingError(f"the {world} ranks hold different weights at step {state.step}")
         rngs = distributed.gather(rng_state())
         if rank == 0:
-            meta = dict(metadata, step=state.step, epoch=state.epoch, val_mAP_3d=state.last_map)
-            payload = checkpoint_payload(model, **meta)
+            meta = metadata.replace(step=state.step, epoch=state.epoch, val_mAP_3d=state.last_map)
+            payload = checkpoint_payload(model, **meta.to_dict())
             schedule = {"total_steps": total_steps, "warmup": cfg.warmup_steps, "lr": cfg.lr}
             save_run(out, payload, optimizer.state_dict(), asdict(cfg), state, rngs, schedule)
             if best:

@@ -51,6 +51,7 @@ from model.checkpoint import (
     read_checkpoint,
     write_payload,
 )
+from model.checkpoint_meta import CheckpointMeta
 from model.cli import resumable_fields
 from model.training.config import TrainConfig
 from scenes.durable import atomic_file, atomic_write_text, read_json_lines
@@ -217,7 +218,7 @@ def _read(path: Path) -> dict[str, Any]:
 
 def _last_step(out: Path) -> int | None:
     try:
-        step = read_checkpoint(out / LAST_FILE)["metadata"].get("step")
+        step = CheckpointMeta.from_dict(read_checkpoint(out / LAST_FILE)["metadata"]).step
     except CheckpointError as exc:
         raise RunStateError(str(exc)) from exc
     return step if isinstance(step, int) else None
