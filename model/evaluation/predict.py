@@ -35,7 +35,8 @@ from scenes.kitti import ObjectLabel, boxes_to_labels, write_label_file
 from scenes.root import Sample, Talk2RadarRoot
 
 if TYPE_CHECKING:
-    from model.tpcnet import SceneFeatures
+    from model.features import SceneFeatures
+    from model.tpcnet import TPCNet
 
 T = TypeVar("T")
 
@@ -85,7 +86,7 @@ def prediction_labels(
     return kept
 
 
-def operating_threshold(model: torch.nn.Module) -> float:
+def operating_threshold(model: TPCNet) -> float:
     """The score above which the model's boxes are its answer (the set metrics, the app).
 
     ``model.checkpoint_metadata["operating_threshold"]`` where the checkpoint stores one (set by
@@ -109,14 +110,11 @@ def operating_threshold(model: torch.nn.Module) -> float:
     return float(value)
 
 
-def decode_threshold(model: torch.nn.Module) -> float:
-    """The smallest score ``model.ground`` returns when given no threshold: the referent stage's
-    ``cfg.referent.min_score`` where ``cfg.grounding == "referent"``, else the decoder's
-    ``cfg.head.score_threshold``."""
-    cfg = model.cfg
-    if getattr(cfg, "grounding", "tpcnet") == "referent":
-        return float(cfg.referent.min_score)
-    return float(cfg.head.score_threshold)
+def decode_threshold(model: TPCNet) -> float:
+    """The smallest score ``model.ground`` returns when given no threshold: its grounding
+    head's ``min_score`` (the referent stage's ``cfg.referent.min_score``, the paper's decoder's
+    ``cfg.head.score_threshold``)."""
+    return float(model.grounding.min_score)
 
 
 SceneKey = tuple[object, ...]
@@ -155,7 +153,7 @@ class FramePrediction:
 
 
 def iterate_predictions(
-    model: torch.nn.Module,
+    model: TPCNet,
     root: Talk2RadarRoot,
     ids: Sequence[str],
     score_threshold: float | None = None,

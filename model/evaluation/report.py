@@ -28,9 +28,9 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 
 from model.evaluation.baselines import class_noun_prompt, named_class, oracle_boxes, unsensed_ids
 from model.evaluation.grounding import (
@@ -54,6 +54,9 @@ from scenes.kitti import ObjectLabel, format_label_line, parse_label_line
 from scenes.prompts import infer_tags
 from scenes.root import Sample, Talk2RadarRoot
 from scenes.scene_labels import SceneLabels
+
+if TYPE_CHECKING:
+    from model.tpcnet import TPCNet
 
 PROMPT_TYPES: tuple[str, ...] = ("depth", "velocity", "motion", "position")
 DEPTH_BINS: tuple[tuple[float, float], ...] = tuple((10.0 * i, 10.0 * (i + 1)) for i in range(6))
@@ -224,7 +227,7 @@ def sample_tags(sample: Sample) -> frozenset[str]:
 
 
 def evaluate_predictions(
-    model: torch.nn.Module,
+    model: TPCNet,
     root: Talk2RadarRoot,
     ids: Sequence[str],
     progress: bool = True,

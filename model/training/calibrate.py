@@ -24,12 +24,15 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 
 from model.evaluation.grounding import PromptBoxes, prompt_outcome
 from model.evaluation.predict import iterate_predictions
+
+if TYPE_CHECKING:
+    from model.tpcnet import TPCNet
 
 CANDIDATES: tuple[float, ...] = tuple(round(float(t), 3) for t in np.arange(0.05, 0.951, 0.025))
 """Thresholds tried."""
@@ -93,7 +96,7 @@ def choose_threshold(
 
 
 def calibrate(
-    model: torch.nn.Module,
+    model: TPCNet,
     data: str | Path,
     split: str = "val",
     limit: int = 0,
