@@ -135,7 +135,9 @@ def ensure_default_data(
             f"generating the synthetic scenes failed ({' '.join(cmd[1:])} exited with "
             f"{result.returncode})"
         )
-    (out / COMPLETE_MARKER).write_text(f"frames={frames} seed={seed}\n")
+    from scenes.durable import atomic_write_text
+
+    atomic_write_text(out / COMPLETE_MARKER, f"frames={frames} seed={seed}\n")
     return out
 
 
@@ -146,19 +148,17 @@ SPLIT_PREFERENCE = ("test", "val", "train")
 def missing_files(root: Talk2RadarRoot, split: str) -> list[str]:
     """One message per frame of ``split`` that lacks a file the reader needs (LiDAR points and
     calib, label_2, the radar tree's points and calib), naming the first missing file."""
+    from scenes.layout import CALIB, LABEL, VELODYNE, sample_file
     from scenes.root import format_id
 
-    trees = [(root.lidar_dir, ("velodyne", "calib", "label_2"))]
+    trees = [(root.lidar_dir, (VELODYNE, CALIB, LABEL))]
     if root.radar_dir is not None:
-        trees.append((root.radar_dir, ("velodyne", "calib")))
+        trees.append((root.radar_dir, (VELODYNE, CALIB)))
     out = []
     for sid in root.ids(split):
         sid = format_id(sid)
         for tree, folders in trees:
-            gone = [
-                tree / "training" / folder / f"{sid}.{'bin' if folder == 'velodyne' else 'txt'}"
-                for folder in folders
-            ]
+            gone = [sample_file(tree, folder, sid) for folder in folders]
             gone = [f for f in gone if not (f.exists() or f.is_symlink())]
             if gone:
                 out.append(f"{gone[0]}: missing {gone[0].parent.name} file for sample {sid}")
@@ -195,6 +195,7 @@ def open_root(path: Path, split: str | None) -> Talk2RadarRoot:
         LaunchError: not a root, an ImageSets folder without lists, an unknown or empty split, or a split listing
             frames whose files are missing (the message names the first such file).
     """
+    from scenes.layout import split_dir
     from scenes.root import RootError, Talk2RadarRoot
 
     if not path.is_dir():
@@ -206,7 +207,7 @@ def open_root(path: Path, split: str | None) -> Talk2RadarRoot:
         raise LaunchError(str(exc)) from exc
     if not present:
         raise LaunchError(
-            f"{root.lidar_dir / 'ImageSets'}: no split list (<split>.txt with one frame id a "
+            f"{split_dir(root.lidar_dir)}: no split list (<split>.txt with one frame id a "
             "line); write one, e.g. all.txt listing the ids of lidar/training/velodyne, and pass "
             "--split all, or remove the empty folder to serve every frame"
         )

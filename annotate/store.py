@@ -80,6 +80,7 @@ from scenes.layout import (
     manifest_file,
     radar_folders_in,
     sample_file,
+    split_dir,
 )
 from scenes.root import Sample, Talk2RadarRoot
 from scenes.writer import SampleText, Talk2RadarWriter, sample_text
@@ -174,8 +175,8 @@ class AnnotationStore:
         )
         with fs_errors(f"opening the annotation store {self.path}"):
             for folder in (
-                self.lidar_dir / "ImageSets",
-                self.radar_dir / "ImageSets",
+                split_dir(self.lidar_dir),
+                split_dir(self.radar_dir),
                 self.journal_dir,
             ):
                 folder.mkdir(parents=True, exist_ok=True)

@@ -7,9 +7,9 @@
   ``ThreadPoolExecutor`` would hold the interpreter's exit until the model call ends).
 - One lock guards the model (the module and its text cache are not meant for concurrent calls;
   on a 2-core machine running two forward passes at once gains nothing).
-- ``encode_scene`` runs once per (sample, modality): the features stay in an LRU cache, so each
-  prompt runs only ``ground``. :meth:`GroundingEngine.prefetch` encodes a frame as soon as it is
-  shown, before anyone types.
+- ``encode_scene`` runs once per (sample, modality): the features stay in an LRU cache
+  (:class:`scenes.lru.LRUCache`), so each prompt runs only ``ground``.
+  :meth:`GroundingEngine.prefetch` encodes a frame as soon as it is shown, before anyone types.
 - Modality: ``"lidar"`` and ``"radar"`` re-encode the scene with the other sensor's points emptied
   (a ``(0, F)`` array), which a model trained on both sensors accepts. A single-sensor model only
   offers its own sensor.
@@ -21,7 +21,6 @@ import logging
 import queue
 import threading
 import time
-from collections import OrderedDict
 from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass
@@ -30,6 +29,7 @@ from typing import Any, Generic, Literal, TypeVar
 import numpy as np
 
 from model import GroundingModel, ModelSettings, PredictionsView
+from scenes.lru import LRUCache
 from scenes.root import Sample
 
 log = logging.getLogger(__name__)
@@ -199,8 +199,9 @@ class GroundingEngine(Generic[Features]):
         self.feature_cache_size = max(1, feature_cache_size)
         self.workers = DaemonWorkers(workers, "talk2pc-model")
         self._model_lock = threading.Lock()
-        self._cache_lock = threading.Lock()
-        self._features: OrderedDict[tuple[str, Modality, bool], Features] = OrderedDict()
+        self._features: LRUCache[tuple[str, Modality, bool], Features] = LRUCache(
+            self.feature_cache_size
+        )
         self.encode_calls = 0
         self.ground_calls = 0
 
@@ -212,8 +213,7 @@ class GroundingEngine(Generic[Features]):
 
     def cached(self, sample_id: str, modality: Modality, labelled: bool = False) -> bool:
         """Whether the features of (sample, modality) are cached (with labelled candidates)."""
-        with self._cache_lock:
-            return (sample_id, modality, labelled) in self._features
+        return (sample_id, modality, labelled) in self._features
 
     def _check_modality(self, modality: Modality) -> None:
         if modality not in self.modalities:
@@ -228,10 +228,9 @@ class GroundingEngine(Generic[Features]):
         ``candidates``: the frame's labelled boxes for the referent stage to choose among
         (``model.LabelledBoxes``), None for the detector's proposals."""
         key = (sample.sample_id, modality, candidates is not None)
-        with self._cache_lock:
-            if key in self._features:
-                self._features.move_to_end(key)
-                return self._features[key], 0.0
+        cached = self._features.get(key)
+        if cached is not None:
+            return cached, 0.0
         lidar, radar = sensor_inputs(sample, modality)
         start = time.perf_counter()
         if candidates is None:
@@ -240,10 +239,7 @@ class GroundingEngine(Generic[Features]):
             features = self.model.encode_scene(lidar, radar, candidates=candidates)
         elapsed = (time.perf_counter() - start) * 1000.0
         self.encode_calls += 1
-        with self._cache_lock:
-            self._features[key] = features
-            while len(self._features) > self.feature_cache_size:
-                self._features.popitem(last=False)
+        self._features.put(key, features)
         return features, max(elapsed, 1e-3)
 
     def encode(

@@ -29,7 +29,7 @@ class LabelledFrames:
     """
 
     def __init__(self, root: Talk2RadarRoot, scene_labels: str | Path | None = None) -> None:
-        self.own = scene_labels is None and not (root.lidar_dir / "training" / "prompt").is_dir()
+        self.own = scene_labels is None and not root.has_prompts
         self.labels = SceneLabels(scene_labels) if scene_labels is not None else None
 
     @property

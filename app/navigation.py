@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import logging
 import threading
-from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Protocol
@@ -28,6 +27,7 @@ import viser
 
 from app.scene_view import estimate_ground_z
 from app.text import md_text
+from scenes.lru import LRUCache
 from scenes.root import RootError, Sample, Talk2RadarRoot
 
 log = logging.getLogger(__name__)
@@ -73,8 +73,7 @@ class FrameStore:
         if not self.ids:
             raise RootError(f"{root.path}: split {split!r} lists no frame")
         self.cache_size = max(1, cache_size)
-        self._cache: OrderedDict[int, Frame] = OrderedDict()
-        self._lock = threading.Lock()
+        self._cache: LRUCache[int, Frame] = LRUCache(self.cache_size)
 
     def __len__(self) -> int:
         return len(self.ids)
@@ -85,11 +84,9 @@ class FrameStore:
         ids = tuple(self.root.ids(self.split))
         if not ids:
             raise RootError(f"{self.root.path}: split {self.split!r} lists no frame")
-        with self._lock:
-            for index in list(self._cache):
-                if index >= len(ids) or ids[index] != self.ids[index]:
-                    del self._cache[index]
-            self.ids = ids
+        old = self.ids
+        self._cache.discard_if(lambda index, _: index >= len(ids) or ids[index] != old[index])
+        self.ids = ids
 
     def index_of(self, sample_id: str) -> int:
         """Position of a sample id in the split (``ValueError`` when absent)."""
@@ -99,16 +96,12 @@ class FrameStore:
         """The frame at ``index`` (``0 <= index < len(self)``); errors name the file."""
         if not 0 <= index < len(self.ids):
             raise IndexError(f"frame {index} is out of range 0..{len(self.ids) - 1}")
-        with self._lock:
-            if index in self._cache:
-                self._cache.move_to_end(index)
-                return self._cache[index]
+        cached = self._cache.get(index)
+        if cached is not None:
+            return cached
         sample = self.root.load(self.ids[index])
         frame = Frame(index=index, sample=sample, ground_z=estimate_ground_z(sample.lidar))
-        with self._lock:
-            self._cache[index] = frame
-            while len(self._cache) > self.cache_size:
-                self._cache.popitem(last=False)
+        self._cache.put(index, frame)
         return frame
 
 

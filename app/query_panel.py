@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 import viser
 
+from app.answer_words import answer_sentence
 from app.boxes_view import BoxesView, best_iou, box_label
 from app.engine import MODALITY_LABELS, Answer, Modality, Predictions
 from app.heatmap_view import HeatmapView
@@ -65,7 +66,8 @@ class QueryRequest:
     Attributes:
         prompt: Normalised, non-empty prompt.
         modality: Sensors to use.
-        score_threshold: Decoder threshold.
+        score_threshold: Operating threshold: the referent-probability cut-off on the referent
+            path, the decoder's score threshold on the paper's path.
         frame: The frame on screen when the prompt was sent.
         generation: The session's generation number at that moment.
         received: ``time.perf_counter()`` when the server received the prompt.
@@ -206,7 +208,8 @@ def answer_labels(pred: Predictions, gt_boxes: np.ndarray) -> tuple[np.ndarray, 
 
 
 def results_markdown(answer: Answer, ious: np.ndarray, latency_ms: float) -> str:
-    """The answer summary: latency breakdown and the best boxes with score and IoU.
+    """The answer summary: the answer in words (:func:`app.answer_words.answer_sentence`), the
+    latency breakdown and the best boxes with score and IoU.
 
     Args:
         answer: The model's answer.
@@ -217,6 +220,8 @@ def results_markdown(answer: Answer, ious: np.ndarray, latency_ms: float) -> str
     scores = np.asarray(pred.scores).reshape(-1)
     encode = "cached" if answer.cached else f"{answer.encode_ms:.0f} ms"
     lines = [
+        md_text(answer_sentence(answer.prompt, tuple(pred.classes))),
+        "",
         f"**{len(scores)} box{'es' if len(scores) != 1 else ''}** in **{latency_ms:.0f} ms** "
         f"(ground {answer.ground_ms:.0f} ms, scene encoding {encode}"
         + (f", queued {answer.waited_ms:.0f} ms" if answer.waited_ms >= 5 else "")
@@ -324,7 +329,12 @@ def build_query_panel(
     threshold = gui.add_slider(
         "Score threshold", 0.0, 0.95, 0.01, float(np.clip(score_threshold, 0.0, 0.95))
     )
-    show_heatmap = gui.add_checkbox("Heatmap", True, hint="C3D-RECHead heatmap on the ground")
+    show_heatmap = gui.add_checkbox(
+        "Heatmap",
+        True,
+        hint="Where the model finds the prompt's objects, on the ground (the referent "
+        "probabilities; on the paper's path the C3D-RECHead heatmap)",
+    )
     opacity = gui.add_slider("Heatmap opacity", 0.0, 1.0, 0.05, heatmap_opacity)
     show_gt = gui.add_checkbox(
         "Ground truth", True, hint="The boxes the sample's own prompt refers to"

@@ -173,7 +173,7 @@ PAIRS_SUFFIX = "-talk2radar"
 def has_prompts(root: Talk2RadarRoot) -> bool:
     """Whether ``root`` is a Talk2Radar root with prompts (``lidar/training/prompt/``); a
     View-of-Delft root as released has none."""
-    return (root.lidar_dir / "training" / "prompt").is_dir()
+    return root.has_prompts
 
 
 def default_pairs_root(root: Talk2RadarRoot) -> Path:

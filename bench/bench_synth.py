@@ -36,6 +36,7 @@ if str(_REPO) not in sys.path:
 
 from scenes.calib import sensor_to_lidar  # noqa: E402
 from scenes.camera import CameraConfig  # noqa: E402
+from scenes.durable import atomic_write_text  # noqa: E402
 from scenes.lidar_sim import ray_directions  # noqa: E402
 from scenes.root import Talk2RadarWriter  # noqa: E402
 from scenes.synth import (  # noqa: E402
@@ -166,7 +167,7 @@ def main() -> int:
         "markdown": table,
     }
     args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(json.dumps(result, indent=1))
+    atomic_write_text(args.out, json.dumps(result, indent=1))
     print(f"\nwrote {args.out}")
     return 0
 

@@ -12,7 +12,7 @@ all re-exported here so that ``from bench.common import ...`` keeps working:
   :func:`summarize`), FLOPs (:func:`count_flops`), parameters and peak memory
   (:func:`peak_memory_bytes`, :class:`LiveTensorMemory`).
 - :mod:`bench.workloads`: :func:`synthetic_scenes` draws scenes and prompts from the synthetic
-  generator.
+  generator; :func:`warm_up` runs a model once before it is timed.
 
 This module adds the command line every benchmark shares (:func:`bench_main`).
 """
@@ -60,7 +60,7 @@ from bench.report import (
     result_from_json,
     write_result,
 )
-from bench.workloads import SceneWorkload, synthetic_scenes
+from bench.workloads import WARM_UP_PROMPTS, SceneWorkload, synthetic_scenes, warm_up
 
 DEFAULT_THREADS = 1
 """Torch intra-op threads of the benchmarks unless ``--threads`` says otherwise: the app's default
@@ -74,6 +74,7 @@ __all__ = [
     "REPO",
     "RESULTS_DIR",
     "SCHEMA",
+    "WARM_UP_PROMPTS",
     "BenchResult",
     "BenchResultError",
     "FlopCount",
@@ -102,6 +103,7 @@ __all__ = [
     "synchronize",
     "synthetic_scenes",
     "time_ms",
+    "warm_up",
     "write_result",
 ]
 

@@ -39,7 +39,6 @@ from bench.floor_measure import (
     FloorRun,
     TimedCall,
     measure,
-    warm_up,
 )
 from bench.latency_measure import CHECKPOINT, DETECT_NAMES, REFERENT, load_path_model
 from bench.measure import summarize
@@ -54,6 +53,7 @@ from bench.report import (
     read_result,
 )
 from bench.vod_frames import LIDAR_POINTS, RADAR_POINTS, vod_frames
+from bench.workloads import warm_up
 from model import TPCNet
 
 ENCODE_TARGET = 2.0
@@ -207,7 +207,7 @@ def run(
     with tempfile.TemporaryDirectory(prefix="floor-vod-") as tmp:
         chosen = vod_frames(Path(tmp), n_frames, prompts=max(prompts, 1))
     for m in models.values():
-        warm_up(m, chosen[0])
+        warm_up(m, chosen[0].lidar, chosen[0].radar)
     runs = measure(models, chosen, n_repeats, prompts)
     measured = runs["now"]
     s = summary(measured)

@@ -158,13 +158,6 @@ def _timed(fn: Callable[[], object]) -> tuple[object, float]:
     return out, (time.perf_counter() - t0) * 1000.0
 
 
-def warm_up(model: TPCNet, frame: VodFrame) -> None:
-    """First-call allocations and the MiniLM load, with prompts outside the measured set."""
-    features = model.encode_scene(frame.lidar, frame.radar)
-    model.ground(features, "the car ahead of us (warm-up)")
-    model.ground(features, "the pedestrians on the left (warm-up)")
-
-
 def measure(
     models: dict[str, TPCNet],
     frames: list[VodFrame],

@@ -23,8 +23,8 @@ are measured in the same run, taking turns prompt by prompt so that both see the
 The result says which models were used. The stage breakdown comes from the models' own
 :class:`model.tpcnet.GroundTimings`/``SceneTimings`` and is checked by timing the same stages from
 outside through public submodules (TPCNet path: ``text_encoder``, ``text_fusion``, ``neck``,
-``head``, :func:`model.head.decode.decode`; referent path: ``text_encoder``, ``model.refer`` on
-``features.objects``, :func:`model.referent.scene_candidates.referent_heatmap`, and the ``detect`` stage part by
+``head``, :func:`model.head.detector.decode.decode`; referent path: ``text_encoder``, ``model.refer`` on
+``features.objects``, :func:`model.referent.stage.stage.scene_candidates.referent_heatmap`, and the ``detect`` stage part by
 part). The referent path is profiled (cProfile) in every run, the TPCNet path when it misses a
 target. With CUDA, the ``paper`` preset (untrained) of both paths is measured on the GPU as well.
 
@@ -74,8 +74,7 @@ from bench.latency_report import (
 )
 from bench.measure import summarize
 from bench.report import BenchResult, Table, Target, fmt_ms, fmt_ratio, machine_info
-from bench.workloads import SceneWorkload, synthetic_scenes
-from model import TPCNet
+from bench.workloads import SceneWorkload, synthetic_scenes, warm_up
 
 
 def workload(quick: bool) -> list[SceneWorkload]:
@@ -87,13 +86,6 @@ def workload(quick: bool) -> list[SceneWorkload]:
         scenes += synthetic_scenes(2, prompts_per_world=6, seed=0, first_world=world)
         world += 2
     return scenes
-
-
-def warm_up(model: TPCNet, scene: SceneWorkload) -> None:
-    """Load MiniLM and make first-call allocations, with prompts outside the measured set."""
-    features = model.encode_scene(scene.lidar, scene.radar)
-    model.ground(features, "the car ahead of us (warm-up)")
-    model.ground(features, "the pedestrians on the left (warm-up)")
 
 
 def measure_block(
@@ -142,7 +134,7 @@ def measure_block(
         if key in checks:
             how = (
                 "`model.text_encoder`, `model.refer` on `features.objects` (sigmoid to numpy) "
-                "and the ranking with `model.referent.scene_candidates.referent_heatmap`, called one by one"
+                "and the ranking with `model.referent.stage.stage.scene_candidates.referent_heatmap`, called one by one"
                 if key == "referent"
                 else "the same stages called one by one through the model's public submodules"
             )
@@ -246,7 +238,7 @@ def run(quick: bool = False, command: str = "python -m bench.latency") -> BenchR
     loaded = {key: load_path_model(spec, "small", "cpu") for key, spec in specs.items()}
     models = {key: v.model for key, v in loaded.items()}
     for model in models.values():
-        warm_up(model, scenes[0])
+        warm_up(model, scenes[0].lidar, scenes[0].radar)
 
     where = "`small` preset, CPU"
     tables, paths_data, calls = measure_block(
@@ -317,7 +309,7 @@ def run(quick: bool = False, command: str = "python -m bench.latency") -> BenchR
     if torch.cuda.is_available():
         gpu = {key: load_path_model(spec, "paper", "cuda") for key, spec in specs.items()}
         for v in gpu.values():
-            warm_up(v.model, scenes[0])
+            warm_up(v.model, scenes[0].lidar, scenes[0].radar)
         gpu_tables, data["paper_gpu"], _ = measure_block(
             specs,
             gpu,

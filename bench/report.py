@@ -20,6 +20,8 @@ from typing import Any
 
 import torch
 
+from scenes.durable import atomic_write_text
+
 REPO = Path(__file__).resolve().parents[1]
 RESULTS_DIR = REPO / "bench" / "results"
 PERFORMANCE_DOC = REPO / "docs" / "PERFORMANCE.md"
@@ -287,9 +289,7 @@ def write_result(result: BenchResult, directory: Path = RESULTS_DIR) -> Path:
     """Write ``<directory>/<name>.json`` (atomically) and return its path."""
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / f"{result.name}.json"
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(result.to_json(), indent=1, allow_nan=True) + "\n")
-    os.replace(tmp, path)
+    atomic_write_text(path, json.dumps(result.to_json(), indent=1, allow_nan=True) + "\n")
     return path
 
 

@@ -36,6 +36,7 @@ from bench.common import (
     machine_info,
     read_result,
 )
+from scenes.durable import atomic_write_text
 
 BENCHMARKS = (
     "latency",
@@ -330,7 +331,7 @@ def main(argv: list[str] | None = None) -> int:
     command = shlex.join(["python", "-m", "bench.run_all", *argv])
     text = render(results, failures, RESULTS_DIR / f"{SYNTH}.json", command, seconds)
     args.doc.parent.mkdir(parents=True, exist_ok=True)
-    args.doc.write_text(text)
+    atomic_write_text(args.doc, text)
     print(f"\nwrote {args.doc} ({len(results)} benchmark results", end="")
     print(f", {seconds / 60:.1f} min)" if seconds is not None else ")")
     if failures:

@@ -35,6 +35,7 @@ if str(_REPO) not in sys.path:
     sys.path.insert(0, str(_REPO))
 
 from scenes.calib import sensor_to_lidar, vod_lidar_calibration, vod_radar_calibration  # noqa: E402
+from scenes.durable import atomic_write_text  # noqa: E402
 from scenes.prompts import DEFAULT_REGION  # noqa: E402
 from scenes.synth import SynthFrame, SynthSettings, synthesize  # noqa: E402
 
@@ -358,7 +359,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     text = markdown(summary_rows(stats), args.worlds, args.seed, time.perf_counter() - t0)
     print(text)
     if str(args.out) != "-":
-        args.out.write_text(text)
+        atomic_write_text(args.out, text)
         print(f"wrote {args.out}")
     return 0
 

@@ -1,6 +1,13 @@
-"""Sensor augmentations for training: pure functions on point clouds (issue 14, sim-to-real).
+"""Training augmentations: the left-right flip, and sensor augmentations (issue 14, sim-to-real).
 
-They make a model robust to what still differs between the synthetic sensors and the real ones
+The flip (the one home of it: :func:`flip_sample` for :class:`scenes.dataset.GroundingDataset`,
+:func:`mirror_points` and :func:`mirror_actor` for :class:`scenes.frame_dataset.FrameDataset`)
+mirrors a scene about the LiDAR's x-z plane: ``y -> -y``, ``yaw -> -yaw``, a ground velocity's
+``vy -> -vy``, and "left" and "right" swapped in the prompt
+(:func:`scenes.prompts.flip_left_right`). Radar radial velocities are unchanged: the radar sits on
+the LiDAR's x axis, so the mirror keeps every range and line of sight.
+
+The sensor augmentations make a model robust to what still differs between the synthetic sensors and the real ones
 (intensity calibration, point density, radar point count and RCS level) and turn an accumulated
 radar cloud into the single scan that real roots often ship (the ``radar`` tree).
 
@@ -17,7 +24,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from scenes.actors import Actor
+from scenes.boxes import wrap_yaw
 from scenes.lidar_sim import LidarConfig, beam_elevations
+from scenes.prompts import flip_left_right
 
 LIDAR_COLUMNS = 4
 RADAR_COLUMNS = 7
@@ -38,6 +48,44 @@ def _check_range(bounds: tuple[float, float], name: str, lo: float, hi: float) -
     a, b = bounds
     if not lo <= a <= b <= hi:
         raise ValueError(f"{name}: expected {lo} <= low <= high <= {hi}, got {bounds}")
+
+
+def mirror_points(points: np.ndarray) -> np.ndarray:
+    """A copy of ``(N, C)`` points (any sensor, LiDAR frame, ``C >= 2``) with ``y`` negated; the
+    dtype is kept."""
+    out = np.array(points, copy=True)
+    out[:, 1] *= -1
+    return out
+
+
+def mirror_boxes(boxes: np.ndarray) -> np.ndarray:
+    """``(K, 7)`` float64 copy of LiDAR-frame boxes (or one ``(7,)`` box) mirrored: ``y`` and
+    ``yaw`` negated, ``yaw`` wrapped to ``[-pi, pi)``."""
+    out = np.array(boxes, dtype=np.float64, copy=True).reshape(-1, 7)
+    out[:, 1] *= -1
+    out[:, 6] = wrap_yaw(-out[:, 6])
+    return out
+
+
+def mirror_actor(actor: Actor) -> Actor:
+    """The actor mirrored about the LiDAR's x-z plane (box as :func:`mirror_boxes`, ``vy``
+    negated)."""
+    vel = actor.velocity * np.array([1.0, -1.0])
+    return Actor(actor.actor_id, actor.cls, mirror_boxes(actor.box)[0], vel)
+
+
+def flip_sample(
+    lidar: np.ndarray, radar: np.ndarray, boxes: np.ndarray, prompt: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
+    """Mirror a sample about the LiDAR's x-z plane and swap left/right in the prompt.
+
+    Args:
+        lidar: ``(N, 4)``; radar: ``(M, 7)``; boxes: ``(K, 7)``; all LiDAR frame.
+
+    Returns:
+        The mirrored copies (boxes ``(K, 7)`` float64) and the rewritten prompt.
+    """
+    return mirror_points(lidar), mirror_points(radar), mirror_boxes(boxes), flip_left_right(prompt)
 
 
 def jitter_intensity(

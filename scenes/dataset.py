@@ -4,8 +4,7 @@ Each item is one sample: the frame's LiDAR and radar points (LiDAR frame), its p
 that prompt refers to. Train-time augmentations (all optional, see :class:`AugmentConfig`):
 
 - left-right flip (``y -> -y``, ``yaw -> -yaw``) with the words "left" and "right" swapped in the
-  prompt (:func:`scenes.prompts.flip_left_right`). Radar radial velocities are unchanged: the radar
-  sits on the LiDAR's x axis, so the mirror keeps every range and line of sight;
+  prompt (:func:`scenes.augment.flip_sample`, where the flip lives);
 - random LiDAR point dropout (a density change only);
 - point shuffling.
 
@@ -21,8 +20,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from scenes.boxes import wrap_yaw
-from scenes.prompts import flip_left_right
+from scenes.augment import flip_sample
 from scenes.root import Talk2RadarRoot
 
 
@@ -96,27 +94,6 @@ class GroundingBatch:
 
     def __len__(self) -> int:
         return len(self.sample_ids)
-
-
-def flip_sample(
-    lidar: np.ndarray, radar: np.ndarray, boxes: np.ndarray, prompt: str
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, str]:
-    """Mirror a sample about the LiDAR's x-z plane and swap left/right in the prompt.
-
-    Args:
-        lidar: ``(N, 4)``; radar: ``(M, 7)``; boxes: ``(K, 7)``; all LiDAR frame.
-
-    Returns:
-        The mirrored copies and the rewritten prompt.
-    """
-    lidar = np.array(lidar, copy=True)
-    radar = np.array(radar, copy=True)
-    boxes = np.array(boxes, dtype=np.float64, copy=True).reshape(-1, 7)
-    lidar[:, 1] *= -1
-    radar[:, 1] *= -1
-    boxes[:, 1] *= -1
-    boxes[:, 6] = wrap_yaw(-boxes[:, 6])
-    return lidar, radar, boxes, flip_left_right(prompt)
 
 
 class GroundingDataset(Dataset):

@@ -9,7 +9,7 @@ and the first sample of each group stands for it.
 
 Augmentations keep every statement about the scene true, because the prompts are generated from
 the augmented actors: the left-right flip mirrors points and actors (``y -> -y``, ``yaw -> -yaw``,
-``vy -> -vy``; radar radial velocities unchanged, as :func:`scenes.dataset.flip_sample`). The
+``vy -> -vy``; radar radial velocities unchanged: :mod:`scenes.augment`, the flip's home). The
 sensor augmentations of :class:`SensorAugment` (:mod:`scenes.augment`) make the model robust to what
 still differs between the synthetic and the real sensors: intensity gain and offset, random and
 beam-wise LiDAR dropout, radar point count, RCS offset, and single-scan radar (real roots often come
@@ -46,7 +46,7 @@ from torch.utils.data import Dataset
 
 from scenes import augment as aug
 from scenes.actors import CLASSES, Actor
-from scenes.boxes import match_by_centre, wrap_yaw
+from scenes.boxes import match_by_centre
 from scenes.calib import IMAGE_SIZE, Calibration
 from scenes.dataset import AugmentConfig
 from scenes.prompts import flip_left_right
@@ -175,15 +175,6 @@ class FrameItem:
     def generates_prompts(self) -> bool:
         """Whether prompts are generated from the actors (sidecar source) rather than given."""
         return not self.from_labels
-
-
-def flip_actor(actor: Actor) -> Actor:
-    """The actor mirrored about the LiDAR's x-z plane."""
-    box = actor.box.copy()
-    box[1] *= -1
-    box[6] = wrap_yaw(-box[6])
-    vel = actor.velocity * np.array([1.0, -1.0])
-    return Actor(actor.actor_id, actor.cls, box, vel)
 
 
 def shift_actor(actor: Actor, dz: float) -> Actor:
@@ -359,10 +350,8 @@ class FrameDataset(Dataset):
         if self.augment is not None:
             rng = np.random.default_rng((self.seed, self.epoch, index))
             if rng.random() < self.augment.flip_probability:
-                lidar, radar = lidar.copy(), radar.copy()
-                lidar[:, 1] *= -1
-                radar[:, 1] *= -1
-                actors = tuple(flip_actor(a) for a in actors)
+                lidar, radar = aug.mirror_points(lidar), aug.mirror_points(radar)
+                actors = tuple(aug.mirror_actor(a) for a in actors)
                 given = tuple(
                     GivenPrompt(g.sample_id, flip_left_right(g.text), g.referent_ids) for g in given
                 )
@@ -397,7 +386,6 @@ __all__ = [
     "FrameItem",
     "GivenPrompt",
     "SensorAugment",
-    "flip_actor",
     "frame_groups",
     "scene_ids",
     "shift_actor",

@@ -164,8 +164,14 @@ class Talk2RadarRoot:
             )
         self.radar_folder = radar
         self.radar_dir = self.path / radar if radar else None
-        self._has_prompts = sample_dir(self.lidar_dir, PROMPT).is_dir()
+        self._has_prompts = self.has_prompts
         self._all_frames_noted = False
+
+    @property
+    def has_prompts(self) -> bool:
+        """Whether the LiDAR tree has a ``prompt/`` folder now (a Talk2Radar root; a
+        View-of-Delft release has none). Samples are read as the root was when opened."""
+        return sample_dir(self.lidar_dir, PROMPT).is_dir()
 
     def __repr__(self) -> str:
         return f"Talk2RadarRoot({str(self.path)!r}, radar={self.radar_folder!r})"

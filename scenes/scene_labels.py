@@ -24,7 +24,15 @@ import numpy as np
 from scenes.actors import CLASSES
 from scenes.calib import IMAGE_SIZE, Calibration, CameraBoxes, boxes_camera_to_lidar, read_calib
 from scenes.kitti import ObjectLabel, read_label_file
-from scenes.layout import CALIB, LABEL, LIDAR_FOLDER, RootError, format_id, sample_file
+from scenes.layout import (
+    CALIB,
+    LABEL,
+    LIDAR_FOLDER,
+    RootError,
+    format_id,
+    sample_dir,
+    sample_file,
+)
 from scenes.vod_labels import in_annotated_area
 
 DONT_CARE = "DontCare"
@@ -96,7 +104,7 @@ class SceneLabels:
     def __init__(self, root: str | Path) -> None:
         self.root = Path(root)
         self.tree = self.root / LIDAR_FOLDER
-        if not (self.tree / "training" / LABEL).is_dir():
+        if not sample_dir(self.tree, LABEL).is_dir():
             raise RootError(
                 f"{self.root}: no {LIDAR_FOLDER}/training/{LABEL}/ folder: not a View-of-Delft "
                 "root with labels (--scene-labels expects the release's root folder)"

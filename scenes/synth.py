@@ -62,7 +62,7 @@ from scenes.camera import CameraConfig
 from scenes.durable import append_json_line, drop_torn_tail, read_json_lines
 from scenes.layout import LABEL, LIDAR_FOLDER, sample_file
 from scenes.poses import FRAME_RATE, write_pose
-from scenes.prompts import PHRASINGS
+from scenes.prompts import LANGUAGES, PHRASINGS
 from scenes.sample_meta import SampleMeta
 from scenes.sequence import sequence_pose
 from scenes.synth_frame import (
@@ -414,6 +414,14 @@ def _parser() -> argparse.ArgumentParser:
         help="prompt wording: train phrasings, held-out phrasings (for measuring generalisation "
         "to other wording) or all (default train)",
     )
+    p.add_argument(
+        "--language",
+        default="base",
+        choices=LANGUAGES,
+        help="prompt language: base (attribute prompts) or extended (also out-of-class, "
+        "unsatisfiable, negation, exclusion, ordinal, relation and counting prompts; some "
+        "samples then have no referent: an empty label_2); default base",
+    )
     p.add_argument("--no-camera", action="store_true", help="write no camera images (image_2)")
     p.add_argument(
         "--camera-scale",
@@ -460,6 +468,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             radar_scans=args.radar_scans,
             prompts_per_world=args.prompts_per_world,
             phrasing=args.phrasing,
+            language=args.language,
             camera=_camera_config(args),
             sequence_length=args.sequence_length,
         )

@@ -16,7 +16,7 @@ from scenes.layout import RADAR_FOLDER_OF_SCANS
 from scenes.lidar_sim import LidarConfig, LidarScan, simulate_lidar
 from scenes.poses import FRAME_RATE
 from scenes.projection import scale_calibration
-from scenes.prompts import PHRASINGS, Prompt, PromptConfig, generate_prompts
+from scenes.prompts import LANGUAGES, PHRASINGS, Prompt, PromptConfig, generate_prompts
 from scenes.radar_sim import RadarConfig, RadarScan, simulate_radar
 from scenes.sequence import world_at
 from scenes.weather import WEATHERS, Weather
@@ -60,6 +60,10 @@ class SynthSettings:
         camera: The camera image's settings, or None for no image (``--no-camera``).
         sequence_length: Consecutive 10 Hz frames written per world (``--sequence-length``;
             :func:`synthesize_sequence`); 1: one frame, as before sequences existed.
+        language: Prompt language, ``base`` or ``extended`` (``--language``;
+            ``scenes.prompts.PromptConfig.language``): extended adds out-of-class,
+            unsatisfiable, negation, exclusion, ordinal, relation and counting prompts, some of
+            whose samples have no referent (an empty ``label_2``).
     """
 
     seed: int = 0
@@ -74,10 +78,13 @@ class SynthSettings:
     phrasing: str = "train"
     camera: CameraConfig | None = field(default_factory=CameraConfig)
     sequence_length: int = 1
+    language: str = "base"
 
     def __post_init__(self) -> None:
         if self.phrasing not in PHRASINGS:
             raise SynthError(f"phrasing must be one of {list(PHRASINGS)}, got {self.phrasing!r}")
+        if self.language not in LANGUAGES:
+            raise SynthError(f"language must be one of {list(LANGUAGES)}, got {self.language!r}")
         if self.seed < 0:
             raise SynthError(f"seed must be >= 0, got {self.seed}")
         if self.weather != MIXED and self.weather not in WEATHERS:
@@ -104,6 +111,7 @@ class SynthSettings:
             # Only with a camera: a root without images records what it did before cameras.
             **({"camera": self.camera.key()} if self.camera is not None else {}),
             **({"sequence_length": self.sequence_length} if self.sequence_length > 1 else {}),
+            **({"language": self.language} if self.language != "base" else {}),
         }
 
     def calibrations(self) -> tuple[Calibration, Calibration]:
@@ -261,7 +269,7 @@ def _sense(
             candidates,
             rngs["prompts"],
             settings.prompts_per_world,
-            config=PromptConfig(phrasing=settings.phrasing),
+            config=PromptConfig(phrasing=settings.phrasing, language=settings.language),
         )
     )
     t4 = time.perf_counter()

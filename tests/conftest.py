@@ -12,14 +12,24 @@ Fixtures (test modules take them by name; none imports another test module):
 - ``torch_threads(count)``: a context manager running torch with ``count`` threads.
 - ``serve_app(root, model, **config)``: a context manager serving the app on a free port (started
   and warmed up; stopped on exit).
+- ``untrained_model(grounding, **overrides)``: the small preset with weights drawn from a fixed
+  seed (the same model every call), in eval mode, on either grounding path; ``grounding``: a
+  module-scoped parameter, ``"tpcnet"`` (the paper's path) then ``"referent"`` (the shipped
+  path), so that a module's app fixture taking it runs the module's tests on both paths.
 - ``ws_client(port)``: a :class:`BrowserLikeClient` speaking viser's websocket protocol.
 - ``chromium``: Debian's Chromium (the test skips without it); ``chromium_args``: its flags.
+- ``torchrun(args, log, timeout)``: ``torchrun`` with 2 CPU processes on a free local port, output
+  into the file ``log``; its exit code (the process group is killed if it outlives ``timeout``).
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import signal
+import socket
+import subprocess
+import sys
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -109,6 +119,31 @@ def serve_app(root: Path, model: object, timeout: float = 60.0, **config: object
         app.stop()
 
 
+GROUNDINGS = ("tpcnet", "referent")
+"""The two grounding paths (``model.config.ModelConfig.grounding``): the paper's, the shipped one."""
+
+
+def untrained_model(grounding: str = "tpcnet", seed: int = 0, **overrides: object):
+    """``build_model("small", grounding=grounding, **overrides)`` in eval mode, its random
+    weights drawn from ``seed`` (torch's global random state is left as it was), so that a test
+    sees the same untrained model every run."""
+    from model import build_model
+
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        return build_model("small", grounding=grounding, **overrides).eval()
+
+
+@pytest.fixture(name="untrained_model", scope="session")
+def _untrained_model() -> Callable[..., torch.nn.Module]:
+    return untrained_model
+
+
+@pytest.fixture(name="grounding", scope="module", params=GROUNDINGS)
+def _grounding(request: pytest.FixtureRequest) -> str:
+    return request.param
+
+
 @pytest.fixture(name="write_tiny_root", scope="session")
 def _write_tiny_root() -> Callable[..., Path]:
     return write_tiny_root
@@ -127,6 +162,49 @@ def _torch_threads() -> Callable[[int], contextlib.AbstractContextManager[None]]
 @pytest.fixture(name="serve_app", scope="session")
 def _serve_app() -> Callable[..., contextlib.AbstractContextManager]:
     return serve_app
+
+
+# ---------------------------------------------------------------------------- torchrun
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that was free a moment ago."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]
+
+
+def torchrun(args: list[str], log: Path, timeout: float) -> int:
+    """Run ``torchrun --nproc_per_node 2 ARGS`` (one node, a free port on 127.0.0.1, one torch
+    thread per process, the repository on ``PYTHONPATH``) with stdout and stderr into the file
+    ``log`` (not pipes: two ranks write progress bars at once); its exit code. The process group
+    is killed when it outlives ``timeout`` seconds, or whatever it left behind, so that no worker
+    stays."""
+    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(REPO))
+    cmd = [sys.executable, "-m", "torch.distributed.run", "--nnodes", "1", "--nproc_per_node"]
+    cmd += ["2", "--master_addr", "127.0.0.1", "--master_port", str(free_port()), *args]
+    with open(log, "w") as handle:
+        proc = subprocess.Popen(
+            cmd,
+            cwd=REPO,
+            env=env,
+            stdout=handle,
+            stderr=handle,
+            stdin=subprocess.DEVNULL,
+            start_new_session=True,
+        )
+        try:
+            return proc.wait(timeout=timeout)
+        finally:
+            if proc.poll() is None:  # never leave the workers behind
+                os.killpg(proc.pid, signal.SIGKILL)
+
+
+@pytest.fixture(name="torchrun", scope="session")
+def _torchrun() -> Callable[[list[str], Path, float], int]:
+    return torchrun
 
 
 # ---------------------------------------------------------------------------- websocket client

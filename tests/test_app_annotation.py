@@ -72,12 +72,13 @@ def test_option_parsing() -> None:
 
 
 @pytest.fixture(scope="module")
-def annotating_app(tmp_path_factory, write_tiny_root, torch_threads, serve_app):
-    from model import build_model
-
+def annotating_app(
+    tmp_path_factory, write_tiny_root, torch_threads, serve_app, untrained_model, grounding
+):
+    """The app on a tiny root, on each grounding path."""
     root = write_tiny_root(tmp_path_factory.mktemp("annotate") / "root")
     with torch_threads(1):
-        model = build_model("small", text_encoder="gru", head__score_threshold=0.0).eval()
+        model = untrained_model(grounding, text_encoder="gru", head__score_threshold=0.0)
         with serve_app(root, model) as app:
             yield app
 

@@ -52,11 +52,11 @@ def test_candidates_labelled_boxes_answer_among_the_labels(labelled_app, ws_clie
         client.close()
 
 
-def test_no_candidates_control_without_labels(tmp_path, write_tiny_root, serve_app, ws_client):
-    from model.checkpoint import load_checkpoint
-
+def test_no_candidates_control_without_labels(
+    tmp_path, write_tiny_root, serve_app, ws_client, untrained_model, grounding
+):
     root = write_tiny_root(tmp_path / "t2r", frames=1)
-    model = load_checkpoint("checkpoints/tpcnet-small.pt")
+    model = untrained_model(grounding, text_encoder="gru")
     with serve_app(root, model, split="test", warm_up=False) as app:
         client = ws_client(app.port)
         try:

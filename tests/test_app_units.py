@@ -9,6 +9,7 @@ import types
 import numpy as np
 import pytest
 
+from app.answer_words import answer_sentence
 from app.boxes_view import (
     GT_STYLE,
     PRED_STYLE,
@@ -58,6 +59,7 @@ from app.scene_view import (
     estimate_ground_z,
     ring_segments,
 )
+from scenes.layout import VELODYNE, sample_file
 from scenes.root import RootError, Talk2RadarRoot
 from scenes.text_policy import collapse_spaces
 
@@ -253,10 +255,25 @@ def test_results_markdown_lists_boxes_and_latency() -> None:
         waited_ms=0.0,
         modality="radar",
         score_threshold=0.3,
+        prompt="the <b>car</b> and the cyclist",
     )
     text = results_markdown(answer, np.array([0.71, np.nan]), latency_ms=55.4)
+    assert text.startswith(r"1 car and 1 cyclist match\.")  # escaped: shown as text
     assert "**2 boxes** in **55 ms**" in text and "cached" in text and "Radar" in text
     assert "| 0 | Car | 0.90 | 0.71 |" in text and "| 1 | Cyclist | 0.40 | - |" in text
+
+
+def test_the_answer_is_said_in_words() -> None:
+    assert answer_sentence("the bus", ()) == (
+        "No object here matches; I find cars, pedestrians and cyclists."
+    )
+    assert answer_sentence("the car", ("Car",)) == "1 car matches."
+    both = ("Pedestrian", "Car", "Pedestrian")
+    assert answer_sentence("the people and the car", both) == "2 pedestrians and 1 car match."
+    assert answer_sentence("How many pedestrians are there?", both[::2]) == (
+        "2: 2 pedestrians (boxed)."
+    )
+    assert answer_sentence("x", (), known=("Car",)) == "No object here matches; I find cars."
 
 
 # ---------------------------------------------------------------------------- engine inputs
@@ -340,14 +357,12 @@ def test_frame_store_and_step(tmp_path, write_tiny_root) -> None:
 
 
 def test_engine_caches_scene_features_per_modality(
-    tmp_path, write_tiny_root, torch_threads
+    tmp_path, write_tiny_root, torch_threads, untrained_model, grounding
 ) -> None:
-    from model import build_model
-
     root = Talk2RadarRoot(write_tiny_root(tmp_path / "root", frames=1))
     sample = root.load("00000")
     with torch_threads(1):
-        engine = GroundingEngine(build_model("small", text_encoder="gru").eval())
+        engine = GroundingEngine(untrained_model(grounding, text_encoder="gru"))
         try:
             # A high threshold keeps the untrained model's decoding (NMS) cheap.
             first = engine.answer(sample, "both", "the car ahead", 0.99)
@@ -361,7 +376,7 @@ def test_engine_caches_scene_features_per_modality(
             assert engine.encode_calls == 2 and engine.cached(sample.sample_id, "radar")
         finally:
             engine.close()
-    lidar_only = GroundingEngine(build_model("small", modalities="lidar", text_encoder="gru"))
+    lidar_only = GroundingEngine(untrained_model(grounding, modalities="lidar", text_encoder="gru"))
     try:
         assert lidar_only.modalities == ("lidar",)
         with pytest.raises(ValueError, match="lidar only"):
@@ -403,7 +418,7 @@ def test_navigator_tells_subscribers_and_raises_navigation_errors(
     with pytest.raises(NoSuchFrameError, match=r"frames 1\.\.3; 4 does not exist"):
         nav.go_to(3)
     assert nav.step(1).index == 0 and sub.shown == [2, 0]  # wraps around
-    velodyne = root.lidar_dir / "training" / "velodyne" / "00001.bin"
+    velodyne = sample_file(root.lidar_dir, VELODYNE, "00001")
     velodyne.write_bytes(velodyne.read_bytes()[:-3])
     with pytest.raises(FrameLoadError) as caught:
         nav.go_to(1)
@@ -417,11 +432,10 @@ def test_navigator_tells_subscribers_and_raises_navigation_errors(
     assert sub.shown == [2, 0] and [f.index for f in moved] == [2, 0, 2]
 
 
-def test_tpcnet_satisfies_the_app_model_protocol(torch_threads) -> None:
-    from model import build_model
-
+def test_tpcnet_satisfies_the_app_model_protocol(torch_threads, untrained_model, grounding) -> None:
     with torch_threads(1):
-        model = build_model("small", text_encoder="gru").eval()
+        model = untrained_model(grounding, text_encoder="gru")
+        assert model.cfg.grounding == grounding
         assert isinstance(model, GroundingModel)
         features = model.encode_scene(np.zeros((0, 4), np.float32), np.zeros((0, 7), np.float32))
         pred = model.ground(features, "the car ahead", score_threshold=0.99)

@@ -4,23 +4,26 @@ The client (the ``ws_client`` fixture, :class:`tests.conftest.BrowserLikeClient`
 1.1.1's protocol (spec §7): it registers with a ``ViewerCameraMessage``, then sends
 ``GuiUpdateMessage`` s (typing into the prompt box, clicking buttons) and decodes the server's
 frames to track which scene nodes exist and which notifications were shown. The model is the real
-small TPCNet with its default MiniLM text encoder, untrained.
+small TPCNet with its default MiniLM text encoder, untrained (fixed seed), and every test runs on
+both grounding paths (the ``grounding`` fixture): the paper's and the shipped referent path.
 """
 
 from __future__ import annotations
 
 import pytest
 
+from scenes.layout import VELODYNE, sample_file, split_dir
 from tests.markdown_helpers import assert_only_text
 
 
 @pytest.fixture(scope="module")
-def running_app(tmp_path_factory, write_tiny_root, torch_threads, serve_app):
-    from model import build_model
-
+def running_app(
+    tmp_path_factory, write_tiny_root, torch_threads, serve_app, untrained_model, grounding
+):
     root = write_tiny_root(tmp_path_factory.mktemp("ws") / "root")
     with torch_threads(1):
-        model = build_model("small").eval()
+        model = untrained_model(grounding)
+        assert model.cfg.grounding == grounding
         with serve_app(root, model, model_note="test note") as app:
             yield app
 
@@ -187,7 +190,7 @@ def test_failed_load_is_a_notification(running_app, ws_client) -> None:
         target = (app.frame.index + 1) % len(app.frames)
         bad_id = app.frames.ids[target]
         app.frames._cache.pop(target, None)
-        velodyne = app.frames.root.lidar_dir / "training" / "velodyne" / f"{bad_id}.bin"
+        velodyne = sample_file(app.frames.root.lidar_dir, VELODYNE, bad_id)
         original = velodyne.read_bytes()
         velodyne.write_bytes(original[:-3])  # not a multiple of 4 floats any more
         try:
@@ -256,7 +259,7 @@ def test_stored_text_and_forged_splits(running_app, ws_client, gt_box) -> None:
         assert tables and "onerror" in tables[0]
         assert_only_text(tables[0])
 
-        lists = sorted((root.lidar_dir / "ImageSets").iterdir())
+        lists = sorted(split_dir(root.lidar_dir).iterdir())
         with session.lock:
             panel.editor.reset(Draft().set_prompt("the car ahead").add_box(gt_box, "Car"))
         # Not an option: only a forged message can send it, and the server refuses it (the
@@ -267,7 +270,7 @@ def test_stored_text_and_forged_splits(running_app, ws_client, gt_box) -> None:
             lambda: any(t.startswith("Saved pair") for t, _ in client.notifications), 10, "saved"
         )
         assert panel.w.split.value == "train"
-        assert sorted((root.lidar_dir / "ImageSets").iterdir()) == lists  # no junk list
+        assert sorted(split_dir(root.lidar_dir).iterdir()) == lists  # no junk list
         assert len(AnnotationStore(root.path).pairs()) == 2
     finally:
         client.close()

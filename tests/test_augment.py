@@ -1,20 +1,30 @@
-"""Sensor augmentations: shapes, purity, determinism, and what each one changes."""
+"""Augmentations: the left-right flip (one helper for both datasets); sensor augmentations: shapes,
+purity, determinism, and what each one changes."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from scenes.actors import Actor
 from scenes.augment import (
     beam_index,
     drop_beams,
     drop_points,
+    flip_sample,
     jitter_intensity,
     jitter_rcs,
+    mirror_actor,
+    mirror_boxes,
+    mirror_points,
     single_scan,
     subsample_radar,
 )
+from scenes.dataset import AugmentConfig, GroundingDataset
+from scenes.frame_dataset import FrameDataset
 from scenes.lidar_sim import LidarConfig, beam_elevations
+from scenes.prompts import flip_left_right
+from scenes.root import Talk2RadarRoot
 
 
 def _lidar(n: int = 4000, seed: int = 0) -> np.ndarray:
@@ -94,3 +104,48 @@ def test_radar_subsampling_rcs_offset_and_single_scan():
         single_scan(_lidar())
     with pytest.raises(ValueError, match="keep"):
         subsample_radar(pts, np.random.default_rng(0), keep=(0.8, 0.2))
+
+
+def test_mirror_points_and_boxes_negate_y_and_yaw_and_leave_the_input():
+    radar = _radar(50)
+    out = mirror_points(radar)
+    assert out.dtype == np.float32 and out is not radar
+    np.testing.assert_array_equal(out[:, 1], -radar[:, 1])
+    np.testing.assert_array_equal(np.delete(out, 1, axis=1), np.delete(radar, 1, axis=1))
+    boxes = np.array([[10.0, 2.0, -1.0, 4.0, 2.0, 1.5, 0.3], [5.0, -1.0, -1.0, 1, 1, 1, -np.pi]])
+    mirrored = mirror_boxes(boxes)
+    assert mirrored.dtype == np.float64 and boxes[0, 1] == 2.0
+    np.testing.assert_allclose(mirrored[:, 1], [-2.0, 1.0])
+    np.testing.assert_allclose(mirrored[:, 6], [-0.3, -np.pi])  # pi wraps to -pi
+    np.testing.assert_allclose(mirror_boxes(mirrored), boxes)  # the mirror is an involution
+    assert mirror_boxes(boxes[0]).shape == (1, 7)
+
+
+def test_mirror_actor_keeps_its_speed_and_radial_velocity():
+    a = Actor(3, "Cyclist", np.array([12.0, 4.0, -1.0, 1.8, 0.6, 1.7, 2.0]), np.array([1.0, 2.0]))
+    f = mirror_actor(a)
+    assert (f.actor_id, f.cls) == (3, "Cyclist")
+    np.testing.assert_allclose(f.box, mirror_boxes(a.box)[0])
+    np.testing.assert_allclose(f.velocity, [1.0, -2.0])
+    assert f.radial_velocity == pytest.approx(a.radial_velocity) and f.speed == a.speed
+
+
+def test_both_datasets_flip_a_frame_alike(tmp_path, write_tiny_root):
+    root = Talk2RadarRoot(write_tiny_root(tmp_path / "root", frames=1))
+    sid = root.ids("train")[0]
+    sample = root.load(sid)
+    always = AugmentConfig(flip_probability=1.0, lidar_keep_min=1.0, shuffle_points=False)
+    item = GroundingDataset(root, "train", augment=always)[0]
+    frame = FrameDataset(root, "train", augment=always)[0]
+    lidar, radar, boxes, prompt = flip_sample(sample.lidar, sample.radar, sample.boxes, "a")
+    assert item.flipped and frame.flipped and prompt == flip_left_right("a")
+    np.testing.assert_array_equal(item.lidar.numpy(), lidar)
+    np.testing.assert_array_equal(frame.lidar, lidar)
+    np.testing.assert_array_equal(frame.radar, radar)
+    np.testing.assert_array_equal(item.boxes, boxes)
+    assert item.prompt == flip_left_right(sample.prompt)
+    plain = FrameDataset(root, "train")[0]
+    assert not plain.flipped and len(plain.actors) == len(frame.actors) > 0
+    for flipped, actor in zip(frame.actors, plain.actors, strict=True):
+        np.testing.assert_array_equal(flipped.box, mirror_actor(actor).box)
+        np.testing.assert_array_equal(flipped.velocity, mirror_actor(actor).velocity)

@@ -10,6 +10,7 @@ import numpy as np
 from bench.floor_measure import ENCODE_STAGES, TimedCall, encode_flops, matmul_rate
 from bench.vod_frames import LIDAR_POINTS, RADAR_POINTS, vod_frames
 from model.checkpoint import load_checkpoint
+from scenes.layout import VELODYNE, sample_file
 from tests.decode_reference import CHECKPOINT
 
 
@@ -19,9 +20,7 @@ def test_vod_frames_have_vods_sizes_and_the_stage_flops_add_up(tmp_path):
     assert RADAR_POINTS[0] <= len(frame.radar) <= RADAR_POINTS[1]
     assert frame.prompts and frame.lidar.dtype == np.float32 and frame.radar.shape[1] == 7
     # Read back from the VoD layout: the radar tree is the single scan, in the radar's frame.
-    assert (
-        tmp_path / "vod" / "radar" / "training" / "velodyne" / f"{frame.sample_id}.bin"
-    ).is_file()
+    assert sample_file(tmp_path / "vod" / "radar", VELODYNE, frame.sample_id).is_file()
     model = load_checkpoint(CHECKPOINT).eval()
     flops = encode_flops(model, frame)
     assert sum(flops[s] for s in ENCODE_STAGES) == flops["total"] > 0

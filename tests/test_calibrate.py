@@ -8,6 +8,7 @@ import pytest
 from model.evaluation.grounding import PromptBoxes
 from model.evaluation.predict import operating_threshold
 from model.training.calibrate import choose_threshold, main
+from scenes.layout import LABEL, LIDAR_FOLDER, sample_dir
 
 CAR = np.array([[15.0, 0.0, -0.9, 4.0, 1.8, 1.5, 0.0]])
 OTHER = np.array([[25.0, 5.0, -0.9, 4.0, 1.8, 1.5, 0.0]])
@@ -86,7 +87,7 @@ def test_a_split_that_cannot_measure_a_threshold_is_refused(
     line = _one_line_error(capsys)
     assert "2 of the 2 prompts of split 'test' have a referent" in line
     assert f"at least {MIN_REFERRED_PROMPTS}" in line and "test.txt" in line
-    for label in (root / "lidar" / "training" / "label_2").glob("*.txt"):
+    for label in sample_dir(root / LIDAR_FOLDER, LABEL).glob("*.txt"):
         label.write_text("")  # every prompt refers to nothing
     assert main([*args, "--min-prompts", "1"]) == 2
     assert "0 of the 2 prompts" in _one_line_error(capsys)

@@ -19,6 +19,7 @@ from app.camera_image import (
 from app.colors import GT_COLOR, class_color
 from app.scene_view import camera_view_pose
 from scenes.calib import CAMERA_IN_LIDAR, IMAGE_SIZE, VOD_INTRINSICS, vod_lidar_calibration
+from scenes.layout import IMAGE, LIDAR_FOLDER, RADAR_FOLDERS, sample_file
 from scenes.projection import project_points
 
 WHITE = (255, 255, 255)
@@ -107,15 +108,14 @@ def test_camera_view_pose_is_the_vod_camera() -> None:
 
 
 @pytest.fixture(scope="module")
-def vod_app(tmp_path_factory, write_vod_root, torch_threads, serve_app):
-    from model import build_model
-
+def vod_app(tmp_path_factory, write_vod_root, torch_threads, serve_app, untrained_model, grounding):
+    """The app on a View-of-Delft root served directly, on each grounding path."""
     root = write_vod_root(tmp_path_factory.mktemp("camera") / "vod", frames=3)
-    for image in root.glob("*/training/image_2/00001.jpg"):  # no image (in any tree)
-        image.unlink()
-    (root / "lidar" / "training" / "image_2" / "00002.jpg").write_bytes(b"\xff\xd8 broken")
+    for tree in (LIDAR_FOLDER, *RADAR_FOLDERS):  # no image (in any tree)
+        sample_file(root / tree, IMAGE, "00001").unlink(missing_ok=True)
+    sample_file(root / LIDAR_FOLDER, IMAGE, "00002").write_bytes(b"\xff\xd8 broken")
     with torch_threads(1):
-        model = build_model("small", text_encoder="gru", head__score_threshold=0.0).eval()
+        model = untrained_model(grounding, text_encoder="gru", head__score_threshold=0.0)
         with serve_app(root, model, split="val", warm_up=False) as app:
             yield app
 
@@ -200,7 +200,11 @@ def test_frames_without_or_with_a_broken_image_show_a_note(vod_app, ws_client) -
         note = _note(session)
         assert "cannot be shown" in note and "00002" in note and "jpg" in note
         assert "The rest of the frame works" in note
-        assert "/scene/lidar" in client.nodes and "/gt/edges" in client.nodes
+        client.pump_until(
+            lambda: "/scene/lidar" in client.nodes and "/gt/edges" in client.nodes,
+            5,
+            "the rest of the frame",
+        )
         assert not any(t == "Camera panel" for t, _ in client.notifications)
     finally:
         app.go_to(0)

@@ -22,6 +22,7 @@ from model.evaluation.class_prompt_counts import (
 from model.evaluation.class_prompts import ScoringConfig, main, score_root
 from scenes.calib import vod_lidar_calibration, vod_radar_calibration
 from scenes.kitti import boxes_to_labels
+from scenes.layout import CALIB, LABEL, LIDAR_FOLDER, PROMPT, sample_dir, sample_file
 from scenes.projection import in_camera_view
 from scenes.root import Talk2RadarRoot
 from scenes.vod_writer import VodWriter
@@ -268,9 +269,9 @@ def test_cli_bad_roots_fail_in_one_line(
     fake_loader(monkeypatch)
     root = tmp_path / "root"
     shutil.copytree(vod_root, root)
-    labels = root / "lidar" / "training" / "label_2"
+    labels = sample_dir(root / LIDAR_FOLDER, LABEL)
     if damage == "no_lidar":
-        shutil.rmtree(root / "lidar")
+        shutil.rmtree(root / LIDAR_FOLDER)
     elif damage == "bad_label":
         (labels / "00003.txt").write_text("Cyclist 0 0 1 2 3\n")
     elif damage == "no_labels":
@@ -279,7 +280,7 @@ def test_cli_bad_roots_fail_in_one_line(
     elif damage == "odd_name":
         (labels / "7.txt").write_text("")
     else:
-        (root / "lidar" / "training" / "calib" / "00010.txt").unlink()
+        sample_file(root / LIDAR_FOLDER, CALIB, "00010").unlink()
     assert main(["--data", str(root), "--quiet"]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("error: ") and "\n" not in err and expect in err
@@ -293,7 +294,7 @@ def test_cli_says_a_talk2radar_root_has_referent_labels_only(
     fake_loader(monkeypatch)
     root = tmp_path / "t2r"
     shutil.copytree(vod_root, root)
-    prompts = root / "lidar" / "training" / "prompt"
+    prompts = sample_dir(root / LIDAR_FOLDER, PROMPT)
     prompts.mkdir()
     for sid in ("00003", "00010"):
         (prompts / f"{sid}.txt").write_text("the cyclist on the left\n")

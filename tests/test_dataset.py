@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 from scenes import Talk2RadarWriter
+from scenes.augment import flip_sample
 from scenes.calib import vod_lidar_calibration, vod_radar_calibration
-from scenes.dataset import AugmentConfig, GroundingDataset, collate, flip_sample
+from scenes.dataset import AugmentConfig, GroundingDataset, collate
 from scenes.prompts import flip_left_right
 
 BOXES = np.array([[12.0, 3.0, -0.9, 4.2, 1.8, 1.5, 0.4]])

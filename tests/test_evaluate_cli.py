@@ -13,6 +13,7 @@ import pytest
 
 from model.evaluate import main, score_directories
 from scenes.kitti import ObjectLabel, format_label_line, read_label_file
+from scenes.layout import LIDAR_FOLDER, PROMPT, sample_file
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -224,7 +225,7 @@ def test_unwritable_json_is_an_error(tmp_path, capsys):
 
 def test_data_mode_with_an_empty_prompt_names_the_sample(tmp_path, capsys, write_tiny_root):
     root = write_tiny_root(tmp_path / "root", frames=2)
-    prompt = root / "lidar" / "training" / "prompt" / "00001.txt"
+    prompt = sample_file(root / LIDAR_FOLDER, PROMPT, "00001")
     prompt.write_text("  \n")
     checkpoint = REPO / "checkpoints" / "tpcnet-small.pt"
     args = ["--data", str(root), "--checkpoint", str(checkpoint), "--out", str(tmp_path / "o")]

@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from app.server import AppConfig, ServerStartError, Talk2PCApp, check_listen_address
+from scenes.layout import LIDAR_FOLDER, VELODYNE, sample_dir
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -66,7 +67,7 @@ def test_a_server_that_cannot_start_exits_2(tiny_root: Path, args, message) -> N
 
 def test_a_split_where_no_frame_loads_exits_2(tmp_path: Path, write_tiny_root) -> None:
     root = write_tiny_root(tmp_path / "root", frames=2)
-    for path in (root / "lidar" / "training" / "velodyne").iterdir():
+    for path in sample_dir(root / LIDAR_FOLDER, VELODYNE).iterdir():
         path.unlink()
         path.write_bytes(b"abc")  # not a multiple of 16 bytes
     proc = _launch("--data", str(root), "--port", "0")

@@ -27,6 +27,18 @@ from model.evaluate import EvaluationInputError, main, score_directories
 from scenes.actors import Actor
 from scenes.calib import CalibrationError
 from scenes.kitti import LabelError, format_label_line, read_label_file
+from scenes.layout import (
+    CALIB,
+    LABEL,
+    LIDAR_FOLDER,
+    PROMPT,
+    RADAR_FOLDERS,
+    VELODYNE,
+    meta_file,
+    sample_dir,
+    sample_file,
+    split_file,
+)
 from scenes.pointcloud import PointCloudError
 from scenes.root import RootError, SampleMeta, Talk2RadarRoot
 
@@ -176,16 +188,20 @@ def reader_root(tmp_path_factory: pytest.TempPathFactory, write_tiny_root, gt_bo
     return root
 
 
-READER_FILES = (
-    ("lidar/training/label_2/00001.txt", "text"),
-    ("lidar/training/calib/00001.txt", "text"),
-    ("radar_5frames/training/calib/00001.txt", "text"),
-    ("lidar/training/prompt/00001.txt", "text"),
-    ("meta/00001.json", "json"),
-    ("lidar/ImageSets/test.txt", "text"),
-    ("lidar/training/velodyne/00001.bin", 4),
-    ("radar_5frames/training/velodyne/00001.bin", 7),
-    ("lidar/training/label_2/00000.txt", "text"),
+_LIDAR, _RADAR = Path(LIDAR_FOLDER), Path(RADAR_FOLDERS[0])
+READER_FILES = tuple(
+    (str(path), kind)
+    for path, kind in (
+        (sample_file(_LIDAR, LABEL, "00001"), "text"),
+        (sample_file(_LIDAR, CALIB, "00001"), "text"),
+        (sample_file(_RADAR, CALIB, "00001"), "text"),
+        (sample_file(_LIDAR, PROMPT, "00001"), "text"),
+        (meta_file(Path(), "00001"), "json"),
+        (split_file(_LIDAR, "test"), "text"),
+        (sample_file(_LIDAR, VELODYNE, "00001"), 4),
+        (sample_file(_RADAR, VELODYNE, "00001"), 7),
+        (sample_file(_LIDAR, LABEL, "00000"), "text"),
+    )
 )
 
 
@@ -238,7 +254,7 @@ def score_folders(tmp_path: Path, write_tiny_root) -> tuple[Path, Path]:
     labels, preds = tmp_path / "labels", tmp_path / "preds"
     labels.mkdir()
     preds.mkdir()
-    for label_file in sorted((root / "lidar" / "training" / "label_2").iterdir()):
+    for label_file in sorted(sample_dir(root / LIDAR_FOLDER, LABEL).iterdir()):
         gt = read_label_file(label_file)
         gt = [*gt, replace(gt[0], name="Cyclist", location=(2.0, 1.6, 14.0))]
         (labels / label_file.name).write_text("".join(format_label_line(g) + "\n" for g in gt))

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from annotate import AnnotationStore, Draft, SourceFrame, ValidationError
+from scenes.layout import PROMPT, sample_file
 from scenes.root import Talk2RadarRoot
 from scenes.text_policy import forbidden_characters
 
@@ -76,7 +77,7 @@ def test_saved_text_is_in_the_policy_form(store_and_source, gt_box) -> None:
         _draft(gt_box, "  the car\tabout １５ m\u00a0ahead "), source, annotator="  Ａda  "
     )
     sid = result.sample_id
-    prompt_file = store.lidar_dir / "training" / "prompt" / f"{sid}.txt"
+    prompt_file = sample_file(store.lidar_dir, PROMPT, sid)
     assert prompt_file.read_text(encoding="utf-8") == "the car about 15 m ahead\n"
     record = store.history(sid)[-1]
     assert record.prompt == "the car about 15 m ahead" and record.annotator == "Ada"

@@ -24,6 +24,7 @@ from model.checkpoint import load_checkpoint, read_checkpoint, save_checkpoint
 from model.training.loop import TrainConfig, main, train
 from model.training.state import LAST_FILE, STATE_FILE, RunState, load_run
 from model.training.stop_signal import TrainingInterrupted
+from scenes.layout import LABEL, LIDAR_FOLDER, sample_dir
 from scenes.synth import SynthSettings, generate_root
 
 REPO = Path(__file__).resolve().parents[1]
@@ -215,7 +216,7 @@ def test_training_without_a_box_of_the_three_classes_exits_2(
     tmp_path: Path, write_tiny_root, capsys: pytest.CaptureFixture
 ) -> None:
     data = write_tiny_root(tmp_path / "root", frames=2)
-    for label in (data / "lidar" / "training" / "label_2").glob("*.txt"):
+    for label in sample_dir(data / LIDAR_FOLDER, LABEL).glob("*.txt"):
         label.write_text("")
     out = tmp_path / "run"
     args = ["--data", str(data), "--out", str(out), "--grounding", "tpcnet", "--epochs", "1"]
@@ -223,7 +224,7 @@ def test_training_without_a_box_of_the_three_classes_exits_2(
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "no label of the 1 samples of split 'train'" in err[0], err
     assert not (out / LAST_FILE).exists()
-    for label in (data / "lidar" / "training" / "label_2").glob("*.txt"):  # other classes only
+    for label in sample_dir(data / LIDAR_FOLDER, LABEL).glob("*.txt"):  # other classes only
         label.write_text("DontCare 0 0 0 0 0 0 0 0 0 0 0 0 0 0\n")
     assert main([*args, "--text-encoder", "gru", "--val-every", "0"]) == 2
 

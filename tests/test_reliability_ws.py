@@ -33,17 +33,15 @@ def _frame_prompt(i: int) -> str:
 
 
 @pytest.fixture(scope="module")
-def app(tmp_path_factory, write_tiny_root, torch_threads, serve_app):
-    """The app on a tiny root whose frames have prompts of their own."""
-    from model import build_model
-
+def app(tmp_path_factory, write_tiny_root, torch_threads, serve_app, untrained_model, grounding):
+    """The app on a tiny root whose frames have prompts of their own, on each grounding path."""
     path = write_tiny_root(tmp_path_factory.mktemp("reliability") / "root", frames=FRAMES)
     root = Talk2RadarRoot(path)
     for i, sid in enumerate(root.ids("test")):
         for tree in (root.lidar_dir, root.radar_dir):
             sample_file(tree, PROMPT, sid).write_text(_frame_prompt(i) + "\n")
     with torch_threads(1):
-        model = build_model("small", text_encoder="gru", head__score_threshold=0.0).eval()
+        model = untrained_model(grounding, text_encoder="gru", head__score_threshold=0.0)
         with serve_app(path, model) as running:
             yield running
 

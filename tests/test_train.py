@@ -2,9 +2,6 @@
 and the evaluate command writes prediction files that the label reader parses."""
 
 import json
-import os
-import signal
-import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -16,6 +13,7 @@ from model.checkpoint import load_checkpoint
 from model.training.loop import TrainConfig, cosine_lr, epoch_batches, train
 from model.training.state import RunStateError
 from scenes.kitti import read_label_file
+from scenes.layout import LIDAR_FOLDER, split_file
 from scenes.root import Talk2RadarRoot
 from scenes.synth import SynthSettings, generate_root
 
@@ -98,61 +96,13 @@ def test_stop_epoch_keeps_the_planned_schedule(tiny_root, tmp_path):
     assert finished.epoch == 3 and finished.step == total
 
 
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
 @pytest.mark.slow
-def test_torchrun_two_gloo_processes(tiny_root, tmp_path):
+def test_torchrun_two_gloo_processes(tiny_root, tmp_path, torchrun):
     out = tmp_path / "ddp"
-    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(REPO))
-    cmd = [
-        sys.executable,
-        "-m",
-        "torch.distributed.run",
-        "--nnodes",
-        "1",
-        "--nproc_per_node",
-        "2",
-        "--master_addr",
-        "127.0.0.1",
-        "--master_port",
-        str(_free_port()),
-        "-m",
-        "model.train",
-        "--grounding",
-        "tpcnet",
-        "--data",
-        str(tiny_root),
-        "--out",
-        str(out),
-        "--max-steps",
-        "2",
-        "--batch-size",
-        "1",
-        "--val-every",
-        "0",
-        "--device",
-        "cpu",
-    ]
+    args = ["-m", "model.train", "--grounding", "tpcnet", "--data", str(tiny_root)]
+    args += ["--out", str(out), "--max-steps", "2", "--batch-size", "1", "--val-every", "0"]
     log = tmp_path / "torchrun.log"
-    with open(log, "w") as handle:  # a file, not pipes: two ranks write progress bars at once
-        proc = subprocess.Popen(
-            cmd,
-            cwd=REPO,
-            env=env,
-            stdout=handle,
-            stderr=handle,
-            stdin=subprocess.DEVNULL,
-            start_new_session=True,
-        )
-        try:
-            code = proc.wait(timeout=300)
-        finally:
-            if proc.poll() is None:  # never leave the workers behind
-                os.killpg(proc.pid, signal.SIGKILL)
+    code = torchrun([*args, "--device", "cpu"], log, timeout=300)
     assert code == 0, log.read_text()[-3000:]
     assert (out / "last.pt").is_file()
     assert load_checkpoint(out / "last.pt").checkpoint_metadata["step"] == 2
@@ -182,7 +132,7 @@ def test_evaluate_command_writes_parsable_files(tiny_root, tmp_path):
     done = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-3000:]
     assert "mAP by prompt type" in done.stdout and "Entire annotated area" in done.stdout
-    test_ids = (tiny_root / "lidar" / "ImageSets" / "test.txt").read_text().split()
+    test_ids = split_file(tiny_root / LIDAR_FOLDER, "test").read_text().split()
     files = sorted(p.stem for p in preds.glob("*.txt"))
     assert files == sorted(test_ids)  # one file per frame, empty ones included
     for f in preds.glob("*.txt"):
@@ -194,7 +144,7 @@ def test_evaluate_command_writes_parsable_files(tiny_root, tmp_path):
 
 
 def test_evaluate_rejects_an_empty_split(tiny_root, tmp_path):
-    (tiny_root / "lidar" / "ImageSets" / "empty.txt").write_text("")
+    split_file(tiny_root / LIDAR_FOLDER, "empty").write_text("")
     cmd = [
         sys.executable,
         "-m",

@@ -12,11 +12,6 @@ torchrun: tests/test_train.py.
 from __future__ import annotations
 
 import json
-import os
-import signal
-import socket
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -26,39 +21,18 @@ from scenes.synth import SynthSettings, generate_root
 REPO = Path(__file__).resolve().parents[1]
 
 
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return sock.getsockname()[1]
-
-
 @pytest.mark.slow
-def test_both_referent_stages_train_stop_and_resume_under_torchrun(tmp_path: Path) -> None:
+def test_both_referent_stages_train_stop_and_resume_under_torchrun(
+    tmp_path: Path, torchrun
+) -> None:
     root = tmp_path / "root"
     generate_root(root, 8, SynthSettings(seed=3, prompts_per_world=1), (0.5, 0.25, 0.25))
     out = tmp_path / "runs"
     out.mkdir()
-    env = dict(os.environ, OMP_NUM_THREADS="1", PYTHONPATH=str(REPO))
-    cmd = [sys.executable, "-m", "torch.distributed.run", "--nnodes", "1", "--nproc_per_node"]
-    cmd += ["2", "--master_addr", "127.0.0.1", "--master_port", str(_free_port())]
-    cmd += [str(REPO / "tests" / "distributed_check.py"), str(root)]
-    cmd += [str(REPO / "checkpoints" / "tpcnet-small.pt"), str(out)]
+    args = [str(REPO / "tests" / "distributed_check.py"), str(root)]
+    args += [str(REPO / "checkpoints" / "tpcnet-small.pt"), str(out)]
     log = tmp_path / "torchrun.log"
-    with open(log, "w") as handle:  # a file, not pipes: two ranks write progress bars at once
-        proc = subprocess.Popen(
-            cmd,
-            cwd=REPO,
-            env=env,
-            stdout=handle,
-            stderr=handle,
-            stdin=subprocess.DEVNULL,
-            start_new_session=True,
-        )
-        try:
-            code = proc.wait(timeout=500)
-        finally:
-            if proc.poll() is None:  # never leave the workers behind
-                os.killpg(proc.pid, signal.SIGKILL)
+    code = torchrun(args, log, timeout=500)
     text = log.read_text()
     assert code == 0, text[-3000:]
     rank0 = json.loads((out / "report-0.json").read_text())

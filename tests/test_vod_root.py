@@ -105,12 +105,11 @@ def test_pairs_of_a_root_without_prompts_go_beside_it(tmp_path, write_vod_root) 
 
 
 @pytest.fixture(scope="module")
-def vod_app(tmp_path_factory, write_vod_root, torch_threads, serve_app):
-    from model import build_model
-
+def vod_app(tmp_path_factory, write_vod_root, torch_threads, serve_app, untrained_model, grounding):
+    """The app serving a View-of-Delft root as released, on each grounding path."""
     root = write_vod_root(tmp_path_factory.mktemp("vod-app") / "vod", frames=2)
     with torch_threads(1):
-        model = build_model("small", text_encoder="gru", head__score_threshold=0.0).eval()
+        model = untrained_model(grounding, text_encoder="gru", head__score_threshold=0.0)
         with serve_app(root, model, split="val", warm_up=False) as app:
             yield app
 
@@ -143,14 +142,14 @@ def test_ready_made_boxes_enter_saves_beside_the_release(vod_app, ws_client) -> 
         assert sample.prompt is None and len(sample.boxes) == 4  # label_2: every object
         status = panel.w.status.content
         assert "Pairs are saved into" in status and "vod\\-talk2radar" in status
-        # The metric objects are offered: in the 3D view and in the Object list.
+        # The metric objects are offered: in the 3D view and in the Object list. With a
+        # referent-path model they are the labelled boxes its referent stage picks among, only
+        # those a pair can hold (app.annotate_tab.labelled): the far car is not offered.
+        referent = app.engine.model.cfg.grounding == "referent"
+        offered = ("1. Pedestrian · 10.4 m", "2. Car · 15.1 m", "3. Cyclist · 20.6 m")
+        offered += () if referent else ("4. Car · 60.0 m",)
         client.pump_until(lambda: "/annotate/ready/edges" in client.nodes, 5, "ready boxes")
-        assert client.dropdown("Object") == (  # nearest first
-            "1. Pedestrian · 10.4 m",
-            "2. Car · 15.1 m",
-            "3. Cyclist · 20.6 m",
-            "4. Car · 60.0 m",
-        )
+        assert client.dropdown("Object") == offered  # nearest first
         assert panel.w.ready.visible  # shown on a root without prompts
         assert panel.w.save.disabled  # nothing to save yet, and the reason is shown
         assert "Save pair is disabled until" in panel.w.checks.content
@@ -160,16 +159,18 @@ def test_ready_made_boxes_enter_saves_beside_the_release(vod_app, ws_client) -> 
         client.click_ground(car[0] + 0.5, car[1], panel.frame.ground_z)
         client.pump_until(lambda: len(panel.draft.boxes) == 1, 5, "the car added")
         np.testing.assert_allclose(panel.draft.boxes[0].box, car, atol=1e-9)
-        assert panel.draft.boxes[0].cls == "Car" and len(panel.ready_boxes) == 3
-        client.pump_until(lambda: len(client.dropdown("Object")) == 3, 5, "the list updated")
+        assert panel.draft.boxes[0].cls == "Car" and len(panel.ready_boxes) == len(offered) - 1
+        client.pump_until(
+            lambda: len(client.dropdown("Object")) == len(offered) - 1, 5, "the list updated"
+        )
         # The draft is drawn into the camera panel too.
         layer = panel.session.camera.layer("draft")
         assert layer is not None and np.array_equal(layer.boxes, panel.draft.box_array)
-        # The far car (60 m) cannot be saved: adding it is refused at once.
-        client.set("Object", next(o for o in client.dropdown("Object") if "60.0 m" in o))
-        client.click("Add object")
-        body = _notified(client, "No ready-made box placed there")
-        assert "centre x = 60.00 m is outside the annotated range" in body
+        if not referent:  # the far car (60 m) cannot be saved: adding it is refused at once
+            client.set("Object", next(o for o in client.dropdown("Object") if "60.0 m" in o))
+            client.click("Add object")
+            body = _notified(client, "No ready-made box placed there")
+            assert "centre x = 60.00 m is outside the annotated range" in body
         assert len(panel.draft.boxes) == 1
 
         # Enter in an invalid draft says why; Enter in a valid one saves.
@@ -248,7 +249,8 @@ def test_a_pair_saved_beside_reopens_on_its_source_frame(vod_app, ws_client) -> 
     client, panel = _connect(app, ws_client)
     try:
         client.pump_until(lambda: panel.frame.name == f"0000{source}", 5, "the source frame")
-        client.pump_until(lambda: len(client.dropdown("Object")) == 4, 5, "the objects")
+        offered = 3 if app.engine.model.cfg.grounding == "referent" else 4  # not the far car
+        client.pump_until(lambda: len(client.dropdown("Object")) == offered, 5, "the objects")
         client.click("Add object")  # the nearest: the pedestrian
         client.pump_until(lambda: len(panel.draft.boxes) == 1, 5, "the pedestrian")
         client.set("Pair prompt", "the pedestrian on the right\n")

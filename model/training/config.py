@@ -28,6 +28,12 @@ from model.training.data import DataSpecError, RootSpec, root_specs
 AmpKind = Literal["none", "bf16"]
 """``--amp``: no autocast, or bfloat16 autocast of the forward passes (CUDA only)."""
 
+LanguageKind = Literal["base", "extended"]
+"""``--language``: the generated prompts' families (``scenes.prompts.PromptConfig.language``)."""
+
+PhrasingKind = Literal["train", "heldout", "all"]
+"""``--phrasing``: the generated prompts' wording variants (``scenes.prompts.phrasing``)."""
+
 
 def default_device() -> str:
     """``cuda`` where CUDA is available, else ``cpu`` (the default of ``--device``)."""
@@ -129,6 +135,23 @@ class TrainConfig:
         "labelled boxes (class, depth and side only: their motion is unknown) beside the given "
         "one (default 0: given prompts only)",
     )
+    language: LanguageKind = option(
+        "base",
+        help="referent path: the generated prompts' families (scenes.prompts.PromptConfig."
+        "language): base, or extended with things outside the classes and unsatisfiable "
+        "attributes (the empty answer), negation, exclusion, ordinals, relations and counting",
+    )
+    phrasing: PhrasingKind = option(
+        "train",
+        help="referent path: the generated prompts' wording variants (scenes.prompts.phrasing): "
+        "train (default; the held-out variants stay unseen, so a root written with --phrasing "
+        "heldout measures new wording), heldout, or all",
+    )
+    text_noise: float = option(
+        0.0,
+        help="referent path: share of generated prompts reworded by scenes.prompts.perturb "
+        "(filler-word dropout, synonyms, typos, casing; the meaning kept), default 0",
+    )
     scene_limit: int = option(
         0, help="--freeze-scene: cache only the first N training scenes (0: all)"
     )
@@ -163,6 +186,12 @@ class TrainConfig:
                 raise TrainingError(f"{flag} must be >= 1, got {getattr(self, name)}")
         if self.amp not in ("none", "bf16"):
             raise TrainingError(f"--amp must be none or bf16, got {self.amp!r}")
+        if self.language not in ("base", "extended"):
+            raise TrainingError(f"--language must be base or extended, got {self.language!r}")
+        if self.phrasing not in ("train", "heldout", "all"):
+            raise TrainingError(f"--phrasing must be train, heldout or all, got {self.phrasing!r}")
+        if not 0.0 <= self.text_noise <= 1.0:
+            raise TrainingError(f"--text-noise must be in [0, 1], got {self.text_noise}")
         if self.grounding not in ("referent", "tpcnet"):
             raise TrainingError(f"--grounding must be referent or tpcnet, got {self.grounding!r}")
         if Path(self.out).exists() and not Path(self.out).is_dir():

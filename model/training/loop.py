@@ -242,7 +242,11 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
     else:
         dataset = GroundingDataset(root, cfg.train_split, augment=augment, seed=cfg.seed)
     referent_cfg = ReferentTrainConfig(
-        prompts_per_scene=cfg.prompts_per_scene, label_prompts=cfg.label_prompts
+        prompts_per_scene=cfg.prompts_per_scene,
+        label_prompts=cfg.label_prompts,
+        language=cfg.language,
+        text_noise=cfg.text_noise,
+        phrasing=cfg.phrasing,
     )
 
     state = TrainState()
@@ -299,6 +303,7 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
                     progress=rank == 0,
                     label_prompts=cfg.label_prompts,
                     known=bank,
+                    prompt_config=referent_cfg.prompt_config(),
                 )
                 into += part
                 bank.entries.update(part_bank.entries)

@@ -86,17 +86,20 @@ def cache_scenes(
     progress: bool = True,
     label_prompts: int = 0,
     known: TextBank | None = None,
+    prompt_config: PromptConfig | None = None,
 ) -> tuple[list[CachedScene], TextBank]:
     """Encode every scene of ``dataset`` with the frozen model, generate ``prompts_per_scene``
     prompts per scene (labels source: take its given prompts, plus ``label_prompts`` from its
     labelled boxes, :func:`frame_prompts`) and encode them with the frozen text encoder (module
     docstring). A ``dataset`` that flips every frame gives the mirrored views of the scenes.
     Prompts already in ``known`` (e.g. the other view's bank) are not encoded again; the bank
-    returned holds only the new ones."""
+    returned holds only the new ones. ``prompt_config``: the generator's settings
+    (:meth:`model.referent_train.ReferentTrainConfig.prompt_config`; default: ``phrasing``'s
+    base prompts)."""
     from tqdm import tqdm
 
     model.eval()
-    pcfg = PromptConfig(phrasing=phrasing)
+    pcfg = prompt_config or PromptConfig(phrasing=phrasing)
     scenes = []
     with torch.no_grad():
         for i in tqdm(range(len(dataset)), desc="cache scenes", disable=not progress):

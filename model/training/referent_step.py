@@ -80,6 +80,8 @@ class ReferentTrainConfig:
         phrasing: Phrasing stream of the generated prompts (``PromptConfig.phrasing``).
         label_prompts: Labels-source frames with scene labels: prompts generated per frame from
             its labelled boxes, beside the given ones (:func:`frame_prompts`).
+        language: Families of the generated prompts (``PromptConfig.language``).
+        text_noise: Share of generated prompts reworded by :func:`scenes.prompts.perturb`.
     """
 
     prompts_per_scene: int = 8
@@ -91,6 +93,14 @@ class ReferentTrainConfig:
     listwise_weight: float = 0.5
     phrasing: str = "train"
     label_prompts: int = 0
+    language: str = "base"
+    text_noise: float = 0.0
+
+    def prompt_config(self) -> PromptConfig:
+        """The generator's settings of these prompts."""
+        return PromptConfig(
+            phrasing=self.phrasing, language=self.language, p_perturb=self.text_noise
+        )
 
 
 @dataclass(frozen=True)
@@ -237,7 +247,7 @@ def referent_step(
     with torch.no_grad():
         dets = head.proposals(model.scene, out, limit=None)
         heat = torch.sigmoid(out.heatmap.detach()).cpu().numpy()
-    pcfg = prompt_config or PromptConfig(phrasing=cfg.phrasing)
+    pcfg = prompt_config or cfg.prompt_config()
     scenes, texts, rows, target_rows = [], [], [], []
     for b, frame in enumerate(frames):
         if not actors[b]:
@@ -291,7 +301,8 @@ def frame_prompts(
 
     ``label_prompts``: on a labels-source frame with complete labels (scene labels), that many
     more prompts generated from its labelled boxes, of the attributes a box alone decides
-    (``PromptConfig.geometry_only``: class, depth, side; the boxes' motion is unknown)."""
+    (``PromptConfig.geometry_only``: class, depth, side; the boxes' motion is unknown). Given
+    prompts are kept as written; generated ones are reworded as ``config.p_perturb`` says."""
     if not frame.generates_prompts:
         given = [(g.text, g.referent_ids) for g in frame.given]
         if label_prompts <= 0 or frame.region is None:

@@ -11,17 +11,33 @@ always equals the number of referents.
 
 Modules, in import order (each imports only those above it):
 
-* :mod:`~scenes.prompts.tags` -- keyword type tags (:func:`infer_tags`) and :func:`flip_left_right`,
-  for any text, generated or typed.
+* :mod:`~scenes.prompts.tags` -- keyword type tags (:func:`infer_tags`), :func:`flip_left_right`
+  and :func:`is_count_question`, for any text, generated or typed.
+* :mod:`~scenes.prompts.noise` -- :func:`perturb`, meaning-keeping text noise for training.
 * :mod:`~scenes.prompts.features` -- :class:`ActorFeatures` and the :class:`ReferableRegion`.
 * :mod:`~scenes.prompts.atoms` -- the atoms, superlatives and their exact semantics.
 * :mod:`~scenes.prompts.predicate` -- :class:`Predicate`, :func:`analyse`, :func:`resolve`,
   ambiguity and crispness.
 * :mod:`~scenes.prompts.numbers` -- numbers in digits or words.
 * :mod:`~scenes.prompts.phrasing` -- the phrasing variant tables and their train / held-out split.
+* :mod:`~scenes.prompts.sampling` -- :class:`PromptConfig`, the families and languages, and
+  predicates sampled from an anchor actor.
+* :mod:`~scenes.prompts.phrasing_more` -- the extended language's extra variants and the
+  compositional families' templates.
 * :mod:`~scenes.prompts.render` -- :class:`Prompt` and :func:`render` (predicate -> sentence).
-* :mod:`~scenes.prompts.generate` -- :class:`PromptConfig` and :func:`generate_prompts`.
+* :mod:`~scenes.prompts.families` -- the compositional families' exact semantics: :class:`Not`,
+  :class:`Exclusion`, :class:`Ordinal`, :class:`Related`, :class:`Count`, unsatisfiable.
+* :mod:`~scenes.prompts.nouns` -- out-of-class things (no referent) and nonsense text.
+* :mod:`~scenes.prompts.compose_render` -- sentences of the compositional families.
+* :mod:`~scenes.prompts.extended` -- the extended language's generator (every family).
+* :mod:`~scenes.prompts.generate` -- :func:`generate_prompts` (base, or extended by
+  ``PromptConfig.language``).
 * :mod:`~scenes.prompts.describe` -- :func:`describe` (a sentence for a given set of actors).
+
+``PromptConfig(language="extended")`` adds the compositional families (negation of any atom,
+exclusion, ordinals, relations to another object, counting questions) and prompts whose referent
+set is empty (things outside the classes, nonsense, predicates nothing satisfies), in a wider
+wording; ``base`` (the default) is the generator as it was, prompt for prompt.
 
 Type tags (``class``, ``depth``, ``velocity``, ``motion``, ``position``, the TPCNet paper's table
 III types) follow the predicate, and every phrasing is written so that :func:`infer_tags` (which
@@ -53,22 +69,35 @@ from scenes.prompts.atoms import (
     SpeedUnit,
 )
 from scenes.prompts.describe import describe, describe_predicate
+from scenes.prompts.families import (
+    Count,
+    Exclusion,
+    Not,
+    Ordinal,
+    Related,
+    Relation,
+)
 from scenes.prompts.features import DEFAULT_REGION, ActorFeatures, ReferableRegion
 from scenes.prompts.generate import PromptConfig, generate_prompts
+from scenes.prompts.noise import perturb
 from scenes.prompts.numbers import spell_number
 from scenes.prompts.phrasing import HELDOUT_VARIANTS, PHRASINGS, TRAIN_VARIANTS
 from scenes.prompts.predicate import Predicate, Resolution, analyse, resolve
 from scenes.prompts.render import Prompt, render, render_with_variants
-from scenes.prompts.tags import TAGS, flip_left_right, infer_tags
+from scenes.prompts.sampling import EXTENDED_RATES, FAMILIES, LANGUAGES
+from scenes.prompts.tags import TAGS, flip_left_right, infer_tags, is_count_question
 
 __all__ = [
     "ABOUT_DEPTH_TOL",
     "AHEAD_MAX_BEARING_DEG",
     "CROSSING_MAX_ANGLE_DEG",
     "DEFAULT_REGION",
+    "EXTENDED_RATES",
+    "FAMILIES",
     "HEADING_RADIAL_SPEED",
     "HELDOUT_VARIANTS",
     "LANE_HALF_WIDTH",
+    "LANGUAGES",
     "PHRASINGS",
     "SPEED_ABOUT_MIN_TOL",
     "SPEED_ABOUT_REL_TOL",
@@ -76,19 +105,25 @@ __all__ = [
     "TRAIN_VARIANTS",
     "ActorFeatures",
     "Atom",
+    "Count",
     "DepthAbout",
     "DepthBetween",
     "DepthBeyond",
     "DepthWithin",
+    "Exclusion",
     "Extreme",
     "Heading",
     "HeadingIs",
     "MotionState",
+    "Not",
     "OnSide",
+    "Ordinal",
     "Predicate",
     "Prompt",
     "PromptConfig",
     "ReferableRegion",
+    "Related",
+    "Relation",
     "Resolution",
     "Side",
     "SpeedAbout",
@@ -101,6 +136,8 @@ __all__ = [
     "flip_left_right",
     "generate_prompts",
     "infer_tags",
+    "is_count_question",
+    "perturb",
     "render",
     "render_with_variants",
     "resolve",

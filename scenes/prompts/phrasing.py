@@ -315,7 +315,11 @@ CLASS_KEYS: dict[str | None, str] = {
 
 
 def phrase_slot(atom: Atom, cls_key: str) -> str:
-    """The slot of an atom's post-noun phrase."""
+    """The slot of an atom's post-noun phrase (an atom with a ``slot`` attribute names its own:
+    the extended language's atoms, :mod:`scenes.prompts.families`)."""
+    own = getattr(atom, "slot", None)
+    if isinstance(own, str):
+        return own
     if isinstance(atom, OnSide):
         return "position.ahead" if atom.side is Side.AHEAD else "position.side"
     if isinstance(atom, MotionState):

@@ -33,13 +33,14 @@ from scenes.prompts.phrasing import (
     HELDOUT_VARIANTS,
     PHRASINGS,
     SLOTS,
-    TRAIN_VARIANTS,
     adjective_slot,
     extreme_slot,
     phrase_slot,
     variant_id,
 )
+from scenes.prompts.phrasing_more import DROPPED, EXTRA, FAMILY_SLOTS
 from scenes.prompts.predicate import Predicate
+from scenes.prompts.sampling import LANGUAGES
 from scenes.prompts.tags import flip_left_right, infer_tags
 
 
@@ -55,6 +56,11 @@ class Prompt:
         predicate: The predicate it was rendered from (None for real / typed prompts).
         variants: Ids of the phrasing variants the sentence used, in order
             (:mod:`scenes.prompts.phrasing`); empty for real / typed prompts. Not compared.
+        family: The prompt family (:data:`scenes.prompts.sampling.FAMILIES`); ``attribute`` for
+            a predicate and for real / typed prompts. Not compared.
+        expression: The compositional expression of the other families
+            (:mod:`scenes.prompts.families`; None for ``attribute`` and ``out_of_class``; the
+            ``predicate`` is then the base predicate, or None). Not compared.
     """
 
     text: str
@@ -62,6 +68,13 @@ class Prompt:
     tags: frozenset[str]
     predicate: Predicate | None = field(default=None, repr=False)
     variants: tuple[str, ...] = field(default=(), repr=False, compare=False)
+    family: str = field(default="attribute", repr=False, compare=False)
+    expression: object = field(default=None, repr=False, compare=False)
+
+    @property
+    def is_count(self) -> bool:
+        """A counting question ("how many cars are parked?"): the referents are the counted set."""
+        return self.family == "count"
 
     @staticmethod
     def from_text(text: str, referent_ids: Sequence[int] = ()) -> Prompt:
@@ -72,7 +85,10 @@ class Prompt:
         """The prompt for the world flipped y -> -y: left/right swapped in text and predicate."""
         pred = self.predicate.flipped() if self.predicate is not None else None
         text = flip_left_right(self.text)
-        return Prompt(text, self.referent_ids, self.tags, pred, self.variants)
+        expr = self.expression
+        flip = getattr(expr, "flipped", None)
+        expr = flip() if flip is not None else expr
+        return Prompt(text, self.referent_ids, self.tags, pred, self.variants, self.family, expr)
 
 
 # --------------------------------------------------------------------------------------------
@@ -88,28 +104,42 @@ class _Choices:
     ids: dict[str, str]
 
 
-def _choices(phrasing: str) -> dict[str, _Choices]:
+def _choices(phrasing: str, language: str) -> dict[str, _Choices]:
+    """Base: the slots of :data:`SLOTS`. Extended: each slot less its :data:`DROPPED` variants
+    plus its :data:`EXTRA` ones (train side), and the :data:`FAMILY_SLOTS` (train side)."""
     out = {}
-    for name, slot in SLOTS.items():
+    extended = language == "extended"
+    slots = {**SLOTS, **FAMILY_SLOTS} if extended else SLOTS
+    for name, slot in slots.items():
         texts = slot.core + slot.more
+        if extended:
+            texts = tuple(t for t in texts if t not in DROPPED.get(name, ())) + EXTRA.get(name, ())
         ids = {t: variant_id(name, t) for t in texts}
         heldout = tuple(t for t in texts if ids[t] in HELDOUT_VARIANTS)
         allowed = (
-            tuple(t for t in texts if ids[t] in TRAIN_VARIANTS) if phrasing == "train" else texts
+            tuple(t for t in texts if ids[t] not in HELDOUT_VARIANTS)
+            if phrasing == "train"
+            else texts
         )
-        out[name] = _Choices(slot.core[0], allowed, heldout, ids)
+        out[name] = _Choices(texts[0], allowed, heldout, ids)
     return out
 
 
-_CHOICES = {p: _choices(p) for p in PHRASINGS}
+_CHOICES = {(lang, p): _choices(p, lang) for p in PHRASINGS for lang in LANGUAGES}
 
 
-class _Picker:
+class Picker:
     """Draws variants for one sentence and records them."""
 
-    def __init__(self, rng: np.random.Generator, phrasing: str, forced: str | None) -> None:
+    def __init__(
+        self,
+        rng: np.random.Generator,
+        phrasing: str,
+        forced: str | None,
+        language: str = "base",
+    ) -> None:
         self.rng = rng
-        self.table = _CHOICES[phrasing]
+        self.table = _CHOICES[(language, phrasing)]
         self.forced = forced
         self.ids: list[str] = []
         self.slots: list[str] = []
@@ -141,13 +171,13 @@ class _Picker:
 
 _FIELD = re.compile(r"\{(\w+)\}")
 _SPELLED_UNIT = re.compile(r"met(?:er|re)s")
-_CASES: dict[str, Callable[[str], str]] = {
+CASES: dict[str, Callable[[str], str]] = {
     "sentence case": lambda s: s[:1].upper() + s[1:],
     "lower case": lambda s: s,
     "upper case": str.upper,
     "title case": lambda s: " ".join(w[:1].upper() + w[1:] for w in s.split(" ")),
 }
-_ENDS = {
+ENDS = {
     "period": ".",
     "no punctuation": "",
     "exclamation mark": "!",
@@ -157,7 +187,7 @@ _JOINERS = {"space": " ", "comma": ", ", "and": " and "}
 
 
 @dataclass(frozen=True)
-class _Style:
+class Style:
     p_count_word: float
     p_adjective: float
     p_frame: float
@@ -165,11 +195,11 @@ class _Style:
     p_number_words: float
 
 
-class _Sentence:
+class Sentence:
     """Fills templates for one sentence about ``n`` referents; ``{rel}``, ``{us}``, ``{verb}``,
     units, the number style and the count style are drawn once per sentence, when first used."""
 
-    def __init__(self, pk: _Picker, n: int, cls_key: str, style: _Style) -> None:
+    def __init__(self, pk: Picker, n: int, cls_key: str, style: Style) -> None:
         self.pk = pk
         self.n = n
         self.plural = n > 1
@@ -226,23 +256,38 @@ class _Sentence:
         return _FIELD.sub(field_value, template)
 
 
-def _compose(pred: Predicate, n: int, pk: _Picker, style: _Style) -> str:
+def noun_phrase(
+    pred: Predicate,
+    s: Sentence,
+    *,
+    noun: str | None = None,
+    determiner: bool = True,
+    adjective: bool = True,
+    core_of: Callable[[str], str] | None = None,
+) -> str:
+    """``determiner [adjective | superlative] noun [phrases]`` of a predicate, for ``s.n``
+    referents. ``noun``: ``singular|plural`` instead of the class's noun slot (out-of-class
+    things). ``determiner`` False: no determiner ("how many parked cars ..."). ``adjective``
+    False: every atom after the noun. ``core_of``: builds the core from the noun instead of a
+    superlative or adjective (ordinals: "second closest car")."""
+    pk, style, n = s.pk, s.style, s.n
     plural = n > 1
-    key = CLASS_KEYS[pred.cls]
-    s = _Sentence(pk, n, key, style)
-    singular_noun, plural_noun = pk.pick(f"noun.{key}").split("|")
-    noun = plural_noun if plural else singular_noun
+    key = s.cls_key
+    singular_noun, plural_noun = (noun or pk.pick(f"noun.{key}")).split("|")
+    noun_text = plural_noun if plural else singular_noun
     atoms = list(pred.atoms)
-    if pred.extreme is not None:
+    if core_of is not None:
+        core = core_of(noun_text)
+    elif pred.extreme is not None:
         side = {Extreme.LEFTMOST: "left", Extreme.RIGHTMOST: "right"}.get(pred.extreme, "")
-        core = s.fill(pk.pick(extreme_slot(pred.extreme)), n=noun, side=side)
+        core = s.fill(pk.pick(extreme_slot(pred.extreme)), n=noun_text, side=side)
     else:
-        core = noun
-        if pk.rng.random() < style.p_adjective:
+        core = noun_text
+        if adjective and pk.rng.random() < style.p_adjective:
             with_adj = [a for a in atoms if adjective_slot(a, key) is not None]
             if with_adj:
                 chosen = with_adj[pk.uniform(len(with_adj))]
-                core = f"{pk.pick(adjective_slot(chosen, key))} {noun}"  # type: ignore[arg-type]
+                core = f"{pk.pick(adjective_slot(chosen, key))} {core}"  # type: ignore[arg-type]
                 atoms.remove(chosen)
     # Motion words right after the noun ("the cyclist stopped between 40 and 45 m ahead"), the
     # other phrases after them in random order.
@@ -251,25 +296,38 @@ def _compose(pred: Predicate, n: int, pk: _Picker, style: _Style) -> str:
     while rest:
         ordered.append(rest.pop(pk.uniform(len(rest))))
     posts = [s.fill(pk.pick(phrase_slot(a, key)), atom=a) for a in ordered]
-    if not plural:
-        det = "the"
+    if not determiner:
+        np_text = core
+    elif not plural:
+        np_text = f"the {core}"
     elif n <= 10 and pk.rng.random() < style.p_count_word:
-        det = s.fill(pk.pick("det.pair" if n == 2 else "det.count"))
+        np_text = f"{s.fill(pk.pick('det.pair' if n == 2 else 'det.count'))} {core}"
     else:
-        det = pk.pick("det.plural")
-    np_text = f"{det} {core}"
+        np_text = f"{pk.pick('det.plural')} {core}"
     if posts:
         joiner = _JOINERS[pk.pick("joiner", style.p_restyle)] if len(posts) > 1 else " "
         np_text += " " + joiner.join(posts)
-    frame = pk.pick("frame", style.p_frame)
+    return np_text
+
+
+def finish(np_text: str, s: Sentence, frame_slot: str = "frame", **known: str) -> str:
+    """The sentence around a noun phrase: a command / question frame (of ``frame_slot``, its
+    other fields from ``known``), casing, end punctuation."""
+    pk, style = s.pk, s.style
+    frame = pk.pick(frame_slot, style.p_frame)
     question = frame.endswith("?")
-    body = s.fill(frame.rstrip("?"), np=np_text)
+    body = s.fill(frame.rstrip("?"), np=np_text, **known)
     case = pk.pick("case", style.p_restyle)
     end = pk.pick("end/question" if question else "end/statement", style.p_restyle)
-    return _CASES[case](body) + _ENDS[end]
+    return CASES[case](body) + ENDS[end]
 
 
-def _repeats(text: str) -> bool:
+def _compose(pred: Predicate, n: int, pk: Picker, style: Style) -> str:
+    s = Sentence(pk, n, CLASS_KEYS[pred.cls], style)
+    return finish(noun_phrase(pred, s), s)
+
+
+def repeats(text: str) -> bool:
     words = re.findall(r"[a-z]+", text.lower())
     return words.count("away") > 1 or words.count("ahead") + words.count("front") > 1
 
@@ -286,19 +344,21 @@ def render_with_variants(
     p_restyle: float = 0.35,
     p_number_words: float = 0.3,
     max_words: int = 22,
+    language: str = "base",
 ) -> tuple[str, tuple[str, ...]]:
-    """:func:`render`, and the ids of the phrasing variants the sentence used."""
+    """:func:`render`, and the ids of the phrasing variants the sentence used (``language``:
+    ``base`` or ``extended`` wording, :func:`_choices`)."""
     if n_referents < 1:
         raise ValueError(f"render: a prompt must refer to something, got n_referents={n_referents}")
     if predicate.extreme is not None and n_referents != 1:
         raise ValueError("render: a superlative refers to exactly one actor")
     if phrasing not in PHRASINGS:
         raise ValueError(f"render: phrasing must be one of {PHRASINGS}, got {phrasing!r}")
-    style = _Style(p_count_word, p_adjective, p_frame, p_restyle, p_number_words)
+    style = Style(p_count_word, p_adjective, p_frame, p_restyle, p_number_words)
     forced: str | None = None
     text, ids = "", ()
     for attempt in range(8):
-        pk = _Picker(rng, phrasing, forced)
+        pk = Picker(rng, phrasing, forced, language)
         text = _compose(predicate, n_referents, pk, style)
         ids = tuple(pk.ids)
         if phrasing == "heldout" and not pk.heldout_used:
@@ -307,7 +367,7 @@ def render_with_variants(
             cands = [sl for sl in dict.fromkeys(pk.slots) if pk.table[sl].heldout]
             forced = cands[pk.uniform(len(cands))] if cands and attempt < 3 else "frame"
             continue
-        if not _repeats(text) and len(text.split()) <= max_words:
+        if not repeats(text) and len(text.split()) <= max_words:
             break
     return text, ids
 

@@ -80,7 +80,7 @@ _SPEED_UNIT = (
 _SPEED_UNIT_RE = re.compile(_SPEED_UNIT)
 _SPEED_PHRASE = re.compile(rf"(?:{NUMBER_PATTERN}\s*)?{_SPEED_UNIT}")
 _LATERAL_EXTREME = re.compile(r"\b(?:farthest|furthest)\s+(?:to\s+(?:the|our)\s+)?(?:left|right)\b")
-_EGO_PHRASE = re.compile(r"\bego[- ]?(?:car|vehicle)s?\b|\bour (?:car|vehicle)\b")
+_EGO_PHRASE = re.compile(r"\bego[- ]?(?:car|vehicle)s?\b|\b(?:our|my) (?:car|vehicle)\b")
 _DEPTH_HINT = re.compile(r"\d|\bm\b|met(?:er|re)|ahead|away")
 _DEPTH_PHRASE = re.compile(
     rf"{NUMBER_PATTERN}\s*(?:m|meters?|metres?)\b(?!/)(?:\s+(?:ahead|away))?"
@@ -98,6 +98,9 @@ _MOTION_WORDS = re.compile(
     r"\bmov(?:e|es|ing)\b|\bstationary\b|\bparked\b|\bparking\b|\bstopped\b|\bstatic\b"
     r"|\bstanding still\b|\bstandstill\b|\bat rest\b|\bmotion\w*|\bapproach\w*|\btowards?\b"
     r"|\baway\b|\bcross(?:es|ing)?\b|\boncoming\b|\breced\w*|\bleaving\b|\bour way\b"
+    r"|\bunderway\b|\bon the go\b|\bhalted\b|\bstanding\b|\bstood\b|\bsitting still\b"
+    r"|\bnot going anywhere\b|\bat a stop\b|\bwaiting\b|\bcoming\b|\bclosing in\b"
+    r"|\bour direction\b|\bacross\b|\bincoming\b|\bgetting closer\b"
 )
 _POSITION_WORDS = re.compile(
     r"\bleft\w*|\bright(?:most|wards?)?\b|\bfront\b|\bbehind\b|\bbeside\b|\bnext to\b"
@@ -106,8 +109,25 @@ _POSITION_WORDS = re.compile(
 _CLASS_WORDS = re.compile(
     r"\b(?:cars?|vehicles?|automobiles?|autos?|trucks?|vans?|bus(?:es)?|pedestrians?|persons?"
     r"|people|man|men|woman|women|child(?:ren)?|kids?|walkers?|cyclists?|bicyclists?|bicycles?"
-    r"|bikes?|bikers?|riders?|motorcyclists?|motorbikes?|scooters?)\b"
+    r"|bikes?|bikers?|riders?|motorcyclists?|motorbikes?|scooters?|sedans?|motorcars?|hatchbacks?"
+    r"|humans?|individuals?|passers?-by|peds?)\b"
 )
+
+
+_TRAVEL = re.compile(
+    r"\b(?:same|opposite) (?:way|direction)\b|\bother way\b|\bdirection of travel\b"
+    r"|\bgoing our way\b"
+)
+
+_COUNT_QUESTION = re.compile(r"\bhow many\b|\bcount\b|\bnumber of\b")
+
+
+def is_count_question(text: str) -> bool:
+    """Whether a text asks for a count ("how many cars are parked?", "count the cyclists",
+    "number of pedestrians on the left?"): the words "how many", "count" (not "counting") or
+    "number of", any case. Works on any typed text; the referents of a count
+    question are the counted objects, and the answer says their number."""
+    return _COUNT_QUESTION.search(text.lower()) is not None
 
 
 def infer_tags(text: str) -> frozenset[str]:
@@ -120,6 +140,9 @@ def infer_tags(text: str) -> frozenset[str]:
       "2 metres per second"); the phrase is removed, so its "metres" is not a depth. Also the
       words speed*, velocity, fast*, slow*, quick*, per hour / second, kph, kmh, mph, mps.
     * position: "farthest / furthest (to the) left / right" (removed, so it is not a depth).
+    * motion: a direction of travel ("the same way / direction", "the opposite way / direction",
+      "the other way", "direction of travel", "going our way"; removed, so "opposite" is not a
+      position).
     * depth: a number with a metre unit ("20 m", "15 meters", "twenty metres away"), a number
       followed by "ahead"/"away", "far away", or the words metres/distance/distant/nearest/
       closest/farthest/furthest. These depth phrases are removed before the rules below, so
@@ -139,6 +162,9 @@ def infer_tags(text: str) -> frozenset[str]:
     if _LATERAL_EXTREME.search(s):
         tags.add("position")
         s = _LATERAL_EXTREME.sub(" ", s)
+    if _TRAVEL.search(s):
+        tags.add("motion")
+        s = _TRAVEL.sub(" ", s)
     if _DEPTH_HINT.search(s) and _DEPTH_PHRASE.search(s):
         tags.add("depth")
         s = _DEPTH_PHRASE.sub(" ", s)
