@@ -14,7 +14,7 @@ Modalities = Literal["lidar", "radar", "both"]
 FusionKind = Literal["baca", "bi_mhca", "lidar_query", "radar_query", "conv_gate"]
 TextFusionKind = Literal["dggf", "ggf"]
 TextEncoderKind = Literal["minilm", "gru"]
-GroundingKind = Literal["tpcnet", "referent"]
+GroundingKind = Literal["referent", "tpcnet"]
 AnchorKind = Literal["corner", "edge", "center"]
 PresetName = Literal["small", "paper"]
 
