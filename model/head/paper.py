@@ -56,13 +56,7 @@ class PaperGrounding(GroundingHead):
         radar: list[Tensor] | None,
         candidates: LabelledBoxes | None,
     ) -> SceneFeatures:
-        stages = scene.sensors(lidar, radar, timed=True)
-        return SceneFeatures(
-            stages=stages.fused,
-            num_lidar=0 if lidar is None else int(lidar[0].shape[0]),
-            num_radar=0 if radar is None else int(radar[0].shape[0]),
-            timings=stages.timings,
-        )
+        return scene.sensors(lidar, radar, timed=True).features(lidar, radar)
 
     def check(self, scene: SceneEncoder, features: SceneFeatures) -> None:
         expected = scene.stage_channels

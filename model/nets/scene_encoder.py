@@ -18,14 +18,23 @@ other sensor.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import torch
 from torch import Tensor, nn
 
 from model.config import LIDAR_FEATURES, RADAR_FEATURES, ModelConfig
-from model.features import Clock, MissingSensorError, PointsLike, SceneTimings, as_points
+from model.features import (
+    Clock,
+    MissingSensorError,
+    PointsLike,
+    SceneFeatures,
+    SceneTimings,
+    as_points,
+)
 from model.head.detector import C3DRecHead, HeadOutput
 from model.nets.baca import build_fusion
 from model.nets.backbone import SecondBackbone
@@ -61,6 +70,24 @@ class SensorStages:
     lidar: tuple[Tensor, ...] | None
     radar: tuple[Tensor, ...] | None
     timings: SceneTimings
+
+    def features(
+        self,
+        lidar: list[Tensor] | None,
+        radar: list[Tensor] | None,
+        detect_ms: float = 0.0,
+        **objects: Any,
+    ) -> SceneFeatures:
+        """The :class:`SceneFeatures` of one scene (batch 1) of clouds ``lidar`` / ``radar``,
+        with ``detect_ms`` as the detection stage's time and the referent path's ``objects``
+        (``objects``, ``detection_heatmaps``, ``answerable``)."""
+        return SceneFeatures(
+            stages=self.fused,
+            num_lidar=0 if lidar is None else int(lidar[0].shape[0]),
+            num_radar=0 if radar is None else int(radar[0].shape[0]),
+            timings=dataclasses.replace(self.timings, detect=detect_ms),
+            **objects,
+        )
 
     def maps(self, neck: Tensor, item: int) -> SceneMaps:
         """Item ``item``'s BEV maps for the referent stage: the FPN output ``neck`` ``(B, C, H,

@@ -8,7 +8,6 @@ candidates whose referent probability reaches the threshold, with
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Sequence
 
 import numpy as np
@@ -147,12 +146,10 @@ class ReferentGrounding(GroundingHead):
             None if lidar is None else lidar[0].cpu().numpy(),
             None if radar is None else radar[0].cpu().numpy(),
         )
-        timings = stages.timings
-        return SceneFeatures(
-            stages=stages.fused,
-            num_lidar=0 if lidar is None else int(lidar[0].shape[0]),
-            num_radar=0 if radar is None else int(radar[0].shape[0]),
-            timings=dataclasses.replace(timings, detect=clock.lap()),
+        return stages.features(
+            lidar,
+            radar,
+            clock.lap(),
             objects=objects,
             detection_heatmaps=heat,
             answerable=answerable,
