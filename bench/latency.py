@@ -21,7 +21,7 @@ are measured in the same run, taking turns prompt by prompt so that both see the
   ``checkpoints/tpcnet-small-faithful.pt``.
 
 The result says which models were used. The stage breakdown comes from the models' own
-:class:`model.tpcnet.GroundTimings`/``SceneTimings`` and is checked by timing the same stages from
+:class:`model.features.GroundTimings`/``SceneTimings`` and is checked by timing the same stages from
 outside through public submodules (TPCNet path: ``text_encoder``, ``text_fusion``, ``neck``,
 ``head``, :func:`model.head.detector.decode.decode`; referent path: ``text_encoder``, ``model.refer`` on
 ``features.objects``, :func:`model.referent.stage.stage.scene_candidates.referent_heatmap`, and the ``detect`` stage part by

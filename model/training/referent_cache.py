@@ -94,7 +94,7 @@ def cache_scenes(
     docstring). A ``dataset`` that flips every frame gives the mirrored views of the scenes.
     Prompts already in ``known`` (e.g. the other view's bank) are not encoded again; the bank
     returned holds only the new ones. ``prompt_config``: the generator's settings
-    (:meth:`model.referent_train.ReferentTrainConfig.prompt_config`; default: ``phrasing``'s
+    (:meth:`model.training.referent_step.ReferentTrainConfig.prompt_config`; default: ``phrasing``'s
     base prompts)."""
     from tqdm import tqdm
 
