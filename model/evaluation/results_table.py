@@ -19,7 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -154,25 +154,33 @@ def _grounding(row: Row) -> tuple[Mapping[str, object], list[tuple[str, Mapping[
     return _field(row.result, "grounding", row.source), sets  # type: ignore[return-value]
 
 
+def _answer_sets(
+    rows: Sequence[Row],
+) -> Iterator[tuple[str, str, Mapping[str, object], Mapping[str, object]]]:
+    """``(row label, where, block, its grounding block)`` of every answer set of every file (the
+    model, then its baselines), ``where`` naming the file and set in errors."""
+    for row in rows:
+        _, sets = _grounding(row)
+        for label, block in sets:
+            where = f"{row.source} [{label}]"
+            yield label, where, block, _field(block, "grounding", where)
+
+
 def grounding_table(rows: Sequence[Row]) -> str:
     """Per-prompt grounding, one row per answer set (model, class noun, oracle) of each file."""
     head = ["model", "prompts", "Acc@0.25", "Acc@0.5", "P", "R", "F1", "**set F1**", "exact"]
     head += ["EAA mAP", "threshold"]
     keys = ("acc_25", "acc_50", "precision", "recall", "f1", "set_f1", "exact")
     body = []
-    for row in rows:
-        _, sets = _grounding(row)
-        for label, block in sets:
-            where = f"{row.source} [{label}]"
-            g = _field(block, "grounding", where)
-            overall = _field(g, "overall", f"{where} grounding")
-            w = f"{where} grounding.overall"
-            cells = [label, str(int(_num(overall, "prompts", w)))]
-            cells += [f"{_num(overall, k, w):.1f}" for k in keys]
-            cells[7] = f"**{cells[7]}**"
-            cells.append(f"{_num(_field(block, 'entire_area', where), 'mAP_3d', where):.2f}")
-            cells.append(f"{_num(g, 'operating_threshold', f'{where} grounding'):g}")
-            body.append(cells)
+    for label, where, block, g in _answer_sets(rows):
+        overall = _field(g, "overall", f"{where} grounding")
+        w = f"{where} grounding.overall"
+        cells = [label, str(int(_num(overall, "prompts", w)))]
+        cells += [f"{_num(overall, k, w):.1f}" for k in keys]
+        cells[7] = f"**{cells[7]}**"
+        cells.append(f"{_num(_field(block, 'entire_area', where), 'mAP_3d', where):.2f}")
+        cells.append(f"{_num(g, 'operating_threshold', f'{where} grounding'):g}")
+        body.append(cells)
     return _markdown(head, body)
 
 
@@ -180,25 +188,21 @@ def grounding_splits_table(rows: Sequence[Row]) -> str:
     """Acc@0.25 / set F1 / exact-set per prompt group and type tag, one row per answer set (``-``
     where a file has no prompt of that kind)."""
     body = []
-    for row in rows:
-        _, sets = _grounding(row)
-        for label, block in sets:
-            where = f"{row.source} [{label}]"
-            g = _field(block, "grounding", where)
-            groups = _field(g, "by_group", f"{where} grounding")
-            types = _field(g, "by_prompt_type", f"{where} grounding")
-            cells = [label]
-            for split in SPLIT_NAMES:
-                entry = groups.get(split) if isinstance(groups, Mapping) else None
-                if entry is None and isinstance(types, Mapping):
-                    entry = types.get(split)
-                if entry is None:
-                    cells.append("-")
-                    continue
-                w = f"{where} grounding [{split}]"
-                a, f, e = (_num(entry, k, w) for k in ("acc_25", "set_f1", "exact"))
-                cells.append(f"{a:.1f} / {f:.1f} / {e:.1f}")
-            body.append(cells)
+    for label, where, _, g in _answer_sets(rows):
+        groups = _field(g, "by_group", f"{where} grounding")
+        types = _field(g, "by_prompt_type", f"{where} grounding")
+        cells = [label]
+        for split in SPLIT_NAMES:
+            entry = groups.get(split) if isinstance(groups, Mapping) else None
+            if entry is None and isinstance(types, Mapping):
+                entry = types.get(split)
+            if entry is None:
+                cells.append("-")
+                continue
+            w = f"{where} grounding [{split}]"
+            a, f, e = (_num(entry, k, w) for k in ("acc_25", "set_f1", "exact"))
+            cells.append(f"{a:.1f} / {f:.1f} / {e:.1f}")
+        body.append(cells)
     return _markdown(["Acc@0.25 / set F1 / exact", *SPLIT_NAMES], body)
 
 

@@ -112,7 +112,21 @@ def attention(q: Tensor, k: Tensor, v: Tensor) -> Tensor:
     return torch.matmul(scores.softmax(dim=-1), v)
 
 
-class AgentCrossAttention(nn.Module):
+class _Projections(nn.Module):
+    """The query, key, value and output projections of one cross attention over ``heads``."""
+
+    def __init__(self, channels: int, heads: int) -> None:
+        super().__init__()
+        if channels % heads:
+            raise ValueError(f"{heads} heads do not divide {channels} channels")
+        self.heads = heads
+        self.q = nn.Linear(channels, channels)
+        self.k = nn.Linear(channels, channels)
+        self.v = nn.Linear(channels, channels)
+        self.out = nn.Linear(channels, channels)
+
+
+class AgentCrossAttention(_Projections):
     """One direction of BACA (eq. 7, or eq. 8 with the sensors swapped).
 
     Queries come from sensor ``a``, keys and values from sensor ``b``; returns ``f_ag W_O`` as a
@@ -120,15 +134,8 @@ class AgentCrossAttention(nn.Module):
     """
 
     def __init__(self, channels: int, agent_size: tuple[int, int], heads: int) -> None:
-        super().__init__()
-        if channels % heads:
-            raise ValueError(f"{heads} heads do not divide {channels} channels")
-        self.heads = heads
+        super().__init__(channels, heads)
         self.agent_size = (int(agent_size[0]), int(agent_size[1]))
-        self.q = nn.Linear(channels, channels)
-        self.k = nn.Linear(channels, channels)
-        self.v = nn.Linear(channels, channels)
-        self.out = nn.Linear(channels, channels)
 
     def forward(self, xa: Tensor, xb: Tensor) -> Tensor:
         """``xa, xb``: ``(B, C, H, W)`` position-encoded maps of the query and key/value sensors."""
@@ -143,19 +150,12 @@ class AgentCrossAttention(nn.Module):
         return _map(self.out(_from_heads(fused)), height, width)
 
 
-class VanillaCrossAttention(nn.Module):
+class VanillaCrossAttention(_Projections):
     """One direction of multi-head cross attention over all ``L`` keys (quadratic in cells)."""
 
     def __init__(self, channels: int, heads: int, chunk: int) -> None:
-        super().__init__()
-        if channels % heads:
-            raise ValueError(f"{heads} heads do not divide {channels} channels")
-        self.heads = heads
+        super().__init__(channels, heads)
         self.chunk = chunk
-        self.q = nn.Linear(channels, channels)
-        self.k = nn.Linear(channels, channels)
-        self.v = nn.Linear(channels, channels)
-        self.out = nn.Linear(channels, channels)
 
     def forward(self, xa: Tensor, xb: Tensor) -> Tensor:
         height, width = xa.shape[-2:]

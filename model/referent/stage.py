@@ -123,6 +123,17 @@ class ReferentStage(nn.Module):
         mean = (text * keep).sum(1) / keep.sum(1).clamp(min=1.0)
         return torch.sigmoid(self.sensor_gate(mean)).view(-1, 2, self.cfg.dim)
 
+    def candidate_tokens(self, cands: CandidateBatch, text: Tensor, text_padding: Tensor) -> Tensor:
+        """The candidates' tokens ``(N, K, dim)``: geometry + fused-map embeddings, plus each
+        sensor's embedding scaled by the prompt's gate for that sensor, normalised."""
+        gate = self.gates(text, text_padding)
+        x = self.geometry(cands.geometry) + self.fused(cands.fused)
+        if self.lidar is not None and cands.lidar is not None:
+            x = x + gate[:, None, 0] * self.lidar(cands.lidar)
+        if self.radar is not None and cands.radar is not None:
+            x = x + gate[:, None, 1] * self.radar(cands.radar)
+        return self.cand_norm(x)
+
     def forward(
         self,
         cands: CandidateBatch,
@@ -137,13 +148,7 @@ class ReferentStage(nn.Module):
         if not self.training and not torch.is_grad_enabled():
             return self._infer(cands, tokens, numbers, text_padding)
         text = self.encode_text(tokens, numbers, text_padding)
-        gate = self.gates(text, text_padding)
-        x = self.geometry(cands.geometry) + self.fused(cands.fused)
-        if self.lidar is not None and cands.lidar is not None:
-            x = x + gate[:, None, 0] * self.lidar(cands.lidar)
-        if self.radar is not None and cands.radar is not None:
-            x = x + gate[:, None, 1] * self.radar(cands.radar)
-        x = self.cand_norm(x)
+        x = self.candidate_tokens(cands, text, text_padding)
         for block in self.blocks:
             x = block(
                 x,
@@ -170,13 +175,7 @@ class ReferentStage(nn.Module):
         text = self.text_in(torch.cat([tokens, numbers.to(tokens.dtype)], dim=-1))
         text = text + _attention(ctx.self_attn, ctx.norm1(text), None, text_mask)
         text = text + _feed_forward(ctx, ctx.norm2(text))
-        gate = self.gates(text, text_padding)
-        x = self.geometry(cands.geometry) + self.fused(cands.fused)
-        if self.lidar is not None and cands.lidar is not None:
-            x = x + gate[:, None, 0] * self.lidar(cands.lidar)
-        if self.radar is not None and cands.radar is not None:
-            x = x + gate[:, None, 1] * self.radar(cands.radar)
-        x = self.cand_norm(x)
+        x = self.candidate_tokens(cands, text, text_padding)
         cand_mask = _attend(cands.padding)
         for block in self.blocks:
             x = x + _attention(block.self_attn, block.norm1(x), None, cand_mask)
