@@ -112,6 +112,15 @@ def attention(q: Tensor, k: Tensor, v: Tensor) -> Tensor:
     return torch.matmul(scores.softmax(dim=-1), v)
 
 
+def _check_pair(f_l: Tensor, f_r: Tensor, channels: int) -> None:
+    """Raise ValueError unless the LiDAR and radar maps are both ``(B, channels, H, W)``."""
+    if f_l.shape != f_r.shape or f_l.shape[1] != channels:
+        raise ValueError(
+            f"fusion expects two (B, {channels}, H, W) maps, got {tuple(f_l.shape)} "
+            f"and {tuple(f_r.shape)}"
+        )
+
+
 class _Projections(nn.Module):
     """The query, key, value and output projections of one cross attention over ``heads``."""
 
@@ -201,11 +210,7 @@ class _CrossFusion(nn.Module):
 
     def forward(self, f_l: Tensor, f_r: Tensor) -> Tensor:
         """``(B, C, H, W)`` LiDAR and radar maps -> ``lr`` ``(B, C, H, W)``."""
-        if f_l.shape != f_r.shape or f_l.shape[1] != self.channels:
-            raise ValueError(
-                f"fusion expects two (B, {self.channels}, H, W) maps, got {tuple(f_l.shape)} "
-                f"and {tuple(f_r.shape)}"
-            )
+        _check_pair(f_l, f_r, self.channels)
         _, c, height, width = f_l.shape
         pe = sinusoidal_position_encoding(c, height, width, f_l.device).to(f_l.dtype)
         x_l, x_r = f_l + pe, f_r + pe
@@ -273,11 +278,7 @@ class ConvGateFusion(nn.Module):
         self.merge = _merge(channels)
 
     def forward(self, f_l: Tensor, f_r: Tensor) -> Tensor:
-        if f_l.shape != f_r.shape or f_l.shape[1] != self.channels:
-            raise ValueError(
-                f"fusion expects two (B, {self.channels}, H, W) maps, got {tuple(f_l.shape)} "
-                f"and {tuple(f_r.shape)}"
-            )
+        _check_pair(f_l, f_r, self.channels)
         both = torch.cat([f_l, f_r], dim=1)
         return self.merge(torch.sigmoid(self.gate(both)) * both)
 

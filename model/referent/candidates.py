@@ -211,6 +211,20 @@ def _mean(values: np.ndarray) -> float:
     return np.add.reduce(values) / len(values)
 
 
+def _points_by_box(
+    boxes: np.ndarray, points: np.ndarray, features: int, margin: float, use_z: bool
+) -> tuple[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None]:
+    """The number of boxes and, when any point lies in one (grown by ``margin``), the points in
+    the boxes ``(P, features)`` float64 grouped box after box, with :func:`_segments`' boxes
+    that have points, their first rows and counts; None when no point is in any box."""
+    b = _boxes(boxes)
+    pts = _points(points, features)
+    box, idx = _box_pairs(pts, b, margin, use_z=use_z)
+    if len(idx) == 0:
+        return len(b), None
+    return len(b), (np.asarray(pts[idx], dtype=np.float64), *_segments(box, len(b)))
+
+
 def lidar_evidence(boxes: np.ndarray, lidar: np.ndarray) -> np.ndarray:
     """LiDAR evidence ``(K, LIDAR_EVIDENCE)``: log(1 + points in the box grown by
     :data:`LIDAR_MARGIN`), mean intensity / 255, height spread of those points (m), whether any.
@@ -218,14 +232,11 @@ def lidar_evidence(boxes: np.ndarray, lidar: np.ndarray) -> np.ndarray:
     ``lidar``: ``(N, 4)`` (float32 as the model gets it, or float64); all boxes are served by one
     pass over the cloud (:func:`_box_pairs`).
     """
-    b = _boxes(boxes)
-    pts = _points(lidar, 4)
-    out = np.zeros((len(b), LIDAR_EVIDENCE), dtype=np.float32)
-    box, idx = _box_pairs(pts, b, LIDAR_MARGIN, use_z=True)
-    if len(idx) == 0:
+    k, grouped = _points_by_box(boxes, lidar, 4, LIDAR_MARGIN, use_z=True)
+    out = np.zeros((k, LIDAR_EVIDENCE), dtype=np.float32)
+    if grouped is None:
         return out
-    p = np.asarray(pts[idx], dtype=np.float64)
-    has, starts, counts = _segments(box, len(b))
+    p, has, starts, counts = grouped
     z = p[:, 2]
     spread = np.maximum.reduceat(z, starts) - np.minimum.reduceat(z, starts)
     intensity = [
@@ -263,14 +274,11 @@ def radar_evidence(boxes: np.ndarray, radar: np.ndarray) -> np.ndarray:
     along x and along y (slope over the ``time`` field, m / scan), whether any point; velocities in
     units of :data:`SPEED_SCALE` m/s.
     """
-    b = _boxes(boxes)
-    pts = _points(radar, 7)
-    out = np.zeros((len(b), RADAR_EVIDENCE), dtype=np.float32)
-    box, idx = _box_pairs(pts, b, RADAR_MARGIN, use_z=False)
-    if len(idx) == 0:
+    k, grouped = _points_by_box(boxes, radar, 7, RADAR_MARGIN, use_z=False)
+    out = np.zeros((k, RADAR_EVIDENCE), dtype=np.float32)
+    if grouped is None:
         return out
-    all_p = np.asarray(pts[idx], dtype=np.float64)
-    has, starts, counts = _segments(box, len(b))
+    all_p, has, starts, counts = grouped
     for i, s, n in zip(has.tolist(), starts.tolist(), counts.tolist(), strict=True):
         p = all_p[s : s + n]
         vc, times = p[:, 5], p[:, 6]
