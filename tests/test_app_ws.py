@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import pytest
 
+from app.answer_words import answer_sentence
+from app.text import md_text
 from scenes.layout import VELODYNE, sample_file, split_dir
 from tests.markdown_helpers import assert_only_text
 
@@ -62,6 +64,11 @@ def test_prompt_run_enter_and_empty_prompt(running_app, ws_client) -> None:
         assert session.answer is not None and session.answer.prompt == "the car about 15 m ahead"
         assert len(session.answer.predictions.boxes) == session.pred_view.count > 0
         assert session.query.history.options[0] == "the car about 15 m ahead"
+        # The answer is said in words above the table, as the browser received it.
+        said = md_text(answer_sentence(session.answer.prompt, session.answer.predictions.classes))
+        client.pump_until(
+            lambda: any(t.startswith(said) for t in client.markdown.values()), 10, "the words"
+        )
 
         # Enter in the prompt box (a line break in the value) runs the new prompt.
         client.set("Prompt", "a cyclist on the left\n")

@@ -85,6 +85,22 @@ def test_mixed_frames_weights(synth_root, release_root):
     assert mixed[len(a)].from_labels and not mixed[0].from_labels
 
 
+def test_scene_labels_bring_label_prompts_by_default():
+    from model.training.config import LABEL_PROMPTS, LABELLED_PROMPTS_PER_SCENE, TrainConfig
+
+    labelled = TrainConfig(data=("t2r",), out="runs/x", scene_labels=("vod",))
+    assert labelled.label_prompts == LABEL_PROMPTS > 0
+    assert labelled.prompts_per_scene == LABELLED_PROMPTS_PER_SCENE
+    plain = TrainConfig(data=("synth",), out="runs/x")
+    assert (plain.label_prompts, plain.prompts_per_scene) == (0, 8)
+    mixed = TrainConfig(data=("synth", "t2r"), out="runs/x", scene_labels=("none", "vod"))
+    assert (mixed.label_prompts, mixed.prompts_per_scene) == (LABEL_PROMPTS, 8)
+    given = TrainConfig(
+        data=("t2r",), out="runs/x", scene_labels=("vod",), label_prompts=0, prompts_per_scene=2
+    )
+    assert (given.label_prompts, given.prompts_per_scene) == (0, 2)
+
+
 def test_freeze_scene_with_init_detector_on_a_release_root(release_root, tmp_path):
     out = tmp_path / "run"
     torch.manual_seed(0)

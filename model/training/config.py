@@ -40,6 +40,20 @@ def default_device() -> str:
     return "cuda" if torch.cuda.is_available() else "cpu"
 
 
+LABEL_PROMPTS = 24
+"""``--label-prompts`` when a root has scene labels and the flag is not given: prompts generated
+per frame from its labelled boxes beside its given one (docs/RESULTS.md, "Real-format roots":
+with 1,080 given prompts the referent stage learns the class and little more; with 24 such
+prompts it learns the attributes)."""
+
+LABELLED_PROMPTS_PER_SCENE = 4
+"""``--prompts-per-scene`` when every root has scene labels and the flag is not given (a frame
+holds its given prompt and :data:`LABEL_PROMPTS` more; measured beside the label prompts)."""
+
+GENERATED_PROMPTS_PER_SCENE = 8
+"""``--prompts-per-scene`` otherwise (prompts generated per scene and step)."""
+
+
 class TrainingError(RuntimeError):
     """Training cannot go on (bad data, non-finite loss); the message says why."""
 
@@ -93,8 +107,11 @@ class TrainConfig:
         help="copy only the scene encoder and detector from this checkpoint; the referent stage "
         "starts from scratch (new runs)",
     )
-    prompts_per_scene: int = option(
-        8, on_resume=True, help="referent path: prompts generated per scene and step"
+    prompts_per_scene: int | None = option(
+        None,
+        on_resume=True,
+        help=f"referent path: prompts per scene and step (default {GENERATED_PROMPTS_PER_SCENE}; "
+        f"{LABELLED_PROMPTS_PER_SCENE} when every root has --scene-labels)",
     )
     radar_folder: str = option("auto", help="radar tree, 'auto' or 'none'")
     train_split: str = option("train", help="the split trained on (default train)")
@@ -129,11 +146,11 @@ class TrainConfig:
     bank_prompts: int = option(
         24, on_resume=True, help="--freeze-scene: prompts generated and encoded once per scene"
     )
-    label_prompts: int = option(
-        0,
+    label_prompts: int | None = option(
+        None,
         help="referent path, roots with --scene-labels: prompts generated per frame from its "
         "labelled boxes (class, depth and side only: their motion is unknown) beside the given "
-        "one (default 0: given prompts only)",
+        f"one (default {LABEL_PROMPTS} with --scene-labels; 0: given prompts only)",
     )
     language: LanguageKind = option(
         "base",
@@ -170,9 +187,17 @@ class TrainConfig:
             value = getattr(self, name)
             object.__setattr__(self, name, (value,) if isinstance(value, str) else tuple(value))
         try:
-            self.roots()
+            roots = self.roots()
         except DataSpecError as exc:
             raise TrainingError(str(exc)) from exc
+        labelled = [r.scene_labels is not None for r in roots]
+        if self.label_prompts is None:
+            object.__setattr__(self, "label_prompts", LABEL_PROMPTS if any(labelled) else 0)
+        if self.prompts_per_scene is None:
+            per_scene = LABELLED_PROMPTS_PER_SCENE if all(labelled) else GENERATED_PROMPTS_PER_SCENE
+            object.__setattr__(self, "prompts_per_scene", per_scene)
+        if self.label_prompts < 0:
+            raise TrainingError(f"--label-prompts must be >= 0, got {self.label_prompts}")
         if self.init and self.init_detector:
             raise TrainingError("give --init or --init-detector, not both")
         if self.grounding != "referent" and (len(self.data) > 1 or self.scene_labels):
@@ -224,4 +249,11 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     return from_args(TrainConfig, a), a.resume
 
 
-__all__ = ["TrainConfig", "TrainingError", "parse_args"]
+__all__ = [
+    "GENERATED_PROMPTS_PER_SCENE",
+    "LABELLED_PROMPTS_PER_SCENE",
+    "LABEL_PROMPTS",
+    "TrainConfig",
+    "TrainingError",
+    "parse_args",
+]
