@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from model.cli import add_options, from_args, option
 from model.evaluation.grounding import PromptBoxes, prompt_outcome
 from model.evaluation.predict import iterate_predictions
 
@@ -182,22 +183,27 @@ def calibrate_run(path: Path, data: str | Path, split: str) -> None:
     )
 
 
+@dataclass(frozen=True, kw_only=True)
+class CalibrateConfig:
+    """The settings of ``python -m model.calibrate`` (each field is one of its flags)."""
+
+    data: str = option(help="Talk2Radar root with a validation split")
+    checkpoint: str = option(help="checkpoint to calibrate (rewritten)")
+    split: str = option("val")
+    limit: int = option(0, help="first N samples only (0: all)")
+    dry_run: bool = option(False, help="print the choice, write nothing")
+    min_prompts: int = option(
+        MIN_REFERRED_PROMPTS,
+        help=f"prompts with a referent the split must hold (default {MIN_REFERRED_PROMPTS})",
+    )
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(
         prog="python -m model.calibrate", description=__doc__.split("\n")[0]
     )
-    p.add_argument("--data", required=True, help="Talk2Radar root with a validation split")
-    p.add_argument("--checkpoint", required=True, help="checkpoint to calibrate (rewritten)")
-    p.add_argument("--split", default="val")
-    p.add_argument("--limit", type=int, default=0, help="first N samples only (0: all)")
-    p.add_argument("--dry-run", action="store_true", help="print the choice, write nothing")
-    p.add_argument(
-        "--min-prompts",
-        type=int,
-        default=MIN_REFERRED_PROMPTS,
-        help=f"prompts with a referent the split must hold (default {MIN_REFERRED_PROMPTS})",
-    )
-    a = p.parse_args(argv)
+    add_options(p, CalibrateConfig)
+    a = from_args(CalibrateConfig, p.parse_args(argv))
     from model.checkpoint import CheckpointError
     from scenes.root import RootError
 
