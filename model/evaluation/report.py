@@ -26,9 +26,10 @@ All AP values are the entire-area 3D mAP at 11 recall points unless a table says
 
 from __future__ import annotations
 
+import typing
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal
 
 import numpy as np
 
@@ -62,11 +63,28 @@ PROMPT_TYPES: tuple[str, ...] = ("depth", "velocity", "motion", "position")
 DEPTH_BINS: tuple[tuple[float, float], ...] = tuple((10.0 * i, 10.0 * (i + 1)) for i in range(6))
 
 
-BASELINES: tuple[str, ...] = ("class_noun", "oracle")
-"""Baseline names, in table order (JSON keys under ``baselines``)."""
+BaselineName = Literal["class_noun", "oracle"]
+"""A baseline: the class-noun prompt, the language-blind oracle (JSON keys under ``baselines``)."""
+
+BASELINES: tuple[BaselineName, ...] = typing.get_args(BaselineName)
+"""Baseline names, in table order."""
 
 ROW_NAMES: dict[str, str] = {"model": "model", "class_noun": "class noun", "oracle": "oracle"}
 """Row labels of the printed grounding tables."""
+
+
+@dataclass
+class AnswerSet:
+    """What one answerer (the model or a baseline) gave on a split, prompt after prompt.
+
+    Attributes:
+        outcomes: Its outcome per prompt (:func:`model.evaluation.grounding.prompt_outcome`).
+        labels: Frame id -> its answer as prediction labels (baselines: what their files would
+            hold, scored with the official metric).
+    """
+
+    outcomes: list[PromptOutcome] = field(default_factory=list)
+    labels: dict[str, list[ObjectLabel]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -110,8 +128,8 @@ class GroundingReport:
     tags: Mapping[str, frozenset[str]] = field(repr=False, default_factory=dict)
     seconds: tuple[float, ...] = field(repr=False, default=())
     grounding: GroundingMetrics | None = None
-    baselines: Mapping[str, BaselineResult] = field(default_factory=dict)
-    notes: Mapping[str, str] = field(default_factory=dict)
+    baselines: Mapping[BaselineName, BaselineResult] = field(default_factory=dict)
+    notes: Mapping[BaselineName, str] = field(default_factory=dict)
 
     def rescored(self, predictions: Mapping[str, list[ObjectLabel]]) -> GroundingReport:
         """The same report with other predictions for the same frames (e.g. read back from the
@@ -278,8 +296,8 @@ def evaluate_predictions(
     dt: dict[str, list[ObjectLabel]] = {}
     tags: dict[str, frozenset[str]] = {}
     seconds = []
-    outcomes: dict[str, list[PromptOutcome]] = {"model": [], "class_noun": [], "oracle": []}
-    base_dt: dict[str, dict[str, list[ObjectLabel]]] = {"class_noun": {}, "oracle": {}}
+    answers = AnswerSet()
+    base: dict[BaselineName, AnswerSet] = {name: AnswerSet() for name in BASELINES}
     noun_answers: dict[tuple[object, ...], PromptBoxes] = {}
     no_meta: list[str] = []
     for pred in iterate_predictions(
@@ -300,7 +318,7 @@ def evaluate_predictions(
         where = f"{root.path}: sample {sid}"
         referents = PromptBoxes.make(sample.boxes, sample.classes, source=f"{where} label_2")
         answer = PromptBoxes.make(pred.boxes, pred.classes, pred.scores, source=f"{where} model")
-        outcomes["model"].append(prompt_outcome(sid, tags[sid], answer, referents, op))
+        answers.outcomes.append(prompt_outcome(sid, tags[sid], answer, referents, op))
         if not baselines:
             continue
         cls = named_class(tags[sid], sample.classes)
@@ -312,8 +330,10 @@ def evaluate_predictions(
                 p.boxes, p.classes, p.scores, source=f"{where} class noun"
             )
         noun_boxes = noun_answers[key]
-        base_dt["class_noun"][sid] = _labels(noun_boxes, decode, sample)
-        outcomes["class_noun"].append(prompt_outcome(sid, tags[sid], noun_boxes, referents, op))
+        base["class_noun"].labels[sid] = _labels(noun_boxes, decode, sample)
+        base["class_noun"].outcomes.append(
+            prompt_outcome(sid, tags[sid], noun_boxes, referents, op)
+        )
         if scene_labels is not None:
             boxes, labels = scene_labels.load(sid).metric()
             objects = [
@@ -327,11 +347,11 @@ def evaluate_predictions(
         else:
             skip = unsensed_ids(sample.meta, source=f"{root.path / 'meta' / sid}.json")
             oracle = oracle_boxes(sample.meta.actors, cls, exclude=skip)
-        base_dt["oracle"][sid] = _labels(oracle, decode, sample)
-        outcomes["oracle"].append(prompt_outcome(sid, tags[sid], oracle, referents, op))
+        base["oracle"].labels[sid] = _labels(oracle, decode, sample)
+        base["oracle"].outcomes.append(prompt_outcome(sid, tags[sid], oracle, referents, op))
     report = build_report(gt, dt, tags, tuple(seconds))
-    found: dict[str, BaselineResult] = {}
-    notes: dict[str, str] = {}
+    found: dict[BaselineName, BaselineResult] = {}
+    notes: dict[BaselineName, str] = {}
     if baselines:
         if no_meta:
             notes["oracle"] = (
@@ -341,12 +361,12 @@ def evaluate_predictions(
         for name in BASELINES:
             if name not in notes:
                 found[name] = BaselineResult(
-                    result=evaluate_frames(gt, base_dt[name]),
-                    grounding=grounding_metrics(outcomes[name], op),
+                    result=evaluate_frames(gt, base[name].labels),
+                    grounding=grounding_metrics(base[name].outcomes, op),
                 )
     return replace(
         report,
-        grounding=grounding_metrics(outcomes["model"], op),
+        grounding=grounding_metrics(answers.outcomes, op),
         baselines=found,
         notes=notes,
     )
