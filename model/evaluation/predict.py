@@ -15,7 +15,7 @@ The writer follows mmdet3d's ``KittiMetric`` as the Talk2Radar workflow uses it 
 from __future__ import annotations
 
 import time
-from collections import OrderedDict, deque
+from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -32,6 +32,7 @@ from model.referent.head import UNCALIBRATED_REFERENT
 from model.referent.labelled import LabelledBoxes
 from scenes.calib import IMAGE_SIZE, Calibration, bottom_centres
 from scenes.kitti import ObjectLabel, boxes_to_labels, write_label_file
+from scenes.lru import LRUCache
 from scenes.root import Sample, Talk2RadarRoot
 
 if TYPE_CHECKING:
@@ -185,14 +186,14 @@ def iterate_predictions(
             raise ValueError(f"{root.path}: sample {sid} has no prompt to ground")
         return sample, scene_key(root, sid), None if candidates is None else candidates(sample)
 
-    cache: OrderedDict[SceneKey, tuple[SceneFeatures, float]] = OrderedDict()
+    cache: LRUCache[SceneKey, tuple[SceneFeatures, float]] = LRUCache(max(cache_scenes, 0))
     bar = tqdm(total=len(ids), desc="predict", unit="frame", disable=not progress)
     with torch.no_grad(), bar:
         for sample, key, labelled in read_ahead(read, ids):
             bar.update(1)
-            if key in cache:
-                cache.move_to_end(key)
-                features, encode_seconds = cache[key]
+            hit = cache.get(key)
+            if hit is not None:
+                features, encode_seconds = hit
             else:
                 start = time.perf_counter()
                 if labelled is None:
@@ -200,10 +201,7 @@ def iterate_predictions(
                 else:
                     features = model.encode_scene(sample.lidar, sample.radar, candidates=labelled)
                 encode_seconds = time.perf_counter() - start
-                if cache_scenes > 0:
-                    cache[key] = (features, encode_seconds)
-                    while len(cache) > cache_scenes:
-                        cache.popitem(last=False)
+                cache.put(key, (features, encode_seconds))
             start = time.perf_counter()
             pred = model.ground(features, sample.prompt, score_threshold=score_threshold)
             seconds = encode_seconds + time.perf_counter() - start

@@ -35,7 +35,6 @@ import json
 import logging
 import os
 import threading
-from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import lru_cache
@@ -49,6 +48,7 @@ from torch.nn.utils.rnn import pack_padded_sequence, pad_packed_sequence
 
 from model.config import TextConfig
 from model.nets.numerals import token_numeric_features
+from scenes.lru import LRUCache
 
 LOG = logging.getLogger(__name__)
 
@@ -354,8 +354,7 @@ class MiniLMTextEncoder(nn.Module):
     def __init__(self, max_tokens: int = 30, cache_size: int = 4096) -> None:
         super().__init__()
         self.max_tokens = max_tokens
-        self.cache_size = cache_size
-        self._cache: OrderedDict[str, tuple[Tensor, Tensor, bool]] = OrderedDict()
+        self._cache: LRUCache[str, tuple[Tensor, Tensor, bool]] = LRUCache(cache_size)
         self.cache_hits = 0
         self.cache_misses = 0
         # Follows .to(device) so that outputs land on the model's device; not in the state_dict.
@@ -377,10 +376,18 @@ class MiniLMTextEncoder(nn.Module):
         thread.start()
         return thread
 
+    @property
+    def cache_size(self) -> int:
+        """Distinct prompts cached (0: none); setting it drops the least recently used beyond."""
+        return self._cache.max_items
+
+    @cache_size.setter
+    def cache_size(self, value: int) -> None:
+        self._cache.max_items = value
+
     def _encode_one(self, prompt: str) -> tuple[Tensor, Tensor, bool]:
         cached = self._cache.get(prompt)
         if cached is not None:
-            self._cache.move_to_end(prompt)
             self.cache_hits += 1
             return cached
         entry = encode_minilm_batched([prompt], self.max_tokens)[0]
@@ -390,10 +397,7 @@ class MiniLMTextEncoder(nn.Module):
     def _remember(self, prompt: str, entry: tuple[Tensor, Tensor, bool]) -> None:
         """Count a cache miss and keep ``entry`` in the LRU (when the cache is on)."""
         self.cache_misses += 1
-        if self.cache_size > 0:
-            self._cache[prompt] = entry
-            if len(self._cache) > self.cache_size:
-                self._cache.popitem(last=False)
+        self._cache.put(prompt, entry)
 
     def prefetch(self, prompts: Sequence[str], chunk: int = 64) -> None:
         """Encode the uncached ``prompts`` with :func:`encode_minilm_batched` (about 4x less time
