@@ -45,6 +45,7 @@ Single-modality models do not build a fusion module: ``lr`` is the sensor's own 
 from __future__ import annotations
 
 import math
+import threading
 from functools import lru_cache
 
 import torch
@@ -112,10 +113,36 @@ def attention(q: Tensor, k: Tensor, v: Tensor) -> Tensor:
     return torch.matmul(scores.softmax(dim=-1), v)
 
 
-def _scores(a: Tensor, x: Tensor, scale: float) -> Tensor:
-    """``scale * a @ x``: ``(N, M, d) @ (N, d, K) -> (N, M, K)``, scaled inside the product."""
-    out = torch.empty(a.shape[0], a.shape[1], x.shape[2], dtype=a.dtype, device=a.device)
-    return torch.baddbmm(out, a, x, beta=0.0, alpha=scale)
+_SCRATCH = threading.local()
+"""Per-thread score buffers of CPU inference (:func:`_softmax_scores`)."""
+
+
+def _scratch(slot: str, shape: tuple[int, ...], like: Tensor) -> Tensor:
+    """A buffer of ``shape`` for CPU inference, kept per thread and reused across calls (grown
+    when a call needs more). Without it every call allocates its multi-megabyte score tensors
+    afresh, and the allocator hands them back to the system and faults them in again on each
+    call (thousands of page faults per scene at the first stage)."""
+    buffers = getattr(_SCRATCH, "buffers", None)
+    if buffers is None:
+        buffers = _SCRATCH.buffers = {}
+    numel = math.prod(shape)
+    buf = buffers.get((slot, like.dtype))
+    if buf is None or buf.numel() < numel:
+        buf = buffers[(slot, like.dtype)] = torch.empty(numel, dtype=like.dtype)
+    return buf[:numel].view(shape)
+
+
+def _softmax_scores(a: Tensor, x: Tensor, scale: float) -> Tensor:
+    """``softmax(scale * a @ x)`` over the last dim: ``(N, M, d) @ (N, d, K) -> (N, M, K)``, the
+    scale applied inside the product. CPU inference writes into :func:`_scratch` buffers (the
+    result is only valid until the next call on this thread: consume it at once)."""
+    shape = (a.shape[0], a.shape[1], x.shape[2])
+    if a.device.type != "cpu" or torch.is_grad_enabled():
+        out = torch.empty(shape, dtype=a.dtype, device=a.device)
+        return torch.baddbmm(out, a, x, beta=0.0, alpha=scale).softmax(dim=-1)
+    scores = _scratch("scores", shape, a)
+    torch.baddbmm(scores, a, x, beta=0.0, alpha=scale, out=scores)
+    return torch.softmax(scores, -1, out=_scratch("probabilities", shape, a))
 
 
 def _project_many(linears: tuple[nn.Linear, ...], x: Tensor) -> Tensor:
@@ -175,9 +202,9 @@ class AgentCrossAttention(nn.Module):
         agents = F.adaptive_avg_pool2d(q, self.agent_size).reshape(b * n, d, -1)  # A_a
         q, k, v = (t.reshape(b * n, d, -1) for t in (q, k, v))
         agents_t = agents.transpose(1, 2)  # (B n, l, d)
-        gather = _scores(agents_t, k, scale).softmax(dim=-1)  # (B n, l, L)
+        gather = _softmax_scores(agents_t, k, scale)  # (B n, l, L)
         context = torch.bmm(v, gather.transpose(1, 2))  # f_ac^T: (B n, d, l)
-        spread = _scores(q.transpose(1, 2), agents, scale).softmax(dim=-1)  # (B n, L, l)
+        spread = _softmax_scores(q.transpose(1, 2), agents, scale)  # (B n, L, l)
         return torch.bmm(context, spread.transpose(1, 2)).view(b, c, -1)  # f_ag^T
 
 
