@@ -148,12 +148,25 @@ def _cpu_attention_flops(
     return sdpa_flop_count(query_shape, key_shape, value_shape)
 
 
+def _onednn_linear_flops(
+    input_shape: tuple[int, ...], weight_shape: tuple[int, ...], *_, **__
+) -> int:
+    """FLOPs of oneDNN's linear ``(..., K) x (N, K)^T``: those of the matrix product."""
+    return 2 * math.prod(input_shape[:-1]) * weight_shape[0] * weight_shape[1]
+
+
 _EXTRA_FLOP_FORMULAS = {
     torch.ops.aten._scaled_dot_product_flash_attention_for_cpu: _cpu_attention_flops,
+    **(
+        {torch.ops.mkldnn._linear_pointwise: _onednn_linear_flops}
+        if hasattr(torch.ops.mkldnn, "_linear_pointwise")
+        else {}
+    ),
 }
 """Operators ``FlopCounterMode`` has no formula for: the CPU kernel of
 ``scaled_dot_product_attention`` counts as the attention it computes (``q k^T`` and the product
-with ``v``: the FLOPs of the explicit form), so that a fused attention has the same floor."""
+with ``v``: the FLOPs of the explicit form), oneDNN's linear (``model.text``) as its matrix
+product, so that a fused or oneDNN form of an operation has the same floor as the plain one."""
 
 
 @dataclass(frozen=True)
