@@ -40,12 +40,11 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from model.tpcnet import TPCNet
+    from model import TPCNet
     from scenes.root import Talk2RadarRoot
 
 REPO = Path(__file__).resolve().parent
 DEFAULT_DATA = REPO / "data" / "default"
-DEFAULT_CHECKPOINT = REPO / "checkpoints" / "tpcnet-small.pt"
 DEFAULT_FRAMES = 60
 DEFAULT_SEED = 0
 COMPLETE_MARKER = ".talk2pc-complete"
@@ -61,6 +60,8 @@ class LaunchError(Exception):
 
 
 def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    from model import DEFAULT_CHECKPOINT
+
     p = argparse.ArgumentParser(
         prog="python launch.py",
         description="Serve the Talk2PC viser app: type a sentence, see the referred objects boxed.",
@@ -247,8 +248,7 @@ def load_model(checkpoint: Path | None, device: str, threads: int = 1) -> tuple[
     """
     import torch
 
-    from model import build_model
-    from model.checkpoint import CheckpointError, load_checkpoint
+    from model import DEFAULT_CHECKPOINT, CheckpointError, build_model, load_checkpoint
 
     if threads < 1:
         raise LaunchError(f"--threads must be >= 1, got {threads}")

@@ -24,10 +24,11 @@ import time
 from collections.abc import Callable
 from concurrent.futures import Future
 from dataclasses import dataclass
-from typing import Any, Generic, Literal, Protocol, TypeVar, runtime_checkable
+from typing import Any, Generic, Literal, TypeVar
 
 import numpy as np
 
+from model import GroundingModel, ModelSettings, PredictionsView
 from scenes.lru import LRUCache
 from scenes.root import Sample
 
@@ -43,89 +44,23 @@ MODALITY_LABELS: dict[str, Modality] = {
 """GUI label -> modality."""
 
 
-class GridExtent(Protocol):
-    """The BEV extent of a heatmap grid (``model.grid.BevGrid`` has it), metres, LiDAR frame."""
-
-    @property
-    def x_min(self) -> float: ...
-
-    @property
-    def x_max(self) -> float: ...
-
-    @property
-    def y_min(self) -> float: ...
-
-    @property
-    def y_max(self) -> float: ...
-
-
-@runtime_checkable
-class Predictions(Protocol):
-    """What the app reads of one answer (:class:`model.tpcnet.Predictions` satisfies it)."""
-
-    @property
-    def boxes(self) -> np.ndarray:
-        """``(K, 7)`` ``x, y, z, l, w, h, yaw``, LiDAR frame, best score first."""
-        ...
-
-    @property
-    def scores(self) -> np.ndarray:
-        """``(K,)`` in ``[0, 1]``."""
-        ...
-
-    @property
-    def classes(self) -> tuple[str, ...]:
-        """``K`` class names (``scenes.actors.CLASSES``)."""
-        ...
-
-    @property
-    def heatmaps(self) -> np.ndarray:
-        """``(3, H, W)`` sigmoid heatmaps on :attr:`grid`, ``heatmaps[c, iy, ix]``."""
-        ...
-
-    @property
-    def grid(self) -> GridExtent: ...
-
-
-class ModelConfig(Protocol):
-    """What the app reads of a model's configuration (:class:`model.config.ModelConfig`)."""
-
-    @property
-    def modalities(self) -> str:
-        """``"both"``, ``"lidar"`` or ``"radar"``: the sensors the model was built for."""
-        ...
-
-
 Features = TypeVar("Features")
-"""A model's encoded scene (``model.tpcnet.SceneFeatures``); the engine only caches it."""
+"""A model's encoded scene (``model.features.SceneFeatures``); the engine only caches it."""
 
-
-@runtime_checkable
-class GroundingModel(Protocol[Features]):
-    """What the app needs of a model (:class:`model.tpcnet.TPCNet` satisfies it).
-
-    A model without ``cfg`` (or with None) counts as a two-sensor model with no threshold of its
-    own; :func:`initial_threshold` and :func:`model_modalities` read it.
-    """
-
-    @property
-    def cfg(self) -> ModelConfig | None: ...
-
-    def encode_scene(self, lidar: np.ndarray | None, radar: np.ndarray | None) -> Features: ...
-
-    def ground(
-        self, features: Features, prompt: str, score_threshold: float | None = None
-    ) -> Predictions: ...
+Predictions = PredictionsView
+"""What the app reads of one answer (:class:`model.protocol.PredictionsView`)."""
 
 
 def initial_threshold(model: GroundingModel, default: float) -> float:
     """The score threshold the query panel starts at: the checkpoint's operating threshold
-    (:func:`model.predict.operating_threshold`, chosen on a validation split by
+    (:func:`model.evaluation.predict.operating_threshold`, chosen on a validation split by
     ``python -m model.calibrate``) so that the app shows the model's answer set, else the
-    decoder's ``cfg.head.score_threshold``, else ``default`` (a model without a config)."""
+    grounding head's uncalibrated threshold (``model.UNCALIBRATED_REFERENT``, a referent
+    probability, on the referent path; the decoder's ``cfg.head.score_threshold`` on the paper's),
+    else ``default`` (a model without a config)."""
     if _config(model) is None:
         return float(default)
-    from model.predict import operating_threshold
+    from model import operating_threshold
 
     return operating_threshold(model)  # type: ignore[arg-type]
 
@@ -142,7 +77,7 @@ def model_modalities(model: GroundingModel) -> tuple[Modality, ...]:
     return ("both", "lidar", "radar")
 
 
-def _config(model: GroundingModel) -> ModelConfig | None:
+def _config(model: GroundingModel) -> ModelSettings | None:
     """The model's configuration, None for a model without one."""
     return getattr(model, "cfg", None)
 

@@ -1,6 +1,6 @@
 """The C3D-RECHead heatmap as a translucent RGBA image lying on the ground.
 
-The head's heatmaps are ``(3, H, W)`` sigmoid scores on its BEV grid (:class:`model.grid.BevGrid`:
+The head's heatmaps are ``(3, H, W)`` sigmoid scores on its BEV grid (:class:`model.nets.grid.BevGrid`:
 ``heatmaps[c, iy, ix]``, row ``iy`` along +y, column ``ix`` along +x, LiDAR frame). One image
 shows all three classes: each cell takes the colour of its highest-scoring class
 (:data:`app.colors.CLASS_COLORS`) and an alpha of ``opacity * score``, so empty cells are clear.
@@ -21,7 +21,7 @@ import numpy as np
 import viser
 
 from app.colors import RGB, class_color
-from app.engine import GridExtent
+from model import GridExtent
 from scenes.actors import CLASSES
 
 GROUND_LIFT = 0.05

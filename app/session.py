@@ -173,7 +173,7 @@ class ClientSession:
 
     @property
     def predictions(self) -> Predictions | None:
-        """The predictions drawn (``model.tpcnet.Predictions``), or None."""
+        """The predictions drawn (``model.features.Predictions``), or None."""
         return None if self.answer is None else self.answer.predictions
 
     def add_frame_listener(self, fn: Listener) -> None:

@@ -1,4 +1,4 @@
-"""Compare :mod:`model.metrics` with the official View-of-Delft devkit on random non-degenerate sets.
+"""Compare :mod:`model.evaluation.metrics` with the official View-of-Delft devkit on random non-degenerate sets.
 
 The devkit (PyPI ``vod-tudelft``, which needs ``numba``) is not a project dependency. Install it in a
 scratch virtual environment outside the repository and point this script at its interpreter::
@@ -250,7 +250,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
     sys.path.insert(0, str(_REPO))
-    from model.evaluate import score_directories
+    from model import score_directories
 
     with tempfile.TemporaryDirectory(prefix="vodcmp") as tmp:
         folders = []

@@ -54,7 +54,7 @@ from bench.report import (
 )
 from bench.vod_frames import LIDAR_POINTS, RADAR_POINTS, vod_frames
 from bench.workloads import warm_up
-from model.tpcnet import TPCNet
+from model import TPCNet
 
 ENCODE_TARGET = 2.0
 GROUND_TARGET = 4.0

@@ -26,9 +26,10 @@ import torch
 
 from bench.latency_measure import DETECT_PARTS, REFERENT, measure_detect_parts, text_cache
 from bench.measure import count_flops
+from bench.model_parts import model_parts
 from bench.vod_frames import VodFrame
 from bench.workloads import SceneWorkload
-from model.tpcnet import SceneFeatures, TPCNet
+from model import SceneFeatures, TPCNet
 
 MATMUL_N = 1024
 """Side of the square float32 matmul that measures the machine's rate."""
@@ -64,21 +65,22 @@ def encode_flops(model: TPCNet, frame: VodFrame) -> dict[str, int]:
     reports per module); FLOPs outside every named module go to ``detect``.
     """
     counted = count_flops(lambda: model.encode_scene(frame.lidar, frame.radar))
-    branches = [b for b in (model.lidar, model.radar) if b is not None]
+    parts = model_parts(model)
+    branches = [b for b in (parts.lidar, parts.radar) if b is not None]
     stage_of: dict[str, str] = {}
     for name in _module_names(*(b.pillars for b in branches)):
         stage_of[name] = "pillars"
     for name in _module_names(*(b.backbone for b in branches)):
         stage_of[name] = "backbone"
-    for name in _module_names(*(model.fusion or [])):
+    for name in _module_names(*(parts.fusion or [])):
         stage_of[name] = "fusion"
     out = dict.fromkeys(ENCODE_STAGES, 0)
     tops = {k: v for k, v in counted.by_module.items() if "." not in k and k != "Global"}
     for name, flops in tops.items():
         out[stage_of.get(name, "detect")] += flops
     out["detect"] += counted.total - sum(tops.values())
-    out["neck"] = tops.get(type(model.neck).__name__, 0)
-    out["head"] = tops.get(type(model.head).__name__, 0)
+    out["neck"] = tops.get(type(parts.neck).__name__, 0)
+    out["head"] = tops.get(type(parts.head).__name__, 0)
     out["total"] = counted.total
     return out
 
@@ -97,7 +99,8 @@ def ground_flops(model: TPCNet, features: SceneFeatures, prompt: str) -> dict[st
             # Counted on the stage's module form (gradients on: no fused fast path, whose
             # attention the counter does not see), so that every implementation has one floor.
             with torch.enable_grad():
-                ref = count_flops(lambda: model.refer(objects, text)).total if len(objects) else 0
+                refer = model_parts(model).refer
+                ref = count_flops(lambda: refer(objects, text)).total if len(objects) else 0
     finally:
         text_cache(model, old)
     return {"text": text_flops, "referent": ref, "decode": 0, "total": text_flops + ref}

@@ -49,8 +49,7 @@ from bench.common import (
     peak_memory_bytes,
     summarize,
 )
-from model.baca import build_fusion
-from model.config import FusionConfig, preset
+from model import FusionConfig, build_fusion, preset
 
 REFERENCE = "BACA 12x12"
 UNCHUNKED = "bi_mhca, unchunked"

@@ -4,10 +4,10 @@
 On the same maps (the fused BEV maps ``lr_i`` of a synthetic scene, from an untrained model of
 each preset, batch 1), in one process, the graph construction + max-relative aggregation of:
 
-- **DGGF**: the dynamic axial graph of Algorithm 1 (:func:`model.dggf.dynamic_max_relative`,
+- **DGGF**: the dynamic axial graph of Algorithm 1 (:func:`model.nets.dggf.dynamic_max_relative`,
   roll step ``K`` = 8, 4, 2 per stage; edges where the feature distance is below ``mu - sigma``
   estimated from the diagonal quadrants);
-- **GGF**: Talk2Radar's static axial graph (:func:`model.dggf.static_max_relative`, ``K`` = 2,
+- **GGF**: Talk2Radar's static axial graph (:func:`model.nets.dggf.static_max_relative`, ``K`` = 2,
   every roll is an edge);
 - **KNN**: a Vision-GNN graph, :func:`knn_max_relative` below: exhaustive pairwise Euclidean
   distances between all ``H * W`` nodes, the ``k = 9`` nearest (the node itself included, as
@@ -45,12 +45,10 @@ from bench.common import (
     summarize,
     synthetic_scenes,
 )
-from model import build_model
-from model import dggf as _dggf
-from model.dggf import dynamic_max_relative, static_max_relative
+from model import build_model, dynamic_max_relative, dynamic_max_relative_loop, static_max_relative
 
-LOOP = getattr(_dggf, "dynamic_max_relative_loop", None)
-"""The roll-loop form of Algorithm 1 when model/dggf.py has it beside the default form."""
+LOOP = dynamic_max_relative_loop
+"""The roll-loop form of Algorithm 1 when model/nets/dggf.py has it beside the default form."""
 LOOP_LABEL = "same graph, roll loop (`dynamic_max_relative_loop`)"
 
 KNN_K = 9
@@ -160,7 +158,7 @@ def run(quick: bool = False, command: str = "python -m bench.graph_cost") -> Ben
             _, c, h, w = x.shape
             n = h * w
             k = graph_k[i]
-            block = model.text_fusion[i]
+            block = model.grounding.text_fusion[i]
             text = tokens[..., : model.text_encoder.out_dim]
             dggf_label = f"DGGF dynamic axial graph, K = {k}"
             knn_label = f"KNN graph, k = {KNN_K}"
@@ -270,7 +268,7 @@ def run(quick: bool = False, command: str = "python -m bench.graph_cost") -> Ben
         )
         findings.append(
             "`dynamic_max_relative` (the model's default form) against the roll loop of the same "
-            f"graph, inference without gradients: {parts}. Same values (model/dggf.py); a ratio "
+            f"graph, inference without gradients: {parts}. Same values (model/nets/dggf.py); a ratio "
             "above 1 means the loop is the faster form for `ground`. KNN / roll-loop latency: "
             + ", ".join(loop_vs_knn)
             + "."

@@ -11,9 +11,8 @@ threshold for the answer set), then prints one markdown table: per family and fi
 named class, score 1). Rewording cases are also grounded in the generator's own wording of the
 same meaning where it has one (:mod:`bench.language_generator`), on the same cases.
 
-Model imports: :func:`model.checkpoint.load_checkpoint` and
-:func:`model.predict.operating_threshold` (the CLI only); the rest takes any object with
-``encode_scene`` / ``ground`` as the app does.
+Model imports: only the public ``model`` names ``load_checkpoint`` and ``operating_threshold``
+(the CLI); the rest takes any object with ``encode_scene`` / ``ground`` as the app does.
 """
 
 from __future__ import annotations
@@ -199,11 +198,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             write_fingerprint(args.suite, fingerprint(root))
             print(f"{args.suite}: recorded the fingerprint of {args.scenes}")
             return 0
-        from model.checkpoint import load_checkpoint
+        from model import load_checkpoint
 
         model = load_checkpoint(args.checkpoint, device=args.device)
         if args.threshold is None:
-            from model.predict import operating_threshold
+            from model import operating_threshold
 
             threshold = operating_threshold(model)  # type: ignore[arg-type]
         else:

@@ -1,7 +1,7 @@
 """Measurements of :mod:`bench.latency`: the models of both grounding paths, the timed calls, the
 stage timings from outside the model, the thread comparison and cProfile.
 
-Each path is described by a :class:`PathSpec` (which :class:`model.tpcnet.GroundTimings` and
+Each path is described by a :class:`PathSpec` (which :class:`model.features.GroundTimings` and
 ``SceneTimings`` fields its stages are). Timings are wall-clock milliseconds
 (``time.perf_counter``, CUDA synchronised before each reading); what is timed is exactly what the
 app calls: ``model.encode_scene(lidar, radar)`` and ``model.ground(features, prompt)``.
@@ -10,8 +10,6 @@ app calls: ``model.encode_scene(lidar, radar)`` and ``model.ground(features, pro
 from __future__ import annotations
 
 import cProfile
-import importlib
-import inspect
 import os
 import pstats
 import time
@@ -23,12 +21,19 @@ import numpy as np
 import torch
 
 from bench.measure import synchronize
+from bench.model_parts import keep_candidates, model_parts
 from bench.report import REPO
 from bench.workloads import SceneWorkload
-from model import build_model
-from model.decode import decode
-from model.grounder import referent_heatmap
-from model.tpcnet import SceneFeatures, TPCNet, as_points
+from model import (
+    CheckpointMeta,
+    SceneFeatures,
+    TPCNet,
+    as_points,
+    build_model,
+    decode,
+    referent_head,
+    referent_heatmap,
+)
 
 CHECKPOINT = REPO / "checkpoints" / "tpcnet-small.pt"
 """The checkpoint the app serves (``make run``): the referent path once it is trained for it."""
@@ -46,8 +51,8 @@ class PathSpec:
     Attributes:
         key: ``ModelConfig.grounding`` (``"referent"`` or ``"tpcnet"``).
         label: Name in the tables.
-        ground_stages: :class:`model.tpcnet.GroundTimings` fields that ``ground`` fills.
-        scene_stages: :class:`model.tpcnet.SceneTimings` fields that ``encode_scene`` fills.
+        ground_stages: :class:`model.features.GroundTimings` fields that ``ground`` fills.
+        scene_stages: :class:`model.features.SceneTimings` fields that ``encode_scene`` fills.
         stage_names: Table label of every stage.
     """
 
@@ -142,7 +147,7 @@ def load_path_model(spec: PathSpec, preset: str, device: str) -> LoadedModel:
     candidates = [CHECKPOINT] if spec.key == "referent" else [FAITHFUL_CHECKPOINT, CHECKPOINT]
     why = []
     if preset == "small":
-        from model.checkpoint import CheckpointError, load_checkpoint, read_checkpoint
+        from model import CheckpointError, load_checkpoint, read_checkpoint
 
         for path in candidates:
             rel = path.relative_to(REPO)
@@ -158,7 +163,8 @@ def load_path_model(spec: PathSpec, preset: str, device: str) -> LoadedModel:
                 why.append(f"`{rel}` has grounding {grounding!r}")
                 continue
             model = load_checkpoint(path, device=device)
-            step = model.checkpoint_metadata.get("step", "?")
+            step = CheckpointMeta.of(model).step
+            step = "?" if step is None else step
             return LoadedModel(
                 model, f"trained checkpoint `{rel}` (step {step})", f"`{path.name}`", True
             )
@@ -185,7 +191,7 @@ def prompt_pairs(scenes: list[SceneWorkload]) -> list[tuple[SceneWorkload, str]]
 
 
 def _answer(model: TPCNet, scores: np.ndarray) -> int:
-    from model.predict import operating_threshold
+    from model import operating_threshold
 
     return int(np.sum(scores >= operating_threshold(model)))
 
@@ -267,7 +273,8 @@ def measure_outside_tpcnet(
     model: TPCNet, scenes: list[SceneWorkload], device: str, limit: int
 ) -> dict[str, list[float]]:
     """The TPCNet path's ``ground`` stages timed from outside the model, through its public
-    submodules (``text_encoder``, ``text_fusion``, ``neck``, ``head``, :func:`decode`)."""
+    submodules (``text_encoder``, ``grounding.text_fusion``, ``scene.neck``, ``scene.head``,
+    :func:`decode`)."""
     out: dict[str, list[float]] = {k: [] for k in GROUND_STAGES}
     features: dict[int, SceneFeatures] = {}
     for scene, prompt in prompt_pairs(scenes)[:limit]:
@@ -282,14 +289,14 @@ def measure_outside_tpcnet(
             t0 = time.perf_counter()
             conditioned = [
                 fuse(lr, text.tokens, text.padding_mask)
-                for fuse, lr in zip(model.text_fusion, stages, strict=True)
+                for fuse, lr in zip(model.grounding.text_fusion, stages, strict=True)
             ]
             out["dggf"].append(_lap(device, t0))
             t0 = time.perf_counter()
-            neck = model.neck(conditioned)
+            neck = model.scene.neck(conditioned)
             out["neck"].append(_lap(device, t0))
             t0 = time.perf_counter()
-            head = model.head(neck)
+            head = model.scene.head(neck)
             out["head"].append(_lap(device, t0))
             t0 = time.perf_counter()
             decode(head, model.head_grid, model.cfg.head)
@@ -302,8 +309,8 @@ def measure_outside_referent(
     model: TPCNet, scenes: list[SceneWorkload], device: str, limit: int
 ) -> dict[str, list[float]]:
     """The referent path's ``ground`` stages timed from outside the model: ``text`` (the model's
-    ``text_encoder``), ``referent`` (``model.refer`` on the scene's ``features.objects``, sigmoid
-    to numpy) and ``decode`` (ranking and :func:`model.grounder.referent_heatmap`)."""
+    ``text_encoder``), ``referent`` (the referent head's ``refer`` on the scene's ``features.objects``, sigmoid
+    to numpy) and ``decode`` (ranking and :func:`model.referent.scene_candidates.referent_heatmap`)."""
     out: dict[str, list[float]] = {k: [] for k in REFERENT.ground_stages}
     features: dict[int, SceneFeatures] = {}
     for scene, prompt in prompt_pairs(scenes)[:limit]:
@@ -319,7 +326,8 @@ def measure_outside_referent(
             out["text"].append(_lap(device, t0))
             t0 = time.perf_counter()
             if len(objects):
-                probs = torch.sigmoid(model.refer(objects, text)[0]).float().cpu().numpy()
+                probs = torch.sigmoid(referent_head(model).refer(objects, text)[0])
+                probs = probs.float().cpu().numpy()
             else:
                 probs = np.zeros(0, dtype=np.float32)
             out["referent"].append(_lap(device, t0))
@@ -342,75 +350,41 @@ def measure_detect_parts(
     model: TPCNet, scenes: list[SceneWorkload], device: str
 ) -> tuple[dict[str, list[float]], list[float], list[int]]:
     """The referent path's ``detect`` stage of ``encode_scene`` part by part, from outside: the
-    sensor branches and fusion are run through the public submodules (``lidar``, ``radar``,
-    ``fusion``), then ``neck``, ``head``, :func:`decode` at the candidate threshold and
-    ``model.candidates``. Returns the parts' times, the model's own ``SceneTimings.detect`` of
-    the same scenes, and the candidates per scene."""
+    sensor branches and fusion (:func:`bench.model_parts.model_parts`), then the ``neck``, the
+    ``head``, the decoding at the candidate threshold and the candidates' description. Returns
+    the parts' times, the model's own ``SceneTimings.detect`` of the same scenes, and the
+    candidates per scene."""
     out: dict[str, list[float]] = {k: [] for k in DETECT_PARTS}
     reported, counts = [], []
-    cfg = model.cfg
-    decode_fn, maps_type = _own_decoding(model)
-    limit = (
-        {"limit": cfg.referent.max_candidates}
-        if "limit" in inspect.signature(decode_fn).parameters
-        else {}
-    )
+    parts = model_parts(model)
+    limit = model.cfg.referent.max_candidates
     for scene in scenes:
         reported.append(float(model.encode_scene(scene.lidar, scene.radar).timings.detect))
         with torch.no_grad():
             lidar = as_points(scene.lidar, 4, "lidar").to(model.device)
             radar = as_points(scene.radar, 7, "radar").to(model.device)
-            own: dict[str, tuple[torch.Tensor, ...]] = {}
-            for name, branch, cloud in (("l", model.lidar, lidar), ("r", model.radar, radar)):
-                if branch is not None:
-                    own[name] = tuple(branch.backbone(branch.pillars([cloud])))
-            if model.fusion is not None:
-                stages = [f(a, b) for f, a, b in zip(model.fusion, own["l"], own["r"], strict=True)]
-            else:
-                stages = list(own["l"] if "l" in own else own["r"])
+            stages, lidar_stage, radar_stage = parts.sensors(lidar, radar)
             synchronize(device)
             t0 = time.perf_counter()
-            neck = model.neck(stages)
+            neck = parts.neck(stages)
             out["neck"].append(_lap(device, t0))
             t0 = time.perf_counter()
-            head = model.head(neck)
+            head = parts.head(neck)
             out["head"].append(_lap(device, t0))
             t0 = time.perf_counter()
-            dets = decode_fn(
-                head, model.head_grid, cfg.head, cfg.referent.candidate_threshold, **limit
-            )[0]
+            dets = parts.proposals(head)
             torch.sigmoid(head.heatmap[0]).float().cpu().numpy()
             out["decode"].append(_lap(device, t0))
             t0 = time.perf_counter()
-            keep = slice(0, cfg.referent.max_candidates)
-            maps = maps_type(
-                neck[0],
-                own["l"][0][0] if "l" in own else None,
-                own["r"][0][0] if "r" in own else None,
-            )
-            objects = model.candidates(
-                dets.boxes[keep],
-                dets.labels[keep],
-                dets.scores[keep],
-                maps,
+            objects = parts.describe(
+                *keep_candidates(dets, limit),
+                parts.maps(neck, lidar_stage, radar_stage),
                 lidar.cpu().numpy(),
                 radar.cpu().numpy(),
             )
             out["candidates"].append(_lap(device, t0))
             counts.append(len(objects))
     return out, reported, counts
-
-
-def _own_decoding(model: TPCNet) -> tuple[Callable[..., list], type]:
-    """The ``decode`` function and ``SceneMaps`` class of the package ``model`` comes from (this
-    repository's ``model``, or an older copy of it loaded beside it by :mod:`bench.floor`), so
-    that its stage is timed as its own ``encode_scene`` runs it (``decode``'s ``limit`` where it
-    has one)."""
-    package = type(model).__module__.rsplit(".", 1)[0]
-    return (
-        importlib.import_module(f"{package}.decode").decode,
-        importlib.import_module(f"{package}.grounder").SceneMaps,
-    )
 
 
 def compare_threads(

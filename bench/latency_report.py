@@ -105,7 +105,7 @@ def side_by_side_table(
             "cache is off while timing); `encode_scene` + `ground` for a scene never seen; "
             "'prompt seen before': `ground` of a prompt already in the text cache.",
             "Boxes: returned by `ground` at its default threshold; answer: those at or above "
-            "the model's operating threshold (`model.predict.operating_threshold`).",
+            "the model's operating threshold (`model.evaluation.predict.operating_threshold`).",
             "The paths take turns prompt by prompt, so that both see the same machine load.",
         ),
     )
@@ -193,7 +193,7 @@ def detect_table(
         notes=(
             f"{len(reported)} scenes; outside: the sensor branches and the fusion run through "
             "the model's public submodules, then the neck, the head, `decode` at the candidate "
-            "threshold and `model.candidates`, each timed.",
+            "threshold and `model.referent.candidates`, each timed.",
         ),
     )
 

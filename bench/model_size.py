@@ -31,9 +31,7 @@ from bench.common import (
     machine_info,
     synthetic_scenes,
 )
-from model import build_model
-from model.text import load_minilm, tokenize
-from model.tpcnet import TPCNet
+from model import TPCNet, build_model, load_minilm, tokenize
 
 PROMPT = "the moving cyclists about 15 metres ahead on the left"
 
@@ -41,26 +39,27 @@ PROMPT = "the moving cyclists about 15 metres ahead on the left"
 def module_rows(model: TPCNet) -> list[tuple[str, str, nn.Module | None]]:
     """``(label, FlopCounterMode name, module)`` of the model's parts, in data-flow order."""
     rows: list[tuple[str, str, nn.Module | None]] = []
+    scene = model.scene
     for sensor in ("lidar", "radar"):
-        branch = getattr(model, sensor)
+        branch = getattr(scene, sensor)
         if branch is not None:
-            rows.append((f"{sensor} pillar encoder", f"TPCNet.{sensor}.pillars", branch.pillars))
-            rows.append((f"{sensor} backbone", f"TPCNet.{sensor}.backbone", branch.backbone))
-    if model.fusion is not None:
-        for i, module in enumerate(model.fusion):
-            rows.append(
-                (f"fusion stage {i + 1} ({type(module).__name__})", f"TPCNet.fusion.{i}", module)
-            )
-    for i, module in enumerate(model.text_fusion):
+            name = f"TPCNet.scene.{sensor}"
+            rows.append((f"{sensor} pillar encoder", f"{name}.pillars", branch.pillars))
+            rows.append((f"{sensor} backbone", f"{name}.backbone", branch.backbone))
+    if scene.fusion is not None:
+        for i, module in enumerate(scene.fusion):
+            label = f"fusion stage {i + 1} ({type(module).__name__})"
+            rows.append((label, f"TPCNet.scene.fusion.{i}", module))
+    for i, module in enumerate(model.grounding.text_fusion):
         rows.append(
             (
                 f"text fusion stage {i + 1} ({type(module).__name__})",
-                f"TPCNet.text_fusion.{i}",
+                f"TPCNet.grounding.text_fusion.{i}",
                 module,
             )
         )
-    rows.append(("neck (SECOND-FPN)", "TPCNet.neck", model.neck))
-    rows.append(("head (C3D-RECHead)", "TPCNet.head", model.head))
+    rows.append(("neck (SECOND-FPN)", "TPCNet.scene.neck", scene.neck))
+    rows.append(("head (C3D-RECHead)", "TPCNet.scene.head", scene.head))
     return rows
 
 

@@ -1,17 +1,17 @@
 """Training throughput: ``python -m bench.train_throughput [--quick]``.
 
-Samples per second of the training step of :mod:`model.train` without its data loader: batches
+Samples per second of the training step of :mod:`model.training.loop` without its data loader: batches
 of 4 synthetic samples (64-beam LiDAR, 5-scan radar, a generated prompt and its referents' boxes,
-held in memory) go through target drawing (:func:`model.targets.draw_targets`),
-``model.forward``, :func:`model.losses.grounding_loss`, backward, gradient clipping (max-norm 35)
-and AdamW (lr 1e-3, weight decay 5e-4), as in :func:`model.train.train`. The prompts repeat
+held in memory) go through target drawing (:func:`model.head.targets.draw_targets`),
+``model.forward``, :func:`model.head.losses.grounding_loss`, backward, gradient clipping (max-norm 35)
+and AdamW (lr 1e-3, weight decay 5e-4), as in :func:`model.training.loop.train`. The prompts repeat
 (8 distinct prompts), so after the warm-up the frozen MiniLM serves them from its cache, as it
 does from the second epoch of a real run. Reading files and augmentations are not included.
 
 ``small`` preset on the CPU (float32) with the benchmark's thread count (``--threads``, default
 1) and, in fewer steps, with one thread per core (torch's default, what ``python -m model.train``
 uses); with CUDA also ``small`` and ``paper`` on the GPU under bfloat16 autocast (what
-``model.train`` uses there).
+``model.training.loop`` uses there).
 """
 
 from __future__ import annotations
@@ -33,9 +33,7 @@ from bench.common import (
     synchronize,
     synthetic_scenes,
 )
-from model import build_model
-from model.losses import grounding_loss
-from model.targets import collate_targets, draw_targets
+from model import build_model, collate_targets, draw_targets, grounding_loss
 
 BATCH = 4
 GRAD_CLIP = 35.0

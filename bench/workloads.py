@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     import numpy as np
 
-    from model.tpcnet import TPCNet
+    from model import TPCNet
 
 WARM_UP_PROMPTS = ("the car ahead of us (warm-up)", "the pedestrians on the left (warm-up)")
 """Prompts of :func:`warm_up`, outside every measured set."""

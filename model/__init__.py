@@ -1,35 +1,160 @@
 """TPCNet: language-guided 3D visual grounding on LiDAR + 4D radar (the paper's section III).
 
-``build_model(preset="small", **overrides)`` builds a :class:`model.tpcnet.TPCNet` from a preset
-(:mod:`model.config`) with overrides such as ``fusion="bi_mhca"``, ``modalities="lidar"``,
-``anchor="center"``, ``text_encoder="gru"``, ``agent_size=(8, 8)``, ``graph_k=(4, 4, 2)``,
-``text_fusion="ggf"`` or ``section__field=value`` (e.g. ``head__score_threshold=0.3``).
+What other packages may use (and the only names they import from ``model``)::
+
+    build_model(preset="small", **overrides) -> TPCNet     build_config(...) -> ModelConfig
+    load_checkpoint(path, device) / save_checkpoint / read_checkpoint / CheckpointError
+    DEFAULT_CHECKPOINT                                      CheckpointMeta (checkpoint metadata)
+    TPCNet, SceneFeatures, Predictions, as_points           LabelledBoxes (labelled candidates)
+    GroundingModel, PredictionsView, GridExtent, ModelSettings   (the typed protocol, no torch)
+    operating_threshold(model), UNCALIBRATED_REFERENT       score_directories (the VoD metric)
+
+and, for the benchmarks that time or count parts on their own, the names in the second group of
+:data:`_EXPORTS` (the fusion and graph blocks, MiniLM, decoding, targets and losses, the
+referent head and its heatmap).
+
+``build_model`` builds a :class:`model.tpcnet.TPCNet` from a preset (:mod:`model.config`) with
+overrides such as ``fusion="bi_mhca"``, ``modalities="lidar"``, ``anchor="center"``,
+``text_encoder="gru"``, ``agent_size=(8, 8)``, ``graph_k=(4, 4, 2)``, ``text_fusion="ggf"`` or
+``section__field=value`` (e.g. ``head__score_threshold=0.3``).
+
+The names are loaded on first use (PEP 562), so that ``from model import GroundingModel`` does not
+import torch; :data:`_EXPORTS` says where each lives. The sub-packages: ``nets`` (encoders,
+fusion, text, the scene encoder), ``head`` (the detector head, targets, decoding, losses, the
+paper's grounding head), ``referent`` (the referent stage and its head), ``training`` and
+``evaluation``; see docs/DESIGN.md.
 """
 
 from __future__ import annotations
 
-from typing import Any
+import importlib
+from typing import TYPE_CHECKING, Any
 
-from model.config import ModelConfig, apply_overrides, preset
-from model.labelled import LabelledBoxes
-from model.tpcnet import Predictions, SceneFeatures, TPCNet
+if TYPE_CHECKING:
+    from model.checkpoint import (
+        DEFAULT_CHECKPOINT,
+        CheckpointError,
+        load_checkpoint,
+        read_checkpoint,
+        save_checkpoint,
+    )
+    from model.checkpoint_meta import CheckpointMeta
+    from model.config import FusionConfig, ModelConfig, preset
+    from model.evaluate import score_directories
+    from model.evaluation.predict import operating_threshold
+    from model.features import Predictions, SceneFeatures, as_points
+    from model.head.decode import decode
+    from model.head.losses import grounding_loss
+    from model.head.targets import collate_targets, draw_targets
+    from model.nets.baca import build_fusion
+    from model.nets.dggf import (
+        dynamic_max_relative,
+        dynamic_max_relative_loop,
+        static_max_relative,
+    )
+    from model.nets.text import load_minilm, tokenize
+    from model.protocol import GridExtent, GroundingModel, ModelSettings, PredictionsView
+    from model.referent.head import UNCALIBRATED_REFERENT, referent_head
+    from model.referent.labelled import LabelledBoxes
+    from model.referent.scene_candidates import SceneMaps, referent_heatmap
+    from model.tpcnet import TPCNet
+
+_EXPORTS = {
+    "CheckpointError": "model.checkpoint",
+    "CheckpointMeta": "model.checkpoint_meta",
+    "DEFAULT_CHECKPOINT": "model.checkpoint",
+    "load_checkpoint": "model.checkpoint",
+    "read_checkpoint": "model.checkpoint",
+    "save_checkpoint": "model.checkpoint",
+    "ModelConfig": "model.config",
+    "score_directories": "model.evaluate",
+    "operating_threshold": "model.evaluation.predict",
+    "Predictions": "model.features",
+    "SceneFeatures": "model.features",
+    "as_points": "model.features",
+    "GridExtent": "model.protocol",
+    "GroundingModel": "model.protocol",
+    "ModelSettings": "model.protocol",
+    "PredictionsView": "model.protocol",
+    "UNCALIBRATED_REFERENT": "model.referent.head",
+    "LabelledBoxes": "model.referent.labelled",
+    "TPCNet": "model.tpcnet",
+    # The parts the benchmarks (bench/) time or count on their own:
+    "FusionConfig": "model.config",
+    "preset": "model.config",
+    "build_fusion": "model.nets.baca",
+    "dynamic_max_relative": "model.nets.dggf",
+    "dynamic_max_relative_loop": "model.nets.dggf",
+    "static_max_relative": "model.nets.dggf",
+    "load_minilm": "model.nets.text",
+    "tokenize": "model.nets.text",
+    "decode": "model.head.decode",
+    "grounding_loss": "model.head.losses",
+    "collate_targets": "model.head.targets",
+    "draw_targets": "model.head.targets",
+    "referent_head": "model.referent.head",
+    "SceneMaps": "model.referent.scene_candidates",
+    "referent_heatmap": "model.referent.scene_candidates",
+}
+"""Exported name -> the module that defines it."""
 
 __all__ = [
+    "DEFAULT_CHECKPOINT",
+    "UNCALIBRATED_REFERENT",
+    "CheckpointError",
+    "CheckpointMeta",
+    "FusionConfig",
+    "GridExtent",
+    "GroundingModel",
     "LabelledBoxes",
     "ModelConfig",
+    "ModelSettings",
     "Predictions",
+    "PredictionsView",
     "SceneFeatures",
+    "SceneMaps",
     "TPCNet",
+    "as_points",
     "build_config",
+    "build_fusion",
     "build_model",
+    "collate_targets",
+    "decode",
+    "draw_targets",
+    "dynamic_max_relative",
+    "dynamic_max_relative_loop",
+    "grounding_loss",
+    "load_checkpoint",
+    "load_minilm",
+    "operating_threshold",
+    "preset",
+    "read_checkpoint",
+    "referent_head",
+    "referent_heatmap",
+    "save_checkpoint",
+    "score_directories",
+    "static_max_relative",
+    "tokenize",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    if name in _EXPORTS:
+        value = getattr(importlib.import_module(_EXPORTS[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'model' has no attribute {name!r}")
 
 
 def build_config(preset_name: str = "small", **overrides: Any) -> ModelConfig:
     """The preset's :class:`ModelConfig` with ``overrides`` applied (see the module docstring)."""
+    from model.config import apply_overrides, preset
+
     return apply_overrides(preset(preset_name), **overrides)
 
 
 def build_model(preset: str = "small", **overrides: Any) -> TPCNet:
     """A freshly initialised :class:`TPCNet` for ``preset`` (``small`` or ``paper``) + overrides."""
+    from model.tpcnet import TPCNet
+
     return TPCNet(build_config(preset, **overrides))

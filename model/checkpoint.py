@@ -31,6 +31,9 @@ from model.config import ConfigError, ModelConfig
 from model.tpcnet import TPCNet
 from scenes.durable import atomic_file
 
+DEFAULT_CHECKPOINT = Path(__file__).resolve().parents[1] / "checkpoints" / "tpcnet-small.pt"
+"""The checkpoint the app serves and the commands read by default (``make run``)."""
+
 FORMAT = "talk2pc-tpcnet"
 FORMAT_VERSION = 1
 
@@ -41,7 +44,7 @@ class CheckpointError(ValueError):
 
 def checkpoint_payload(model: TPCNet, **metadata: Any) -> dict[str, Any]:
     """The checkpoint of ``model`` as the dict :func:`save_checkpoint` writes (weights copied to
-    the CPU, ``metadata`` checked to be plain JSON data); :mod:`model.train_state` embeds it."""
+    the CPU, ``metadata`` checked to be plain JSON data); :mod:`model.training.state` embeds it."""
     try:
         # The round trip turns float subclasses (numpy scalars) into plain floats, which
         # ``torch.load(weights_only=True)`` accepts; anything not JSON is refused.

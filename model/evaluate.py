@@ -1,10 +1,10 @@
-"""Command line for the official View-of-Delft evaluation (:mod:`model.metrics`).
+"""Command line for the official View-of-Delft evaluation (:mod:`model.evaluation.metrics`).
 
 ``python -m model.evaluate --labels DIR --preds DIR [--json OUT]`` scores KITTI-format prediction
 files (``<frame id>.txt``, one detection per line with a 16th score field) against label files.
 ``python -m model.evaluate --data ROOT`` grounds a split (default ``test``) with a checkpoint (default
 the bundled one), writes and scores its prediction files, and adds the per-prompt grounding metrics
-(:mod:`model.grounding_metrics`) with the class-noun and language-blind oracle baselines beside them.
+(:mod:`model.evaluation.grounding`) with the class-noun and language-blind oracle baselines beside them.
 
 Decisions (the devkit behaves differently, see the spec §2.2):
 
@@ -14,7 +14,7 @@ Decisions (the devkit behaves differently, see the spec §2.2):
 - A prediction file for a frame with no label file is an error naming the file(s): it almost always
   means the wrong label folder or split.
 - Overlaps follow the devkit, including its +0.01 rad / +0.01 px offsets on detections
-  (``--exact-overlaps`` turns them off; see :mod:`model.metrics`).
+  (``--exact-overlaps`` turns them off; see :mod:`model.evaluation.metrics`).
 - A malformed prediction line is an error naming the file and line, and so is a prediction line
   without its score (the devkit would score it 0, silently ranking it last).
 - Nothing that could silently change a score passes: every ``*.txt`` entry of both folders must be
@@ -36,15 +36,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from model.metrics import VodResult, evaluate_frames
+from model.checkpoint import DEFAULT_CHECKPOINT
+from model.evaluation.metrics import VodResult, evaluate_frames
 
 if TYPE_CHECKING:
-    from model.report import GroundingReport
+    from model.evaluation.report import GroundingReport
 from scenes.kitti import LabelError, ObjectLabel, parse_label_line, read_label_file
 from scenes.layout import ID_WIDTH, format_id, is_frame_id
 from scenes.textfile import read_text_file
 
-DEFAULT_CHECKPOINT = Path(__file__).resolve().parents[1] / "checkpoints" / "tpcnet-small.pt"
 """The bundled checkpoint, model mode's default."""
 
 DEFAULT_EVAL_DIR = Path("runs") / "eval"
@@ -191,7 +191,7 @@ def score_directories(
     labels: str | Path, preds: str | Path, devkit_offsets: bool = True
 ) -> ScoredDirectories:
     """Score the prediction folder ``preds`` against the label folder ``labels``
-    (``devkit_offsets``: see :func:`model.metrics.evaluate_frames`)."""
+    (``devkit_offsets``: see :func:`model.evaluation.metrics.evaluate_frames`)."""
     gt = load_label_dir(labels)
     frame_ids = tuple(sorted(gt))
     dt, missing = load_prediction_dir(preds, frame_ids)
@@ -318,8 +318,8 @@ def _run_model_mode(args: argparse.Namespace) -> int:
     the official table, the per-prompt-type and per-depth tables, and the grounding tables (model,
     class-noun prompt and language-blind oracle side by side)."""
     from model.checkpoint import load_checkpoint
-    from model.predict import operating_threshold, write_predictions
-    from model.report import evaluate_predictions
+    from model.evaluation.predict import operating_threshold, write_predictions
+    from model.evaluation.report import evaluate_predictions
     from scenes.root import Talk2RadarRoot
 
     json_path = args.json

@@ -1,226 +1,107 @@
-"""TPCNet (fig. 3, section III-A): LiDAR and radar pillar branches, BACA fusion, text encoder,
-DGGF, SECOND-FPN and the C3D-RECHead, assembled from a :class:`model.config.ModelConfig`.
-
-Data flow per sample (LiDAR frame throughout)::
-
-    lidar (N, 4) -> PillarEncoder -> SecondBackbone -> f^l_1..3 --+
-                                                                   +-> fusion_i -> lr_i  (no text)
-    radar (M, 7) -> PillarEncoder -> SecondBackbone -> f^r_1..3 --+
-    prompt -> text encoder -> tokens (L, D), mask
-    (lr_i, tokens) -> DGGF_i -> lc_i ;  FPN(lc_1..3) -> f ;  head(f) -> heatmap (3, H, W), regression
+"""TPCNet (fig. 3, section III-A): the shared scene encoder (:mod:`model.nets.scene_encoder`), the text
+encoder and one grounding head (:mod:`model.grounding_head`), assembled from a
+:class:`model.config.ModelConfig`; ``cfg.grounding`` picks the head: ``tpcnet`` the paper's DGGF
++ C3D-RECHead ranking (:mod:`model.head.paper`), ``referent`` the referent stage over the
+detector's candidates (:mod:`model.referent.head`).
 
 The sensor branches and the LiDAR-radar fusion do not depend on the text, so the model splits in
 two calls for the app: :meth:`TPCNet.encode_scene` (once per scene) and :meth:`TPCNet.ground`
 (once per prompt, from the cached :class:`SceneFeatures`). :meth:`TPCNet.forward` runs both on a
-batch for training; in eval mode ``ground(encode_scene(l, r), p)`` gives the same head outputs as
-``forward([l], [r], [p])`` (every normalisation is per sample or in running-statistics mode).
+batch for training the paper's path; in eval mode ``ground(encode_scene(l, r), p)`` gives the same
+head outputs as ``forward([l], [r], [p])`` (every normalisation is per sample or in
+running-statistics mode).
 
-Input rules: points are numpy arrays or tensors ``(N, 4)`` (x, y, z, intensity) and ``(M, 7)``
-(x, y, z, rcs, v_r, v_r_compensated, time), radar already in the LiDAR frame. NaN or inf raise
-:class:`NonFiniteInputError` naming the sensor and row *before* anything reaches the network. An
-empty array (a sensor that returned nothing) is fine. A single-modality model ignores the other
-sensor (it may be ``None``); a missing required sensor (``None``) raises :class:`MissingSensorError`
-that says which sensor the model was built for.
+Input rules: :mod:`model.features` (NaN or inf raise :class:`NonFiniteInputError`, a missing
+required sensor :class:`MissingSensorError`). ``encode_scene``/``ground`` run under
+``torch.no_grad`` and do not switch the mode: call ``model.eval()`` first for inference.
 
-``encode_scene``/``ground`` run under ``torch.no_grad`` and do not switch the mode: call
-``model.eval()`` first for inference.
+Checkpoint names: the state dict keeps the names checkpoints have always had (``lidar.``,
+``radar.``, ``fusion.``, ``text_encoder.``, ``text_fusion.``, ``neck.``, ``head.``,
+``referent.``, in that order); :data:`CHECKPOINT_NAMES` maps them to the modules
+(``scene.lidar.``, ..., ``grounding.text_fusion.``, ``grounding.stage.``) on the way out
+(``state_dict``) and in (``load_state_dict``, which takes either form).
 """
 
 from __future__ import annotations
 
-import dataclasses
-import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from typing import Any
 
-import numpy as np
 import torch
 from torch import Tensor, nn
 
-from model.baca import build_fusion
-from model.backbone import SecondBackbone
-from model.config import LIDAR_FEATURES, RADAR_FEATURES, ModelConfig
-from model.decode import decode
-from model.dggf import DynamicGatedGraphFusion, GatedGraphFusion
-from model.fpn import SecondFpn
-from model.grid import BevGrid
-from model.grounder import (
-    SceneCandidates,
-    SceneMaps,
-    describe_candidates,
-    referent_heatmap,
-    stack_candidates,
+from model.config import ModelConfig
+from model.features import (
+    Clock,
+    GroundTimings,
+    MissingSensorError,
+    NonFiniteInputError,
+    PointsLike,
+    Predictions,
+    SceneFeatures,
+    SceneTimings,
+    as_points,
 )
-from model.head import C3DRecHead, HeadOutput
-from model.labelled import LabelledBoxes, anchor_scores, with_context
-from model.pillars import PillarEncoder
-from model.referent import ReferentStage
-from model.text import TextFeatures, build_text_encoder, validate_prompt
-from scenes.actors import CLASSES
+from model.grounding_head import GroundingHead
+from model.head.detector import HeadOutput
+from model.head.paper import PaperGrounding
+from model.nets.scene_encoder import SceneEncoder
+from model.nets.text import build_text_encoder, validate_prompt
+from model.referent.head import ReferentGrounding
+from model.referent.labelled import LabelledBoxes
+from model.referent.scene_candidates import SceneMaps
 
-PointsLike = np.ndarray | Tensor
+CHECKPOINT_NAMES = {
+    "lidar": "scene.lidar",
+    "radar": "scene.radar",
+    "fusion": "scene.fusion",
+    "text_encoder": "text_encoder",
+    "text_fusion": "grounding.text_fusion",
+    "neck": "scene.neck",
+    "head": "scene.head",
+    "referent": "grounding.stage",
+}
+"""Checkpoint name of each top-level part -> its module path, in the checkpoints' order."""
 
-
-class NonFiniteInputError(ValueError):
-    """A point cloud holds NaN or inf values."""
-
-
-class MissingSensorError(ValueError):
-    """The model needs a sensor's points that were not given."""
-
-
-@dataclass(frozen=True)
-class SceneTimings:
-    """Milliseconds spent in :meth:`TPCNet.encode_scene`, per stage."""
-
-    pillars: float
-    backbone: float
-    fusion: float
-    detect: float = 0.0
-    """``grounding="referent"``: neck, head, decoding and candidate description."""
-
-    @property
-    def total(self) -> float:
-        return self.pillars + self.backbone + self.fusion + self.detect
+_MODULE_NAMES = {module: saved for saved, module in CHECKPOINT_NAMES.items()}
+_ORDER = {saved: i for i, saved in enumerate(CHECKPOINT_NAMES)}
 
 
-@dataclass(frozen=True)
-class GroundTimings:
-    """Milliseconds spent in :meth:`TPCNet.ground`, per stage."""
-
-    text: float
-    dggf: float
-    neck: float
-    head: float
-    decode: float
-    referent: float = 0.0
-    """``grounding="referent"``: the referent stage (then ``dggf``, ``neck``, ``head`` are 0)."""
-
-    @property
-    def total(self) -> float:
-        return self.text + self.dggf + self.neck + self.head + self.decode + self.referent
+def checkpoint_name(name: str) -> str:
+    """The checkpoint name of a parameter or buffer named ``name`` in the module tree."""
+    for module, saved in _MODULE_NAMES.items():
+        if name.startswith(module + "."):
+            return saved + name[len(module) :]
+    return name
 
 
-@dataclass(frozen=True)
-class SceneFeatures:
-    """Text-independent features of one scene.
-
-    Attributes:
-        stages: ``(lr_1, lr_2, lr_3)``, each ``(1, C_i, H_i, W_i)`` on the model's device.
-        num_lidar: LiDAR points given (before range filtering); 0 when unused.
-        num_radar: Radar points given; 0 when unused.
-        timings: Time per stage of the encoding.
-        objects: ``grounding="referent"`` only: the text-agnostic detections of the scene as
-            referent-stage candidates, and the detector's ``(3, H, W)`` sigmoid heatmaps.
-        answerable: With labelled candidates (:mod:`model.labelled`): the first this many
-            candidates are the labelled boxes, the only possible answers (the rest is context).
-            None: every candidate may be an answer.
-    """
-
-    stages: tuple[Tensor, ...]
-    num_lidar: int
-    num_radar: int
-    timings: SceneTimings
-    objects: SceneCandidates | None = None
-    detection_heatmaps: np.ndarray | None = None
-    answerable: int | None = None
+def module_name(name: str) -> str:
+    """The module-tree name of a checkpoint name (a module-tree name is returned as it is)."""
+    top, _, rest = name.partition(".")
+    return f"{CHECKPOINT_NAMES[top]}.{rest}" if top in CHECKPOINT_NAMES and rest else name
 
 
-@dataclass(frozen=True)
-class Predictions:
-    """The answer to one prompt.
-
-    Attributes:
-        boxes: ``(K, 7)`` float64 ``x, y, z, l, w, h, yaw``, LiDAR frame, sorted by score.
-        scores: ``(K,)`` float64 in ``[0, 1]``.
-        labels: ``(K,)`` int64 indices into ``scenes.actors.CLASSES``.
-        classes: ``K`` class names.
-        heatmaps: ``(3, H, W)`` float32 sigmoid heatmaps (Car, Pedestrian, Cyclist) on ``grid``,
-            ``heatmaps[c, iy, ix]``.
-        grid: The head's BEV grid.
-        prompt: The prompt as encoded (stripped).
-        truncated: Whether the prompt exceeded the text encoder's token limit.
-        timings: Time per stage of the grounding.
-    """
-
-    boxes: np.ndarray
-    scores: np.ndarray
-    labels: np.ndarray
-    classes: tuple[str, ...]
-    heatmaps: np.ndarray
-    grid: BevGrid
-    prompt: str
-    truncated: bool
-    timings: GroundTimings
+def _checkpoint_rank(name: str) -> int:
+    return _ORDER.get(name.partition(".")[0], len(_ORDER))
 
 
-def as_points(points: PointsLike, num_features: int, name: str) -> Tensor:
-    """Validate one cloud and return it as a float32 CPU-or-device tensor ``(N, F)``.
-
-    Raises:
-        TypeError: not an array or tensor.
-        ValueError: wrong shape.
-        NonFiniteInputError: NaN or inf values (names the first bad row).
-    """
-    if isinstance(points, np.ndarray):
-        tensor = torch.from_numpy(np.ascontiguousarray(points, dtype=np.float32))
-    elif isinstance(points, Tensor):
-        tensor = points.detach().to(torch.float32)
-    else:
-        raise TypeError(f"{name} must be a numpy array or a torch tensor, got {type(points)}")
-    if tensor.numel() == 0:
-        return tensor.reshape(0, num_features)
-    if tensor.dim() != 2 or tensor.shape[1] != num_features:
-        raise ValueError(f"{name} must have shape (N, {num_features}), got {tuple(tensor.shape)}")
-    # One sum is finite exactly when every value is (or it overflowed: then look row by row).
-    if not bool(torch.isfinite(tensor.sum())) and not bool(torch.isfinite(tensor).all()):
-        finite = torch.isfinite(tensor).all(dim=1)
-        row = int(torch.nonzero(~finite)[0, 0])
-        raise NonFiniteInputError(
-            f"{name} has NaN or inf values (first at row {row}: {tensor[row].tolist()}); "
-            "remove or fix those points before running the model"
-        )
-    return tensor
+def _save_checkpoint_names(
+    module: nn.Module, state: dict[str, Any], prefix: str, local_metadata: Any
+) -> None:
+    items = [(k, state.pop(k)) for k in list(state) if k.startswith(prefix)]
+    renamed = [(checkpoint_name(k[len(prefix) :]), v) for k, v in items]
+    renamed.sort(key=lambda kv: _checkpoint_rank(kv[0]))
+    for k, v in renamed:
+        state[prefix + k] = v
 
 
-class SensorBranch(nn.Module):
-    """Pillar encoder + three-stage backbone of one sensor."""
-
-    def __init__(self, cfg: ModelConfig, sensor: str) -> None:
-        super().__init__()
-        p = cfg.pillars
-        if sensor == "lidar":
-            self.pillars = PillarEncoder(p, LIDAR_FEATURES, p.lidar_max_points, p.lidar_scale)
-        else:
-            self.pillars = PillarEncoder(p, RADAR_FEATURES, p.radar_max_points, p.radar_scale)
-        self.backbone = SecondBackbone(p.channels, cfg.backbone)
-
-
-def _sync(device: torch.device) -> None:
-    if device.type == "cuda":
-        torch.cuda.synchronize(device)
-
-
-class _Clock:
-    """Wall-clock lap timer in milliseconds (synchronising CUDA before each reading).
-
-    Disabled (``enabled=False``, as in training) it returns 0 and never synchronises.
-    """
-
-    def __init__(self, device: torch.device, enabled: bool = True) -> None:
-        self.device = device
-        self.enabled = enabled
-        if enabled:
-            _sync(device)
-        self.last = time.perf_counter()
-
-    def lap(self) -> float:
-        if not self.enabled:
-            return 0.0
-        _sync(self.device)
-        now = time.perf_counter()
-        ms, self.last = (now - self.last) * 1000.0, now
-        return ms
+def _load_checkpoint_names(
+    module: nn.Module, state: dict[str, Any], prefix: str, *args: Any
+) -> None:
+    for key in [k for k in state if k.startswith(prefix)]:
+        new = prefix + module_name(key[len(prefix) :])
+        if new != key:
+            state[new] = state.pop(key)
 
 
 class TPCNet(nn.Module):
@@ -229,40 +110,18 @@ class TPCNet(nn.Module):
     def __init__(self, cfg: ModelConfig) -> None:
         super().__init__()
         self.cfg = cfg
-        self.grid = cfg.pillars.grid
-        self.head_grid = cfg.head_grid
-        self.lidar = SensorBranch(cfg, "lidar") if cfg.uses_lidar else None
-        self.radar = SensorBranch(cfg, "radar") if cfg.uses_radar else None
-        channels = cfg.backbone.channels
-        self.fusion = (
-            nn.ModuleList(build_fusion(cfg.fusion, c) for c in channels)
-            if cfg.modalities == "both"
-            else None
-        )
+        self.scene = SceneEncoder(cfg)
+        self.grid = self.scene.grid
+        self.head_grid = self.scene.head_grid
         self.text_encoder = build_text_encoder(cfg.text)
         text_dim = self.text_encoder.out_dim
-        self.text_fusion: nn.ModuleList | None = None
-        if cfg.grounding == "tpcnet" and cfg.text_fusion.kind == "dggf":
-            self.text_fusion = nn.ModuleList(
-                DynamicGatedGraphFusion(c, text_dim, k, cfg.text_fusion.ffn_ratio)
-                for c, k in zip(channels, cfg.text_fusion.graph_k, strict=True)
-            )
-        elif cfg.grounding == "tpcnet":
-            self.text_fusion = nn.ModuleList(
-                GatedGraphFusion(c, text_dim, cfg.text_fusion.ggf_k) for c in channels
-            )
-        self.neck = SecondFpn(channels, cfg.backbone.cumulative_strides, cfg.fpn)
-        self.head = C3DRecHead(cfg.head, self.neck.out_channels)
-        self.referent: ReferentStage | None = None
-        if cfg.grounding == "referent":
-            # Candidate maps are pooled at two points (centre, anchor): see model.grounder.
-            self.referent = ReferentStage(
-                cfg.referent,
-                text_dim,
-                2 * self.neck.out_channels,
-                2 * channels[0] if cfg.uses_lidar else None,
-                2 * channels[0] if cfg.uses_radar else None,
-            )
+        self.grounding: GroundingHead = (
+            ReferentGrounding(cfg, text_dim, self.scene.neck.out_channels)
+            if cfg.grounding == "referent"
+            else PaperGrounding(cfg, text_dim)
+        )
+        self.register_state_dict_post_hook(_save_checkpoint_names)
+        self.register_load_state_dict_pre_hook(_load_checkpoint_names)
         self.checkpoint_metadata: dict = {}
         """Metadata of the checkpoint this model was loaded from (see :mod:`model.checkpoint`)."""
 
@@ -270,127 +129,20 @@ class TPCNet(nn.Module):
     def device(self) -> torch.device:
         return next(self.parameters()).device
 
-    # ------------------------------------------------------------------ input handling
-
-    def _clouds(
-        self,
-        clouds: Sequence[PointsLike | None] | None,
-        batch: int,
-        sensor: str,
-        num_features: int,
-        used: bool,
-    ) -> list[Tensor] | None:
-        if not used:
-            return None
-        label = "LiDAR" if sensor == "lidar" else "radar"
-        if clouds is None or any(c is None for c in clouds):
-            raise MissingSensorError(
-                f"this model was built with modalities={self.cfg.modalities!r} and needs {label} "
-                f"points, but none were given; pass an empty (0, {num_features}) array for a "
-                f"{label} that returned nothing"
-            )
-        if len(clouds) != batch:
-            raise ValueError(f"{len(clouds)} {label} clouds for a batch of {batch}")
-        return [
-            as_points(c, num_features, f"{label} cloud {i}").to(self.device)
-            for i, c in enumerate(clouds)
-        ]
-
-    # ------------------------------------------------------------------ the two halves
-
-    def _encode(
-        self, lidar: list[Tensor] | None, radar: list[Tensor] | None, timed: bool = False
-    ) -> tuple[tuple[Tensor, ...], dict[str, tuple[Tensor, ...]], SceneTimings]:
-        """Fused stages ``lr_1..3``, each sensor's own stages (``"l"``, ``"r"``) and timings."""
-        clock = _Clock(self.device, timed)
-        canvases: dict[str, Tensor] = {}
-        for name, branch, clouds in (("l", self.lidar, lidar), ("r", self.radar, radar)):
-            if branch is not None and clouds is not None:
-                canvases[name] = branch.pillars(clouds)
-        t_pillars = clock.lap()
-        stages: dict[str, tuple[Tensor, ...]] = {}
-        for name, branch in (("l", self.lidar), ("r", self.radar)):
-            if branch is not None:
-                stages[name] = branch.backbone(canvases[name])
-        t_backbone = clock.lap()
-        if self.fusion is not None:
-            fused = tuple(
-                fuse(f_l, f_r)
-                for fuse, f_l, f_r in zip(self.fusion, stages["l"], stages["r"], strict=True)
-            )
-        else:
-            fused = stages["l"] if "l" in stages else stages["r"]
-        return fused, stages, SceneTimings(t_pillars, t_backbone, clock.lap())
+    def parameters_in_checkpoint_order(self) -> list[nn.Parameter]:
+        """The parameters in the order of their checkpoint names (:data:`CHECKPOINT_NAMES`):
+        the order of the optimiser's state in ``train_state.pt``."""
+        named = list(self.named_parameters())
+        ranked = sorted(
+            range(len(named)), key=lambda i: _checkpoint_rank(checkpoint_name(named[i][0]))
+        )
+        return [named[i][1] for i in ranked]
 
     def detect(
         self, lidar: list[Tensor] | None, radar: list[Tensor] | None
     ) -> tuple[HeadOutput, list[SceneMaps]]:
-        """``grounding="referent"``: the text-agnostic detector on a batch of validated clouds.
-
-        Returns:
-            The head output (``heatmap (B, 3, H, W)`` logits, ``regression (B, 8, H, W)``) and,
-            per item, the BEV maps the referent stage pools from (:class:`SceneMaps`).
-        """
-        fused, stages, _ = self._encode(lidar, radar)
-        neck = self.neck(list(fused))
-        out = self.head(neck)
-        maps = [
-            SceneMaps(
-                fused=neck[b],
-                lidar=stages["l"][0][b] if "l" in stages else None,
-                radar=stages["r"][0][b] if "r" in stages else None,
-            )
-            for b in range(neck.shape[0])
-        ]
-        return out, maps
-
-    def candidates(
-        self,
-        boxes: np.ndarray,
-        labels: np.ndarray,
-        scores: np.ndarray,
-        maps: SceneMaps,
-        lidar: np.ndarray | None,
-        radar: np.ndarray | None,
-    ) -> SceneCandidates:
-        """:func:`model.grounder.describe_candidates` with this model's grid and anchor."""
-        return describe_candidates(
-            boxes,
-            labels,
-            scores,
-            maps,
-            self.head_grid,
-            self.cfg.head.anchor,
-            lidar if self.cfg.uses_lidar else None,
-            radar if self.cfg.uses_radar else None,
-        )
-
-    def refer(self, cands: SceneCandidates | list[SceneCandidates], text: TextFeatures) -> Tensor:
-        """Referent logits ``(N, K)`` of ``N`` prompts; ``cands`` is one scene shared by all the
-        prompts, or one scene per prompt."""
-        assert self.referent is not None
-        scenes = [cands] if isinstance(cands, SceneCandidates) else list(cands)
-        batch = stack_candidates(scenes)
-        n = text.tokens.shape[0]
-        if len(scenes) == 1 and n > 1:
-            batch = batch.index(torch.zeros(n, dtype=torch.long, device=batch.padding.device))
-        return self.referent(batch, text.tokens, text.numbers, text.padding_mask)
-
-    def _ground(
-        self, stages: Sequence[Tensor], text: TextFeatures, timed: bool = False
-    ) -> tuple[HeadOutput, tuple[float, float, float]]:
-        clock = _Clock(self.device, timed)
-        conditioned = [
-            fuse(lr, text.tokens, text.padding_mask)
-            for fuse, lr in zip(self.text_fusion, stages, strict=True)
-        ]
-        t_dggf = clock.lap()
-        neck = self.neck(conditioned)
-        t_neck = clock.lap()
-        out = self.head(neck)
-        return out, (t_dggf, t_neck, clock.lap())
-
-    # ------------------------------------------------------------------ public API
+        """The text-agnostic detector on a batch of clouds (:meth:`SceneEncoder.detect`)."""
+        return self.scene.detect(lidar, radar)
 
     def encode_scene(
         self,
@@ -407,79 +159,20 @@ class TPCNet(nn.Module):
             radar: ``(M, 7)`` radar points in the LiDAR frame; ignored by a LiDAR-only model.
             candidates: Referent path only: the frame's labelled boxes, among which the referent
                 stage then chooses instead of the detector's proposals (each gets the detector's
-                score at its anchor cell, :func:`model.labelled.anchor_scores`).
+                score at its anchor cell, :func:`model.referent.labelled.anchor_scores`).
 
         Returns:
             :class:`SceneFeatures` with ``lr_i`` of shape ``(1, C_i, H_i, W_i)``.
         """
-        if candidates is not None and self.referent is None:
+        if candidates is not None and not self.grounding.takes_labelled_candidates:
             raise ValueError(
                 "labelled candidates need a referent-path model; the paper's path ranks "
                 "its own heatmap peaks"
             )
-        lidar_t = self._clouds(
-            None if lidar is None else [lidar], 1, "lidar", LIDAR_FEATURES, self.cfg.uses_lidar
-        )
-        radar_t = self._clouds(
-            None if radar is None else [radar], 1, "radar", RADAR_FEATURES, self.cfg.uses_radar
-        )
-        objects, heat, answerable = None, None, None
+        lidar_t = self.scene.clouds(None if lidar is None else [lidar], 1, "lidar")
+        radar_t = self.scene.clouds(None if radar is None else [radar], 1, "radar")
         with torch.no_grad():
-            stages, per_sensor, timings = self._encode(lidar_t, radar_t, timed=True)
-            if self.referent is not None:
-                clock = _Clock(self.device)
-                neck = self.neck(list(stages))
-                out = self.head(neck)
-                heat = torch.sigmoid(out.heatmap[0]).float().cpu().numpy()
-                dets = decode(
-                    out,
-                    self.head_grid,
-                    self.cfg.head,
-                    self.cfg.referent.candidate_threshold,
-                    limit=self.cfg.referent.max_candidates,
-                )[0]
-                keep = slice(0, self.cfg.referent.max_candidates)
-                boxes, labels = dets.boxes[keep], dets.labels[keep]
-                scores = dets.scores[keep]
-                if candidates is not None:
-                    answerable = len(candidates)
-                    boxes, labels, scores = with_context(
-                        candidates,
-                        anchor_scores(
-                            heat,
-                            candidates.boxes,
-                            candidates.labels,
-                            self.head_grid,
-                            self.cfg.head.anchor,
-                        ),
-                        boxes,
-                        labels,
-                        scores,
-                        self.cfg.referent.max_candidates,
-                    )
-                maps = SceneMaps(
-                    neck[0],
-                    per_sensor["l"][0][0] if "l" in per_sensor else None,
-                    per_sensor["r"][0][0] if "r" in per_sensor else None,
-                )
-                objects = self.candidates(
-                    boxes,
-                    labels,
-                    scores,
-                    maps,
-                    None if lidar_t is None else lidar_t[0].cpu().numpy(),
-                    None if radar_t is None else radar_t[0].cpu().numpy(),
-                )
-                timings = dataclasses.replace(timings, detect=clock.lap())
-        return SceneFeatures(
-            stages=tuple(stages),
-            num_lidar=0 if lidar_t is None else int(lidar_t[0].shape[0]),
-            num_radar=0 if radar_t is None else int(radar_t[0].shape[0]),
-            timings=timings,
-            objects=objects,
-            detection_heatmaps=heat,
-            answerable=answerable,
-        )
+            return self.grounding.encode(self.scene, lidar_t, radar_t, candidates)
 
     def ground(
         self, features: SceneFeatures, prompt: str, score_threshold: float | None = None
@@ -490,85 +183,33 @@ class TPCNet(nn.Module):
             features: From :meth:`encode_scene` of this model.
             prompt: The referring sentence (non-empty; longer than the token limit is truncated
                 and reported in :attr:`Predictions.truncated`).
-            score_threshold: Smallest score returned. Default: ``cfg.head.score_threshold`` for
-                the paper's path (a decoded heatmap peak), ``cfg.referent.min_score`` for the
-                referent stage (a referent probability); the returned *set* at the checkpoint's
-                operating threshold is :func:`model.predict.operating_threshold`'s business.
+            score_threshold: Smallest score returned. Default: the head's ``min_score``
+                (``cfg.head.score_threshold`` for the paper's path, a decoded heatmap peak;
+                ``cfg.referent.min_score`` for the referent stage, a referent probability); the
+                returned *set* at the checkpoint's operating threshold is
+                :func:`model.evaluation.predict.operating_threshold`'s business.
 
         Returns:
             :class:`Predictions` (boxes, scores, class names, sigmoid heatmaps, grid, timings).
         """
         text_prompt = validate_prompt(prompt)
-        expected = tuple(self.cfg.backbone.channels)
-        got = tuple(int(s.shape[1]) for s in features.stages)
-        if got != expected or any(s.shape[0] != 1 for s in features.stages):
-            raise ValueError(
-                f"scene features with stage widths {got} do not come from this model "
-                f"(expects {expected}, batch 1)"
-            )
-        if self.referent is not None:
-            return self._ground_referent(features, text_prompt, score_threshold)
-        clock = _Clock(self.device)
+        self.grounding.check(self.scene, features)
+        clock = Clock(self.device)
         with torch.no_grad():
             text = self.text_encoder([text_prompt])
             t_text = clock.lap()
-            out, (t_dggf, t_neck, t_head) = self._ground(features.stages, text, timed=True)
-            clock.lap()
-            detections = decode(out, self.head_grid, self.cfg.head, score_threshold)[0]
-            heatmaps = torch.sigmoid(out.heatmap[0]).float().cpu().numpy()
-            t_decode = clock.lap()
+            answer = self.grounding.answer(self.scene, features, text, score_threshold)
+        t = answer.timings
         return Predictions(
-            boxes=detections.boxes,
-            scores=detections.scores,
-            labels=detections.labels,
-            classes=detections.classes,
-            heatmaps=heatmaps,
+            boxes=answer.boxes,
+            scores=answer.scores,
+            labels=answer.labels,
+            classes=answer.classes,
+            heatmaps=answer.heatmaps,
             grid=self.head_grid,
             prompt=text_prompt,
             truncated=text.truncated[0],
-            timings=GroundTimings(t_text, t_dggf, t_neck, t_head, t_decode),
-        )
-
-    def _ground_referent(
-        self, features: SceneFeatures, prompt: str, score_threshold: float | None
-    ) -> Predictions:
-        objects, heat = features.objects, features.detection_heatmaps
-        if objects is None or heat is None:
-            raise ValueError(
-                "scene features without candidates: encode the scene with this model "
-                "(grounding='referent')"
-            )
-        threshold = self.cfg.referent.min_score if score_threshold is None else score_threshold
-        clock = _Clock(self.device)
-        with torch.no_grad():
-            text = self.text_encoder([prompt])
-            t_text = clock.lap()
-            if len(objects):
-                probs = torch.sigmoid(self.refer(objects, text)[0]).float().cpu().numpy()
-            else:
-                probs = np.zeros(0, dtype=np.float32)
-            t_ref = clock.lap()
-        probs = probs.astype(np.float64)
-        if features.answerable is not None:  # labelled candidates; the proposals are context
-            probs[features.answerable :] = 0.0
-        order = np.argsort(-probs, kind="stable")
-        order = order[probs[order] >= threshold]
-        if features.answerable is not None:
-            order = order[order < features.answerable]
-        heatmaps = referent_heatmap(
-            heat, objects.boxes, objects.labels, probs, self.head_grid, self.cfg.head.anchor
-        )
-        labels = objects.labels[order]
-        return Predictions(
-            boxes=objects.boxes[order],
-            scores=probs[order],
-            labels=labels,
-            classes=tuple(CLASSES[i] for i in labels),
-            heatmaps=heatmaps,
-            grid=self.head_grid,
-            prompt=prompt,
-            truncated=text.truncated[0],
-            timings=GroundTimings(t_text, 0.0, 0.0, 0.0, clock.lap(), referent=t_ref),
+            timings=GroundTimings(t_text, t.dggf, t.neck, t.head, t.decode, t.referent),
         )
 
     def forward(
@@ -585,23 +226,22 @@ class TPCNet(nn.Module):
             prompts: ``B`` prompts.
 
         Returns:
-            :class:`model.head.HeadOutput` with ``heatmap (B, 3, H, W)`` logits and
+            :class:`model.head.detector.HeadOutput` with ``heatmap (B, 3, H, W)`` logits and
             ``regression (B, 8, H, W)`` on :attr:`head_grid`; train it with
-            :func:`model.losses.grounding_loss`. The referent path trains through
-            :meth:`detect`, :meth:`candidates` and :meth:`refer` (:mod:`model.referent_train`).
+            :func:`model.head.losses.grounding_loss`. The referent path trains through
+            :meth:`detect` and its head (:mod:`model.training.referent_step`).
         """
-        if self.text_fusion is None:
-            raise ValueError(
-                "forward() is the paper's text-conditioned pass; a grounding='referent' model "
-                "trains through detect() / candidates() / refer()"
-            )
-        batch = len(prompts)
-        if batch == 0:
-            raise ValueError("forward needs at least one sample")
-        prompts = [validate_prompt(p) for p in prompts]  # fail before any network work
-        lidar_t = self._clouds(lidar, batch, "lidar", LIDAR_FEATURES, self.cfg.uses_lidar)
-        radar_t = self._clouds(radar, batch, "radar", RADAR_FEATURES, self.cfg.uses_radar)
-        stages, _, _ = self._encode(lidar_t, radar_t)
-        text = self.text_encoder(prompts)
-        out, _ = self._ground(stages, text)
-        return out
+        return self.grounding.forward_batch(self.scene, self.text_encoder, lidar, radar, prompts)
+
+
+__all__ = [
+    "CHECKPOINT_NAMES",
+    "GroundTimings",
+    "MissingSensorError",
+    "NonFiniteInputError",
+    "Predictions",
+    "SceneFeatures",
+    "SceneTimings",
+    "TPCNet",
+    "as_points",
+]

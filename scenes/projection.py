@@ -175,7 +175,7 @@ def in_camera_view(
 ) -> np.ndarray:
     """Which LiDAR-frame boxes ``(K, 7)`` the camera sees: the box centre in front of the camera
     (camera-frame depth > 0) and the projected 2D box, clipped to ``image_size`` (width, height),
-    of positive area (``model.predict``'s image rule). Returns ``(K,)`` bool."""
+    of positive area (``model.evaluation.predict``'s image rule). Returns ``(K,)`` bool."""
     b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
     if len(b) == 0:
         return np.zeros(0, dtype=bool)

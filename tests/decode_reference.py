@@ -7,8 +7,10 @@ Regenerate (only when a change of the outputs is intended, and say so in docs/RE
     python -m tests.decode_reference
 
 which rewrites :data:`REFERENCE` and records in it the commit it ran on (``commit``), the
-generator version and torch's version. The committed file was made on the code before issue 20's
-speed-ups (see ``commit`` in the file).
+generator version and torch's version. The committed file was first made on the code before
+issue 20's speed-ups, then regenerated on its inference forms of the network (see ``commit`` in
+the file; the change of outputs between the two: docs/RESULTS.md, "Issue 20's inference
+forms").
 
 Inputs, all on this machine's CPU with one torch thread:
 
@@ -18,7 +20,7 @@ Inputs, all on this machine's CPU with one torch thread:
   candidates of ``encode_scene`` (boxes, labels, scores and every feature tensor) and
   ``ground`` of each prompt (boxes, scores, labels, in the order returned);
 - an untrained ``small`` model (``torch.manual_seed(0)``), whose head is ~0.1 everywhere, so that
-  hundreds of peaks reach rotated NMS: :func:`model.decode.decode` of its head output on the
+  hundreds of peaks reach rotated NMS: :func:`model.head.decode.decode` of its head output on the
   first frame at the head's threshold and at the candidate threshold.
 """
 
@@ -89,7 +91,7 @@ def shipped_outputs(frames: list) -> dict[str, np.ndarray]:
 def untrained_outputs(frames: list) -> dict[str, np.ndarray]:
     """Decoded boxes of an untrained model's head on the first frame (many peaks)."""
     from model import build_model
-    from model.decode import decode
+    from model.head.decode import decode
     from model.tpcnet import as_points
 
     torch.manual_seed(0)

@@ -1,4 +1,4 @@
-"""Run under ``torchrun``: both referent stages through ``model.train.main``, each three times
+"""Run under ``torchrun``: both referent stages through ``model.training.loop.main``, each three times
 (uninterrupted; stopped by a signal that only rank 1 receives; resumed), and write what happened
 to a JSON file for tests/test_train_distributed.py (a helper, not a test module).
 
@@ -16,10 +16,10 @@ from pathlib import Path
 
 import torch
 
-import model.train as train_module
-from model import distributed
+import model.training.loop as train_module
 from model.checkpoint import load_checkpoint
-from model.train_state import load_run
+from model.training import distributed
+from model.training.state import load_run
 
 STAGES = {
     "joint": ("referent_step", []),

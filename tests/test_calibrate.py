@@ -5,9 +5,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from model.calibrate import choose_threshold, main
-from model.grounding_metrics import PromptBoxes
-from model.predict import operating_threshold
+from model.evaluation.grounding import PromptBoxes
+from model.evaluation.predict import operating_threshold
+from model.training.calibrate import choose_threshold, main
 from scenes.layout import LABEL, LIDAR_FOLDER, sample_dir
 
 CAR = np.array([[15.0, 0.0, -0.9, 4.0, 1.8, 1.5, 0.0]])
@@ -76,8 +76,8 @@ def test_a_split_that_cannot_measure_a_threshold_is_refused(
     """Prompts that refer to nothing (any threshold returning nothing scores set F1 100 there),
     or too few that refer to something: exit 2, one line, the checkpoint byte for byte as it was."""
     from model import build_model
-    from model.calibrate import MIN_REFERRED_PROMPTS
     from model.checkpoint import save_checkpoint
+    from model.training.calibrate import MIN_REFERRED_PROMPTS
 
     root = write_tiny_root(tmp_path / "root", frames=2)
     path = save_checkpoint(tmp_path / "m.pt", build_model("small", text_encoder="gru"), step=3)

@@ -17,7 +17,7 @@ from model.checkpoint import (
     load_metadata,
     save_checkpoint,
 )
-from model.grid import BevGrid
+from model.nets.grid import BevGrid
 from model.tpcnet import TPCNet
 
 COARSE = BevGrid(0.0, 51.2, -25.6, 25.6, 1.28)
@@ -158,3 +158,17 @@ def test_numpy_scalars_in_metadata_load_back_with_weights_only(tmp_path):
     )
     meta = load_checkpoint(path).checkpoint_metadata
     assert meta["operating_threshold"] == 0.45 and type(meta["operating_threshold"]) is float
+
+
+def test_checkpoint_meta_reads_and_writes_the_files_dict() -> None:
+    from model import DEFAULT_CHECKPOINT, CheckpointMeta, read_checkpoint
+
+    shipped = read_checkpoint(DEFAULT_CHECKPOINT)["metadata"]
+    meta = CheckpointMeta.from_dict(shipped)
+    assert meta.to_dict() == shipped and list(meta.to_dict()) == list(shipped)
+    assert meta.step == shipped["step"] and not meta.extra
+    assert meta.operating_threshold == shipped.get("operating_threshold")
+    other = CheckpointMeta.from_dict({"epoch": 4, "note": "kept"})  # an older or foreign dict
+    assert other.epoch == 4 and other.step is None and other.extra == {"note": "kept"}
+    assert other.to_dict() == {"epoch": 4, "note": "kept"}
+    assert CheckpointMeta.of(object()) == CheckpointMeta()

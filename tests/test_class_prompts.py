@@ -1,4 +1,4 @@
-"""Class prompts on a fully labelled root (model.class_prompts): exact counting with a fake model
+"""Class prompts on a fully labelled root (model.evaluation.class_prompts): exact counting with a fake model
 on a hand-written VoD-layout frame (written by scenes.vod_writer), the command line's errors, and
 one smoke run of the bundled checkpoint on synthetic frames exported in the View-of-Delft layout
 (``real_format_roots``: python -m scenes.export_real)."""
@@ -13,13 +13,13 @@ import numpy as np
 import pytest
 
 import model.checkpoint
-from model.class_prompt_counts import (
+from model.evaluation.class_prompt_counts import (
     CLASS_PROMPTS,
     ClassSummary,
     assign_matches,
     count_prompt,
 )
-from model.class_prompts import ScoringConfig, main, score_root
+from model.evaluation.class_prompts import ScoringConfig, main, score_root
 from scenes.calib import vod_lidar_calibration, vod_radar_calibration
 from scenes.kitti import boxes_to_labels
 from scenes.layout import CALIB, LABEL, LIDAR_FOLDER, PROMPT, sample_dir, sample_file

@@ -3,7 +3,7 @@
 import pytest
 import torch
 
-from model.dggf import dynamic_max_relative, dynamic_max_relative_loop
+from model.nets.dggf import dynamic_max_relative, dynamic_max_relative_loop
 
 
 @pytest.mark.parametrize(

@@ -1,4 +1,4 @@
-"""Grounding metrics (model/grounding_metrics.py), the baselines (model/baselines.py) and the
+"""Grounding metrics (model/evaluation/grounding.py), the baselines (model/evaluation/baselines.py) and the
 grounding output of ``python -m model.evaluate --data ROOT``.
 
 Boxes are axis-aligned (yaw 0) and equal in size, shifted along x by ``d``, so their 3D IoU is
@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from model.baselines import class_noun_prompt, named_class, oracle_boxes, unsensed_ids
-from model.grounding_metrics import (
+from model.evaluation.baselines import class_noun_prompt, named_class, oracle_boxes, unsensed_ids
+from model.evaluation.grounding import (
     PromptBoxes,
     grounding_metrics,
     match_count,

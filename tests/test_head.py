@@ -5,7 +5,8 @@ from __future__ import annotations
 import pytest
 import torch
 
-from model.head import C3DRecHead, HeadConfig, HeadOutput
+from model.config import HeadConfig
+from model.head.detector import C3DRecHead, HeadOutput
 
 
 def test_default_config_matches_contract():

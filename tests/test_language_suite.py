@@ -146,7 +146,7 @@ def test_runner_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
     import torch
 
     from model import build_model
-    from model.checkpoint import save_checkpoint
+    from model import save_checkpoint
 
     path, scenes = _tiny_suite(tmp_path)
     assert main(["--suite", str(path), "--scenes", str(scenes), "--write-fingerprint"]) == 0

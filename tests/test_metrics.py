@@ -1,6 +1,6 @@
-"""The official VoD metric (model.metrics) on hand-made cases with hand-computed expectations.
+"""The official VoD metric (model.evaluation.metrics) on hand-made cases with hand-computed expectations.
 
-Reminders used below (see model/metrics.py): with N <= 40 valid objects and k true positives that
+Reminders used below (see model/evaluation/metrics.py): with N <= 40 valid objects and k true positives that
 all come before any false positive, the k score thresholds fill precision slots 0..k-1 with 1, so
 AP R11 = ceil(k / 4) / 11 x 100 (slots 0, 4, ..., 40) and AP R40 = (k - 1) / 40 x 100 (slots 1..40).
 """
@@ -13,7 +13,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from model.metrics import (
+from model.evaluation.metrics import (
     MIN_HEIGHT_PX,
     camera_bev_iou,
     camera_iou3d,

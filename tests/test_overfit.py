@@ -6,8 +6,8 @@ import pytest
 import torch
 
 from model import build_model
-from model.losses import grounding_loss
-from model.targets import collate_targets, draw_targets
+from model.head.losses import grounding_loss
+from model.head.targets import collate_targets, draw_targets
 from scenes.boxes import iou3d
 from scenes.dataset import GroundingDataset, collate
 from scenes.synth import SynthSettings, generate_root

@@ -6,7 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from model.predict import (
+from model.evaluation.predict import (
     iterate_predictions,
     operating_threshold,
     prediction_labels,

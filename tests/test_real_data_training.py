@@ -11,8 +11,8 @@ import pytest
 import torch
 
 from model.checkpoint import load_checkpoint
-from model.train import SCENE_MODULES, main
-from model.training_data import DataSpecError, MixedFrames, root_specs
+from model.training.data import DataSpecError, MixedFrames, root_specs
+from model.training.loop import SCENE_MODULES, main
 from scenes.frame_dataset import FrameDataset
 from scenes.layout import meta_dir
 from scenes.synth import SynthSettings, generate_root
@@ -86,7 +86,7 @@ def test_mixed_frames_weights(synth_root, release_root):
 
 
 def test_scene_labels_bring_label_prompts_by_default():
-    from model.train_config import LABEL_PROMPTS, LABELLED_PROMPTS_PER_SCENE, TrainConfig
+    from model.training.config import LABEL_PROMPTS, LABELLED_PROMPTS_PER_SCENE, TrainConfig
 
     labelled = TrainConfig(data=("t2r",), out="runs/x", scene_labels=("vod",))
     assert labelled.label_prompts == LABEL_PROMPTS > 0
@@ -160,7 +160,7 @@ def test_joint_training_with_scene_labels_ignores_outside_the_camera_view(
     real_format_roots, tmp_path
 ):
     from model import build_model
-    from model.referent_train import detection_targets, in_grid_actors
+    from model.training.referent_step import detection_targets, in_grid_actors
     from scenes.scene_labels import SceneLabels
 
     t2r, vod = real_format_roots
@@ -200,8 +200,8 @@ def test_joint_training_with_scene_labels_ignores_outside_the_camera_view(
 
 
 def test_a_finished_run_is_calibrated_on_the_validation_split(monkeypatch, tmp_path, capsys):
-    import model.calibrate as calibrate_module
-    from model.calibrate import Calibration
+    import model.training.calibrate as calibrate_module
+    from model.training.calibrate import Calibration
 
     seen = {}
 

@@ -8,19 +8,19 @@ import pytest
 import torch
 
 from model import build_model
-from model.candidates import (
+from model.config import ReferentConfig
+from model.nets.grid import BevGrid
+from model.nets.numerals import number_spans, token_numeric_features
+from model.nets.text import tokenize_with_numbers
+from model.referent.candidates import (
     geometry_features,
     lidar_evidence,
     nearest_depth,
     pool_bev,
     radar_evidence,
 )
-from model.config import ReferentConfig
-from model.grid import BevGrid
-from model.numerals import number_spans, token_numeric_features
-from model.referent import CandidateBatch, ReferentStage, referent_loss
-from model.referent_train import ReferentTrainConfig, referent_step
-from model.text import tokenize_with_numbers
+from model.referent.stage import CandidateBatch, ReferentStage, referent_loss
+from model.training.referent_step import ReferentTrainConfig, referent_step
 from scenes.actors import Actor
 from scenes.augment import mirror_actor
 from scenes.dataset import AugmentConfig
@@ -214,7 +214,7 @@ def test_referent_model_grounds_a_scene(tiny_root):
 
 
 def test_cached_stage_banks_prompts_and_learns(tiny_root):
-    from model.referent_cache import cache_scenes, cached_referent_step, match_detections
+    from model.training.referent_cache import cache_scenes, cached_referent_step, match_detections
 
     torch.manual_seed(0)
     model = build_model("small", grounding="referent")
@@ -223,14 +223,14 @@ def test_cached_stage_banks_prompts_and_learns(tiny_root):
     assert set(bank.entries) == {t for s in scenes for t in s.prompts}
     for p in model.parameters():
         p.requires_grad_(False)
-    for p in model.referent.parameters():
+    for p in model.grounding.parameters():
         p.requires_grad_(True)
-    opt = torch.optim.AdamW(model.referent.parameters(), lr=3e-3)
+    opt = torch.optim.AdamW(model.grounding.parameters(), lr=3e-3)
     cfg = ReferentTrainConfig(prompts_per_scene=6)
     usable = [s for s in scenes if s.prompts]
     assert usable, "the (seeded, untrained) detector should propose some actor of these scenes"
     losses = []
-    model.referent.train()
+    model.grounding.train()
     for _ in range(15):
         loss = cached_referent_step(model, usable, bank, np.random.default_rng(0), cfg)
         opt.zero_grad()
@@ -313,7 +313,7 @@ def _reference_radar_evidence(boxes, radar):
 
 
 def _reference_heatmap(detection, boxes, labels, probabilities, grid, anchor, sigma_cells=1.5):
-    from model.targets import anchor_points
+    from model.head.targets import anchor_points
 
     _, h, w = detection.shape
     weight = np.zeros_like(detection, dtype=np.float32)
@@ -423,7 +423,7 @@ def test_fast_point_evidence_matches_on_a_generated_scene(tiny_root):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_fast_referent_heatmap_is_bit_identical_to_the_reference(seed):
-    from model.grounder import referent_heatmap
+    from model.referent.scene_candidates import referent_heatmap
 
     rng = np.random.default_rng(seed)
     grid = BevGrid(0.0, 51.2, -25.6, 25.6, 0.64)
@@ -458,8 +458,8 @@ def test_fast_referent_heatmap_is_bit_identical_to_the_reference(seed):
 def test_extended_language_banks_empty_answers_and_reworded_prompts(tiny_root):
     """``--language extended --text-noise``: the bank holds prompts whose right answer is no box
     (an all-zero target row) and reworded ones; the base bank is what it always was."""
-    from model.referent_cache import cache_scenes
-    from model.train_config import TrainConfig, TrainingError, parse_args
+    from model.training.config import TrainConfig, TrainingError, parse_args
+    from model.training.referent_cache import cache_scenes
 
     flags = ["--language", "extended", "--text-noise", "0.5", "--phrasing", "all"]
     cfg, _ = parse_args(["--data", str(tiny_root), "--out", "/tmp/x", *flags])

@@ -19,11 +19,11 @@ from pathlib import Path
 import pytest
 import torch
 
-import model.train as train_module
+import model.training.loop as train_module
 from model.checkpoint import load_checkpoint, read_checkpoint, save_checkpoint
-from model.stop_signal import TrainingInterrupted
-from model.train import TrainConfig, main, train
-from model.train_state import LAST_FILE, STATE_FILE, RunState, load_run
+from model.training.loop import TrainConfig, main, train
+from model.training.state import LAST_FILE, STATE_FILE, RunState, load_run
+from model.training.stop_signal import TrainingInterrupted
 from scenes.layout import LABEL, LIDAR_FOLDER, sample_dir
 from scenes.synth import SynthSettings, generate_root
 
@@ -41,7 +41,7 @@ STEP_FUNCTION = {
     "freeze": "cached_referent_step",
     "tpcnet": "_forward_step",
 }
-"""The function of ``model.train`` that runs one step of each stage."""
+"""The function of ``model.training.loop`` that runs one step of each stage."""
 
 
 @pytest.fixture(scope="module")

@@ -1,4 +1,4 @@
-"""model/report.py's breakdowns: frames grouped by prompt type (paper table III) and objects by
+"""model/evaluation/report.py's breakdowns: frames grouped by prompt type (paper table III) and objects by
 camera depth (table IV), each scored with the official VoD protocol (:func:`evaluate_frames`)."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from model.metrics import evaluate_frames
-from model.report import DEPTH_BINS, PROMPT_TYPES, breakdown_by_depth, breakdown_by_type
+from model.evaluation.metrics import evaluate_frames
+from model.evaluation.report import DEPTH_BINS, PROMPT_TYPES, breakdown_by_depth, breakdown_by_type
 from scenes.calib import vod_lidar_calibration
 from scenes.kitti import ObjectLabel, boxes_to_labels
 

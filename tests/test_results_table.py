@@ -4,8 +4,8 @@ import json
 
 import pytest
 
-from model.grounding_metrics import SPLIT_NAMES
-from model.results_table import (
+from model.evaluation.grounding import SPLIT_NAMES
+from model.evaluation.results_table import (
     CLASSES,
     PROMPT_TYPES,
     ResultsTableError,

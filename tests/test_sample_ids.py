@@ -1,7 +1,7 @@
 """One frame-id rule for every reader and command (issue 21): exactly 5 ASCII digits.
 
 ``scenes.layout`` holds the rule; the split-list reader (``Talk2RadarRoot.ids``), ``launch.py``,
-``model.evaluate`` (split lists and label / prediction file names) and ``model.class_prompts``
+``model.evaluate`` (split lists and label / prediction file names) and ``model.evaluation.class_prompts``
 (label file names) refuse the same entries with one line naming the file (and line).
 """
 
@@ -107,10 +107,10 @@ def test_launch_and_evaluate_refuse_it_in_one_line(
 def test_file_names_follow_the_same_rule(
     root: Path, tmp_path: Path, capsys: pytest.CaptureFixture, stem: str
 ) -> None:
-    """``model.evaluate --labels/--preds`` and ``model.class_prompts`` (split ``all``) read ids
+    """``model.evaluate --labels/--preds`` and ``model.evaluation.class_prompts`` (split ``all``) read ids
     from file names: a 6-digit or non-ASCII stem is refused by both, naming the file."""
     from model import evaluate
-    from model.class_prompts import root_frame_ids
+    from model.evaluation.class_prompts import root_frame_ids
 
     labels, preds = tmp_path / "labels", tmp_path / "preds"
     labels.mkdir()

@@ -73,7 +73,7 @@ def test_ground_over_labelled_boxes_returns_only_those_boxes(tmp_path, write_vod
 
 
 def test_with_context_keeps_labels_first_and_drops_duplicates():
-    from model.labelled import with_context
+    from model.referent.labelled import with_context
 
     labelled = LabelledBoxes(
         np.array([[10.0, 0, -1, 4, 2, 1.5, 0], [20.0, 5, -1, 1, 1, 1.7, 0]]), [0, 1]

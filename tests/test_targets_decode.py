@@ -8,10 +8,11 @@ import numpy as np
 import pytest
 import torch
 
-from model.decode import Detections, decode, rotated_nms
-from model.grid import BevGrid
-from model.head import HeadConfig, HeadOutput
-from model.targets import collate_targets, draw_targets, gaussian_radius
+from model.config import HeadConfig
+from model.head.decode import Detections, decode, rotated_nms
+from model.head.detector import HeadOutput
+from model.head.targets import collate_targets, draw_targets, gaussian_radius
+from model.nets.grid import BevGrid
 
 # 0.5 m cells: every coordinate below is exact in binary floating point.
 GRID = BevGrid(x_min=0.0, x_max=50.0, y_min=-25.0, y_max=25.0, cell=0.5)  # (H, W) = (100, 100)
@@ -386,7 +387,7 @@ def _greedy_reference(boxes, scores, labels, iou_threshold):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_class_nms_is_per_class_greedy_nms_merged_by_score(seed):
-    from model.decode import class_nms
+    from model.head.decode import class_nms
 
     rng = np.random.default_rng(seed)
     n = 400  # more than one block (4 * max_keep) for the small caps below

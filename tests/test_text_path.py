@@ -8,16 +8,16 @@ import numpy as np
 import pytest
 import torch
 
-from model.candidates import GEOMETRY_FEATURES, LIDAR_EVIDENCE, RADAR_EVIDENCE
 from model.config import ReferentConfig
-from model.numerals import NUMERIC_FEATURES
-from model.referent import CandidateBatch, ReferentStage
-from model.text import (
+from model.nets.numerals import NUMERIC_FEATURES
+from model.nets.text import (
     MiniLMTextEncoder,
     load_minilm,
     load_minilm_forward,
     tokenize,
 )
+from model.referent.candidates import GEOMETRY_FEATURES, LIDAR_EVIDENCE, RADAR_EVIDENCE
+from model.referent.stage import CandidateBatch, ReferentStage
 
 PROMPTS = (
     "the car ahead",

@@ -11,12 +11,12 @@ import torch
 
 from model import build_config, build_model
 from model.config import ALIASES, ConfigError
-from model.decode import decode
-from model.grid import BevGrid
-from model.head import HeadOutput
-from model.losses import grounding_loss
-from model.targets import collate_targets, draw_targets
-from model.text import EmptyPromptError
+from model.head.decode import decode
+from model.head.detector import HeadOutput
+from model.head.losses import grounding_loss
+from model.head.targets import collate_targets, draw_targets
+from model.nets.grid import BevGrid
+from model.nets.text import EmptyPromptError
 from model.tpcnet import MissingSensorError, NonFiniteInputError, TPCNet
 
 COARSE = BevGrid(0.0, 51.2, -25.6, 25.6, 1.28)  # 40 x 40 pillars: fast option tests
@@ -126,9 +126,9 @@ def test_every_option_runs_and_trains(overrides: dict[str, Any]) -> None:
     _loss(model, out).backward()
     _assert_gradients_reach_every_parameter(model)
     if model.cfg.modalities != "both":
-        assert model.fusion is None
-        assert (model.lidar is None) == (model.cfg.modalities == "radar")
-        assert (model.radar is None) == (model.cfg.modalities == "lidar")
+        assert model.scene.fusion is None
+        assert (model.scene.lidar is None) == (model.cfg.modalities == "radar")
+        assert (model.scene.radar is None) == (model.cfg.modalities == "lidar")
 
 
 def test_paper_preset_shapes_with_reduced_input() -> None:
@@ -139,7 +139,7 @@ def test_paper_preset_shapes_with_reduced_input() -> None:
         features = model.encode_scene(*make_scene(0))
     widths = [tuple(s.shape) for s in features.stages]
     assert widths == [(1, 64, 20, 20), (1, 128, 10, 10), (1, 256, 5, 5)]
-    assert model.neck.out_channels == 384
+    assert model.scene.neck.out_channels == 384
     pred = model.ground(features, "the car ahead")
     assert pred.heatmaps.shape == (3, 10, 10) and pred.grid == COARSE.downsample(4)
 
@@ -229,7 +229,7 @@ def test_non_finite_points_are_rejected_before_the_network(small_model: TPCNet) 
     bad = lidar.copy()
     bad[17, 1] = np.nan
     called = []
-    hook = small_model.lidar.pillars.register_forward_pre_hook(lambda *a: called.append(1))
+    hook = small_model.scene.lidar.pillars.register_forward_pre_hook(lambda *a: called.append(1))
     try:
         with pytest.raises(NonFiniteInputError, match=r"LiDAR cloud 0.*row 17"):
             small_model.encode_scene(bad, radar)

@@ -10,8 +10,8 @@ import pytest
 import torch
 
 from model.checkpoint import load_checkpoint
-from model.train import TrainConfig, cosine_lr, epoch_batches, train
-from model.train_state import RunStateError
+from model.training.loop import TrainConfig, cosine_lr, epoch_batches, train
+from model.training.state import RunStateError
 from scenes.kitti import read_label_file
 from scenes.layout import LIDAR_FOLDER, split_file
 from scenes.root import Talk2RadarRoot

@@ -1,7 +1,7 @@
 """Both referent-path stages under ``torchrun`` with 2 CPU processes (gloo; issue 24 item 2).
 
 tests/distributed_check.py runs, in one ``torchrun`` launch, the joint stage and the
-``--freeze-scene`` stage (on the shipped detector) through ``model.train.main`` three times each:
+``--freeze-scene`` stage (on the shipped detector) through ``model.training.loop.main`` three times each:
 uninterrupted; stopped by SIGINT that only rank 1 receives (both ranks must stop after the same
 step, exit 130 and leave a resumable state with both ranks' RNG states); resumed. The resumed run
 must equal the uninterrupted one bit for bit, and the checkpoint must load. Every checkpoint also
@@ -50,7 +50,7 @@ def test_both_referent_stages_train_stop_and_resume_under_torchrun(
 
 
 def test_amp_bf16_is_cuda_only(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
-    from model.train import main
+    from model.training.loop import main
 
     args = ["--data", str(tmp_path / "nowhere"), "--out", str(tmp_path / "run")]
     assert main([*args, "--amp", "bf16", "--device", "cpu"]) == 2
@@ -66,11 +66,11 @@ def test_every_stage_steps_under_bfloat16_autocast(tmp_path: Path, write_tiny_ro
     import torch
 
     from model import build_model
-    from model.losses import grounding_loss
-    from model.referent_cache import cache_scenes, cached_referent_step
-    from model.referent_train import ReferentTrainConfig, float32_output, referent_step
-    from model.targets import collate_targets, draw_targets
-    from model.train import init_from
+    from model.head.losses import grounding_loss
+    from model.head.targets import collate_targets, draw_targets
+    from model.training.loop import init_from
+    from model.training.referent_cache import cache_scenes, cached_referent_step
+    from model.training.referent_step import ReferentTrainConfig, float32_output, referent_step
     from scenes.dataset import GroundingDataset, collate
     from scenes.frame_dataset import FrameDataset
 

@@ -1,0 +1,149 @@
+"""Command lines made from frozen dataclass configs: each field is one flag, and its type, default
+and help are the only source of that flag (``python -m model.train``, ``model.evaluate``,
+``model.calibrate``).
+
+A field becomes ``--field-name`` (underscores to hyphens) unless :func:`option` names another
+flag; ``Literal[...]`` (or ``Literal[...] | None``) gives the choices, ``int`` / ``float`` /
+``str`` the type, a ``tuple[X, ...]`` a flag given once per value (``action="append"``), a
+``bool`` a switch (``--name`` for a default of False, ``--no-name`` for True, or both forms with
+``negatable=True``). A field without a default is a required flag. Fields with ``cli=False``
+metadata have no flag.
+
+Why not ``tyro``: the commands' flags, help text and errors are relied on by scripts and docs
+(docs/DESIGN.md); tyro renames and re-formats them (``--flag/--no-flag`` pairs, its own help
+layout and error messages, ``nargs`` lists instead of repeated flags), and keeping every existing
+spelling would take a marker on nearly every field. Generating the argparse parser from the
+fields keeps the command lines exactly and still has one source for each setting.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import types
+import typing
+from collections.abc import Callable
+from typing import Any, Literal
+
+
+def option(
+    default: Any = dataclasses.MISSING,
+    *,
+    help: str | None = None,
+    flag: str | None = None,
+    negatable: bool = False,
+    on_resume: bool = False,
+    default_factory: Callable[[], Any] | Any = dataclasses.MISSING,
+    cli: bool = True,
+) -> Any:
+    """A dataclass field with its command-line flag's settings.
+
+    Args:
+        default: The field's default (none: a required flag).
+        help: The flag's help text.
+        flag: The flag's spelling when it is not ``--field-name``.
+        negatable: A bool given as ``--name`` / ``--no-name`` (``BooleanOptionalAction``).
+        on_resume: The setting may change when a run is resumed (:func:`resumable_fields`).
+        default_factory: As :func:`dataclasses.field`'s (also the flag's default).
+        cli: False: a field with no flag.
+    """
+    meta = {"help": help, "flag": flag, "negatable": negatable, "on_resume": on_resume, "cli": cli}
+    if default_factory is not dataclasses.MISSING:
+        return dataclasses.field(default_factory=default_factory, metadata=meta)
+    return dataclasses.field(default=default, metadata=meta)
+
+
+def choices_of(tp: Any) -> tuple[Any, ...] | None:
+    """The values of a ``Literal`` type (also inside ``X | None``); None for another type."""
+    if typing.get_origin(tp) is Literal:
+        return typing.get_args(tp)
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        for arg in typing.get_args(tp):
+            found = choices_of(arg)
+            if found is not None:
+                return found
+    return None
+
+
+def _base(tp: Any) -> Any:
+    """``X`` of ``X | None``."""
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        return args[0] if len(args) == 1 else str
+    return tp
+
+
+def flag_name(field: dataclasses.Field) -> str:
+    """The flag of a field: ``--field-name``, ``--no-field-name`` for a switch that is on by
+    default, or the one :func:`option` names."""
+    if field.metadata.get("flag"):
+        return field.metadata["flag"]
+    switch_off = field.default is True and not field.metadata.get("negatable")
+    return ("--no-" if switch_off else "--") + field.name.replace("_", "-")
+
+
+def _default(field: dataclasses.Field) -> Any:
+    if field.default_factory is not dataclasses.MISSING:
+        return field.default_factory()
+    return field.default
+
+
+def add_options(parser: argparse.ArgumentParser, cls: type, only: tuple[str, ...] = ()) -> None:
+    """One flag per field of ``cls`` (in field order; ``only``: just these fields)."""
+    hints = typing.get_type_hints(cls, include_extras=True)
+    for f in dataclasses.fields(cls):
+        if not f.metadata.get("cli", True) or (only and f.name not in only):
+            continue
+        tp, name = hints[f.name], flag_name(f)
+        kw: dict[str, Any] = {"dest": f.name}
+        if f.metadata.get("help") is not None:
+            kw["help"] = f.metadata["help"]
+        required = f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+        base = _base(tp)
+        if base is bool:
+            if f.metadata.get("negatable"):
+                kw.update(action=argparse.BooleanOptionalAction, default=_default(f))
+            else:
+                kw.update(action="store_false" if _default(f) else "store_true")
+            parser.add_argument(name, **kw)
+            continue
+        if typing.get_origin(base) is tuple:
+            item = typing.get_args(base)[0]
+            kw.update(action="append", required=required)
+            if not required:
+                kw["default"] = list(_default(f))
+            if item is not str:
+                kw["type"] = item
+            if f.metadata.get("flag"):
+                kw["metavar"] = name.lstrip("-").replace("-", "_").upper()
+            parser.add_argument(name, **kw)
+            continue
+        choices = choices_of(tp)
+        if choices is not None:
+            kw["choices"] = list(choices)
+        elif base in (int, float):
+            kw["type"] = base
+        if required:
+            kw["required"] = True
+        else:
+            kw["default"] = _default(f)
+        parser.add_argument(name, **kw)
+
+
+def from_args(cls: type, args: argparse.Namespace, **extra: Any) -> Any:
+    """``cls`` built from the parsed flags of its fields (tuples from repeated flags) and
+    ``extra``."""
+    given: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        if hasattr(args, f.name):
+            value = getattr(args, f.name)
+            given[f.name] = tuple(value) if isinstance(value, list) else value
+    return cls(**{**given, **extra})
+
+
+def resumable_fields(cls: type) -> frozenset[str]:
+    """The fields of ``cls`` marked ``on_resume`` (settings a resumed run may change)."""
+    return frozenset(f.name for f in dataclasses.fields(cls) if f.metadata.get("on_resume"))
+
+
+__all__ = ["add_options", "choices_of", "flag_name", "from_args", "option", "resumable_fields"]

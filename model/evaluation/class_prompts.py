@@ -1,0 +1,473 @@
+"""Class prompts on a fully labelled root: ``python -m model.class_prompts --data ROOT``.
+
+For every frame the model is asked :data:`CLASS_PROMPTS` ("the cyclists", "the pedestrians",
+"the cars") on one encoded scene (``encode_scene`` once, ``ground`` three times). The boxes scoring
+at least the operating threshold (:func:`model.evaluation.predict.operating_threshold`, or ``--threshold``)
+are the answer. Per prompt:
+
+- **targets**: the ground-truth objects of the prompt's class in the *counted region*: BEV distance
+  of the box centre from the LiDAR origin ``<= max_range`` (``sqrt(x^2 + y^2)``, LiDAR frame) and,
+  with ``fov="camera"`` (default), inside the camera image (:func:`in_camera_view`), because
+  View-of-Delft annotates only the camera's field of view. Only the metric classes (Car,
+  Pedestrian, Cyclist) are ever targets; VoD's other labels (``bicycle``, ``rider``,
+  ``moped_scooter``, ``truck``, ...) are not, so a box on a parked bicycle is a false box.
+- **found**: targets matched one-to-one by an answer box of the prompt's class, greedily in
+  descending score order, each box taking the free ground-truth box of that class with the largest
+  3D IoU strictly above the official minimum overlap (:data:`model.evaluation.metrics.MIN_OVERLAPS`: 0.5 Car,
+  0.25 Pedestrian / Cyclist). The looser **found (centre)** figure matches the same way by BEV
+  centre distance within :data:`CENTRE_RADIUS` (1 m; 2 m for cars), the nearest first.
+- **false boxes**: answer boxes in the counted region that match no ground-truth box of the
+  prompt's class (a box of another class, a duplicate, a box on nothing or on a non-metric object).
+
+Ground-truth boxes of the class outside the counted region can be matched but are never counted,
+and answer boxes outside it are never counted either: an object at 30.5 m found by a box at 29.9 m
+is neither a target nor a false box. Recall = found / targets (percent); false boxes per prompt =
+false boxes / frames. The issue-14 targets (:data:`TARGET_RECALL`, :data:`TARGET_FALSE_PER_PROMPT`)
+are reported against the pooled figures of the three prompts.
+
+The root is a View-of-Delft release root as it comes (``lidar/training/{velodyne,calib,label_2}``,
+a ``radar`` / ``radar_3frames`` / ``radar_5frames`` tree, no ``prompt/`` folder), whose label_2
+holds every annotated object. A Talk2Radar root (with ``prompt/``) is read too, one frame per
+distinct set of sensor files, but its label_2 holds only each prompt's referents, so the figures
+are not meaningful there; the command says so. Errors are one line, ``error: ...``, exit 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from PIL import Image
+
+from model.checkpoint import DEFAULT_CHECKPOINT
+from model.checkpoint_meta import CheckpointMeta
+from model.evaluation.class_prompt_counts import (
+    CLASS_PROMPTS,
+    METRIC_NAMES,
+    TARGET_FALSE_PER_PROMPT,
+    TARGET_RECALL,
+    ClassSummary,
+    PromptCount,
+    bev_range,
+    count_prompt,
+    other_label_boxes,
+)
+from model.protocol import GroundingModel
+from scenes.calib import IMAGE_SIZE
+from scenes.layout import ID_WIDTH, is_frame_id
+from scenes.projection import in_camera_view
+from scenes.root import LIDAR_FOLDER, RADAR_FOLDERS, RootError, Sample, Talk2RadarRoot
+
+FOVS = ("camera", "all")
+"""Counted region: inside the camera image too, or anywhere within the range."""
+
+
+@dataclass(frozen=True)
+class ScoringConfig:
+    """How answers are counted.
+
+    Attributes:
+        threshold: Operating threshold: answer boxes with ``score >= threshold`` count.
+        max_range: Counted region radius (m), BEV distance of the box centre from the LiDAR.
+        fov: ``camera`` (also inside the camera image) or ``all``.
+        sweep: Further thresholds to count at (pooled figures only; the model is asked once, at
+            the smallest threshold).
+    """
+
+    threshold: float
+    max_range: float = 30.0
+    fov: str = "camera"
+    sweep: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        for name, value in [("threshold", self.threshold)] + [("sweep", t) for t in self.sweep]:
+            if not 0.0 <= value < 1.0:
+                raise ValueError(f"{name} values must be in [0, 1), got {value}")
+        if not self.max_range > 0.0:
+            raise ValueError(f"max_range must be positive, got {self.max_range}")
+        if self.fov not in FOVS:
+            raise ValueError(f"fov must be one of {FOVS}, got {self.fov!r}")
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """The three prompts' counts on one frame: ``counts[k]`` at threshold ``thresholds[k]`` (the
+    operating threshold first, then ``ScoringConfig.sweep``), one :class:`PromptCount` per class."""
+
+    sample_id: str
+    thresholds: tuple[float, ...]
+    counts: tuple[tuple[PromptCount, ...], ...]
+
+
+@dataclass(frozen=True)
+class ClassPromptReport:
+    """Class-prompt figures over a root.
+
+    Attributes:
+        config: How answers were counted.
+        frames: Per-frame counts, in scoring order.
+        per_class: Class -> totals at the operating threshold.
+        overall: The three prompts pooled, at the operating threshold.
+        sweep: ``(threshold, per class, pooled)`` for each ``config.sweep`` threshold.
+        other_labels: Non-metric label names -> count over the frames (never targets).
+        seconds: Wall time of loading and the model calls.
+    """
+
+    config: ScoringConfig
+    frames: tuple[FrameResult, ...]
+    per_class: dict[str, ClassSummary]
+    overall: ClassSummary
+    sweep: tuple[tuple[float, dict[str, ClassSummary], ClassSummary], ...] = ()
+    other_labels: dict[str, int] = field(default_factory=dict)
+    seconds: float = 0.0
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "config": asdict(self.config),
+            "prompts": dict(CLASS_PROMPTS),
+            "frames": len(self.frames),
+            "per_class": {k: asdict(v) for k, v in self.per_class.items()},
+            "overall": asdict(self.overall),
+            "targets": {
+                "recall_percent_at_least": TARGET_RECALL,
+                "false_boxes_per_prompt_at_most": TARGET_FALSE_PER_PROMPT,
+                "met": self.overall.meets_targets(),
+            },
+            "sweep": [
+                {"threshold": t, "overall": asdict(o), **{k: asdict(v) for k, v in pc.items()}}
+                for t, pc, o in self.sweep
+            ],
+            "other_labels": dict(self.other_labels),
+            "seconds": self.seconds,
+            "per_frame": [
+                {"id": f.sample_id, **{c.cls: asdict(c) for c in f.counts[0]}} for f in self.frames
+            ],
+        }
+
+    def format_table(self) -> str:
+        """The per-class table and the threshold sweep (plain text)."""
+        cfg = self.config
+        view = ", camera field of view" if cfg.fov == "camera" else ""
+        lines = [
+            f"Class prompts on {len(self.frames)} frames (BEV range <= {cfg.max_range:g} m{view}; "
+            f"threshold {cfg.threshold:g}; found: 3D IoU > 0.5 car, > 0.25 ped / cyc; (c): BEV "
+            "centre within 2 m car, 1 m ped / cyc)",
+            f"{'prompt':<17}{'targets':>8}{'found':>7}{'recall':>8}{'false/prompt':>13}"
+            f"{'wrong cls':>10}{'on other':>9}{'found(c)':>9}{'recall(c)':>10}{'false(c)/pr':>12}",
+        ]
+        rows = [(CLASS_PROMPTS[c], s) for c, s in self.per_class.items()]
+        for name, s in [*rows, ("all three", self.overall)]:
+            n = max(s.prompts, 1)
+            lines.append(
+                f"{name:<17}{s.targets:>8}{s.found:>7}{s.recall:>7.1f}%{s.false_per_prompt:>13.2f}"
+                f"{s.false_wrong_class / n:>10.2f}{s.false_on_other / n:>9.2f}"
+                f"{s.found_centre:>9}{s.recall_centre:>9.1f}%"
+                f"{s.false_centre_per_prompt:>12.2f}"
+            )
+        lines.append(
+            "false/prompt: answer boxes in the region matching no target; of which 'wrong cls': "
+            "of another class, 'on other': on a non-metric labelled object (per prompt)"
+        )
+        verdict = "met" if self.overall.meets_targets() else "not met"
+        lines.append(
+            f"issue-14 targets (pooled recall >= {TARGET_RECALL:g} %, <= "
+            f"{TARGET_FALSE_PER_PROMPT:g} false boxes per prompt): {verdict}"
+        )
+        if self.sweep:
+            lines.append("threshold sweep: recall % / false boxes per prompt")
+            lines.append(
+                f"{'threshold':<11}"
+                + "".join(f"{c:>14}" for c in CLASS_PROMPTS)
+                + f"{'pooled':>14}"
+            )
+            for t, pc, o in ((cfg.threshold, self.per_class, self.overall), *self.sweep):
+                cells = [f"{s.recall:.1f} / {s.false_per_prompt:.2f}" for s in (*pc.values(), o)]
+                mark = " *" if o.meets_targets() else ""
+                lines.append(f"{t:<11g}" + "".join(f"{c:>14}" for c in cells) + mark)
+            lines.append("(* meets the issue-14 targets)")
+        if self.other_labels:
+            others = ", ".join(f"{k} {v}" for k, v in sorted(self.other_labels.items()))
+            lines.append(f"non-metric labels (never targets): {others}")
+        return "\n".join(lines) + "\n"
+
+
+def image_size_of(sample: Sample) -> tuple[int, int]:
+    """``(width, height)`` of the sample's camera image (header only), VoD's without an image.
+
+    Raises:
+        RootError: the image file cannot be opened (names the file).
+    """
+    if sample.image_path is None:
+        return IMAGE_SIZE
+    try:
+        with Image.open(sample.image_path) as img:
+            return (int(img.size[0]), int(img.size[1]))
+    except (OSError, ValueError, Image.DecompressionBombError) as exc:
+        raise RootError(f"{sample.image_path}: unreadable camera image ({exc})") from exc
+
+
+def score_frame(model: GroundingModel, sample: Sample, config: ScoringConfig) -> FrameResult:
+    """Ask the three class prompts on one sample (one ``encode_scene``, three ``ground`` at the
+    smallest threshold) and count the answers at each threshold."""
+    fov_size = image_size_of(sample) if config.fov == "camera" else IMAGE_SIZE
+
+    def counted(boxes: np.ndarray) -> np.ndarray:
+        mask = bev_range(boxes) <= config.max_range
+        if config.fov == "camera":
+            mask &= in_camera_view(boxes, sample.calib, fov_size)
+        return mask
+
+    thresholds = (config.threshold, *config.sweep)
+    gt_boxes = np.asarray(sample.boxes, dtype=np.float64).reshape(-1, 7)
+    gt_counted = counted(gt_boxes)
+    other_boxes = other_label_boxes(sample.labels, sample.calib)
+    features = model.encode_scene(sample.lidar, sample.radar)
+    per_threshold: list[list[PromptCount]] = [[] for _ in thresholds]
+    for cls, prompt in CLASS_PROMPTS.items():
+        pred = model.ground(features, prompt, score_threshold=min(thresholds))
+        scores = np.asarray(pred.scores, dtype=np.float64).reshape(-1)
+        boxes = np.asarray(pred.boxes, dtype=np.float64).reshape(-1, 7)
+        classes = np.array(list(pred.classes), dtype=object).reshape(-1)
+        pred_counted = counted(boxes)
+        for k, t in enumerate(thresholds):
+            keep = scores >= t
+            per_threshold[k].append(
+                count_prompt(
+                    cls,
+                    boxes[keep],
+                    scores[keep],
+                    list(classes[keep]),
+                    gt_boxes,
+                    sample.classes,
+                    pred_counted[keep],
+                    gt_counted,
+                    other_boxes,
+                )
+            )
+    return FrameResult(sample.sample_id, thresholds, tuple(tuple(c) for c in per_threshold))
+
+
+def summarize(
+    frames: Sequence[FrameResult], config: ScoringConfig
+) -> tuple[dict[str, ClassSummary], ClassSummary, tuple]:
+    """Per-class and pooled totals at the operating threshold, and the sweep's."""
+    out = []
+    for k in range(1 + len(config.sweep)):
+        counts = [c for f in frames for c in f.counts[k]]
+        per_class = {
+            cls: ClassSummary.of([c for c in counts if c.cls == cls]) for cls in CLASS_PROMPTS
+        }
+        out.append((per_class, ClassSummary.of(counts)))
+    sweep = tuple((t, pc, o) for t, (pc, o) in zip(config.sweep, out[1:], strict=True))
+    return out[0][0], out[0][1], sweep
+
+
+def root_frame_ids(root: Talk2RadarRoot, split: str) -> list[str]:
+    """The frames to score: ``all`` = every ``label_2`` file of the LiDAR tree (frames with
+    labels; VoD withholds its test labels), else the ids of ``ImageSets/<split>.txt``.
+
+    Raises:
+        RootError: no label folder, no label file, or a split list problem (names the file).
+    """
+    if split != "all":
+        return root.ids(split)
+    label_dir = root.lidar_dir / "training" / "label_2"
+    if not label_dir.is_dir():
+        raise RootError(f"{label_dir}: no label folder (a root with full labels has one)")
+    ids = sorted(path.stem for path in label_dir.glob("*.txt"))
+    for sid in ids:
+        if not is_frame_id(sid):
+            raise RootError(
+                f"{label_dir / (sid + '.txt')}: not named by a {ID_WIDTH}-digit frame id "
+                "(ASCII digits)"
+            )
+    if not ids:
+        raise RootError(f"{label_dir}: no label files")
+    return ids
+
+
+def distinct_scenes(root: Talk2RadarRoot, ids: Sequence[str]) -> list[str]:
+    """The first id of each distinct set of sensor files (:func:`model.evaluation.predict.scene_key`):
+    Talk2Radar samples of one frame share them; a VoD root's frames are all distinct."""
+    from model.evaluation.predict import scene_key
+
+    seen: set[object] = set()
+    out = []
+    for sid in ids:
+        try:
+            key = scene_key(root, sid)
+        except FileNotFoundError as exc:
+            raise RootError(f"{exc.filename}: missing sensor file for sample {sid}") from exc
+        if key not in seen:
+            seen.add(key)
+            out.append(sid)
+    return out
+
+
+def score_root(
+    model: GroundingModel,
+    root: Talk2RadarRoot,
+    ids: Sequence[str],
+    config: ScoringConfig,
+    progress: bool = False,
+) -> ClassPromptReport:
+    """Score the class prompts on the given frames of ``root`` (eval mode, no gradients)."""
+    from tqdm import tqdm
+
+    if isinstance(model, torch.nn.Module):
+        model.eval()
+    frames = []
+    others: dict[str, int] = {}
+    start = time.perf_counter()
+    with torch.no_grad():
+        for sid in tqdm(ids, desc="class prompts", unit="frame", disable=not progress):
+            sample = root.load(sid)
+            frames.append(score_frame(model, sample, config))
+            for lab in sample.labels:
+                if lab.name.lower() not in METRIC_NAMES:
+                    others[lab.name] = others.get(lab.name, 0) + 1
+    per_class, overall, sweep = summarize(frames, config)
+    seconds = time.perf_counter() - start
+    return ClassPromptReport(config, tuple(frames), per_class, overall, sweep, others, seconds)
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m model.class_prompts",
+        description="Ask 'the cyclists', 'the pedestrians', 'the cars' on every frame of a root "
+        "with full labels (a View-of-Delft root) and count found objects and false boxes.",
+    )
+    p.add_argument("--data", required=True, type=Path, help="root folder (lidar/ + a radar tree)")
+    p.add_argument("--checkpoint", type=Path, default=DEFAULT_CHECKPOINT)
+    p.add_argument(
+        "--split",
+        default="all",
+        help="all (every frame with a label_2 file; default) or an ImageSets list name",
+    )
+    p.add_argument("--max-range", type=float, default=30.0, help="metres, BEV (default 30)")
+    p.add_argument("--threshold", type=float, default=None, help="default: the checkpoint's")
+    p.add_argument(
+        "--radar-folder",
+        default="auto",
+        choices=["auto", *RADAR_FOLDERS, "none"],
+        help="radar tree",
+    )
+    p.add_argument(
+        "--fov", default="camera", choices=FOVS, help="count only the camera's view (default)"
+    )
+    p.add_argument(
+        "--sweep",
+        type=float,
+        nargs="+",
+        default=(),
+        metavar="T",
+        help="also count at these thresholds (pooled table; one model pass)",
+    )
+    p.add_argument("--limit", type=int, default=0, help="first N frames only (0: all)")
+    p.add_argument("--device", default="cpu", help="cpu or cuda")
+    p.add_argument("--json", type=Path, default=None, help="write the figures as JSON here")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    return p
+
+
+def _sha256(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for chunk in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def run(args: argparse.Namespace, argv: Sequence[str]) -> int:
+    """The command (see :func:`main`; ``argv`` is recorded in the JSON); raises on bad input."""
+    from model.checkpoint import load_checkpoint
+    from model.evaluation.predict import operating_threshold
+
+    if args.limit < 0:
+        raise ValueError(f"--limit must be >= 0, got {args.limit}")
+    for flag, values in (("--threshold", [args.threshold]), ("--sweep", args.sweep)):
+        for value in values:
+            if value is not None and not 0.0 <= value < 1.0:
+                raise ValueError(f"{flag} must be in [0, 1), got {value}")
+    if not args.max_range > 0.0:
+        raise ValueError(f"--max-range must be positive, got {args.max_range}")
+    if not args.data.is_dir():
+        raise RootError(f"{args.data}: not a folder")
+    if not (args.data / LIDAR_FOLDER).is_dir():
+        raise RootError(f"{args.data / LIDAR_FOLDER}: missing (a VoD root has lidar/training/...)")
+    root = Talk2RadarRoot(
+        args.data, radar=None if args.radar_folder == "none" else args.radar_folder
+    )
+    talk2radar = (root.lidar_dir / "training" / "prompt").is_dir()
+    ids = distinct_scenes(root, root_frame_ids(root, args.split))
+    if args.limit:
+        ids = ids[: args.limit]
+    if not ids:
+        raise RootError(f"{args.data}: split {args.split!r} has no frames")
+    model = load_checkpoint(args.checkpoint, device=args.device)
+    threshold = operating_threshold(model) if args.threshold is None else args.threshold
+    config = ScoringConfig(
+        float(threshold), args.max_range, args.fov, tuple(float(t) for t in args.sweep)
+    )
+    meta = CheckpointMeta.of(model)
+    print(
+        f"data: {args.data} ({len(ids)} frames, split {args.split}, radar "
+        f"{root.radar_folder or 'none'}); checkpoint {args.checkpoint} (step {meta.step}, "
+        f"epoch {meta.epoch}); threshold {threshold:g} "
+        f"({'--threshold' if args.threshold is not None else 'checkpoint'})"
+    )
+    if talk2radar:
+        print(
+            f"note: {args.data} is a Talk2Radar root (lidar/training/prompt/): its label_2 holds "
+            "only each prompt's referents, not every object, so found objects are undercounted "
+            "and real objects count as false boxes; use a View-of-Delft root with full labels",
+            file=sys.stderr,
+        )
+    report = score_root(model, root, ids, config, progress=not args.quiet)
+    print(report.format_table(), end="")
+    if args.json is not None:
+        data = {
+            "root": str(args.data),
+            "root_kind": "talk2radar (referent labels only)" if talk2radar else "full labels",
+            "split": args.split,
+            "radar_folder": root.radar_folder,
+            "checkpoint": str(args.checkpoint),
+            "checkpoint_sha256": _sha256(args.checkpoint),
+            "checkpoint_step": meta.step,
+            "checkpoint_epoch": meta.epoch,
+            "threshold_source": "--threshold" if args.threshold is not None else "checkpoint",
+            "command": " ".join(["python -m model.class_prompts", *argv]),
+            **report.to_dict(),
+        }
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(data, indent=1) + "\n")
+        print(f"wrote {args.json}")
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m model.class_prompts``; errors are one line on stderr with exit code 2."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = _parser().parse_args(argv)
+    try:
+        return run(args, argv)
+    except ValueError as exc:  # RootError, LabelError, CalibrationError, CheckpointError, ...
+        print(f"error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"error: {where}{' '.join((exc.strerror or str(exc)).split())}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

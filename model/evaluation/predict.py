@@ -1,0 +1,256 @@
+"""Run a model over a split of a Talk2Radar root and write KITTI prediction files.
+
+The writer follows mmdet3d's ``KittiMetric`` as the Talk2Radar workflow uses it (spec §1.7, §2.2):
+
+- one ``<frame id>.txt`` per frame of the split, **empty when nothing is found** (the VoD
+  evaluator takes its frame list from the prediction folder, so a missing file would silently drop
+  that frame's ground truth);
+- each line ``Class -1 -1 alpha x1 y1 x2 y2 h w l x y z ry score`` with four decimals, the camera-
+  frame bottom centre, and the *real* projected and clipped 2D box (the evaluator ignores
+  detections whose 2D height is under 40 px);
+- a detection is kept only if its 2D box overlaps the image and its LiDAR-frame bottom centre lies
+  strictly inside ``pcd_limit_range = [0, -40, -3, 70.4, 40, 0]``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, field
+from itertools import islice
+from pathlib import Path
+from typing import TYPE_CHECKING, TypeVar
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from model.checkpoint_meta import CheckpointMeta
+from model.referent.head import UNCALIBRATED_REFERENT
+from model.referent.labelled import LabelledBoxes
+from scenes.calib import IMAGE_SIZE, Calibration, bottom_centres
+from scenes.kitti import ObjectLabel, boxes_to_labels, write_label_file
+from scenes.lru import LRUCache
+from scenes.root import Sample, Talk2RadarRoot
+
+if TYPE_CHECKING:
+    from model.features import SceneFeatures
+    from model.tpcnet import TPCNet
+
+T = TypeVar("T")
+
+PCD_LIMIT_RANGE = (0.0, -40.0, -3.0, 70.4, 40.0, 0.0)
+"""mmdet3d's default ``pcd_limit_range`` (x_min, y_min, z_min, x_max, y_max, z_max), LiDAR frame."""
+
+
+def prediction_labels(
+    boxes: np.ndarray,
+    classes: Sequence[str],
+    scores: np.ndarray,
+    calib: Calibration,
+    image_size: tuple[int, int] = IMAGE_SIZE,
+) -> list[ObjectLabel]:
+    """Turn LiDAR-frame detections into KITTI prediction labels, filtered as ``KittiMetric`` does.
+
+    Args:
+        boxes: ``(K, 7)`` LiDAR frame, z at the geometric centre.
+        classes: ``K`` class names.
+        scores: ``(K,)`` confidences.
+        calib: The frame's LiDAR calibration.
+
+    Returns:
+        The kept detections as labels (``truncated = occluded = -1``), in input order.
+    """
+    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
+    if len(b) == 0:
+        return []
+    labels = boxes_to_labels(
+        b,
+        list(classes),
+        calib,
+        scores=np.asarray(scores),
+        image_size=image_size,
+        truncated=-1.0,
+        occluded=-1,
+    )
+    width, height = image_size
+    lo, hi = np.array(PCD_LIMIT_RANGE[:3]), np.array(PCD_LIMIT_RANGE[3:])
+    kept = []
+    for label, centre in zip(labels, bottom_centres(b), strict=True):
+        x1, y1, x2, y2 = label.bbox
+        in_image = x1 < width and y1 < height and x2 > 0 and y2 > 0
+        in_range = bool(np.all(centre > lo) and np.all(centre < hi))
+        if in_image and in_range:
+            kept.append(label)
+    return kept
+
+
+def operating_threshold(model: TPCNet) -> float:
+    """The score above which the model's boxes are its answer (the set metrics, the app).
+
+    ``model.checkpoint_metadata["operating_threshold"]`` where the checkpoint stores one (set by
+    ``python -m model.calibrate``); else, on the referent path, :data:`UNCALIBRATED_REFERENT` (a
+    referent probability: the decision boundary its BCE training draws), and on the paper's path
+    the decoder's ``model.cfg.head.score_threshold``.
+
+    Raises:
+        ValueError: the stored value is not a number in ``[0, 1)`` (the message names the field).
+    """
+    value = CheckpointMeta.of(model).operating_threshold
+    if value is None:
+        if getattr(model.cfg, "grounding", "tpcnet") == "referent":
+            return UNCALIBRATED_REFERENT
+        return float(model.cfg.head.score_threshold)
+    if isinstance(value, bool) or not isinstance(value, int | float) or not 0.0 <= value < 1.0:
+        raise ValueError(
+            f"checkpoint metadata field 'operating_threshold' must be a number in [0, 1), "
+            f"got {value!r}"
+        )
+    return float(value)
+
+
+def decode_threshold(model: TPCNet) -> float:
+    """The smallest score ``model.ground`` returns when given no threshold: its grounding
+    head's ``min_score`` (the referent stage's ``cfg.referent.min_score``, the paper's decoder's
+    ``cfg.head.score_threshold``)."""
+    return float(model.grounding.min_score)
+
+
+SceneKey = tuple[object, ...]
+"""Identity of a sample's sensor data (see :func:`scene_key`)."""
+
+
+def scene_key(root: Talk2RadarRoot, sample_id: str) -> SceneKey:
+    """The identity of a sample's frame: :meth:`scenes.root.Talk2RadarRoot.frame_key`."""
+    return root.frame_key(sample_id)
+
+
+@dataclass(frozen=True)
+class FramePrediction:
+    """The model's answer for one sample, with its ground truth and timing.
+
+    Attributes:
+        sample: The sample.
+        boxes: ``(K, 7)`` LiDAR frame, sorted by score (every box the grounding threshold kept).
+        scores: ``(K,)``.
+        classes: ``K`` class names.
+        labels: KITTI prediction labels of the boxes scoring at least ``min_label_score`` (see
+            :func:`iterate_predictions`), filtered as :func:`prediction_labels`.
+        seconds: ``encode_scene`` (of this sample's scene, measured once when shared) + ``ground``.
+        features: The encoded scene (to ground other prompts on it).
+        scene_key: :func:`scene_key` of the sample.
+    """
+
+    sample: Sample
+    boxes: np.ndarray
+    scores: np.ndarray
+    classes: tuple[str, ...]
+    labels: list[ObjectLabel]
+    seconds: float
+    features: SceneFeatures | None = field(default=None, repr=False, compare=False)
+    scene_key: SceneKey = ()
+
+
+def iterate_predictions(
+    model: TPCNet,
+    root: Talk2RadarRoot,
+    ids: Sequence[str],
+    score_threshold: float | None = None,
+    progress: bool = True,
+    min_label_score: float = 0.0,
+    cache_scenes: int = 4,
+    candidates: Callable[[Sample], LabelledBoxes] | None = None,
+) -> Iterator[FramePrediction]:
+    """Run ``model.encode_scene`` + ``model.ground`` on each sample (eval mode, no gradients).
+
+    Args:
+        score_threshold: Decoding threshold given to ``ground`` (None: the model's own).
+        min_label_score: Only boxes scoring at least this become :attr:`FramePrediction.labels`.
+        cache_scenes: Encoded scenes kept (most recently used first) for the following samples
+            with the same :func:`scene_key`; ids in world order (as ``scenes.synth`` writes them)
+            encode each world once. 0 encodes every sample.
+        candidates: Referent path: the labelled boxes of a sample's frame, among which the
+            referent stage then chooses (``model.evaluate --candidates labels``); None: the
+            detector's proposals.
+    """
+    model.eval()
+    warm_up = getattr(getattr(model, "text_encoder", None), "warm_up", None)
+    if warm_up is not None:
+        warm_up()  # the text encoder loads while the first scenes are read and encoded
+
+    def read(sid: str) -> tuple[Sample, SceneKey, LabelledBoxes | None]:
+        sample = root.load(sid)
+        if sample.prompt is None:
+            raise ValueError(f"{root.path}: sample {sid} has no prompt to ground")
+        return sample, scene_key(root, sid), None if candidates is None else candidates(sample)
+
+    cache: LRUCache[SceneKey, tuple[SceneFeatures, float]] = LRUCache(max(cache_scenes, 0))
+    bar = tqdm(total=len(ids), desc="predict", unit="frame", disable=not progress)
+    with torch.no_grad(), bar:
+        for sample, key, labelled in read_ahead(read, ids):
+            bar.update(1)
+            hit = cache.get(key)
+            if hit is not None:
+                features, encode_seconds = hit
+            else:
+                start = time.perf_counter()
+                if labelled is None:
+                    features = model.encode_scene(sample.lidar, sample.radar)
+                else:
+                    features = model.encode_scene(sample.lidar, sample.radar, candidates=labelled)
+                encode_seconds = time.perf_counter() - start
+                cache.put(key, (features, encode_seconds))
+            start = time.perf_counter()
+            pred = model.ground(features, sample.prompt, score_threshold=score_threshold)
+            seconds = encode_seconds + time.perf_counter() - start
+            scores = np.asarray(pred.scores, dtype=np.float64)
+            boxes = np.asarray(pred.boxes, dtype=np.float64).reshape(-1, 7)
+            keep = scores >= min_label_score
+            labels = prediction_labels(
+                boxes[keep],
+                [c for c, k in zip(pred.classes, keep, strict=True) if k],
+                scores[keep],
+                sample.calib,
+            )
+            yield FramePrediction(
+                sample,
+                boxes,
+                scores,
+                tuple(pred.classes),
+                labels,
+                seconds,
+                features,
+                key,
+            )
+
+
+def read_ahead(read: Callable[[str], T], ids: Sequence[str], ahead: int = 2) -> Iterator[T]:
+    """``read(id)`` of each id, in order, computed up to ``ahead`` ids in advance by one worker
+    thread (file reading and parsing overlap the model's work, which releases the GIL). An error
+    of ``read`` is raised where its id's result is taken, as if read there."""
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="read-ahead") as pool:
+        pending: deque[Future[T]] = deque()
+        todo = iter(ids)
+        try:
+            for sid in islice(todo, ahead):
+                pending.append(pool.submit(read, sid))
+            while pending:
+                done = pending.popleft()
+                nxt = next(todo, None)
+                if nxt is not None:
+                    pending.append(pool.submit(read, nxt))
+                yield done.result()
+        finally:
+            for future in pending:
+                future.cancel()
+
+
+def write_predictions(predictions: dict[str, list[ObjectLabel]], out_dir: str | Path) -> Path:
+    """Write one prediction file per frame (empty files included) into ``out_dir``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    for sid, labels in predictions.items():
+        write_label_file(out / f"{sid}.txt", labels, decimals=4)
+    return out

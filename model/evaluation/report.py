@@ -1,0 +1,390 @@
+"""Ground a whole split and score it: the official VoD result plus the paper's breakdowns.
+
+- Overall: :func:`model.evaluation.metrics.evaluate_frames` over every frame of the split.
+- Per prompt type (the paper's table III): frames grouped by their prompt's type tags (``depth``,
+  ``velocity``, ``motion``, ``position``); a prompt with several tags counts in each. Tags come from
+  the sample's sidecar where present, else from :func:`scenes.prompts.infer_tags` on the text (so
+  real Talk2Radar prompts are grouped by the same keyword rules).
+- Per depth bin (table IV): "we partition the predicted objects into six depth intervals, each
+  spanning 10 meters". An object's depth is its camera-frame forward distance (the label's
+  ``location.z``); ground truth and detections are both restricted to the bin, then scored.
+
+- Grounding per prompt (:mod:`model.evaluation.grounding`): top-box Acc@0.25 / Acc@0.5 and the set
+  metrics at the operating threshold (:func:`model.evaluation.predict.operating_threshold`), overall, per
+  prompt type and per group; with ``baselines=True`` also for the language-blind oracle and the
+  class-noun prompt (:mod:`model.evaluation.baselines`), each with its official mAP. They judge the boxes as
+  ``ground`` returns them (LiDAR frame, before the prediction files' image / range filter), against
+  the referents of ``label_2``.
+
+Thresholds: the model grounds each prompt once, decoding at ``min(decode, operating)``; the boxes
+scoring at least the decode threshold (``score_threshold``, default
+:func:`model.evaluation.predict.decode_threshold`, what ``ground`` returns by itself) make the prediction files and the mAP (unchanged by the operating
+threshold), the boxes scoring at least the operating threshold make the answer set.
+
+All AP values are the entire-area 3D mAP at 11 recall points unless a table says otherwise.
+"""
+
+from __future__ import annotations
+
+import typing
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+
+from model.evaluation.baselines import class_noun_prompt, named_class, oracle_boxes, unsensed_ids
+from model.evaluation.grounding import (
+    GroundingMetrics,
+    PromptBoxes,
+    PromptOutcome,
+    format_grounding_tables,
+    grounding_metrics,
+    prompt_outcome,
+)
+from model.evaluation.metrics import VodResult, evaluate_frames
+from model.evaluation.predict import (
+    decode_threshold,
+    iterate_predictions,
+    operating_threshold,
+    prediction_labels,
+)
+from model.referent.labelled import LabelledBoxes
+from scenes.actors import CLASSES, Actor
+from scenes.kitti import ObjectLabel, format_label_line, parse_label_line
+from scenes.prompts import infer_tags
+from scenes.root import Sample, Talk2RadarRoot
+from scenes.scene_labels import SceneLabels
+
+if TYPE_CHECKING:
+    from model.tpcnet import TPCNet
+
+PROMPT_TYPES: tuple[str, ...] = ("depth", "velocity", "motion", "position")
+DEPTH_BINS: tuple[tuple[float, float], ...] = tuple((10.0 * i, 10.0 * (i + 1)) for i in range(6))
+
+
+BaselineName = Literal["class_noun", "oracle"]
+"""A baseline: the class-noun prompt, the language-blind oracle (JSON keys under ``baselines``)."""
+
+BASELINES: tuple[BaselineName, ...] = typing.get_args(BaselineName)
+"""Baseline names, in table order."""
+
+ROW_NAMES: dict[str, str] = {"model": "model", "class_noun": "class noun", "oracle": "oracle"}
+"""Row labels of the printed grounding tables."""
+
+
+@dataclass
+class AnswerSet:
+    """What one answerer (the model or a baseline) gave on a split, prompt after prompt.
+
+    Attributes:
+        outcomes: Its outcome per prompt (:func:`model.evaluation.grounding.prompt_outcome`).
+        labels: Frame id -> its answer as prediction labels (baselines: what their files would
+            hold, scored with the official metric).
+    """
+
+    outcomes: list[PromptOutcome] = field(default_factory=list)
+    labels: dict[str, list[ObjectLabel]] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class BaselineResult:
+    """A baseline scored like the model.
+
+    Attributes:
+        result: Official VoD result of its answers (as the prediction files would hold them).
+        grounding: Its grounding metrics at the model's operating threshold.
+    """
+
+    result: VodResult
+    grounding: GroundingMetrics
+
+    def to_dict(self) -> dict:
+        return {**self.result.to_dict(), "grounding": self.grounding.to_dict()}
+
+
+@dataclass(frozen=True)
+class GroundingReport:
+    """The evaluation of a model on a split.
+
+    Attributes:
+        result: Official VoD result over all frames.
+        by_type: Prompt type -> (number of frames, result on those frames).
+        by_depth: ``"0-10"`` ... ``"50-60"`` -> (number of GT objects, result in that bin).
+        predictions: Frame id -> prediction labels (what the files hold).
+        ground_truth: Frame id -> ground-truth labels.
+        seconds: Per-frame ``encode_scene + ground`` wall time (a shared scene's encoding time
+            counts in each of its frames).
+        grounding: The model's grounding metrics (None when not computed).
+        baselines: Name of :data:`BASELINES` -> its result (only those computed).
+        notes: Baseline name -> why it was not computed.
+    """
+
+    result: VodResult
+    by_type: Mapping[str, tuple[int, VodResult]]
+    by_depth: Mapping[str, tuple[int, VodResult]]
+    predictions: Mapping[str, list[ObjectLabel]] = field(repr=False)
+    ground_truth: Mapping[str, list[ObjectLabel]] = field(repr=False)
+    tags: Mapping[str, frozenset[str]] = field(repr=False, default_factory=dict)
+    seconds: tuple[float, ...] = field(repr=False, default=())
+    grounding: GroundingMetrics | None = None
+    baselines: Mapping[BaselineName, BaselineResult] = field(default_factory=dict)
+    notes: Mapping[BaselineName, str] = field(default_factory=dict)
+
+    def rescored(self, predictions: Mapping[str, list[ObjectLabel]]) -> GroundingReport:
+        """The same report with other predictions for the same frames (e.g. read back from the
+        written files, as the official devkit would read them); grounding and baselines kept."""
+        fresh = build_report(self.ground_truth, predictions, self.tags, self.seconds)
+        return replace(fresh, grounding=self.grounding, baselines=self.baselines, notes=self.notes)
+
+    def to_dict(self) -> dict:
+        """JSON-ready: the official dict plus ``by_prompt_type``, ``by_depth`` and timing; with
+        grounding metrics, ``grounding`` (:meth:`GroundingMetrics.to_dict`), ``baselines`` (name ->
+        official dict + ``grounding``) and ``baseline_notes``."""
+        out = {
+            **self.result.to_dict(),
+            "num_frames": self.result.num_frames,
+            "by_prompt_type": {
+                k: {"frames": n, **r.to_dict()} for k, (n, r) in self.by_type.items()
+            },
+            "by_depth": {
+                k: {"gt_objects": n, **r.to_dict()} for k, (n, r) in self.by_depth.items()
+            },
+            "median_seconds_per_frame": float(np.median(self.seconds)) if self.seconds else None,
+        }
+        if self.grounding is not None:
+            out["grounding"] = self.grounding.to_dict()
+            out["baselines"] = {k: v.to_dict() for k, v in self.baselines.items()}
+            out["baseline_notes"] = dict(self.notes)
+        return out
+
+    def grounding_rows(self) -> dict[str, tuple[GroundingMetrics, float | None]]:
+        """Row label -> (grounding metrics, entire-area 3D mAP): the model, then the baselines."""
+        if self.grounding is None:
+            return {}
+        rows = {ROW_NAMES["model"]: (self.grounding, self.result.entire_area.map_3d)}
+        for name in BASELINES:
+            if name in self.baselines:
+                b = self.baselines[name]
+                rows[ROW_NAMES[name]] = (b.grounding, b.result.entire_area.map_3d)
+        return rows
+
+    def format_tables(self) -> str:
+        """The official table, mAP by prompt type and by depth bin (3D, entire area, R11), then the
+        grounding tables (model and baselines side by side)."""
+        lines = [self.result.format_table()]
+        lines.append("mAP by prompt type (3D, entire area, 11-point / 40-point)")
+        for name, (n, res) in self.by_type.items():
+            area = res.entire_area
+            lines.append(f"  {name:<10}{n:>6} frames  {area.map_3d:6.2f} / {area.map_3d_r40:6.2f}")
+        lines.append("mAP by depth (3D, entire area, 11-point / 40-point)")
+        for name, (n, res) in self.by_depth.items():
+            area = res.entire_area
+            lines.append(f"  {name:<10}{n:>6} objects {area.map_3d:6.2f} / {area.map_3d_r40:6.2f}")
+        rows = self.grounding_rows()
+        if rows:
+            lines.append(format_grounding_tables(rows).rstrip("\n"))
+        for name, why in self.notes.items():
+            lines.append(f"{ROW_NAMES.get(name, name)} baseline not computed: {why}")
+        return "\n".join(lines) + "\n"
+
+
+def _depth(label: ObjectLabel) -> float:
+    return float(label.location[2])
+
+
+def breakdown_by_type(
+    gt: Mapping[str, list[ObjectLabel]],
+    dt: Mapping[str, list[ObjectLabel]],
+    tags: Mapping[str, frozenset[str]],
+) -> dict[str, tuple[int, VodResult]]:
+    """Score the frames of each prompt type separately (types with no frame are left out)."""
+    out = {}
+    for kind in PROMPT_TYPES:
+        frames = [f for f in gt if kind in tags.get(f, frozenset())]
+        if frames:
+            out[kind] = (
+                len(frames),
+                evaluate_frames({f: gt[f] for f in frames}, {f: dt.get(f, []) for f in frames}),
+            )
+    return out
+
+
+def breakdown_by_depth(
+    gt: Mapping[str, list[ObjectLabel]],
+    dt: Mapping[str, list[ObjectLabel]],
+    bins: Sequence[tuple[float, float]] = DEPTH_BINS,
+) -> dict[str, tuple[int, VodResult]]:
+    """Score ground truth and detections restricted to each depth bin ``[lo, hi)``."""
+    out = {}
+    for lo, hi in bins:
+        gt_bin = {f: [g for g in labs if lo <= _depth(g) < hi] for f, labs in gt.items()}
+        dt_bin = {f: [d for d in labs if lo <= _depth(d) < hi] for f, labs in dt.items()}
+        count = sum(len(v) for v in gt_bin.values())
+        out[f"{lo:g}-{hi:g}"] = (count, evaluate_frames(gt_bin, dt_bin))
+    return out
+
+
+def _as_written(labels: Sequence[ObjectLabel]) -> list[ObjectLabel]:
+    """Labels rounded as a prediction file holds them (4 decimals), so that baselines are scored
+    on the same footing as the model's files."""
+    return [parse_label_line(format_label_line(lab, decimals=4)) for lab in labels]
+
+
+def _labels(boxes: PromptBoxes, min_score: float, sample: Sample) -> list[ObjectLabel]:
+    kept = boxes.above(min_score)
+    return _as_written(prediction_labels(kept.boxes, kept.classes, kept.scores, sample.calib))
+
+
+def sample_tags(sample: Sample) -> frozenset[str]:
+    """The sidecar's prompt type tags, else :func:`scenes.prompts.infer_tags` of the prompt."""
+    meta = sample.meta
+    if meta is not None and meta.tags:
+        return frozenset(meta.tags)
+    return infer_tags(sample.prompt or "")
+
+
+def evaluate_predictions(
+    model: TPCNet,
+    root: Talk2RadarRoot,
+    ids: Sequence[str],
+    progress: bool = True,
+    score_threshold: float | None = None,
+    operating: float | None = None,
+    baselines: bool = False,
+    scene_labels: SceneLabels | None = None,
+    candidates: str = "detector",
+) -> GroundingReport:
+    """Ground every sample of ``ids`` and score the answers.
+
+    Args:
+        score_threshold: Decode threshold of the prediction files and the mAP (None:
+            :func:`model.evaluation.predict.decode_threshold`).
+        operating: Operating threshold of the set metrics (None:
+            :func:`model.evaluation.predict.operating_threshold`).
+        baselines: Also score the class-noun prompt and the language-blind oracle (the oracle
+            needs every frame's objects: the scene labels where given, else the sidecar; without
+            either it is left out with a note).
+        scene_labels: The View-of-Delft root with every frame's full labels. Where given, nothing
+            under the root's ``meta/`` is read.
+        candidates: ``"detector"`` (the detector's proposals) or ``"labels"`` (the frame's
+            labelled boxes of the three classes: grounding apart from detection; needs
+            ``scene_labels``).
+    """
+    if not ids:
+        raise ValueError(f"{root.path}: no samples to evaluate")
+    decode = decode_threshold(model) if score_threshold is None else float(score_threshold)
+    op = operating_threshold(model) if operating is None else float(operating)
+    if not 0.0 <= op < 1.0:
+        raise ValueError(f"operating threshold must be in [0, 1), got {op}")
+    ground_at = min(decode, op)
+    if candidates not in ("detector", "labels"):
+        raise ValueError(f"candidates must be detector or labels, got {candidates!r}")
+    if candidates == "labels" and scene_labels is None:
+        raise ValueError(
+            "candidates 'labels' need the frames' full labels (--scene-labels VOD_ROOT): a "
+            "Talk2Radar label_2 lists only the referents"
+        )
+    if scene_labels is not None and root.sidecar:
+        root = Talk2RadarRoot(root.path, radar=root.radar_folder, sidecar=False)
+
+    def labelled(sample: Sample) -> LabelledBoxes:
+        assert scene_labels is not None
+        return LabelledBoxes(*scene_labels.load(sample.sample_id).metric())
+
+    gt: dict[str, list[ObjectLabel]] = {}
+    dt: dict[str, list[ObjectLabel]] = {}
+    tags: dict[str, frozenset[str]] = {}
+    seconds = []
+    answers = AnswerSet()
+    base: dict[BaselineName, AnswerSet] = {name: AnswerSet() for name in BASELINES}
+    noun_answers: dict[tuple[object, ...], PromptBoxes] = {}
+    no_meta: list[str] = []
+    for pred in iterate_predictions(
+        model,
+        root,
+        ids,
+        ground_at,
+        progress=progress,
+        min_label_score=decode,
+        candidates=labelled if candidates == "labels" else None,
+    ):
+        sample = pred.sample
+        sid = sample.sample_id
+        gt[sid] = list(sample.labels)
+        dt[sid] = _as_written(pred.labels)  # as the files will hold them (rescored at no cost)
+        tags[sid] = sample_tags(sample)
+        seconds.append(pred.seconds)
+        where = f"{root.path}: sample {sid}"
+        referents = PromptBoxes.make(sample.boxes, sample.classes, source=f"{where} label_2")
+        answer = PromptBoxes.make(pred.boxes, pred.classes, pred.scores, source=f"{where} model")
+        answers.outcomes.append(prompt_outcome(sid, tags[sid], answer, referents, op))
+        if not baselines:
+            continue
+        cls = named_class(tags[sid], sample.classes)
+        noun = class_noun_prompt(cls)
+        key = (*pred.scene_key, noun)
+        if key not in noun_answers:
+            p = model.ground(pred.features, noun, score_threshold=ground_at)
+            noun_answers[key] = PromptBoxes.make(
+                p.boxes, p.classes, p.scores, source=f"{where} class noun"
+            )
+        noun_boxes = noun_answers[key]
+        base["class_noun"].labels[sid] = _labels(noun_boxes, decode, sample)
+        base["class_noun"].outcomes.append(
+            prompt_outcome(sid, tags[sid], noun_boxes, referents, op)
+        )
+        if scene_labels is not None:
+            boxes, labels = scene_labels.load(sid).metric()
+            objects = [
+                Actor(i, CLASSES[int(lab)], box, np.zeros(2))
+                for i, (box, lab) in enumerate(zip(boxes, labels, strict=True))
+            ]
+            oracle = oracle_boxes(objects, cls)
+        elif sample.meta is None:
+            no_meta.append(sid)
+            continue
+        else:
+            skip = unsensed_ids(sample.meta, source=f"{root.path / 'meta' / sid}.json")
+            oracle = oracle_boxes(sample.meta.actors, cls, exclude=skip)
+        base["oracle"].labels[sid] = _labels(oracle, decode, sample)
+        base["oracle"].outcomes.append(prompt_outcome(sid, tags[sid], oracle, referents, op))
+    report = build_report(gt, dt, tags, tuple(seconds))
+    found: dict[BaselineName, BaselineResult] = {}
+    notes: dict[BaselineName, str] = {}
+    if baselines:
+        if no_meta:
+            notes["oracle"] = (
+                f"{len(no_meta)} sample(s) have no meta sidecar listing the frame's actors "
+                f"(e.g. {root.path / 'meta' / (no_meta[0] + '.json')})"
+            )
+        for name in BASELINES:
+            if name not in notes:
+                found[name] = BaselineResult(
+                    result=evaluate_frames(gt, base[name].labels),
+                    grounding=grounding_metrics(base[name].outcomes, op),
+                )
+    return replace(
+        report,
+        grounding=grounding_metrics(answers.outcomes, op),
+        baselines=found,
+        notes=notes,
+    )
+
+
+def build_report(
+    gt: Mapping[str, list[ObjectLabel]],
+    dt: Mapping[str, list[ObjectLabel]],
+    tags: Mapping[str, frozenset[str]],
+    seconds: Sequence[float] = (),
+) -> GroundingReport:
+    """Score ``dt`` against ``gt`` overall, per prompt type and per depth bin."""
+    return GroundingReport(
+        result=evaluate_frames(gt, dt),
+        by_type=breakdown_by_type(gt, dt, tags),
+        by_depth=breakdown_by_depth(gt, dt),
+        predictions=dict(dt),
+        ground_truth=dict(gt),
+        tags=dict(tags),
+        seconds=tuple(seconds),
+    )

@@ -1,0 +1,341 @@
+"""Object candidates of the referent stage and their explicit, text-free evidence.
+
+A candidate is one box ``x, y, z, l, w, h, yaw`` (LiDAR frame, z at the geometric centre) with a
+class and a detection score; at inference the candidates are the text-agnostic C3D-RECHead's
+decoded detections, in training the frame's actors (slightly jittered) plus the detector's own
+false positives. For each candidate this module computes, as pure numpy functions:
+
+- :func:`geometry_features` ``(K, GEOMETRY_FEATURES)``: class one-hot, detection score, centre,
+  size, heading, nearest-edge depth (``min x`` of the BEV corners, the depth the prompts speak of),
+  bearing, range, lateral offset;
+- :func:`lidar_evidence` ``(K, LIDAR_EVIDENCE)``: LiDAR points inside the box (count, intensity,
+  height spread);
+- :func:`radar_evidence` ``(K, RADAR_EVIDENCE)``: radar points inside the box footprint grown by
+  :data:`RADAR_MARGIN` (count, radial and ego-compensated radial velocity, RCS) and the box's motion
+  read off the accumulated scans' ``time`` field: the least-squares slope of the points' x and y
+  over the scan index, i.e. the displacement per scan, which sees crossing motion that Doppler
+  cannot.
+
+:func:`pool_bev` samples a BEV feature map at metric positions (bilinear, differentiable), for the
+learned part of each candidate's description.
+
+Scales: every feature is brought to roughly unit range by the constants below, so that the
+referent stage can compare them with the numbers of a prompt (see :mod:`model.nets.numerals`) through
+plain linear layers.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+from torch import Tensor
+
+from model.nets.grid import BevGrid
+from scenes.actors import CLASSES
+from scenes.boxes import bev_corners
+
+GEOMETRY_FEATURES = 17
+LIDAR_EVIDENCE = 4
+RADAR_EVIDENCE = 10
+RADAR_MARGIN = 0.5
+"""Metres added on every side of a box's footprint when gathering its radar points (radar points
+scatter around an object's surface by more than LiDAR points do)."""
+LIDAR_MARGIN = 0.2
+DEPTH_SCALE = 50.0
+LATERAL_SCALE = 25.0
+SPEED_SCALE = 10.0
+
+
+def _boxes(boxes: np.ndarray) -> np.ndarray:
+    return np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
+
+
+def nearest_depth(boxes: np.ndarray) -> np.ndarray:
+    """Forward distance ``(K,)`` of each box's nearest point: ``min x`` over its BEV corners."""
+    b = _boxes(boxes)
+    if len(b) == 0:
+        return np.zeros(0)
+    return bev_corners(b)[:, :, 0].min(axis=1)
+
+
+def geometry_features(boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray) -> np.ndarray:
+    """Explicit geometry of ``K`` candidates.
+
+    Args:
+        boxes: ``(K, 7)`` LiDAR frame.
+        labels: ``(K,)`` class indices into :data:`scenes.actors.CLASSES`.
+        scores: ``(K,)`` detection scores in ``[0, 1]``.
+
+    Returns:
+        ``(K, GEOMETRY_FEATURES)`` float32: one-hot class (3), score, x, y, z, log l, log w, log h,
+        sin yaw, cos yaw, nearest-edge depth, bearing (rad), range, ``|y|``, nearest-edge depth
+        minus centre x (how deep the box reaches).
+    """
+    b = _boxes(boxes)
+    k = len(b)
+    out = np.zeros((k, GEOMETRY_FEATURES), dtype=np.float32)
+    if k == 0:
+        return out
+    labels = np.asarray(labels, dtype=np.int64).reshape(k)
+    out[np.arange(k), labels] = 1.0
+    depth = nearest_depth(b)
+    rng = np.hypot(b[:, 0], b[:, 1])
+    out[:, 3] = np.asarray(scores, dtype=np.float64).reshape(k)
+    out[:, 4] = b[:, 0] / DEPTH_SCALE
+    out[:, 5] = b[:, 1] / LATERAL_SCALE
+    out[:, 6] = b[:, 2] / 2.0
+    out[:, 7:10] = np.log(np.maximum(b[:, 3:6], 1e-3))
+    out[:, 10] = np.sin(b[:, 6])
+    out[:, 11] = np.cos(b[:, 6])
+    out[:, 12] = depth / DEPTH_SCALE
+    out[:, 13] = np.arctan2(b[:, 1], b[:, 0])
+    out[:, 14] = rng / DEPTH_SCALE
+    out[:, 15] = np.abs(b[:, 1]) / LATERAL_SCALE
+    out[:, 16] = (b[:, 0] - depth) / 2.0
+    return out
+
+
+def _box_pairs(
+    points: np.ndarray, boxes: np.ndarray, margin: float, use_z: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every (box, point) pair with the point inside the box grown by ``margin`` (BEV footprint,
+    and ``|z - box z| <= h / 2 + margin`` with ``use_z``), for all ``K`` boxes at once.
+
+    Args:
+        points: ``(N, >=3)`` float32 or float64, LiDAR frame.
+        boxes: ``(K, 7)`` float64.
+
+    Returns:
+        ``(box, point)`` int64 index arrays ``(P,)``, sorted by box, then by the point's x, then by
+        the point's index (the order of a stable sort of the cloud by x), the order each box's
+        sums were defined in (the features are the same bit for bit). A point also needs ``box x - r <= x < box x + r`` with ``r`` half the box's diagonal plus
+        ``margin`` (the x range each box searched in a cloud sorted by x, which the features
+        were defined and the model trained with; it clips the grown box's corners).
+
+    One pass over the cloud: a grid of :data:`_CELL` cells, each box marking the cells under the
+    axis-aligned bounding box of its grown footprint (cut to its x range, plus 1 mm), and each
+    point in a marked cell paired with the boxes marking it; only those pairs get the exact test,
+    in float64. The cells are found in the points' own precision: a point of a footprint is at
+    least 1 mm inside its marked rectangle, far more than float32 rounding.
+    """
+    k = len(boxes)
+    empty = np.zeros(0, dtype=np.int64)
+    if k == 0 or len(points) == 0:
+        return empty, empty
+    cos, sin = np.cos(boxes[:, 6]), np.sin(boxes[:, 6])
+    # Half-extents of each grown footprint's axis-aligned bounding box, and of its x range
+    # (below), plus 1 mm.
+    length, width = boxes[:, 3] / 2 + margin, boxes[:, 4] / 2 + margin
+    r = 0.5 * np.hypot(boxes[:, 3], boxes[:, 4]) + margin
+    ex = np.minimum(np.abs(length * cos) + np.abs(width * sin), r) + 1e-3
+    ey = np.abs(length * sin) + np.abs(width * cos) + 1e-3
+    x0 = float((boxes[:, 0] - ex).min())
+    y0 = float((boxes[:, 1] - ey).min())
+    c0 = np.floor((boxes[:, 0] - ex - x0) / _CELL).astype(np.int64)
+    c1 = np.floor((boxes[:, 0] + ex - x0) / _CELL).astype(np.int64)
+    r0 = np.floor((boxes[:, 1] - ey - y0) / _CELL).astype(np.int64)
+    r1 = np.floor((boxes[:, 1] + ey - y0) / _CELL).astype(np.int64)
+    cols, rows = int(c1.max()) + 1, int(r1.max()) + 1
+    # One read of each strided column, then contiguous arithmetic (in the points' precision).
+    fx, fy = (points[:, 0] - x0) / _CELL, (points[:, 1] - y0) / _CELL
+    cand = np.flatnonzero((fx >= 0) & (fx < cols) & (fy >= 0) & (fy < rows))
+    col = np.minimum(fx[cand].astype(np.int64), cols - 1)
+    row = np.minimum(fy[cand].astype(np.int64), rows - 1)
+    cell = col * rows + row
+    # The boxes of each cell, as a CSR list (box indices ascending within a cell).
+    width = r1 - r0 + 1
+    cells = (c1 - c0 + 1) * width
+    owner = np.repeat(np.arange(k), cells)
+    local = np.arange(len(owner)) - np.repeat(np.cumsum(cells) - cells, cells)
+    marked = (c0[owner] + local // width[owner]) * rows + r0[owner] + local % width[owner]
+    box_of_cell = owner[np.argsort(marked, kind="stable")]
+    count = np.bincount(marked, minlength=cols * rows)
+    first = np.cumsum(count) - count
+    per_point = count[cell]
+    near = per_point > 0
+    cand, cell, per_point = cand[near], cell[near], per_point[near]
+    total = int(per_point.sum())
+    point = np.repeat(cand, per_point)
+    slot = np.repeat(first[cell] - (np.cumsum(per_point) - per_point), per_point)
+    box = box_of_cell[slot + np.arange(total)]
+    # The exact test (the same arithmetic as a box against each of its points).
+    p = np.asarray(points[point, :3], dtype=np.float64)
+    dx, dy = p[:, 0] - boxes[box, 0], p[:, 1] - boxes[box, 1]
+    c, s = cos[box], sin[box]
+    lx, ly = dx * c + dy * s, -dx * s + dy * c
+    keep = (np.abs(lx) <= (boxes[:, 3] / 2 + margin)[box]) & (
+        np.abs(ly) <= (boxes[:, 4] / 2 + margin)[box]
+    )
+    if use_z:
+        keep &= np.abs(p[:, 2] - boxes[box, 2]) <= (boxes[:, 5] / 2 + margin)[box]
+    # And within ``r`` of the centre along x, ``r`` = half the box's diagonal + margin (less than
+    # the grown box's half-diagonal: the features were defined, and the model trained, so).
+    keep &= (p[:, 0] >= (boxes[:, 0] - r)[box]) & (p[:, 0] < (boxes[:, 0] + r)[box])
+    box, point = box[keep], point[keep]
+    order = _by_box_then_x(box, point, points[point, 0], k, len(points))
+    return box[order], point[order]
+
+
+_CELL = 0.5
+"""Side (m) of the cells that pair points with boxes (:func:`_box_pairs`)."""
+
+
+def _by_box_then_x(box: np.ndarray, point: np.ndarray, x: np.ndarray, k: int, n: int) -> np.ndarray:
+    """The permutation that sorts pairs (given in ascending ``point`` order) by box, then x, then
+    point: one sort of unique 64-bit keys where they fit (float32 x: its bits in an
+    order-preserving form, -0.0 as +0.0), else two stable sorts."""
+    box_bits, point_bits = max(k - 1, 1).bit_length(), max(n - 1, 1).bit_length()
+    if x.dtype == np.float32 and box_bits + 32 + point_bits <= 64:
+        bits = (x + np.float32(0.0)).view(np.uint32)  # x + 0 turns -0.0 into +0.0
+        ordered = np.where(bits >> 31, ~bits, bits | np.uint32(1 << 31)).astype(np.uint64)
+        key = (box.astype(np.uint64) << np.uint64(32 + point_bits)) | (
+            ordered << np.uint64(point_bits)
+        )
+        return np.argsort(key | point.astype(np.uint64))
+    by_x = np.argsort(x, kind="stable")
+    return by_x[np.argsort(box[by_x].astype(np.int16 if k < 2**15 else np.int64), kind="stable")]
+
+
+def _segments(box: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Boxes that hold points, and where their runs of ``box`` (sorted) start and how long
+    they are."""
+    counts = np.bincount(box, minlength=k)
+    has = np.flatnonzero(counts)
+    return has, (np.cumsum(counts) - counts)[has], counts[has]
+
+
+def _mean(values: np.ndarray) -> float:
+    """``values.mean()`` of a non-empty 1-D float64 array, without its Python overhead (the same
+    pairwise sum divided by the count, so bit-identical)."""
+    return np.add.reduce(values) / len(values)
+
+
+def _points_by_box(
+    boxes: np.ndarray, points: np.ndarray, features: int, margin: float, use_z: bool
+) -> tuple[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None]:
+    """The number of boxes and, when any point lies in one (grown by ``margin``), the points in
+    the boxes ``(P, features)`` float64 grouped box after box, with :func:`_segments`' boxes
+    that have points, their first rows and counts; None when no point is in any box."""
+    b = _boxes(boxes)
+    pts = _points(points, features)
+    box, idx = _box_pairs(pts, b, margin, use_z=use_z)
+    if len(idx) == 0:
+        return len(b), None
+    return len(b), (np.asarray(pts[idx], dtype=np.float64), *_segments(box, len(b)))
+
+
+def lidar_evidence(boxes: np.ndarray, lidar: np.ndarray) -> np.ndarray:
+    """LiDAR evidence ``(K, LIDAR_EVIDENCE)``: log(1 + points in the box grown by
+    :data:`LIDAR_MARGIN`), mean intensity / 255, height spread of those points (m), whether any.
+
+    ``lidar``: ``(N, 4)`` (float32 as the model gets it, or float64); all boxes are served by one
+    pass over the cloud (:func:`_box_pairs`).
+    """
+    k, grouped = _points_by_box(boxes, lidar, 4, LIDAR_MARGIN, use_z=True)
+    out = np.zeros((k, LIDAR_EVIDENCE), dtype=np.float32)
+    if grouped is None:
+        return out
+    p, has, starts, counts = grouped
+    z = p[:, 2]
+    spread = np.maximum.reduceat(z, starts) - np.minimum.reduceat(z, starts)
+    intensity = [
+        _mean(p[s : s + n, 3]) for s, n in zip(starts.tolist(), counts.tolist(), strict=True)
+    ]
+    out[has, 0] = np.log1p(counts)
+    out[has, 1] = np.asarray(intensity) / 255.0
+    out[has, 2] = spread
+    out[has, 3] = 1.0
+    return out
+
+
+def _points(points: np.ndarray, features: int) -> np.ndarray:
+    """``points`` as an ``(N, features)`` float32 or float64 array (not copied when it is one)."""
+    arr = np.asarray(points)
+    if arr.dtype not in (np.float32, np.float64):
+        arr = arr.astype(np.float64)
+    return arr.reshape(-1, features)
+
+
+def _scan_slope(values: np.ndarray, t: np.ndarray, denom: float) -> float:
+    """Least-squares slope of ``values`` over times centred as ``t`` (``denom`` = sum of
+    ``t * t``; 0 when it is below 1e-9, i.e. fewer than two distinct times)."""
+    if denom < 1e-9:
+        return 0.0
+    return float(np.add.reduce(t * (values - _mean(values))) / denom)
+
+
+def radar_evidence(boxes: np.ndarray, radar: np.ndarray) -> np.ndarray:
+    """Radar evidence ``(K, RADAR_EVIDENCE)`` from points ``(M, 7)`` (x, y, z, rcs, v_r,
+    v_r_compensated, time; LiDAR frame) in each box's footprint grown by :data:`RADAR_MARGIN`.
+
+    Columns: log(1 + count), log(1 + count of the newest scan), mean v_r, mean v_r_compensated,
+    median v_r_compensated, spread (std) of v_r_compensated, mean RCS / 10, displacement per scan
+    along x and along y (slope over the ``time`` field, m / scan), whether any point; velocities in
+    units of :data:`SPEED_SCALE` m/s.
+    """
+    k, grouped = _points_by_box(boxes, radar, 7, RADAR_MARGIN, use_z=False)
+    out = np.zeros((k, RADAR_EVIDENCE), dtype=np.float32)
+    if grouped is None:
+        return out
+    all_p, has, starts, counts = grouped
+    for i, s, n in zip(has.tolist(), starts.tolist(), counts.tolist(), strict=True):
+        p = all_p[s : s + n]
+        vc, times = p[:, 5], p[:, 6]
+        vc_mean = _mean(vc)
+        spread = vc - vc_mean
+        t = times - _mean(times)
+        denom = float(np.add.reduce(t * t))
+        out[i] = (
+            np.log1p(n),
+            np.log1p(np.count_nonzero(times == 0)),
+            _mean(p[:, 4]) / SPEED_SCALE,
+            vc_mean / SPEED_SCALE,
+            np.median(vc) / SPEED_SCALE,
+            np.sqrt(np.add.reduce(spread * spread) / n) / SPEED_SCALE,
+            _mean(p[:, 3]) / 10.0,
+            _scan_slope(p[:, 0], t, denom),
+            _scan_slope(p[:, 1], t, denom),
+            1.0,
+        )
+    return out
+
+
+def pool_bev(feature_map: Tensor, grid: BevGrid, xy: Tensor) -> Tensor:
+    """Bilinear samples of a BEV map at metric positions.
+
+    Args:
+        feature_map: ``(C, H, W)`` on ``grid`` (``[c, iy, ix]``, see :mod:`model.nets.grid`).
+        grid: The map's grid.
+        xy: ``(K, 2)`` positions in the LiDAR frame (metres), on the map's device.
+
+    Returns:
+        ``(K, C)``; positions outside the grid sample zeros. Differentiable in ``feature_map``.
+    """
+    if xy.shape[0] == 0:
+        return feature_map.new_zeros((0, feature_map.shape[0]))
+    gx = (xy[:, 0] - grid.x_min) / (grid.x_max - grid.x_min) * 2.0 - 1.0
+    gy = (xy[:, 1] - grid.y_min) / (grid.y_max - grid.y_min) * 2.0 - 1.0
+    g = torch.stack([gx, gy], dim=-1).to(feature_map.dtype)[None, None]  # (1, 1, K, 2)
+    out = F.grid_sample(
+        feature_map[None], g, mode="bilinear", padding_mode="zeros", align_corners=False
+    )
+    return out[0, :, 0].T
+
+
+def class_indices(names: tuple[str, ...] | list[str]) -> np.ndarray:
+    """Class indices ``(K,)`` of class names (each must be one of ``CLASSES``)."""
+    return np.array([CLASSES.index(n) for n in names], dtype=np.int64)
+
+
+__all__ = [
+    "GEOMETRY_FEATURES",
+    "LIDAR_EVIDENCE",
+    "RADAR_EVIDENCE",
+    "class_indices",
+    "geometry_features",
+    "lidar_evidence",
+    "nearest_depth",
+    "pool_bev",
+    "radar_evidence",
+]

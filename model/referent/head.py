@@ -1,0 +1,224 @@
+"""The referent grounding head (``grounding="referent"``, the shipped checkpoint): the shared
+detector proposes every object of a scene once (:meth:`ReferentGrounding.encode`: decoding at the
+candidate threshold, :func:`model.referent.scene_candidates.describe_candidates`); per prompt only the text encoder
+and the referent stage (:class:`model.referent.stage.ReferentStage`) run, and the answer is the
+candidates whose referent probability reaches the threshold, with
+:func:`model.referent.scene_candidates.referent_heatmap` as its heatmap. Training: :meth:`proposals`,
+:meth:`describe`, :meth:`refer` and :meth:`loss` (:mod:`model.training.referent_step`)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+from model.config import ModelConfig
+from model.features import (
+    Answer,
+    Clock,
+    GroundTimings,
+    PointsLike,
+    SceneFeatures,
+)
+from model.grounding_head import GroundingHead
+from model.head.decode import Detections, decode
+from model.head.detector import HeadOutput
+from model.nets.scene_encoder import SceneEncoder
+from model.nets.text import TextFeatures
+from model.referent.labelled import LabelledBoxes, anchor_scores, with_context
+from model.referent.scene_candidates import (
+    SceneCandidates,
+    SceneMaps,
+    describe_candidates,
+    referent_heatmap,
+    stack_candidates,
+)
+from model.referent.stage import ReferentStage, referent_loss
+from scenes.actors import CLASSES
+
+UNCALIBRATED_REFERENT = 0.5
+"""Operating threshold of a referent-path checkpoint that was never calibrated: a referent
+probability, the decision boundary its BCE training draws."""
+
+
+class ReferentGrounding(GroundingHead):
+    """The referent stage (``stage``) over the detector's candidates."""
+
+    takes_labelled_candidates = True
+
+    def __init__(self, cfg: ModelConfig, text_dim: int, neck_channels: int) -> None:
+        super().__init__()
+        self.cfg = cfg
+        first = cfg.backbone.channels[0]
+        # Candidate maps are pooled at two points (centre, anchor): see model.referent.scene_candidates.
+        self.stage = ReferentStage(
+            cfg.referent,
+            text_dim,
+            2 * neck_channels,
+            2 * first if cfg.uses_lidar else None,
+            2 * first if cfg.uses_radar else None,
+        )
+
+    @property
+    def min_score(self) -> float:
+        return float(self.cfg.referent.min_score)
+
+    @property
+    def uncalibrated_threshold(self) -> float:
+        return UNCALIBRATED_REFERENT
+
+    def proposals(
+        self, scene: SceneEncoder, out: HeadOutput, limit: int | None
+    ) -> list[Detections]:
+        """The detector's boxes of a batch at the candidate threshold (at most ``limit``)."""
+        threshold = self.cfg.referent.candidate_threshold
+        return decode(out, scene.head_grid, self.cfg.head, threshold, limit=limit)
+
+    def describe(
+        self,
+        scene: SceneEncoder,
+        boxes: np.ndarray,
+        labels: np.ndarray,
+        scores: np.ndarray,
+        maps: SceneMaps,
+        lidar: np.ndarray | None,
+        radar: np.ndarray | None,
+    ) -> SceneCandidates:
+        """:func:`model.referent.scene_candidates.describe_candidates` with this model's grid and anchor."""
+        return describe_candidates(
+            boxes,
+            labels,
+            scores,
+            maps,
+            scene.head_grid,
+            self.cfg.head.anchor,
+            lidar if self.cfg.uses_lidar else None,
+            radar if self.cfg.uses_radar else None,
+        )
+
+    def refer(self, cands: SceneCandidates | list[SceneCandidates], text: TextFeatures) -> Tensor:
+        """Referent logits ``(N, K)`` of ``N`` prompts; ``cands`` is one scene shared by all the
+        prompts, or one scene per prompt."""
+        scenes = [cands] if isinstance(cands, SceneCandidates) else list(cands)
+        batch = stack_candidates(scenes)
+        n = text.tokens.shape[0]
+        if len(scenes) == 1 and n > 1:
+            batch = batch.index(torch.zeros(n, dtype=torch.long, device=batch.padding.device))
+        return self.stage(batch, text.tokens, text.numbers, text.padding_mask)
+
+    @staticmethod
+    def loss(logits: Tensor, targets: Tensor, padding: Tensor) -> tuple[Tensor, Tensor]:
+        """:func:`model.referent.stage.referent_loss`: BCE and the listwise term."""
+        return referent_loss(logits, targets, padding)
+
+    def encode(
+        self,
+        scene: SceneEncoder,
+        lidar: list[Tensor] | None,
+        radar: list[Tensor] | None,
+        candidates: LabelledBoxes | None,
+    ) -> SceneFeatures:
+        stages = scene.sensors(lidar, radar, timed=True)
+        clock = Clock(scene.device)
+        limit = self.cfg.referent.max_candidates
+        neck, out = scene.detector(stages.fused)
+        heat = torch.sigmoid(out.heatmap[0]).float().cpu().numpy()
+        dets = self.proposals(scene, out, limit)[0]
+        keep = slice(0, limit)
+        boxes, labels, scores = dets.boxes[keep], dets.labels[keep], dets.scores[keep]
+        answerable = None
+        if candidates is not None:
+            answerable = len(candidates)
+            labelled_scores = anchor_scores(
+                heat, candidates.boxes, candidates.labels, scene.head_grid, self.cfg.head.anchor
+            )
+            boxes, labels, scores = with_context(
+                candidates, labelled_scores, boxes, labels, scores, limit
+            )
+        objects = self.describe(
+            scene,
+            boxes,
+            labels,
+            scores,
+            stages.maps(neck, 0),
+            None if lidar is None else lidar[0].cpu().numpy(),
+            None if radar is None else radar[0].cpu().numpy(),
+        )
+        return stages.features(
+            lidar,
+            radar,
+            clock.lap(),
+            objects=objects,
+            detection_heatmaps=heat,
+            answerable=answerable,
+        )
+
+    def check(self, scene: SceneEncoder, features: SceneFeatures) -> None:
+        if features.objects is None or features.detection_heatmaps is None:
+            raise ValueError(
+                "scene features without candidates: encode the scene with this model "
+                "(grounding='referent')"
+            )
+
+    def answer(
+        self,
+        scene: SceneEncoder,
+        features: SceneFeatures,
+        text: TextFeatures,
+        score_threshold: float | None,
+    ) -> Answer:
+        objects, heat = features.objects, features.detection_heatmaps
+        assert objects is not None and heat is not None  # check()
+        threshold = self.min_score if score_threshold is None else score_threshold
+        clock = Clock(scene.device)
+        if len(objects):
+            probs = torch.sigmoid(self.refer(objects, text)[0]).float().cpu().numpy()
+        else:
+            probs = np.zeros(0, dtype=np.float32)
+        t_ref = clock.lap()
+        probs = probs.astype(np.float64)
+        if features.answerable is not None:  # labelled candidates; the proposals are context
+            probs[features.answerable :] = 0.0
+        order = np.argsort(-probs, kind="stable")
+        order = order[probs[order] >= threshold]
+        if features.answerable is not None:
+            order = order[order < features.answerable]
+        heatmaps = referent_heatmap(
+            heat, objects.boxes, objects.labels, probs, scene.head_grid, self.cfg.head.anchor
+        )
+        labels = objects.labels[order]
+        return Answer(
+            boxes=objects.boxes[order],
+            scores=probs[order],
+            labels=labels,
+            classes=tuple(CLASSES[i] for i in labels),
+            heatmaps=heatmaps,
+            timings=GroundTimings(0.0, 0.0, 0.0, 0.0, clock.lap(), referent=t_ref),
+        )
+
+    def forward_batch(
+        self,
+        scene: SceneEncoder,
+        text_encoder: nn.Module,
+        lidar: Sequence[PointsLike | None] | None,
+        radar: Sequence[PointsLike | None] | None,
+        prompts: Sequence[str],
+    ) -> HeadOutput:
+        raise ValueError(
+            "forward() is the paper's text-conditioned pass; a grounding='referent' model "
+            "trains through detect() and its referent head (model.training.referent_step)"
+        )
+
+
+def referent_head(model: nn.Module) -> ReferentGrounding:
+    """``model``'s referent head (``model.grounding``).
+
+    Raises:
+        ValueError: ``model`` is not a referent-path model (``grounding="referent"``).
+    """
+    head = getattr(model, "grounding", None)
+    if not isinstance(head, ReferentGrounding):
+        raise ValueError("this needs a referent-path model (grounding='referent')")
+    return head

@@ -1,0 +1,228 @@
+"""Candidates of one scene for the referent stage, and the answer's heatmap.
+
+:func:`describe_candidates` turns boxes (detections at inference, actors plus false detections in
+training) and the scene's BEV maps into the per-candidate tensors of
+:class:`model.referent.stage.CandidateBatch`; :func:`stack_candidates` pads several scenes into one
+batch; :func:`referent_heatmap` draws what the app shows: the detector's class heatmaps kept where
+a candidate the sentence refers to sits (a Gaussian at each candidate's anchor cell, weighted by
+its referent probability), so that a person sees where the answer is and how sure it is.
+
+Maps (all on the head grid, ``(C, H, W)``, ``[c, iy, ix]``):
+
+- ``fused``: the FPN output (what the C3D-RECHead reads), pooled at the box centre and at the
+  box's anchor point (the corner nearest the ego vehicle by default), so ``2 * C_fpn`` values;
+- ``lidar`` / ``radar``: stage 1 of that sensor's backbone (before the LiDAR-radar fusion), pooled
+  at the centre and the anchor, plus :func:`model.referent.candidates.lidar_evidence` /
+  :func:`model.referent.candidates.radar_evidence` from the raw points.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from model.head.targets import anchor_points
+from model.nets.grid import BevGrid
+from model.referent.candidates import (
+    geometry_features,
+    lidar_evidence,
+    pool_bev,
+    radar_evidence,
+)
+from model.referent.stage import CandidateBatch
+
+
+@dataclass(frozen=True)
+class SceneMaps:
+    """BEV maps of one scene, each ``(C, H, W)`` on the head grid (None for an unused sensor)."""
+
+    fused: Tensor
+    lidar: Tensor | None
+    radar: Tensor | None
+
+
+@dataclass(frozen=True)
+class SceneCandidates:
+    """The candidates of one scene.
+
+    Attributes:
+        boxes: ``(K, 7)`` float64, LiDAR frame.
+        labels: ``(K,)`` int64 class indices.
+        scores: ``(K,)`` float64 detection scores.
+        geometry, fused, lidar, radar: ``(K, F)`` tensors as in :class:`CandidateBatch`.
+    """
+
+    boxes: np.ndarray
+    labels: np.ndarray
+    scores: np.ndarray
+    geometry: Tensor
+    fused: Tensor
+    lidar: Tensor | None
+    radar: Tensor | None
+
+    def __len__(self) -> int:
+        return len(self.boxes)
+
+
+def _pooled(feature_map: Tensor, grid: BevGrid, centres: Tensor, anchors: Tensor) -> Tensor:
+    return torch.cat(
+        [pool_bev(feature_map, grid, centres), pool_bev(feature_map, grid, anchors)], dim=1
+    )
+
+
+def describe_candidates(
+    boxes: np.ndarray,
+    labels: np.ndarray,
+    scores: np.ndarray,
+    maps: SceneMaps,
+    grid: BevGrid,
+    anchor: str,
+    lidar_points: np.ndarray | None,
+    radar_points: np.ndarray | None,
+) -> SceneCandidates:
+    """Everything the referent stage reads about ``K`` candidates of one scene.
+
+    Args:
+        boxes: ``(K, 7)`` LiDAR frame; labels ``(K,)`` class indices; scores ``(K,)``.
+        maps: The scene's BEV maps on ``grid``.
+        grid: The head grid.
+        anchor: The head's anchor kind (``corner``, ``edge``, ``center``).
+        lidar_points: ``(N, 4)`` (None when the model has no LiDAR).
+        radar_points: ``(M, 7)`` in the LiDAR frame (None when the model has no radar).
+
+    Returns:
+        :class:`SceneCandidates`; the pooled parts are differentiable in ``maps``.
+    """
+    boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
+    labels = np.asarray(labels, dtype=np.int64).reshape(-1)
+    scores = np.asarray(scores, dtype=np.float64).reshape(-1)
+    device, dtype = maps.fused.device, maps.fused.dtype
+
+    def t(a: np.ndarray) -> Tensor:
+        return torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32)).to(device, dtype)
+
+    centres = t(boxes[:, :2])
+    anchors = t(anchor_points(boxes, anchor)) if len(boxes) else centres
+    geometry = t(geometry_features(boxes, labels, scores))
+    fused = _pooled(maps.fused, grid, centres, anchors)
+    lidar = radar = None
+    if maps.lidar is not None:
+        pts = np.zeros((0, 4)) if lidar_points is None else np.asarray(lidar_points)
+        lidar = torch.cat(
+            [_pooled(maps.lidar, grid, centres, anchors), t(lidar_evidence(boxes, pts))], dim=1
+        )
+    if maps.radar is not None:
+        pts = np.zeros((0, 7)) if radar_points is None else np.asarray(radar_points)
+        radar = torch.cat(
+            [_pooled(maps.radar, grid, centres, anchors), t(radar_evidence(boxes, pts))], dim=1
+        )
+    return SceneCandidates(boxes, labels, scores, geometry, fused, lidar, radar)
+
+
+def _pad(parts: Sequence[Tensor], k: int) -> Tensor:
+    out = parts[0].new_zeros((len(parts), k, parts[0].shape[1]))
+    for i, p in enumerate(parts):
+        out[i, : p.shape[0]] = p
+    return out
+
+
+def stack_candidates(scenes: Sequence[SceneCandidates]) -> CandidateBatch:
+    """Pad ``S`` scenes' candidates into a :class:`CandidateBatch` of ``S`` rows (``K`` = the
+    largest count, at least 1; padding True where a scene has fewer)."""
+    if not scenes:
+        raise ValueError("stack_candidates: no scenes")
+    k = max(1, max(len(s) for s in scenes))
+    geometry = _pad([s.geometry for s in scenes], k)
+    padding = torch.ones((len(scenes), k), dtype=torch.bool, device=geometry.device)
+    for i, s in enumerate(scenes):
+        padding[i, : len(s)] = False
+    lidar = _pad([s.lidar for s in scenes], k) if scenes[0].lidar is not None else None
+    radar = _pad([s.radar for s in scenes], k) if scenes[0].radar is not None else None
+    return CandidateBatch(geometry, _pad([s.fused for s in scenes], k), lidar, radar, padding)
+
+
+_FLOAT32_ZERO = 151 * math.log(2.0)
+"""``-ln`` of a value (``2**-151``) below half the smallest float32 subnormal: it rounds to 0."""
+
+
+def _gaussian_radius(p_max: float, sigma_cells: float) -> int:
+    """Cells beyond which ``p * exp(-d^2 / (2 sigma^2))`` rounds to 0 in float32 for every
+    ``p <= p_max`` (at least 0; one cell more than needed, against rounding)."""
+    d2 = 2 * sigma_cells**2 * (_FLOAT32_ZERO + math.log(max(p_max, 1e-300)))
+    return int(math.ceil(math.sqrt(max(d2, 0.0)))) + 1
+
+
+def referent_heatmap(
+    detection: np.ndarray,
+    boxes: np.ndarray,
+    labels: np.ndarray,
+    probabilities: np.ndarray,
+    grid: BevGrid,
+    anchor: str,
+    sigma_cells: float = 1.5,
+) -> np.ndarray:
+    """The answer's heatmap ``(3, H, W)`` in ``[0, 1]``.
+
+    Args:
+        detection: ``(3, H, W)`` sigmoid heatmaps of the text-agnostic detector on ``grid``.
+        boxes: ``(K, 7)`` candidates; labels ``(K,)``; probabilities ``(K,)`` referent scores.
+        grid: The head grid; anchor: the head's anchor kind.
+        sigma_cells: Width of the Gaussian drawn at each candidate's anchor cell.
+
+    Returns:
+        For each class, the largest ``p_k * gaussian_k`` over the class's candidates, shaded by
+        the detector's heatmap (half from it, relative to its peak): bright at the referred
+        objects, dark elsewhere.
+    """
+    _, h, w = detection.shape
+    weight = np.zeros_like(detection, dtype=np.float32)
+    labels = np.asarray(labels).reshape(-1)
+    probabilities = np.asarray(probabilities, dtype=np.float64).reshape(-1)
+    if len(boxes):
+        cells = grid.xy_to_cell(anchor_points(np.asarray(boxes).reshape(-1, 7), anchor))
+        radius = _gaussian_radius(float(probabilities.max()), sigma_cells)
+        size = 2 * radius + 1
+        # Candidate k only reaches the grid columns x0[k] - radius .. x0[k] + radius around its
+        # anchor cell (beyond, its value rounds to 0 in float32), and the same rows: a window of
+        # size x size cells, drawn on a canvas padded by `size` cells on every side.
+        x0 = np.floor(cells[:, 0]).astype(np.int64)
+        y0 = np.floor(cells[:, 1]).astype(np.int64)
+        inside = (x0 > -radius - 1) & (x0 < w + radius) & (y0 > -radius - 1) & (y0 < h + radius)
+        offsets = np.arange(size) - radius + 0.5
+        for c in range(detection.shape[0]):
+            mine = np.flatnonzero((labels == c) & inside)
+            if not len(mine):
+                continue
+            # p_k * exp(-d2 / (2 sigma^2)), element for element the same operations as on the
+            # whole grid; the class maximum is taken after the float32 rounding (monotone).
+            dx2 = ((x0[mine, None] + offsets[None, :]) - cells[mine, 0, None]) ** 2
+            dy2 = ((y0[mine, None] + offsets[None, :]) - cells[mine, 1, None]) ** 2
+            g = np.add(dx2[:, None, :], dy2[:, :, None])
+            np.negative(g, out=g)
+            np.divide(g, 2 * sigma_cells**2, out=g)
+            np.exp(g, out=g)
+            np.multiply(g, probabilities[mine, None, None], out=g)
+            g32 = g.astype(np.float32)
+            canvas = np.zeros((h + 2 * size, w + 2 * size), dtype=np.float32)
+            rows0, cols0 = (y0[mine] + radius + 1).tolist(), (x0[mine] + radius + 1).tolist()
+            for k, (row, col) in enumerate(zip(rows0, cols0, strict=True)):
+                view = canvas[row : row + size, col : col + size]
+                np.maximum(view, g32[k], out=view)
+            weight[c] = canvas[size : size + h, size : size + w]
+    peak = np.maximum(detection.reshape(detection.shape[0], -1).max(axis=1), 1e-6)
+    shape = 0.5 + 0.5 * detection / peak[:, None, None]
+    return np.clip(weight * shape, 0.0, 1.0).astype(np.float32)
+
+
+__all__ = [
+    "SceneCandidates",
+    "SceneMaps",
+    "describe_candidates",
+    "referent_heatmap",
+    "stack_candidates",
+]

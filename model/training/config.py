@@ -1,0 +1,259 @@
+"""The settings of a training run (:class:`TrainConfig`) and the command line that builds them.
+
+``python -m model.train --help`` lists every option; docs/DESIGN.md and docs/REAL_DATA.md say
+how they combine. :class:`TrainConfig` is stored in every checkpoint and run state.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+import torch
+
+from model.cli import add_options, from_args, option
+from model.config import (
+    AnchorKind,
+    FusionKind,
+    GroundingKind,
+    Modalities,
+    PresetName,
+    TextEncoderKind,
+    TextFusionKind,
+)
+from model.training.data import DataSpecError, RootSpec, root_specs
+
+AmpKind = Literal["none", "bf16"]
+"""``--amp``: no autocast, or bfloat16 autocast of the forward passes (CUDA only)."""
+
+LanguageKind = Literal["base", "extended"]
+"""``--language``: the generated prompts' families (``scenes.prompts.PromptConfig.language``)."""
+
+PhrasingKind = Literal["train", "heldout", "all"]
+"""``--phrasing``: the generated prompts' wording variants (``scenes.prompts.phrasing``)."""
+
+
+def default_device() -> str:
+    """``cuda`` where CUDA is available, else ``cpu`` (the default of ``--device``)."""
+    return "cuda" if torch.cuda.is_available() else "cpu"
+
+
+LABEL_PROMPTS = 24
+"""``--label-prompts`` when a root has scene labels and the flag is not given: prompts generated
+per frame from its labelled boxes beside its given one (docs/RESULTS.md, "Real-format roots":
+with 1,080 given prompts the referent stage learns the class and little more; with 24 such
+prompts it learns the attributes)."""
+
+LABELLED_PROMPTS_PER_SCENE = 4
+"""``--prompts-per-scene`` when every root has scene labels and the flag is not given (a frame
+holds its given prompt and :data:`LABEL_PROMPTS` more; measured beside the label prompts)."""
+
+GENERATED_PROMPTS_PER_SCENE = 8
+"""``--prompts-per-scene`` otherwise (prompts generated per scene and step)."""
+
+
+class TrainingError(RuntimeError):
+    """Training cannot go on (bad data, non-finite loss); the message says why."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrainConfig:
+    """Everything that defines a training run (stored in the checkpoints). Each field is one flag
+    of ``python -m model.train`` (:mod:`model.cli`); ``on_resume`` marks the settings a resumed
+    run may change (:data:`model.training.state.FREE_ON_RESUME`)."""
+
+    data: tuple[str, ...] = option(
+        help="Talk2Radar root; give it several times to train on several roots at once"
+    )
+    data_weights: tuple[float, ...] = option(
+        (),
+        flag="--data-weight",
+        help="referent path: times each frame of the matching --data root (in order) is seen "
+        "per epoch (default 1)",
+    )
+    scene_labels: tuple[str, ...] = option(
+        (),
+        help="referent path: the View-of-Delft root whose label_2 lists every object of the "
+        "matching --data root's frames (in order; 'none' for a root without); such a root trains "
+        "on its labels and prompts only, never a sidecar",
+    )
+    out: str = option(help="run folder, e.g. runs/NAME")
+    preset: PresetName = option("small")
+    epochs: int = option(20, on_resume=True)
+    batch_size: int = option(4)
+    lr: float = option(1e-3)
+    weight_decay: float = option(5e-4)
+    warmup_steps: int = option(50)
+    modalities: Modalities | None = option(None)
+    fusion: FusionKind | None = option(None)
+    text_fusion: TextFusionKind | None = option(None)
+    anchor: AnchorKind | None = option(None)
+    text_encoder: TextEncoderKind | None = option(None)
+    grounding: GroundingKind = option(
+        "referent",
+        help="referent: text-agnostic detector + referent stage (default); tpcnet: the paper's "
+        "DGGF + C3D-RECHead ranking",
+    )
+    init: str | None = option(
+        None,
+        on_resume=True,
+        help="copy matching weights from this checkpoint before training (new runs)",
+    )
+    init_detector: str | None = option(
+        None,
+        on_resume=True,
+        help="copy only the scene encoder and detector from this checkpoint; the referent stage "
+        "starts from scratch (new runs)",
+    )
+    prompts_per_scene: int | None = option(
+        None,
+        on_resume=True,
+        help=f"referent path: prompts per scene and step (default {GENERATED_PROMPTS_PER_SCENE}; "
+        f"{LABELLED_PROMPTS_PER_SCENE} when every root has --scene-labels)",
+    )
+    radar_folder: str = option("auto", help="radar tree, 'auto' or 'none'")
+    train_split: str = option("train", help="the split trained on (default train)")
+    val_split: str = option("val", help="the split validated and calibrated on (default val)")
+    val_every: int = option(1, on_resume=True, help="validate every N epochs (0: never)")
+    val_limit: int = option(0, on_resume=True, help="validate on the first N frames only")
+    seed: int = option(0)
+    device: str = option(default_factory=default_device, on_resume=True)
+    amp: AmpKind = option(
+        "none",
+        on_resume=True,
+        help="bf16: bfloat16 autocast of the forward passes (CUDA only)",
+    )
+    max_steps: int = option(0, on_resume=True, help="stop after N steps (0: all epochs)")
+    stop_epoch: int = option(
+        0,
+        on_resume=True,
+        help="stop after this many epochs but keep the --epochs learning-rate schedule "
+        "(a budget cut; --resume without it goes on)",
+    )
+    log_every: int = option(10, on_resume=True)
+    flip_probability: float = option(0.5)
+    sensor_augment: bool = option(
+        True,
+        help="referent path: no intensity / dropout / radar-count / single-scan augmentation",
+    )
+    freeze_scene: bool = option(
+        False,
+        help="referent path: train only the referent stage on scenes encoded once by the frozen "
+        "detector (use with --init RUN/last.pt of a joint run)",
+    )
+    bank_prompts: int = option(
+        24, on_resume=True, help="--freeze-scene: prompts generated and encoded once per scene"
+    )
+    label_prompts: int | None = option(
+        None,
+        help="referent path, roots with --scene-labels: prompts generated per frame from its "
+        "labelled boxes (class, depth and side only: their motion is unknown) beside the given "
+        f"one (default {LABEL_PROMPTS} with --scene-labels; 0: given prompts only)",
+    )
+    language: LanguageKind = option(
+        "base",
+        help="referent path: the generated prompts' families (scenes.prompts.PromptConfig."
+        "language): base, or extended with things outside the classes and unsatisfiable "
+        "attributes (the empty answer), negation, exclusion, ordinals, relations and counting",
+    )
+    phrasing: PhrasingKind = option(
+        "train",
+        help="referent path: the generated prompts' wording variants (scenes.prompts.phrasing): "
+        "train (default; the held-out variants stay unseen, so a root written with --phrasing "
+        "heldout measures new wording), heldout, or all",
+    )
+    text_noise: float = option(
+        0.0,
+        help="referent path: share of generated prompts reworded by scenes.prompts.perturb "
+        "(filler-word dropout, synonyms, typos, casing; the meaning kept), default 0",
+    )
+    scene_limit: int = option(
+        0, help="--freeze-scene: cache only the first N training scenes (0: all)"
+    )
+    calibrate: bool = option(
+        True,
+        negatable=True,
+        on_resume=True,
+        help="referent path: at the end of the run, choose the operating threshold on the first "
+        "root's validation split (python -m model.calibrate) and store it in last.pt (default: "
+        "on; a split with too few referred prompts leaves it uncalibrated, with a notice)",
+    )
+    grad_clip: float = option(35.0, cli=False)
+
+    def __post_init__(self) -> None:
+        for name in ("data", "data_weights", "scene_labels"):
+            value = getattr(self, name)
+            object.__setattr__(self, name, (value,) if isinstance(value, str) else tuple(value))
+        try:
+            roots = self.roots()
+        except DataSpecError as exc:
+            raise TrainingError(str(exc)) from exc
+        labelled = [r.scene_labels is not None for r in roots]
+        if self.label_prompts is None:
+            object.__setattr__(self, "label_prompts", LABEL_PROMPTS if any(labelled) else 0)
+        if self.prompts_per_scene is None:
+            per_scene = LABELLED_PROMPTS_PER_SCENE if all(labelled) else GENERATED_PROMPTS_PER_SCENE
+            object.__setattr__(self, "prompts_per_scene", per_scene)
+        if self.label_prompts < 0:
+            raise TrainingError(f"--label-prompts must be >= 0, got {self.label_prompts}")
+        if self.init and self.init_detector:
+            raise TrainingError("give --init or --init-detector, not both")
+        if self.grounding != "referent" and (len(self.data) > 1 or self.scene_labels):
+            raise TrainingError(
+                "several --data roots and --scene-labels are the referent path's; the paper's "
+                "path trains on one root's label_2 boxes"
+            )
+        for name in ("epochs", "batch_size", "prompts_per_scene"):
+            if getattr(self, name) < 1:
+                flag = "--" + name.replace("_", "-")
+                raise TrainingError(f"{flag} must be >= 1, got {getattr(self, name)}")
+        if self.amp not in ("none", "bf16"):
+            raise TrainingError(f"--amp must be none or bf16, got {self.amp!r}")
+        if self.language not in ("base", "extended"):
+            raise TrainingError(f"--language must be base or extended, got {self.language!r}")
+        if self.phrasing not in ("train", "heldout", "all"):
+            raise TrainingError(f"--phrasing must be train, heldout or all, got {self.phrasing!r}")
+        if not 0.0 <= self.text_noise <= 1.0:
+            raise TrainingError(f"--text-noise must be in [0, 1], got {self.text_noise}")
+        if self.grounding not in ("referent", "tpcnet"):
+            raise TrainingError(f"--grounding must be referent or tpcnet, got {self.grounding!r}")
+        if Path(self.out).exists() and not Path(self.out).is_dir():
+            raise TrainingError(f"--out {self.out} is a file; give a run folder")
+
+    def roots(self) -> tuple[RootSpec, ...]:
+        """The training roots (:func:`model.training.data.root_specs`)."""
+        return root_specs(self.data, self.data_weights, self.scene_labels)
+
+    def model_overrides(self) -> dict[str, str]:
+        """The ``build_model`` overrides given on the command line."""
+        names = ("modalities", "fusion", "text_fusion", "anchor", "text_encoder", "grounding")
+        return {n: getattr(self, n) for n in names if getattr(self, n) is not None}
+
+
+def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
+    """Parse the command line into a :class:`TrainConfig` and the resume flag."""
+    p = argparse.ArgumentParser(prog="python -m model.train", description=__doc__.split("\n")[0])
+    add_options(p, TrainConfig)
+    p.add_argument("--resume", action="store_true", help="continue the run in --out")
+    p.add_argument(
+        "--threads",
+        type=int,
+        default=0,
+        help="torch CPU threads (0: torch's default); use 1 when other jobs share the cores",
+    )
+    a = p.parse_args(argv)
+    if a.threads:
+        torch.set_num_threads(a.threads)
+    return from_args(TrainConfig, a), a.resume
+
+
+__all__ = [
+    "GENERATED_PROMPTS_PER_SCENE",
+    "LABELLED_PROMPTS_PER_SCENE",
+    "LABEL_PROMPTS",
+    "TrainConfig",
+    "TrainingError",
+    "parse_args",
+]

@@ -1,0 +1,54 @@
+"""The shipped checkpoints give the same outputs as the code they were referenced on (issue 22).
+
+``tests/data/equivalence_*.npz`` hold the inputs (a tiny fixed synthetic root) and the outputs of
+``detect``, ``encode_scene`` + ``ground`` of each checkpoint, made by
+``python tests/make_equivalence_reference.py --checkpoint CKPT --out FILE`` on the code before
+model/ was reshaped; a change of shape must keep every one of them (to 1e-5).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from model.checkpoint import load_checkpoint
+from tests.make_equivalence_reference import pipeline_outputs, read_inputs
+
+REPO = Path(__file__).resolve().parents[1]
+CASES = {
+    "tpcnet-small": REPO / "tests" / "data" / "equivalence_small.npz",
+    "tpcnet-small-faithful": REPO / "tests" / "data" / "equivalence_small_faithful.npz",
+}
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_checkpoint_outputs_match_the_reference(name: str, torch_threads) -> None:
+    reference = dict(np.load(CASES[name]))
+    with torch_threads(1):
+        model = load_checkpoint(REPO / "checkpoints" / f"{name}.pt")
+        got = pipeline_outputs(model, read_inputs(reference))
+    expected = {k: v for k, v in reference.items() if k.startswith("f") and k != "frames"}
+    assert sorted(got) == sorted(expected)
+    assert any(len(v) for k, v in expected.items() if k.endswith("_scores"))  # not vacuous
+    for key, want in expected.items():
+        have = got[key]
+        assert have.shape == want.shape, f"{key}: shape {have.shape} != {want.shape}"
+        if want.dtype.kind in "iu":
+            np.testing.assert_array_equal(have, want, err_msg=key)
+        else:
+            np.testing.assert_allclose(have, want, rtol=1e-5, atol=1e-5, err_msg=key)
+
+
+def test_the_comparison_can_fail(torch_threads) -> None:
+    """A perturbed weight changes the outputs beyond the tolerance (the test above can fail)."""
+    reference = dict(np.load(CASES["tpcnet-small"]))
+    with torch_threads(1):
+        model = load_checkpoint(REPO / "checkpoints" / "tpcnet-small.pt")
+        with torch.no_grad():
+            next(model.parameters()).add_(0.05)
+        got = pipeline_outputs(model, read_inputs(reference))
+    key = "f0_detect_heatmap"
+    assert not np.allclose(got[key], reference[key], rtol=1e-5, atol=1e-5)
