@@ -145,8 +145,7 @@ def test_fingerprint_mismatch_is_a_clear_error(tmp_path: Path) -> None:
 def test_runner_end_to_end(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     import torch
 
-    from model import build_model
-    from model import save_checkpoint
+    from model import build_model, save_checkpoint
 
     path, scenes = _tiny_suite(tmp_path)
     assert main(["--suite", str(path), "--scenes", str(scenes), "--write-fingerprint"]) == 0
