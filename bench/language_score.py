@@ -24,9 +24,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from scenes.actors import CLASSES
-from scenes.boxes import match_by_centre
+from scenes.boxes import CENTRE_MATCH_DISTANCE, match_by_centre
 
-MATCH_DISTANCE = {"Car": 2.0, "Pedestrian": 1.0, "Cyclist": 1.2}
+MATCH_DISTANCE = CENTRE_MATCH_DISTANCE
 """Largest BEV centre distance (m) of a box from the referent it answers, per class."""
 
 FIGURES = {

@@ -57,11 +57,12 @@ from model.referent.scene_candidates import SceneCandidates, stack_candidates
 from model.referent.stage import CandidateBatch, referent_loss
 from model.tpcnet import TPCNet, as_points
 from scenes.actors import CLASSES, Actor
+from scenes.boxes import CENTRE_MATCH_DISTANCE
 from scenes.calib import Calibration
 from scenes.frame_dataset import AnnotatedRegion, FrameItem
 from scenes.prompts import Prompt, PromptConfig, generate_prompts
 
-MATCH_DISTANCE = {"Car": 2.0, "Pedestrian": 1.0, "Cyclist": 1.2}
+MATCH_DISTANCE = CENTRE_MATCH_DISTANCE
 """A detection within this BEV centre distance (m) of a same-class actor is that actor."""
 
 
