@@ -13,12 +13,12 @@ Modules, in import order (each imports only those above it):
 
 * :mod:`~scenes.prompts.tags` -- keyword type tags (:func:`infer_tags`), :func:`flip_left_right`
   and :func:`is_count_question`, for any text, generated or typed.
+* :mod:`~scenes.prompts.numbers` -- numbers in digits or words.
 * :mod:`~scenes.prompts.noise` -- :func:`perturb`, meaning-keeping text noise for training.
 * :mod:`~scenes.prompts.features` -- :class:`ActorFeatures` and the :class:`ReferableRegion`.
 * :mod:`~scenes.prompts.atoms` -- the atoms, superlatives and their exact semantics.
 * :mod:`~scenes.prompts.predicate` -- :class:`Predicate`, :func:`analyse`, :func:`resolve`,
   ambiguity and crispness.
-* :mod:`~scenes.prompts.numbers` -- numbers in digits or words.
 * :mod:`~scenes.prompts.phrasing` -- the phrasing variant tables and their train / held-out split.
 * :mod:`~scenes.prompts.sampling` -- :class:`PromptConfig`, the families and languages, and
   predicates sampled from an anchor actor.

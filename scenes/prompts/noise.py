@@ -22,6 +22,8 @@ import re
 
 import numpy as np
 
+from scenes.prompts.numbers import NUMBER_WORDS
+
 DROPPABLE = frozenset(
     {"the", "a", "an", "please", "that", "which", "is", "are", "just", "exactly", "hey", "really"}
 )
@@ -60,41 +62,7 @@ SYNONYMS: dict[str, str] = {
 }
 """One-word swaps :func:`perturb` may make (same meaning, same grammar)."""
 
-_NUMBER_WORDS = [
-    "zero",
-    "one",
-    "two",
-    "three",
-    "four",
-    "five",
-    "six",
-    "seven",
-    "eight",
-    "nine",
-    "ten",
-    "eleven",
-    "twelve",
-    "thirteen",
-    "fourteen",
-    "fifteen",
-    "sixteen",
-    "seventeen",
-    "eighteen",
-    "nineteen",
-    "twenty",
-    "thirty",
-    "forty",
-    "fifty",
-    "sixty",
-    "seventy",
-    "eighty",
-    "ninety",
-    "hundred",
-    "half",
-    "point",
-    "and",
-    "both",
-]
+_NUMBER_WORDS = [*sorted(NUMBER_WORDS), "half", "point", "and", "both"]
 _MEANING = frozenset(
     [
         *_NUMBER_WORDS,

@@ -31,6 +31,9 @@ _ONES = (
 )
 _TENS = ("", "", "twenty", "thirty", "forty", "fifty", "sixty", "seventy", "eighty", "ninety")
 
+NUMBER_WORDS: frozenset[str] = frozenset((*_ONES, *_TENS[2:], "hundred"))
+"""Every word :func:`spell_number` may write for a number (besides "point" and "and")."""
+
 DIGITS = "digits"
 HYPHENATED = "hyphenated words"
 SPACED = "spaced words"
