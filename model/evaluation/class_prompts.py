@@ -63,7 +63,8 @@ from model.evaluation.class_prompt_counts import (
 )
 from model.protocol import GroundingModel
 from scenes.calib import IMAGE_SIZE
-from scenes.layout import ID_WIDTH, is_frame_id
+from scenes.durable import atomic_write_text
+from scenes.layout import ID_WIDTH, LABEL, is_frame_id, sample_dir
 from scenes.projection import in_camera_view
 from scenes.root import LIDAR_FOLDER, RADAR_FOLDERS, RootError, Sample, Talk2RadarRoot
 
@@ -280,7 +281,7 @@ def root_frame_ids(root: Talk2RadarRoot, split: str) -> list[str]:
     """
     if split != "all":
         return root.ids(split)
-    label_dir = root.lidar_dir / "training" / "label_2"
+    label_dir = sample_dir(root.lidar_dir, LABEL)
     if not label_dir.is_dir():
         raise RootError(f"{label_dir}: no label folder (a root with full labels has one)")
     ids = sorted(path.stem for path in label_dir.glob("*.txt"))
@@ -407,7 +408,7 @@ def run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     root = Talk2RadarRoot(
         args.data, radar=None if args.radar_folder == "none" else args.radar_folder
     )
-    talk2radar = (root.lidar_dir / "training" / "prompt").is_dir()
+    talk2radar = root.has_prompts
     ids = distinct_scenes(root, root_frame_ids(root, args.split))
     if args.limit:
         ids = ids[: args.limit]
@@ -449,7 +450,7 @@ def run(args: argparse.Namespace, argv: Sequence[str]) -> int:
             **report.to_dict(),
         }
         args.json.parent.mkdir(parents=True, exist_ok=True)
-        args.json.write_text(json.dumps(data, indent=1) + "\n")
+        atomic_write_text(args.json, json.dumps(data, indent=1) + "\n")
         print(f"wrote {args.json}")
     return 0
 
