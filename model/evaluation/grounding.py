@@ -37,6 +37,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
@@ -51,6 +52,10 @@ CLASS_TAG = "class"
 
 ACC_IOUS: tuple[float, float] = (0.25, 0.5)
 """3D IoU thresholds of Acc@0.25 and Acc@0.5."""
+
+CandidateSource = Literal["detector", "labels"]
+"""What the referent stage chooses the answer among: the detector's proposals, or the frame's
+labelled boxes (grounding apart from detection; ``model.evaluate --candidates``)."""
 
 GROUPS: tuple[str, ...] = ("class_only", "attribute", "single", "multiple", "empty")
 """Prompt groups: no attribute tag / some attribute tag; one referent / two or more / none (the

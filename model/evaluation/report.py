@@ -35,6 +35,7 @@ import numpy as np
 
 from model.evaluation.baselines import class_noun_prompt, named_class, oracle_boxes, unsensed_ids
 from model.evaluation.grounding import (
+    CandidateSource,
     GroundingMetrics,
     PromptBoxes,
     PromptOutcome,
@@ -253,7 +254,7 @@ def evaluate_predictions(
     operating: float | None = None,
     baselines: bool = False,
     scene_labels: SceneLabels | None = None,
-    candidates: str = "detector",
+    candidates: CandidateSource = "detector",
 ) -> GroundingReport:
     """Ground every sample of ``ids`` and score the answers.
 
@@ -278,7 +279,7 @@ def evaluate_predictions(
     if not 0.0 <= op < 1.0:
         raise ValueError(f"operating threshold must be in [0, 1), got {op}")
     ground_at = min(decode, op)
-    if candidates not in ("detector", "labels"):
+    if candidates not in typing.get_args(CandidateSource):
         raise ValueError(f"candidates must be detector or labels, got {candidates!r}")
     if candidates == "labels" and scene_labels is None:
         raise ValueError(
