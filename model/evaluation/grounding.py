@@ -42,6 +42,7 @@ from typing import Literal
 import numpy as np
 
 from model.evaluation.metrics import MIN_OVERLAPS
+from model.evaluation.report_file import BY_GROUP, BY_TYPE, OVERALL, THRESHOLD
 from scenes.boxes import iou3d
 
 GROUNDING_TYPES: tuple[str, ...] = ("class", "depth", "velocity", "motion", "position")
@@ -314,11 +315,12 @@ class GroundingMetrics:
     by_group: Mapping[str, GroundingSummary]
 
     def to_dict(self) -> dict:
+        """JSON-ready, :mod:`model.evaluation.report_file`'s keys."""
         return {
-            "operating_threshold": self.threshold,
-            "overall": self.overall.to_dict(),
-            "by_prompt_type": {k: v.to_dict() for k, v in self.by_type.items()},
-            "by_group": {k: v.to_dict() for k, v in self.by_group.items()},
+            THRESHOLD: self.threshold,
+            OVERALL: self.overall.to_dict(),
+            BY_TYPE: {k: v.to_dict() for k, v in self.by_type.items()},
+            BY_GROUP: {k: v.to_dict() for k, v in self.by_group.items()},
         }
 
 
