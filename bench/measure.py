@@ -5,7 +5,8 @@
   between order statistics, mean, min, max).
 - FLOPs with :class:`torch.utils.flop_counter.FlopCounterMode` (:func:`count_flops`): it counts
   matrix products and convolutions only (2 FLOPs per multiply-add; element-wise ops, softmax and
-  pooling are not counted), per module and in total.
+  pooling are not counted), per module and in total; a fused attention counts as its two matrix
+  products.
 - Peak memory (:func:`peak_memory_bytes`): the peak, during one call, of the bytes of tensors
   allocated *by that call* and still alive (inputs and parameters are not counted; outputs are).
   On CUDA ``torch.cuda.max_memory_allocated`` minus the allocation before the call; on the CPU the
@@ -25,7 +26,7 @@ from dataclasses import dataclass
 import torch
 from torch.utils._python_dispatch import TorchDispatchMode
 from torch.utils._pytree import tree_flatten
-from torch.utils.flop_counter import FlopCounterMode
+from torch.utils.flop_counter import FlopCounterMode, sdpa_flop_count
 
 # --------------------------------------------------------------------------- statistics and timing
 
@@ -140,6 +141,34 @@ def interleaved_ms(
 # --------------------------------------------------------------------------- FLOPs, parameters
 
 
+def _cpu_attention_flops(
+    query_shape: tuple[int, ...], key_shape: tuple[int, ...], value_shape: tuple[int, ...], *_, **__
+) -> int:
+    """FLOPs of one fused attention from its operands' shapes (as ``FlopCounterMode``'s own)."""
+    return sdpa_flop_count(query_shape, key_shape, value_shape)
+
+
+def _onednn_linear_flops(
+    input_shape: tuple[int, ...], weight_shape: tuple[int, ...], *_, **__
+) -> int:
+    """FLOPs of oneDNN's linear ``(..., K) x (N, K)^T``: those of the matrix product."""
+    return 2 * math.prod(input_shape[:-1]) * weight_shape[0] * weight_shape[1]
+
+
+_EXTRA_FLOP_FORMULAS = {
+    torch.ops.aten._scaled_dot_product_flash_attention_for_cpu: _cpu_attention_flops,
+    **(
+        {torch.ops.mkldnn._linear_pointwise: _onednn_linear_flops}
+        if hasattr(torch.ops.mkldnn, "_linear_pointwise")
+        else {}
+    ),
+}
+"""Operators ``FlopCounterMode`` has no formula for: the CPU kernel of
+``scaled_dot_product_attention`` counts as the attention it computes (``q k^T`` and the product
+with ``v``: the FLOPs of the explicit form), oneDNN's linear (``model.text``) as its matrix
+product, so that a fused or oneDNN form of an operation has the same floor as the plain one."""
+
+
 @dataclass(frozen=True)
 class FlopCount:
     """FLOPs of one call: ``total`` and per module (fully qualified names as FlopCounterMode
@@ -155,7 +184,7 @@ def count_flops(fn: Callable[[], object]) -> FlopCount:
     Run it on meta tensors (module ``.to("meta")`` and ``torch.empty(..., device="meta")`` inputs)
     to count a call that would be too slow or too large to execute.
     """
-    with FlopCounterMode(display=False) as counter:
+    with FlopCounterMode(display=False, custom_mapping=_EXTRA_FLOP_FORMULAS) as counter:
         fn()
     by_module = {name: int(sum(ops.values())) for name, ops in counter.get_flop_counts().items()}
     return FlopCount(total=int(counter.get_total_flops()), by_module=by_module)

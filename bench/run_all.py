@@ -97,18 +97,20 @@ MISS_NOTES: dict[str, str] = {
     ),
     "`encode_scene` time / FLOP floor": (
         "**`encode_scene` against its FLOP floor.** The floor section's stage tables say where "
-        "the time above the floor goes: the pillar encoders (no FLOPs to speak of: grouping "
-        "~190k points into pillars, one pass over the cloud), BACA's attention (skinny matrix "
-        "products and softmaxes over `L x 144` scores, bound by memory, not arithmetic), "
+        "the time above the floor goes: the pillar encoders (no FLOPs to speak of: masking and "
+        "grouping ~190k points into pillars), BACA's first stage (skinny matrix products and "
+        "softmaxes over `144 x 6400` scores, at about 60 % of the machine's matmul rate), "
         "decoding and candidate description (no FLOPs: peaks, NMS, point evidence). With two "
-        "threads on shared cores each operation also waits for the slower thread; the same "
-        "benchmark with `--threads 1` shows the single-core ratio."
+        "threads on shared cores each operation also waits for the slower thread (while other "
+        "jobs hold the cores a two-thread call can take several times its one-thread time); "
+        "the same benchmark with `--threads 1` shows the single-core ratio."
     ),
     "`ground` (new prompt) time / FLOP floor": (
         "**`ground` against its FLOP floor.** MiniLM for one prompt is 15-30 matrix rows "
-        "against 42 MB of weights read once per prompt: bound by memory bandwidth more than by "
-        "arithmetic; the referent stage is some 60 small operations whose overhead exceeds "
-        "their FLOPs."
+        "against 42 MB of weights read once per prompt (through oneDNN's inner product, the "
+        "fastest form here for so few rows); the referent stage is some 60 small operations "
+        "whose overhead exceeds their FLOPs, and the answer (ranking, heatmap) has none. On "
+        "shared cores two threads wait for each other at every one of those operations."
     ),
     "`model.evaluate` prompts/s": (
         "**Evaluation throughput.** The evaluation section times the whole command; with the "

@@ -7,8 +7,10 @@ Regenerate (only when a change of the outputs is intended, and say so in docs/RE
     python -m tests.decode_reference
 
 which rewrites :data:`REFERENCE` and records in it the commit it ran on (``commit``), the
-generator version and torch's version. The committed file was made on the code before issue 20's
-speed-ups (see ``commit`` in the file).
+generator version and torch's version. The committed file was first made on the code before
+issue 20's speed-ups, then regenerated on its inference forms of the network (see ``commit`` in
+the file; the change of outputs between the two: docs/RESULTS.md, "Issue 20's inference
+forms").
 
 Inputs, all on this machine's CPU with one torch thread:
 

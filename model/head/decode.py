@@ -145,6 +145,15 @@ def class_nms(
     return order[np.asarray(kept, dtype=np.int64)]
 
 
+def _max3x3(x: torch.Tensor) -> torch.Tensor:
+    """``F.max_pool2d(x, 3, stride=1, padding=1)`` of ``(C, H, W)`` as two separable passes of
+    element-wise maxima over shifted views (the same values: max is exact; on the CPU a tenth
+    of the pooling kernel's time on a head-size map)."""
+    padded = F.pad(x, (1, 1, 1, 1), value=float("-inf"))
+    rows = torch.maximum(torch.maximum(padded[:, :, :-2], padded[:, :, 1:-1]), padded[:, :, 2:])
+    return torch.maximum(torch.maximum(rows[:, :-2], rows[:, 1:-1]), rows[:, 2:])
+
+
 def _decode_one(
     heatmap: torch.Tensor,
     regression: torch.Tensor,
@@ -157,7 +166,7 @@ def _decode_one(
     ``limit`` boxes."""
     _, H, W = heatmap.shape
     scores = torch.sigmoid(heatmap.float())
-    pooled = F.max_pool2d(scores[None], kernel_size=3, stride=1, padding=1)[0]
+    pooled = _max3x3(scores)
     # Non-peaks get -1 so that they never pass a threshold (even 0).
     peaks = torch.where(scores == pooled, scores, torch.full_like(scores, -1.0)).reshape(-1)
     k = min(cfg.top_k, peaks.numel())

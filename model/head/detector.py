@@ -42,6 +42,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import torch
+import torch.nn.functional as F
 from torch import Tensor, nn
 
 from model.config import HeadConfig
@@ -118,7 +119,37 @@ class C3DRecHead(nn.Module):
             raise ValueError(
                 f"C3DRecHead expects (B, C, H, W) features, got shape {tuple(x.shape)}"
             )
+        if not self.training and not torch.is_grad_enabled():
+            return self._infer(x)
         shared = self.shared(x)
         heatmap = self.heatmap(shared)
         regression = torch.cat([branch(shared) for branch in self.regression.values()], dim=1)
         return HeadOutput(heatmap=heatmap, regression=regression)
+
+    def _infer(self, x: Tensor) -> HeadOutput:
+        """:meth:`forward` in eval mode without gradients: the same layers, channels-last (the
+        layout oneDNN's convolutions run natively: the head's narrow maps are not reordered into
+        blocks and back around every conv), and the five branches' first convs (all on the
+        shared map) as one conv, their BatchNorms as one; equal to float rounding."""
+        shared = self.shared(x.contiguous(memory_format=torch.channels_last))
+        branches = [self.heatmap, *self.regression.values()]
+        firsts = [branch[0] for branch in branches]  # conv (no bias), BatchNorm, ReLU each
+        norms = [first[1] for first in firsts]
+        hidden = F.conv2d(shared, torch.cat([f[0].weight for f in firsts]), None, padding=1)
+        hidden = F.batch_norm(
+            hidden,
+            torch.cat([n.running_mean for n in norms]),
+            torch.cat([n.running_var for n in norms]),
+            torch.cat([n.weight for n in norms]),
+            torch.cat([n.bias for n in norms]),
+            False,
+            0.0,
+            norms[0].eps,
+        ).relu_()
+        width = self.cfg.head_channels
+        outs = [
+            branch[1](hidden[:, i * width : (i + 1) * width]) for i, branch in enumerate(branches)
+        ]
+        return HeadOutput(
+            heatmap=outs[0].contiguous(), regression=torch.cat(outs[1:], dim=1).contiguous()
+        )

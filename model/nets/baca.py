@@ -45,6 +45,7 @@ Single-modality models do not build a fusion module: ``lr`` is the sensor's own 
 from __future__ import annotations
 
 import math
+import threading
 from functools import lru_cache
 
 import torch
@@ -135,6 +136,53 @@ class _Projections(nn.Module):
         self.out = nn.Linear(channels, channels)
 
 
+_SCRATCH = threading.local()
+"""Per-thread score buffers of CPU inference (:func:`_softmax_scores`)."""
+
+
+def _scratch(slot: str, shape: tuple[int, ...], like: Tensor) -> Tensor:
+    """A buffer of ``shape`` for CPU inference, kept per thread and reused across calls (grown
+    when a call needs more). Without it every call allocates its multi-megabyte score tensors
+    afresh, and the allocator hands them back to the system and faults them in again on each
+    call (thousands of page faults per scene at the first stage)."""
+    buffers = getattr(_SCRATCH, "buffers", None)
+    if buffers is None:
+        buffers = _SCRATCH.buffers = {}
+    numel = math.prod(shape)
+    buf = buffers.get((slot, like.dtype))
+    if buf is None or buf.numel() < numel:
+        buf = buffers[(slot, like.dtype)] = torch.empty(numel, dtype=like.dtype)
+    return buf[:numel].view(shape)
+
+
+def _softmax_scores(a: Tensor, x: Tensor, scale: float) -> Tensor:
+    """``softmax(scale * a @ x)`` over the last dim: ``(N, M, d) @ (N, d, K) -> (N, M, K)``, the
+    scale applied inside the product. CPU inference writes into :func:`_scratch` buffers (the
+    result is only valid until the next call on this thread: consume it at once)."""
+    shape = (a.shape[0], a.shape[1], x.shape[2])
+    if a.device.type != "cpu" or torch.is_grad_enabled():
+        out = torch.empty(shape, dtype=a.dtype, device=a.device)
+        return torch.baddbmm(out, a, x, beta=0.0, alpha=scale).softmax(dim=-1)
+    scores = _scratch("scores", shape, a)
+    torch.baddbmm(scores, a, x, beta=0.0, alpha=scale, out=scores)
+    return torch.softmax(scores, -1, out=_scratch("probabilities", shape, a))
+
+
+def _project_many(linears: tuple[nn.Linear, ...], x: Tensor) -> Tensor:
+    """Several ``nn.Linear`` of one input in one product: channel-major ``(B, C_in, L)`` ->
+    ``(B, sum C_out, L)``, the outputs stacked along the channels in the order given."""
+    weight = torch.cat([lin.weight for lin in linears])
+    bias = torch.cat([lin.bias for lin in linears])
+    if x.shape[0] == 1:  # one matrix product with the bias as its added term
+        return torch.addmm(bias[:, None], weight, x[0]).unsqueeze(0)
+    return torch.matmul(weight, x) + bias[:, None]
+
+
+def _project(linear: nn.Linear, x: Tensor) -> Tensor:
+    """``linear`` over the channels of a channel-major ``(B, C_in, L)`` tensor: ``(B, C_out, L)``."""
+    return _project_many((linear,), x)
+
+
 class AgentCrossAttention(_Projections):
     """One direction of BACA (eq. 7, or eq. 8 with the sensors swapped).
 
@@ -148,15 +196,32 @@ class AgentCrossAttention(_Projections):
 
     def forward(self, xa: Tensor, xb: Tensor) -> Tensor:
         """``xa, xb``: ``(B, C, H, W)`` position-encoded maps of the query and key/value sensors."""
-        height, width = xa.shape[-2:]
-        q = self.q(_tokens(xa))  # (B, L, C): Q_a
-        agents = F.adaptive_avg_pool2d(_map(q, height, width), self.agent_size)  # A_a, (B, C, h, w)
-        q, agents = _to_heads(q, self.heads), _to_heads(_tokens(agents), self.heads)
-        k = _to_heads(self.k(_tokens(xb)), self.heads)  # K_b
-        v = _to_heads(self.v(_tokens(xb)), self.heads)  # V_b
-        context = attention(agents, k, v)  # f_ac: (B, n, l, d), agents gather the other sensor
-        fused = attention(q, agents, context)  # f_ag: (B, n, L, d), broadcast to every query
-        return _map(self.out(_from_heads(fused)), height, width)
+        b, c, height, width = xa.shape
+        xa, xb = xa.reshape(b, c, -1), xb.reshape(b, c, -1)
+        q = _project(self.q, xa).view(b, c, height, width)
+        fused = self.attend(q, _project(self.k, xb), _project(self.v, xb))
+        return _project(self.out, fused).view(b, c, height, width)
+
+    def attend(self, q: Tensor, k: Tensor, v: Tensor) -> Tensor:
+        """Eq. 7 on projected maps, channel-major as the maps are: ``Q_a`` ``(B, C, H, W)``,
+        ``K_b, V_b`` ``(B, C, L)`` (``L = H * W``) -> ``f_ag`` ``(B, C, L)`` (before ``W_O``).
+
+        No transposing copies: every product reads its operands in place; the ``1 / sqrt(d)``
+        scale is applied inside the score products; the agents' scores are ``(B n, l, L)``, the
+        queries' ``(B n, L, l)`` (each softmax over its last dim). The same values as
+        :func:`attention` on token-major tensors, up to float rounding.
+        """
+        b, c = q.shape[:2]
+        n = self.heads
+        d = c // n
+        scale = d**-0.5
+        agents = F.adaptive_avg_pool2d(q, self.agent_size).reshape(b * n, d, -1)  # A_a
+        q, k, v = (t.reshape(b * n, d, -1) for t in (q, k, v))
+        agents_t = agents.transpose(1, 2)  # (B n, l, d)
+        gather = _softmax_scores(agents_t, k, scale)  # (B n, l, L)
+        context = torch.bmm(v, gather.transpose(1, 2))  # f_ac^T: (B n, d, l)
+        spread = _softmax_scores(q.transpose(1, 2), agents, scale)  # (B n, L, l)
+        return torch.bmm(context, spread.transpose(1, 2)).view(b, c, -1)  # f_ag^T
 
 
 class VanillaCrossAttention(_Projections):
@@ -193,6 +258,21 @@ def _merge(channels: int) -> nn.Sequential:
     )
 
 
+def _merged(merge: nn.Sequential, both: Tensor) -> Tensor:
+    """``merge`` (1x1 conv, BatchNorm, ReLU) of a channel-major ``(B, 2 C, L)`` tensor ->
+    ``(B, C, L)``. In eval mode for one item: one matrix product with the BatchNorm folded into
+    it (running statistics: an affine map per channel), then ReLU in place; the same values as
+    the three modules up to float rounding."""
+    conv, norm = merge[0], merge[1]
+    if norm.training or both.shape[0] != 1 or torch.is_grad_enabled():
+        b, c2, cells = both.shape
+        return merge(both.view(b, c2, cells, 1)).view(b, -1, cells)
+    scale = norm.weight / torch.sqrt(norm.running_var + norm.eps)
+    shift = norm.bias - norm.running_mean * scale
+    weight = conv.weight.view(conv.weight.shape[0], -1) * scale[:, None]
+    return torch.addmm(shift[:, None], weight, both[0]).relu_().unsqueeze(0)
+
+
 class _CrossFusion(nn.Module):
     """Shared frame of the attention fusions: PE, per-direction attention, residual, merge."""
 
@@ -211,9 +291,26 @@ class _CrossFusion(nn.Module):
     def forward(self, f_l: Tensor, f_r: Tensor) -> Tensor:
         """``(B, C, H, W)`` LiDAR and radar maps -> ``lr`` ``(B, C, H, W)``."""
         _check_pair(f_l, f_r, self.channels)
-        _, c, height, width = f_l.shape
+        b, c, height, width = f_l.shape
         pe = sinusoidal_position_encoding(c, height, width, f_l.device).to(f_l.dtype)
         x_l, x_r = f_l + pe, f_r + pe
+        lid, rad = self.lidar_dir, self.radar_dir
+        if isinstance(lid, AgentCrossAttention) and isinstance(rad, AgentCrossAttention):
+            # BACA: each sensor's map feeds its own queries and the other direction's keys and
+            # values, so its three projections are one product (rows: Q, K, V).
+            from_l = _project_many((lid.q, rad.k, rad.v), x_l.reshape(b, c, -1))
+            from_r = _project_many((rad.q, lid.k, lid.v), x_r.reshape(b, c, -1))
+            shape = (b, c, height, width)
+            f_lg = lid.attend(from_l[:, :c].view(shape), from_r[:, c : 2 * c], from_r[:, 2 * c :])
+            f_rm = rad.attend(from_r[:, :c].view(shape), from_l[:, c : 2 * c], from_l[:, 2 * c :])
+            both = torch.cat(
+                [
+                    f_l.reshape(b, c, -1) + _project(lid.out, f_lg),
+                    f_r.reshape(b, c, -1) + _project(rad.out, f_rm),
+                ],
+                dim=1,
+            )
+            return _merged(self.merge, both).view(shape)
         lidar = f_l + self.lidar_dir(x_l, x_r) if self.lidar_dir is not None else f_l
         radar = f_r + self.radar_dir(x_r, x_l) if self.radar_dir is not None else f_r
         return self.merge(torch.cat([lidar, radar], dim=1))

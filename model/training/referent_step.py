@@ -48,11 +48,12 @@ from model.nets.text import (
 from model.referent.head import referent_head
 from model.tpcnet import TPCNet
 from scenes.actors import CLASSES, Actor
+from scenes.boxes import CENTRE_MATCH_DISTANCE
 from scenes.calib import Calibration
 from scenes.frame_dataset import AnnotatedRegion, FrameItem
 from scenes.prompts import Prompt, PromptConfig, generate_prompts
 
-MATCH_DISTANCE = {"Car": 2.0, "Pedestrian": 1.0, "Cyclist": 1.2}
+MATCH_DISTANCE = CENTRE_MATCH_DISTANCE
 """A detection within this BEV centre distance (m) of a same-class actor is that actor."""
 
 
