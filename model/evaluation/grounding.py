@@ -42,7 +42,7 @@ from typing import Literal
 import numpy as np
 
 from model.evaluation.metrics import MIN_OVERLAPS
-from model.evaluation.report_file import BY_GROUP, BY_TYPE, OVERALL, THRESHOLD
+from model.evaluation.report_file import BY_GROUP, BY_TYPE, OVERALL, THRESHOLD, SummaryFigures
 from scenes.boxes import iou3d
 
 GROUNDING_TYPES: tuple[str, ...] = ("class", "depth", "velocity", "motion", "position")
@@ -246,34 +246,28 @@ def _pct(num: float, den: float) -> float:
 
 
 @dataclass(frozen=True)
-class GroundingSummary:
+class GroundingSummary(SummaryFigures):
     """Grounding figures over a set of prompts, in percent (see the module doc).
 
     Attributes:
         prompts: Prompts in the set.
-        acc_prompts: Of those, with at least one referent (the denominator of Acc).
         acc_25, acc_50: Top-box accuracy at 3D IoU > 0.25 / 0.5.
         precision, recall, f1: Set metrics micro-averaged over boxes.
         set_f1: Mean per-prompt F1 ("set F1").
         exact: Prompts answered with exactly their referent set.
+        acc_prompts: Of the prompts, with at least one referent (the denominator of Acc).
         referents, predicted, true_positives: Box totals behind the micro averages.
     """
 
-    prompts: int
     acc_prompts: int
-    acc_25: float
-    acc_50: float
-    precision: float
-    recall: float
-    f1: float
-    set_f1: float
-    exact: float
     referents: int
     predicted: int
     true_positives: int
 
     def to_dict(self) -> dict[str, float | int]:
-        return dict(self.__dict__)
+        """Every field by name, in the order files have always had (``acc_prompts`` second)."""
+        out: dict[str, float | int] = dict(self.__dict__)
+        return {"prompts": out.pop("prompts"), "acc_prompts": out.pop("acc_prompts"), **out}
 
 
 def summarize(outcomes: Sequence[PromptOutcome]) -> GroundingSummary:

@@ -16,8 +16,8 @@ constants into typed figures (what :mod:`model.evaluation.results_table` prints)
      "baseline_notes": {name: why}}                              "by_prompt_type": {tag: summary},
                                                                  "by_group": {group: summary}}
 
-A summary holds the fields of :class:`model.evaluation.grounding.GroundingSummary` by name. The
-figures need only what the tables print (a file may hold more); a section a file lacks (older
+A summary holds the fields of :class:`model.evaluation.grounding.GroundingSummary` by name (its
+figures are :class:`SummaryFigures`' fields). The figures need only what the tables print (a file may hold more); a section a file lacks (older
 files have no ``grounding``) is None, and asking a table for it names the missing field. This
 module imports only the protocol's area names, so that the writers can import it.
 """
@@ -118,7 +118,9 @@ class SubsetFigures:
 
 @dataclass(frozen=True)
 class SummaryFigures:
-    """Grounding figures over a set of prompts (percent; the fields of ``GroundingSummary``)."""
+    """Grounding figures over a set of prompts (percent, ``prompts`` a count): what the tables
+    print of a :class:`model.evaluation.grounding.GroundingSummary`, which adds the totals
+    behind them."""
 
     prompts: int
     acc_25: float
@@ -129,10 +131,10 @@ class SummaryFigures:
     set_f1: float
     exact: float
 
-    @classmethod
-    def read(cls, data: object, where: str) -> SummaryFigures:
-        values = {f.name: _num(data, f.name, where) for f in dataclasses.fields(cls)}
-        return cls(**{**values, "prompts": int(values["prompts"])})
+    @staticmethod
+    def read(data: object, where: str) -> SummaryFigures:
+        values = {f.name: _num(data, f.name, where) for f in dataclasses.fields(SummaryFigures)}
+        return SummaryFigures(**{**values, "prompts": int(values["prompts"])})
 
 
 @dataclass(frozen=True)
