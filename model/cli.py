@@ -5,9 +5,10 @@ and help are the only source of that flag (``python -m model.train``, ``model.ev
 A field becomes ``--field-name`` (underscores to hyphens) unless :func:`option` names another
 flag; ``Literal[...]`` (or ``Literal[...] | None``) gives the choices, ``int`` / ``float`` /
 ``str`` the type, a ``tuple[X, ...]`` a flag given once per value (``action="append"``), a
-``bool`` a switch (``--name`` for a default of False, ``--no-name`` for True, or both forms with
-``negatable=True``). A field without a default is a required flag. Fields with ``cli=False``
-metadata have no flag.
+``Path`` (or ``Path | None``) a path, a ``bool`` a switch (``--name`` for a default of False,
+``--no-name`` for True, or both forms with ``negatable=True``). A field without a default is a
+required flag. Fields with ``cli=False`` metadata have no flag; fields with a ``group`` title are
+listed under that argument group in ``--help`` (groups in the order their first field comes).
 
 Why not ``tyro``: the commands' flags, help text and errors are relied on by scripts and docs
 (docs/DESIGN.md); tyro renames and re-formats them (``--flag/--no-flag`` pairs, its own help
@@ -23,6 +24,7 @@ import dataclasses
 import types
 import typing
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any, Literal
 
 
@@ -35,6 +37,7 @@ def option(
     on_resume: bool = False,
     default_factory: Callable[[], Any] | Any = dataclasses.MISSING,
     cli: bool = True,
+    group: str | None = None,
 ) -> Any:
     """A dataclass field with its command-line flag's settings.
 
@@ -46,8 +49,16 @@ def option(
         on_resume: The setting may change when a run is resumed (:func:`resumable_fields`).
         default_factory: As :func:`dataclasses.field`'s (also the flag's default).
         cli: False: a field with no flag.
+        group: The title of the argument group the flag is listed under (None: the parser's).
     """
-    meta = {"help": help, "flag": flag, "negatable": negatable, "on_resume": on_resume, "cli": cli}
+    meta = {
+        "help": help,
+        "flag": flag,
+        "negatable": negatable,
+        "on_resume": on_resume,
+        "cli": cli,
+        "group": group,
+    }
     if default_factory is not dataclasses.MISSING:
         return dataclasses.field(default_factory=default_factory, metadata=meta)
     return dataclasses.field(default=default, metadata=meta)
@@ -91,43 +102,61 @@ def _default(field: dataclasses.Field) -> Any:
 def add_options(parser: argparse.ArgumentParser, cls: type, only: tuple[str, ...] = ()) -> None:
     """One flag per field of ``cls`` (in field order; ``only``: just these fields)."""
     hints = typing.get_type_hints(cls, include_extras=True)
+    groups: dict[str, argparse._ArgumentGroup] = {}
     for f in dataclasses.fields(cls):
         if not f.metadata.get("cli", True) or (only and f.name not in only):
             continue
-        tp, name = hints[f.name], flag_name(f)
-        kw: dict[str, Any] = {"dest": f.name}
-        if f.metadata.get("help") is not None:
-            kw["help"] = f.metadata["help"]
-        required = f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
-        base = _base(tp)
-        if base is bool:
-            if f.metadata.get("negatable"):
-                kw.update(action=argparse.BooleanOptionalAction, default=_default(f))
-            else:
-                kw.update(action="store_false" if _default(f) else "store_true")
-            parser.add_argument(name, **kw)
-            continue
-        if typing.get_origin(base) is tuple:
-            item = typing.get_args(base)[0]
-            kw.update(action="append", required=required)
-            if not required:
-                kw["default"] = list(_default(f))
-            if item is not str:
-                kw["type"] = item
-            if f.metadata.get("flag"):
-                kw["metavar"] = name.lstrip("-").replace("-", "_").upper()
-            parser.add_argument(name, **kw)
-            continue
+        _add_option(_group(parser, groups, f.metadata.get("group")), f, hints[f.name])
+
+
+def _group(
+    parser: argparse.ArgumentParser,
+    groups: dict[str, argparse._ArgumentGroup],
+    title: str | None,
+) -> argparse.ArgumentParser | argparse._ArgumentGroup:
+    """The parser itself (``title`` None) or its argument group ``title`` (made on first use)."""
+    if title is None:
+        return parser
+    if title not in groups:
+        groups[title] = parser.add_argument_group(title)
+    return groups[title]
+
+
+def _add_option(
+    parser: argparse.ArgumentParser | argparse._ArgumentGroup, f: dataclasses.Field, tp: Any
+) -> None:
+    """The flag of field ``f`` (type ``tp``) on ``parser`` (module docstring)."""
+    name = flag_name(f)
+    kw: dict[str, Any] = {"dest": f.name}
+    if f.metadata.get("help") is not None:
+        kw["help"] = f.metadata["help"]
+    required = f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+    base = _base(tp)
+    if base is bool:
+        if f.metadata.get("negatable"):
+            kw.update(action=argparse.BooleanOptionalAction, default=_default(f))
+        else:
+            kw.update(action="store_false" if _default(f) else "store_true")
+    elif typing.get_origin(base) is tuple:
+        item = typing.get_args(base)[0]
+        kw.update(action="append", required=required)
+        if not required:
+            kw["default"] = list(_default(f))
+        if item is not str:
+            kw["type"] = item
+        if f.metadata.get("flag"):
+            kw["metavar"] = name.lstrip("-").replace("-", "_").upper()
+    else:
         choices = choices_of(tp)
         if choices is not None:
             kw["choices"] = list(choices)
-        elif base in (int, float):
+        elif base in (int, float, Path):
             kw["type"] = base
         if required:
             kw["required"] = True
         else:
             kw["default"] = _default(f)
-        parser.add_argument(name, **kw)
+    parser.add_argument(name, **kw)
 
 
 def from_args(cls: type, args: argparse.Namespace, **extra: Any) -> Any:

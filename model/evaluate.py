@@ -34,9 +34,11 @@ import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal
 
 from model.checkpoint import DEFAULT_CHECKPOINT
+from model.cli import add_options, from_args, option
+from model.evaluation.grounding import CandidateSource
 from model.evaluation.metrics import VodResult, evaluate_frames
 
 if TYPE_CHECKING:
@@ -44,8 +46,6 @@ if TYPE_CHECKING:
 from scenes.kitti import LabelError, ObjectLabel, parse_label_line, read_label_file
 from scenes.layout import ID_WIDTH, format_id, is_frame_id
 from scenes.textfile import read_text_file
-
-"""The bundled checkpoint, model mode's default."""
 
 DEFAULT_EVAL_DIR = Path("runs") / "eval"
 """Model mode's default output folder's parent (relative to the working directory)."""
@@ -209,7 +209,103 @@ def write_json(path: str | Path, result: VodResult | GroundingReport) -> None:
     path.write_text(json.dumps(result.to_dict(), indent=2) + "\n")
 
 
+FILES_MODE = "score prediction files"
+"""The argument group of files mode (``--labels``, ``--preds``)."""
+
+MODEL_MODE = "ground a split with a checkpoint, then score it"
+"""The argument group of model mode (``--data`` and its settings)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class EvaluateConfig:
+    """The settings of ``python -m model.evaluate`` (each field is one of its flags,
+    :mod:`model.cli`): files mode (``labels`` and ``preds``) or model mode (``data``)."""
+
+    labels: Path | None = option(
+        None, group=FILES_MODE, help="folder of ground-truth label_2 files"
+    )
+    preds: Path | None = option(
+        None,
+        group=FILES_MODE,
+        help="folder of prediction files <frame id>.txt (a missing file = no detections)",
+    )
+    data: Path | None = option(None, group=MODEL_MODE, help="Talk2Radar root")
+    split: str = option("test", group=MODEL_MODE, help="ImageSets split (default: test)")
+    checkpoint: Path = option(
+        DEFAULT_CHECKPOINT,
+        group=MODEL_MODE,
+        help="model checkpoint (.pt; default: the bundled checkpoints/tpcnet-small.pt)",
+    )
+    out: Path | None = option(
+        None,
+        group=MODEL_MODE,
+        help=(
+            f"folder for the prediction files (default: {DEFAULT_EVAL_DIR}/<root name>-<split>, "
+            "with the JSON beside it as <that folder>.json unless --json is given)"
+        ),
+    )
+    threshold: float | None = option(
+        None,
+        group=MODEL_MODE,
+        help=(
+            "operating threshold of the set metrics (default: the checkpoint's stored "
+            "operating_threshold, else its decode threshold); mAP always uses every decoded box"
+        ),
+    )
+    baselines: bool = option(
+        True,
+        negatable=True,
+        group=MODEL_MODE,
+        help="also score the language-blind oracle and the class-noun prompt (default: on)",
+    )
+    radar_folder: str = option(
+        "auto", group=MODEL_MODE, help="radar tree to read: auto, none or a folder name"
+    )
+    scene_labels: Path | None = option(
+        None,
+        group=MODEL_MODE,
+        help="the View-of-Delft root whose label_2 lists every object of the frames (the "
+        "language-blind oracle's objects; with it nothing under the root's meta/ is read)",
+    )
+    candidates: CandidateSource = option(
+        "detector",
+        group=MODEL_MODE,
+        help="what the referent stage chooses among: the detector's proposals (default) or the "
+        "frame's labelled boxes from --scene-labels (grounding apart from detection)",
+    )
+    device: str = option("cpu", group=MODEL_MODE, help="cpu or cuda")
+    limit: int = option(0, group=MODEL_MODE, help="first N frames only (0: all)")
+    json: Path | None = option(None, help="write the results as JSON here")
+    exact_overlaps: bool = option(
+        False,
+        help=(
+            "score the boxes exactly as written; by default, like the official devkit, detections "
+            "are rotated by +0.01 rad and their 2D boxes shifted by +0.01 px before overlaps"
+        ),
+    )
+
+    def mode(self) -> Literal["files", "model"]:
+        """Which of the two modes the flags ask for.
+
+        Raises:
+            ValueError: neither mode, or flags of both, or ``--labels`` without ``--preds`` (or
+                the reverse); the message is the command line's error.
+        """
+        if self.data is not None:
+            if self.labels is not None or self.preds is not None:
+                raise ValueError("--data does not go with --labels/--preds")
+            return "model"
+        if self.labels is None and self.preds is None:
+            raise ValueError(
+                "give --labels DIR --preds DIR, or --data ROOT [--checkpoint PATH] [--out DIR]"
+            )
+        if self.labels is None or self.preds is None:
+            raise ValueError("--labels and --preds go together")
+        return "files"
+
+
 def build_parser() -> argparse.ArgumentParser:
+    """The command line of ``python -m model.evaluate``: :class:`EvaluateConfig`'s flags."""
     parser = argparse.ArgumentParser(
         prog="python -m model.evaluate",
         description=(
@@ -217,80 +313,26 @@ def build_parser() -> argparse.ArgumentParser:
             "area and driving corridor, 11-point AP with 40-point AP beside it)."
         ),
     )
-    files = parser.add_argument_group("score prediction files")
-    files.add_argument("--labels", type=Path, help="folder of ground-truth label_2 files")
-    files.add_argument(
-        "--preds",
-        type=Path,
-        help="folder of prediction files <frame id>.txt (a missing file = no detections)",
-    )
-    model_mode = parser.add_argument_group("ground a split with a checkpoint, then score it")
-    model_mode.add_argument("--data", type=Path, help="Talk2Radar root")
-    model_mode.add_argument("--split", default="test", help="ImageSets split (default: test)")
-    model_mode.add_argument(
-        "--checkpoint",
-        type=Path,
-        default=DEFAULT_CHECKPOINT,
-        help="model checkpoint (.pt; default: the bundled checkpoints/tpcnet-small.pt)",
-    )
-    model_mode.add_argument(
-        "--out",
-        type=Path,
-        help=(
-            f"folder for the prediction files (default: {DEFAULT_EVAL_DIR}/<root name>-<split>, "
-            "with the JSON beside it as <that folder>.json unless --json is given)"
-        ),
-    )
-    model_mode.add_argument(
-        "--threshold",
-        type=float,
-        default=None,
-        help=(
-            "operating threshold of the set metrics (default: the checkpoint's stored "
-            "operating_threshold, else its decode threshold); mAP always uses every decoded box"
-        ),
-    )
-    model_mode.add_argument(
-        "--baselines",
-        action=argparse.BooleanOptionalAction,
-        default=True,
-        help="also score the language-blind oracle and the class-noun prompt (default: on)",
-    )
-    model_mode.add_argument(
-        "--radar-folder", default="auto", help="radar tree to read: auto, none or a folder name"
-    )
-    model_mode.add_argument(
-        "--scene-labels",
-        type=Path,
-        default=None,
-        help="the View-of-Delft root whose label_2 lists every object of the frames (the "
-        "language-blind oracle's objects; with it nothing under the root's meta/ is read)",
-    )
-    model_mode.add_argument(
-        "--candidates",
-        default="detector",
-        choices=["detector", "labels"],
-        help="what the referent stage chooses among: the detector's proposals (default) or the "
-        "frame's labelled boxes from --scene-labels (grounding apart from detection)",
-    )
-    model_mode.add_argument("--device", default="cpu", help="cpu or cuda")
-    model_mode.add_argument("--limit", type=int, default=0, help="first N frames only (0: all)")
-    parser.add_argument("--json", type=Path, default=None, help="write the results as JSON here")
-    parser.add_argument(
-        "--exact-overlaps",
-        action="store_true",
-        help=(
-            "score the boxes exactly as written; by default, like the official devkit, detections "
-            "are rotated by +0.01 rad and their 2D boxes shifted by +0.01 px before overlaps"
-        ),
-    )
+    add_options(parser, EvaluateConfig)
     return parser
 
 
-def _run_files_mode(args: argparse.Namespace) -> int:
-    scored = score_directories(args.labels, args.preds, devkit_offsets=not args.exact_overlaps)
+def parse_args(argv: Sequence[str] | None = None) -> EvaluateConfig:
+    """The :class:`EvaluateConfig` of a command line (a mode error exits 2 with usage, as
+    argparse's own errors)."""
+    parser = build_parser()
+    cfg = from_args(EvaluateConfig, parser.parse_args(argv))
+    try:
+        cfg.mode()
+    except ValueError as exc:
+        parser.error(str(exc))
+    return cfg
+
+
+def _run_files_mode(cfg: EvaluateConfig) -> int:
+    scored = score_directories(cfg.labels, cfg.preds, devkit_offsets=not cfg.exact_overlaps)
     print(
-        f"labels: {args.labels} ({len(scored.frame_ids)} frames); predictions: {args.preds}"
+        f"labels: {cfg.labels} ({len(scored.frame_ids)} frames); predictions: {cfg.preds}"
         + (
             f" ({len(scored.missing_predictions)} files missing, scored as no detections)"
             if scored.missing_predictions
@@ -301,9 +343,9 @@ def _run_files_mode(args: argparse.Namespace) -> int:
     note = scored.result.unknown_classes_note()
     if note is not None:
         print(f"warning: {note}", file=sys.stderr)
-    if args.json is not None:
-        write_json(args.json, scored.result)
-        print(f"wrote {args.json}")
+    if cfg.json is not None:
+        write_json(cfg.json, scored.result)
+        print(f"wrote {cfg.json}")
     return 0
 
 
@@ -313,7 +355,7 @@ def default_out_dir(data: Path, split: str) -> Path:
     return DEFAULT_EVAL_DIR / f"{data.resolve().name}-{split}"
 
 
-def _run_model_mode(args: argparse.Namespace) -> int:
+def _run_model_mode(cfg: EvaluateConfig) -> int:
     """Ground every sample of a split, write one prediction file per frame, score them, and print
     the official table, the per-prompt-type and per-depth tables, and the grounding tables (model,
     class-noun prompt and language-blind oracle side by side)."""
@@ -322,56 +364,56 @@ def _run_model_mode(args: argparse.Namespace) -> int:
     from model.evaluation.report import evaluate_predictions
     from scenes.root import Talk2RadarRoot
 
-    json_path = args.json
-    if args.out is None:
-        args.out = default_out_dir(args.data, args.split)
+    json_path, out_dir = cfg.json, cfg.out
+    if out_dir is None:
+        out_dir = default_out_dir(cfg.data, cfg.split)
         if json_path is None:
-            json_path = args.out.with_name(args.out.name + ".json")
-    if args.threshold is not None and not 0.0 <= args.threshold < 1.0:
-        raise EvaluationInputError(f"--threshold must be in [0, 1), got {args.threshold}")
+            json_path = out_dir.with_name(out_dir.name + ".json")
+    if cfg.threshold is not None and not 0.0 <= cfg.threshold < 1.0:
+        raise EvaluationInputError(f"--threshold must be in [0, 1), got {cfg.threshold}")
 
     from scenes.scene_labels import SceneLabels
 
-    radar = None if args.radar_folder == "none" else args.radar_folder
-    if args.candidates == "labels" and args.scene_labels is None:
+    radar = None if cfg.radar_folder == "none" else cfg.radar_folder
+    if cfg.candidates == "labels" and cfg.scene_labels is None:
         raise EvaluationInputError(
             "--candidates labels needs --scene-labels VOD_ROOT (a Talk2Radar label_2 lists only "
             "the referents, which would give the answer away)"
         )
-    scene_labels = None if args.scene_labels is None else SceneLabels(args.scene_labels)
-    root = Talk2RadarRoot(args.data, radar=radar, sidecar=scene_labels is None)
-    ids = root.ids(args.split)
-    if args.limit:
-        ids = ids[: args.limit]
+    scene_labels = None if cfg.scene_labels is None else SceneLabels(cfg.scene_labels)
+    root = Talk2RadarRoot(cfg.data, radar=radar, sidecar=scene_labels is None)
+    ids = root.ids(cfg.split)
+    if cfg.limit:
+        ids = ids[: cfg.limit]
     if not ids:
-        raise EvaluationInputError(f"{args.data}: split {args.split!r} has no samples")
-    model = load_checkpoint(args.checkpoint, device=args.device)
-    operating = operating_threshold(model) if args.threshold is None else args.threshold
-    if args.candidates == "labels" and model.cfg.grounding != "referent":
+        raise EvaluationInputError(f"{cfg.data}: split {cfg.split!r} has no samples")
+    model = load_checkpoint(cfg.checkpoint, device=cfg.device)
+    operating = operating_threshold(model) if cfg.threshold is None else cfg.threshold
+    if cfg.candidates == "labels" and model.cfg.grounding != "referent":
         raise EvaluationInputError(
-            f"{args.checkpoint}: --candidates labels needs a referent-path checkpoint"
+            f"{cfg.checkpoint}: --candidates labels needs a referent-path checkpoint"
         )
     report = evaluate_predictions(
         model,
         root,
         ids,
         operating=operating,
-        baselines=args.baselines,
+        baselines=cfg.baselines,
         scene_labels=scene_labels,
-        candidates=args.candidates,
+        candidates=cfg.candidates,
     )
-    out = write_predictions(report.predictions, args.out)
+    out = write_predictions(report.predictions, out_dir)
     # Score the files as written (4 decimals), as the official devkit reads them.
     from_files, missing = load_prediction_dir(out, tuple(sorted(ids)))
     if missing:
         raise EvaluationInputError(f"{out}: prediction files missing for {list(missing)[:5]}")
     report = report.rescored(from_files)
     print(
-        f"data: {args.data} split {args.split} ({len(ids)} frames); checkpoint {args.checkpoint}; "
-        f"candidates: {args.candidates}"
-        + ("" if scene_labels is None else f"; scene labels {args.scene_labels}")
+        f"data: {cfg.data} split {cfg.split} ({len(ids)} frames); checkpoint {cfg.checkpoint}; "
+        f"candidates: {cfg.candidates}"
+        + ("" if scene_labels is None else f"; scene labels {cfg.scene_labels}")
     )
-    source = "--threshold" if args.threshold is not None else "checkpoint"
+    source = "--threshold" if cfg.threshold is not None else "checkpoint"
     print(f"predictions written to {out}; operating threshold {operating:g} ({source})")
     print(report.format_tables(), end="")
     if json_path is not None:
@@ -381,22 +423,10 @@ def _run_model_mode(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    if args.data is not None:
-        if args.labels is not None or args.preds is not None:
-            parser.error("--data does not go with --labels/--preds")
-        runner = _run_model_mode
-    elif args.labels is None and args.preds is None:
-        parser.error(
-            "give --labels DIR --preds DIR, or --data ROOT [--checkpoint PATH] [--out DIR]"
-        )
-    elif args.labels is None or args.preds is None:
-        parser.error("--labels and --preds go together")
-    else:
-        runner = _run_files_mode
+    cfg = parse_args(argv)
+    runner = _run_model_mode if cfg.mode() == "model" else _run_files_mode
     try:
-        return runner(args)
+        return runner(cfg)
     except (EvaluationInputError, LabelError, ValueError) as exc:
         print(f"error: {_one_line(str(exc))}", file=sys.stderr)
         return 2

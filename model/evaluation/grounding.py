@@ -37,10 +37,12 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 import numpy as np
 
 from model.evaluation.metrics import MIN_OVERLAPS
+from model.evaluation.report_file import BY_GROUP, BY_TYPE, OVERALL, THRESHOLD, SummaryFigures
 from scenes.boxes import iou3d
 
 GROUNDING_TYPES: tuple[str, ...] = ("class", "depth", "velocity", "motion", "position")
@@ -51,6 +53,10 @@ CLASS_TAG = "class"
 
 ACC_IOUS: tuple[float, float] = (0.25, 0.5)
 """3D IoU thresholds of Acc@0.25 and Acc@0.5."""
+
+CandidateSource = Literal["detector", "labels"]
+"""What the referent stage chooses the answer among: the detector's proposals, or the frame's
+labelled boxes (grounding apart from detection; ``model.evaluate --candidates``)."""
 
 GROUPS: tuple[str, ...] = ("class_only", "attribute", "single", "multiple", "empty")
 """Prompt groups: no attribute tag / some attribute tag; one referent / two or more / none (the
@@ -240,34 +246,28 @@ def _pct(num: float, den: float) -> float:
 
 
 @dataclass(frozen=True)
-class GroundingSummary:
+class GroundingSummary(SummaryFigures):
     """Grounding figures over a set of prompts, in percent (see the module doc).
 
     Attributes:
         prompts: Prompts in the set.
-        acc_prompts: Of those, with at least one referent (the denominator of Acc).
         acc_25, acc_50: Top-box accuracy at 3D IoU > 0.25 / 0.5.
         precision, recall, f1: Set metrics micro-averaged over boxes.
         set_f1: Mean per-prompt F1 ("set F1").
         exact: Prompts answered with exactly their referent set.
+        acc_prompts: Of the prompts, with at least one referent (the denominator of Acc).
         referents, predicted, true_positives: Box totals behind the micro averages.
     """
 
-    prompts: int
     acc_prompts: int
-    acc_25: float
-    acc_50: float
-    precision: float
-    recall: float
-    f1: float
-    set_f1: float
-    exact: float
     referents: int
     predicted: int
     true_positives: int
 
     def to_dict(self) -> dict[str, float | int]:
-        return dict(self.__dict__)
+        """Every field by name, in the order files have always had (``acc_prompts`` second)."""
+        out: dict[str, float | int] = dict(self.__dict__)
+        return {"prompts": out.pop("prompts"), "acc_prompts": out.pop("acc_prompts"), **out}
 
 
 def summarize(outcomes: Sequence[PromptOutcome]) -> GroundingSummary:
@@ -309,11 +309,12 @@ class GroundingMetrics:
     by_group: Mapping[str, GroundingSummary]
 
     def to_dict(self) -> dict:
+        """JSON-ready, :mod:`model.evaluation.report_file`'s keys."""
         return {
-            "operating_threshold": self.threshold,
-            "overall": self.overall.to_dict(),
-            "by_prompt_type": {k: v.to_dict() for k, v in self.by_type.items()},
-            "by_group": {k: v.to_dict() for k, v in self.by_group.items()},
+            THRESHOLD: self.threshold,
+            OVERALL: self.overall.to_dict(),
+            BY_TYPE: {k: v.to_dict() for k, v in self.by_type.items()},
+            BY_GROUP: {k: v.to_dict() for k, v in self.by_group.items()},
         }
 
 

@@ -29,12 +29,13 @@ from __future__ import annotations
 import typing
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from model.evaluation.baselines import class_noun_prompt, named_class, oracle_boxes, unsensed_ids
 from model.evaluation.grounding import (
+    CandidateSource,
     GroundingMetrics,
     PromptBoxes,
     PromptOutcome,
@@ -49,6 +50,19 @@ from model.evaluation.predict import (
     operating_threshold,
     prediction_labels,
 )
+from model.evaluation.report_file import (
+    BASELINES,
+    BASELINES_KEY,
+    BY_DEPTH,
+    BY_TYPE,
+    FRAMES,
+    GROUNDING,
+    GT_OBJECTS,
+    NOTES,
+    NUM_FRAMES,
+    SECONDS,
+    BaselineName,
+)
 from model.referent.labelled import LabelledBoxes
 from scenes.actors import CLASSES, Actor
 from scenes.kitti import ObjectLabel, format_label_line, parse_label_line
@@ -62,12 +76,6 @@ if TYPE_CHECKING:
 PROMPT_TYPES: tuple[str, ...] = ("depth", "velocity", "motion", "position")
 DEPTH_BINS: tuple[tuple[float, float], ...] = tuple((10.0 * i, 10.0 * (i + 1)) for i in range(6))
 
-
-BaselineName = Literal["class_noun", "oracle"]
-"""A baseline: the class-noun prompt, the language-blind oracle (JSON keys under ``baselines``)."""
-
-BASELINES: tuple[BaselineName, ...] = typing.get_args(BaselineName)
-"""Baseline names, in table order."""
 
 ROW_NAMES: dict[str, str] = {"model": "model", "class_noun": "class noun", "oracle": "oracle"}
 """Row labels of the printed grounding tables."""
@@ -100,7 +108,7 @@ class BaselineResult:
     grounding: GroundingMetrics
 
     def to_dict(self) -> dict:
-        return {**self.result.to_dict(), "grounding": self.grounding.to_dict()}
+        return {**self.result.to_dict(), GROUNDING: self.grounding.to_dict()}
 
 
 @dataclass(frozen=True)
@@ -143,19 +151,15 @@ class GroundingReport:
         official dict + ``grounding``) and ``baseline_notes``."""
         out = {
             **self.result.to_dict(),
-            "num_frames": self.result.num_frames,
-            "by_prompt_type": {
-                k: {"frames": n, **r.to_dict()} for k, (n, r) in self.by_type.items()
-            },
-            "by_depth": {
-                k: {"gt_objects": n, **r.to_dict()} for k, (n, r) in self.by_depth.items()
-            },
-            "median_seconds_per_frame": float(np.median(self.seconds)) if self.seconds else None,
+            NUM_FRAMES: self.result.num_frames,
+            BY_TYPE: {k: {FRAMES: n, **r.to_dict()} for k, (n, r) in self.by_type.items()},
+            BY_DEPTH: {k: {GT_OBJECTS: n, **r.to_dict()} for k, (n, r) in self.by_depth.items()},
+            SECONDS: float(np.median(self.seconds)) if self.seconds else None,
         }
         if self.grounding is not None:
-            out["grounding"] = self.grounding.to_dict()
-            out["baselines"] = {k: v.to_dict() for k, v in self.baselines.items()}
-            out["baseline_notes"] = dict(self.notes)
+            out[GROUNDING] = self.grounding.to_dict()
+            out[BASELINES_KEY] = {k: v.to_dict() for k, v in self.baselines.items()}
+            out[NOTES] = dict(self.notes)
         return out
 
     def grounding_rows(self) -> dict[str, tuple[GroundingMetrics, float | None]]:
@@ -253,7 +257,7 @@ def evaluate_predictions(
     operating: float | None = None,
     baselines: bool = False,
     scene_labels: SceneLabels | None = None,
-    candidates: str = "detector",
+    candidates: CandidateSource = "detector",
 ) -> GroundingReport:
     """Ground every sample of ``ids`` and score the answers.
 
@@ -278,7 +282,7 @@ def evaluate_predictions(
     if not 0.0 <= op < 1.0:
         raise ValueError(f"operating threshold must be in [0, 1), got {op}")
     ground_at = min(decode, op)
-    if candidates not in ("detector", "labels"):
+    if candidates not in typing.get_args(CandidateSource):
         raise ValueError(f"candidates must be detector or labels, got {candidates!r}")
     if candidates == "labels" and scene_labels is None:
         raise ValueError(

@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from model.evaluation.protocol import AREAS
+from model.evaluation.report_file import MAOS, MAP_3D, MAP_BEV, R40, class_key
 from scenes.actors import CLASSES
 
 
@@ -79,22 +80,20 @@ class AreaResult:
 
     def to_dict(self) -> dict[str, float]:
         """The devkit's keys (``Car_3d_all``, ``Car_bev_all``, ``Car_aos_all``, ...) at 11 points,
-        the same with suffix ``_R40``, and ``mAP_3d``, ``mAP_bev``, ``mAOS`` (also ``_R40``)."""
+        the same with suffix ``_R40``, and ``mAP_3d``, ``mAP_bev``, ``mAOS`` (also ``_R40``):
+        :mod:`model.evaluation.report_file`'s keys."""
         out: dict[str, float] = {}
-        for c in self.classes:
-            out[f"{c.name}_3d_all"] = c.ap_3d.r11
-            out[f"{c.name}_bev_all"] = c.ap_bev.r11
-            out[f"{c.name}_aos_all"] = c.aos.r11
-        for c in self.classes:
-            out[f"{c.name}_3d_all_R40"] = c.ap_3d.r40
-            out[f"{c.name}_bev_all_R40"] = c.ap_bev.r40
-            out[f"{c.name}_aos_all_R40"] = c.aos.r40
-        out["mAP_3d"] = self.map_3d
-        out["mAP_bev"] = self.map_bev
-        out["mAOS"] = self.maos
-        out["mAP_3d_R40"] = self.map_3d_r40
-        out["mAP_bev_R40"] = self.map_bev_r40
-        out["mAOS_R40"] = self.maos_r40
+        for r40 in (False, True):
+            for c in self.classes:
+                ap = (c.ap_3d, c.ap_bev, c.aos)
+                for kind, value in zip(("3d", "bev", "aos"), ap, strict=True):
+                    out[class_key(c.name, kind, r40)] = value.r40 if r40 else value.r11
+        out[MAP_3D] = self.map_3d
+        out[MAP_BEV] = self.map_bev
+        out[MAOS] = self.maos
+        out[MAP_3D + R40] = self.map_3d_r40
+        out[MAP_BEV + R40] = self.map_bev_r40
+        out[MAOS + R40] = self.maos_r40
         return out
 
 

@@ -19,42 +19,43 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 from model.evaluation.grounding import SPLIT_NAMES
 from model.evaluation.metrics import AREAS, MIN_OVERLAPS
-from model.evaluation.report import BASELINES, PROMPT_TYPES, ROW_NAMES
+from model.evaluation.report import PROMPT_TYPES, ROW_NAMES
+from model.evaluation.report_file import (
+    BY_DEPTH,
+    BY_TYPE,
+    GROUNDING,
+    NUM_FRAMES,
+    AnswerSetFigures,
+    AreaFigures,
+    ReportFile,
+    ReportFileError,
+    SubsetFigures,
+)
 
 CLASSES: tuple[str, ...] = tuple(MIN_OVERLAPS)
 """The classes the mAP averages, in the official order."""
 
-
-class ResultsTableError(ValueError):
-    """A results file that is missing, unreadable or lacks a field (the message names it)."""
+ResultsTableError = ReportFileError
+"""A results file that is missing, unreadable or lacks a field (the message names it)."""
 
 
 @dataclass(frozen=True)
 class Row:
-    """One table row: a label and the parsed ``model.evaluate --json`` file."""
+    """One table row: a label and its ``model.evaluate --json`` file, read
+    (:class:`model.evaluation.report_file.ReportFile`)."""
 
     name: str
-    result: Mapping[str, object]
-    source: str
+    report: ReportFile
 
-
-def _field(mapping: Mapping[str, object], key: str, source: str) -> object:
-    if not isinstance(mapping, Mapping) or key not in mapping:
-        raise ResultsTableError(f"{source}: missing field {key!r}")
-    return mapping[key]
-
-
-def _num(mapping: Mapping[str, object], key: str, source: str) -> float:
-    value = _field(mapping, key, source)
-    if not isinstance(value, int | float):
-        raise ResultsTableError(f"{source}: field {key!r} is not a number ({value!r})")
-    return float(value)
+    @property
+    def source(self) -> str:
+        return self.report.source
 
 
 def load_row(spec: str) -> Row:
@@ -63,14 +64,12 @@ def load_row(spec: str) -> Row:
     if not sep or not name or not path:
         raise ResultsTableError(f"{spec!r}: expected NAME=PATH.json")
     try:
-        result = json.loads(Path(path).read_text())
+        data = json.loads(Path(path).read_text())
     except FileNotFoundError:
         raise ResultsTableError(f"{path}: no such results file") from None
     except json.JSONDecodeError as exc:
         raise ResultsTableError(f"{path}: not JSON (line {exc.lineno}: {exc.msg})") from None
-    if not isinstance(result, Mapping):
-        raise ResultsTableError(f"{path}: expected a JSON object")
-    return Row(name, result, path)
+    return Row(name, ReportFile.read(data, path, name, ROW_NAMES))
 
 
 def _markdown(head: Sequence[str], body: Sequence[Sequence[str]]) -> str:
@@ -87,30 +86,36 @@ def overall_table(rows: Sequence[Row]) -> str:
     head += [f"DCA {c[:3]}" for c in CLASSES] + ["DCA mAP", "DCA mAOS"]
     body = []
     for row in rows:
-        cells = [row.name, str(int(_num(row.result, "num_frames", row.source)))]
+        cells = [row.name, str(row.report.need(NUM_FRAMES))]
         for area in AREAS:
-            scores = _field(row.result, area, row.source)
-            where = f"{row.source} [{area}]"
-            cells += [f"{_num(scores, f'{c}_3d_all', where):.2f}" for c in CLASSES]
-            m = f"{_num(scores, 'mAP_3d', where):.2f}"
+            scores = row.report.need(area)
+            assert isinstance(scores, AreaFigures)
+            cells += [f"{scores.ap_3d[c]:.2f}" for c in CLASSES]
+            m = f"{scores.map_3d:.2f}"
             cells += [f"**{m}**" if area == "entire_area" else m]
-            cells += [f"{_num(scores, 'mAOS', where):.2f}"]
+            cells += [f"{scores.maos:.2f}"]
             if area == "entire_area":
-                cells += [f"{_num(scores, 'mAP_3d_R40', where):.2f}"]
+                cells += [f"{scores.map_3d_r40:.2f}"]
         body.append(cells)
     return _markdown(head, body)
+
+
+def _subsets(row: Row, section: str) -> dict[str, SubsetFigures]:
+    subsets = row.report.need(section)
+    assert isinstance(subsets, dict)
+    return subsets
 
 
 def by_type_table(rows: Sequence[Row]) -> str:
     """Table III's shape: entire-area 3D mAP (11 points) per prompt type."""
     body = []
     for row in rows:
-        types = _field(row.result, "by_prompt_type", row.source)
+        types = _subsets(row, BY_TYPE)
         cells = [row.name]
         for t in PROMPT_TYPES:
-            entry = _field(types, t, f"{row.source} [by_prompt_type]")
-            where = f"{row.source} [by_prompt_type.{t}]"
-            cells.append(f"{_num(_field(entry, 'entire_area', where), 'mAP_3d', where):.2f}")
+            if t not in types:
+                raise ResultsTableError(f"{row.source} [{BY_TYPE}]: missing field {t!r}")
+            cells.append(f"{types[t].entire_area.map_3d:.2f}")
         body.append(cells)
     return _markdown(["model", *PROMPT_TYPES], body)
 
@@ -120,50 +125,29 @@ def by_depth_table(rows: Sequence[Row]) -> str:
     truth objects show ``-``); the bins are those of the first row's file."""
     if not rows:
         return ""
-    bins = list(_field(rows[0].result, "by_depth", rows[0].source))
+    bins = list(_subsets(rows[0], BY_DEPTH))
     body = []
     for row in rows:
-        depth = _field(row.result, "by_depth", row.source)
+        depth = _subsets(row, BY_DEPTH)
         cells = [row.name]
         for b in bins:
-            where = f"{row.source} [by_depth.{b}]"
-            entry = _field(depth, b, where)
-            if _num(entry, "gt_objects", where) == 0:
-                cells.append("-")
-                continue
-            cells.append(f"{_num(_field(entry, 'entire_area', where), 'mAP_3d', where):.2f}")
+            if b not in depth:
+                raise ResultsTableError(f"{row.source} [{BY_DEPTH}.{b}]: missing field {b!r}")
+            entry = depth[b]
+            cells.append("-" if entry.count == 0 else f"{entry.entire_area.map_3d:.2f}")
         body.append(cells)
     return _markdown(["model", *(f"{b} m" for b in bins)], body)
 
 
-def _grounding(row: Row) -> tuple[Mapping[str, object], list[tuple[str, Mapping[str, object]]]]:
-    """The file's ``grounding`` block and its answer sets: ``[(row label, block with "grounding"
-    and "entire_area")]``, the model first, then the baselines present."""
-    if "grounding" not in row.result:
-        raise ResultsTableError(
-            f"{row.source}: missing field 'grounding' (written before the grounding metrics; "
-            "rerun python -m model.evaluate --data ROOT)"
-        )
-    sets: list[tuple[str, Mapping[str, object]]] = [(row.name, row.result)]
-    baselines = row.result.get("baselines", {})
-    if not isinstance(baselines, Mapping):
-        raise ResultsTableError(f"{row.source}: field 'baselines' is not an object")
-    for name in BASELINES:
-        if name in baselines:
-            sets.append((f"{row.name} {ROW_NAMES[name]}", baselines[name]))
-    return _field(row.result, "grounding", row.source), sets  # type: ignore[return-value]
-
-
-def _answer_sets(
-    rows: Sequence[Row],
-) -> Iterator[tuple[str, str, Mapping[str, object], Mapping[str, object]]]:
-    """``(row label, where, block, its grounding block)`` of every answer set of every file (the
-    model, then its baselines), ``where`` naming the file and set in errors."""
+def _answer_sets(rows: Sequence[Row]) -> Iterator[AnswerSetFigures]:
+    """Every answer set of every file (the model, then its baselines)."""
     for row in rows:
-        _, sets = _grounding(row)
-        for label, block in sets:
-            where = f"{row.source} [{label}]"
-            yield label, where, block, _field(block, "grounding", where)
+        if row.report.answer_sets is None:
+            raise ResultsTableError(
+                f"{row.source}: missing field {GROUNDING!r} (written before the grounding "
+                "metrics; rerun python -m model.evaluate --data ROOT)"
+            )
+        yield from row.report.answer_sets
 
 
 def grounding_table(rows: Sequence[Row]) -> str:
@@ -172,14 +156,13 @@ def grounding_table(rows: Sequence[Row]) -> str:
     head += ["EAA mAP", "threshold"]
     keys = ("acc_25", "acc_50", "precision", "recall", "f1", "set_f1", "exact")
     body = []
-    for label, where, block, g in _answer_sets(rows):
-        overall = _field(g, "overall", f"{where} grounding")
-        w = f"{where} grounding.overall"
-        cells = [label, str(int(_num(overall, "prompts", w)))]
-        cells += [f"{_num(overall, k, w):.1f}" for k in keys]
+    for answers in _answer_sets(rows):
+        overall = answers.overall
+        cells = [answers.label, str(overall.prompts)]
+        cells += [f"{getattr(overall, k):.1f}" for k in keys]
         cells[7] = f"**{cells[7]}**"
-        cells.append(f"{_num(_field(block, 'entire_area', where), 'mAP_3d', where):.2f}")
-        cells.append(f"{_num(g, 'operating_threshold', f'{where} grounding'):g}")
+        cells.append(f"{answers.entire_area.map_3d:.2f}")
+        cells.append(f"{answers.threshold:g}")
         body.append(cells)
     return _markdown(head, body)
 
@@ -188,20 +171,16 @@ def grounding_splits_table(rows: Sequence[Row]) -> str:
     """Acc@0.25 / set F1 / exact-set per prompt group and type tag, one row per answer set (``-``
     where a file has no prompt of that kind)."""
     body = []
-    for label, where, _, g in _answer_sets(rows):
-        groups = _field(g, "by_group", f"{where} grounding")
-        types = _field(g, "by_prompt_type", f"{where} grounding")
-        cells = [label]
+    for answers in _answer_sets(rows):
+        cells = [answers.label]
         for split in SPLIT_NAMES:
-            entry = groups.get(split) if isinstance(groups, Mapping) else None
-            if entry is None and isinstance(types, Mapping):
-                entry = types.get(split)
+            entry = answers.by_group.get(split)
+            if entry is None:
+                entry = answers.by_type.get(split)
             if entry is None:
                 cells.append("-")
                 continue
-            w = f"{where} grounding [{split}]"
-            a, f, e = (_num(entry, k, w) for k in ("acc_25", "set_f1", "exact"))
-            cells.append(f"{a:.1f} / {f:.1f} / {e:.1f}")
+            cells.append(f"{entry.acc_25:.1f} / {entry.set_f1:.1f} / {entry.exact:.1f}")
         body.append(cells)
     return _markdown(["Acc@0.25 / set F1 / exact", *SPLIT_NAMES], body)
 

@@ -14,6 +14,11 @@ FPN and the head on three stages (the fused ones on the referent path, the DGGF-
 on the paper's path); :meth:`SceneEncoder.detect` is both on a batch, with the BEV maps the
 referent stage pools from. A single-modality model has no branch (and ignores the points) of the
 other sensor.
+
+The detector's geometry is the encoder's to answer, so that training code never assembles the
+head grid and the head's anchor rule itself: :meth:`SceneEncoder.anchors_in_grid` (which boxes the
+detector can see), :meth:`SceneEncoder.anchor_scores` (its score of a box at the box's anchor
+cell) and :meth:`SceneEncoder.detection_targets` (its training targets for given boxes).
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
+import numpy as np
 import torch
 from torch import Tensor, nn
 
@@ -36,10 +42,12 @@ from model.features import (
     as_points,
 )
 from model.head.detector import C3DRecHead, HeadOutput
+from model.head.targets import BatchTargets, anchor_points, collate_targets, draw_targets
 from model.nets.baca import build_fusion
 from model.nets.backbone import SecondBackbone
 from model.nets.fpn import SecondFpn
 from model.nets.pillars import PillarEncoder
+from model.referent.labelled import anchor_scores
 from model.referent.scene_candidates import SceneMaps
 
 
@@ -126,6 +134,31 @@ class SceneEncoder(nn.Module):
     def stage_channels(self) -> tuple[int, ...]:
         """Channels of the three stages ``lr_1..3``."""
         return tuple(self.cfg.backbone.channels)
+
+    def anchors_in_grid(self, boxes: np.ndarray) -> np.ndarray:
+        """``(K,)`` bool: the boxes ``(K, 7)`` (LiDAR frame) whose anchor point
+        (``cfg.head.anchor``) lies in the head grid, the ones the detector can be trained on and
+        can find."""
+        return self.head_grid.contains(anchor_points(boxes, self.cfg.head.anchor))
+
+    def anchor_scores(self, heat: np.ndarray, boxes: np.ndarray, labels: np.ndarray) -> np.ndarray:
+        """``(K,)``: the detector's sigmoid heatmap ``heat (3, H, W)`` read at each box's anchor
+        cell in its class's channel (:func:`model.referent.labelled.anchor_scores`); boxes ``(K,
+        7)`` LiDAR frame, ``labels (K,)`` indices into ``CLASSES``."""
+        return anchor_scores(heat, boxes, labels, self.head_grid, self.cfg.head.anchor)
+
+    def detection_targets(
+        self, boxes: Sequence[np.ndarray], classes: Sequence[Sequence[str]]
+    ) -> BatchTargets:
+        """The detector's training targets of a batch: item ``b``'s boxes ``(K_b, 7)`` (LiDAR
+        frame) with their class names (:func:`model.head.targets.draw_targets` on the head
+        grid), collated, on the CPU."""
+        return collate_targets(
+            [
+                draw_targets(b, c, self.head_grid, self.cfg.head)
+                for b, c in zip(boxes, classes, strict=True)
+            ]
+        )
 
     def clouds(
         self, clouds: Sequence[PointsLike | None] | None, batch: int, sensor: str

@@ -4,7 +4,7 @@ candidate threshold, :func:`model.referent.scene_candidates.describe_candidates`
 and the referent stage (:class:`model.referent.stage.ReferentStage`) run, and the answer is the
 candidates whose referent probability reaches the threshold, with
 :func:`model.referent.scene_candidates.referent_heatmap` as its heatmap. Training: :meth:`proposals`,
-:meth:`describe`, :meth:`refer` and :meth:`loss` (:mod:`model.training.referent_step`)."""
+:meth:`describe` and :meth:`prompt_losses` (:mod:`model.training.referent_step`)."""
 
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ from model.head.decode import Detections, decode
 from model.head.detector import HeadOutput
 from model.nets.scene_encoder import SceneEncoder
 from model.nets.text import TextFeatures
-from model.referent.labelled import LabelledBoxes, anchor_scores, with_context
+from model.referent.labelled import LabelledBoxes, with_context
 from model.referent.scene_candidates import (
     SceneCandidates,
     SceneMaps,
@@ -35,7 +35,7 @@ from model.referent.scene_candidates import (
     referent_heatmap,
     stack_candidates,
 )
-from model.referent.stage import ReferentStage, referent_loss
+from model.referent.stage import CandidateBatch, ReferentStage, referent_loss
 from scenes.actors import CLASSES
 
 UNCALIBRATED_REFERENT = 0.5
@@ -108,10 +108,31 @@ class ReferentGrounding(GroundingHead):
             batch = batch.index(torch.zeros(n, dtype=torch.long, device=batch.padding.device))
         return self.stage(batch, text.tokens, text.numbers, text.padding_mask)
 
-    @staticmethod
-    def loss(logits: Tensor, targets: Tensor, padding: Tensor) -> tuple[Tensor, Tensor]:
-        """:func:`model.referent.stage.referent_loss`: BCE and the listwise term."""
-        return referent_loss(logits, targets, padding)
+    def prompt_losses(
+        self,
+        scenes: Sequence[SceneCandidates],
+        rows: Sequence[int],
+        text: TextFeatures,
+        targets: Sequence[np.ndarray],
+    ) -> tuple[Tensor, Tensor]:
+        """The referent losses of ``N`` prompts (training): prompt ``i`` asks about
+        ``scenes[rows[i]]``, its encoded text is row ``i`` of ``text`` and ``targets[i]`` marks its
+        referents among that scene's candidates (``(K_scene,)`` float32, 1 for a referent).
+        Returns :func:`model.referent.stage.referent_loss`'s BCE and listwise term."""
+        device = next(self.stage.parameters()).device
+        batch = stack_candidates(scenes).index(torch.tensor(list(rows)))
+        batch = CandidateBatch(
+            batch.geometry.to(device),
+            batch.fused.to(device),
+            None if batch.lidar is None else batch.lidar.to(device),
+            None if batch.radar is None else batch.radar.to(device),
+            batch.padding.to(device),
+        )
+        logits = self.stage(batch, text.tokens, text.numbers, text.padding_mask)
+        target = torch.zeros_like(logits)
+        for i, t in enumerate(targets):
+            target[i, : len(t)] = torch.from_numpy(t).to(device)
+        return referent_loss(logits, target, batch.padding)
 
     def encode(
         self,
@@ -131,9 +152,7 @@ class ReferentGrounding(GroundingHead):
         answerable = None
         if candidates is not None:
             answerable = len(candidates)
-            labelled_scores = anchor_scores(
-                heat, candidates.boxes, candidates.labels, scene.head_grid, self.cfg.head.anchor
-            )
+            labelled_scores = scene.anchor_scores(heat, candidates.boxes, candidates.labels)
             boxes, labels, scores = with_context(
                 candidates, labelled_scores, boxes, labels, scores, limit
             )

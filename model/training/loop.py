@@ -20,6 +20,10 @@ uninterrupted one bit for bit (on the CPU): the data order of epoch ``e`` is a p
 by ``(seed, e)``, augmentations and generated prompts are seeded per item, a resumed epoch skips
 the batches already done, and the RNG states are restored.
 
+One loop trains every stage; the step of the run's stage (the paper's path, the referent path's
+joint stage or its ``--freeze-scene`` stage) is chosen once (:func:`choose_step`,
+:mod:`model.training.steps`).
+
 SIGINT or SIGTERM (:mod:`model.training.stop_signal`) let the current step finish, save the run state and
 exit with 130 or 143 and one line. A non-finite loss or gradient stops training with a message
 (exit 2); the last good checkpoint is kept as it was, and so is a training split without a box of
@@ -28,6 +32,7 @@ the three classes.
 
 from __future__ import annotations
 
+import functools
 import math
 import sys
 import time
@@ -41,17 +46,11 @@ from tqdm import tqdm
 from model import build_model
 from model.checkpoint import checkpoint_payload, model_from_payload, write_payload
 from model.checkpoint_meta import CheckpointMeta
-from model.head.losses import grounding_loss
-from model.head.targets import collate_targets, draw_targets
 from model.training import distributed
 from model.training.config import TrainConfig, TrainingError, parse_args
 from model.training.data import MixedFrames, RootSpec, frame_dataset
-from model.training.referent_cache import CachedScene, TextBank, cache_scenes, cached_referent_step
-from model.training.referent_step import (
-    ReferentTrainConfig,
-    float32_output,
-    referent_step,
-)
+from model.training.referent_cache import cached_referent_step
+from model.training.referent_step import ReferentTrainConfig, referent_step
 from model.training.state import (
     BEST_FILE,
     LAST_FILE,
@@ -67,22 +66,23 @@ from model.training.state import (
     state_path,
     trim_log,
 )
+from model.training.steps import (
+    FrozenScenes,
+    FrozenSceneStep,
+    JointReferentStep,
+    PaperStep,
+    TrainStep,
+    freeze_scene,
+)
 from model.training.stop_signal import StopRequest, TrainingInterrupted
 from scenes.actors import CLASSES
-from scenes.dataset import AugmentConfig, GroundingBatch, GroundingDataset, collate
+from scenes.dataset import AugmentConfig, GroundingDataset
 from scenes.durable import append_json_line
 from scenes.frame_dataset import FrameDataset, SensorAugment
 from scenes.kitti import read_label_file
 from scenes.layout import LABEL, sample_dir, sample_file, split_file
 from scenes.root import Talk2RadarRoot
 from scenes.scene_labels import SceneLabels, class_index
-
-
-def item_rngs(seed: int, epoch: int, indices: list[int]) -> list[np.random.Generator]:
-    """The generator of each training item of a step (referent path: box jitter, generated and
-    drawn prompts), seeded by ``(seed, epoch, item)``: the same whichever rank or step draws the
-    item, so a resumed or a distributed run draws what one uninterrupted process does."""
-    return [np.random.default_rng((seed, 7, epoch, i)) for i in indices]
 
 
 def cosine_lr(step: int, total: int, base: float, warmup: int) -> float:
@@ -108,30 +108,8 @@ def epoch_batches(n: int, batch_size: int, epoch: int, seed: int, rank: int, wor
     return [mine[i : i + batch_size].tolist() for i in range(0, len(mine), batch_size)]
 
 
-def _targets(batch: GroundingBatch, model: torch.nn.Module, device: torch.device):
-    cfg = model.cfg
-    grid = model.head_grid
-    return collate_targets(
-        [
-            draw_targets(b, c, grid, cfg.head)
-            for b, c in zip(batch.boxes, batch.classes, strict=True)
-        ]
-    ).to(device)
-
-
 SCENE_MODULES = ("lidar.", "radar.", "fusion.", "neck.", "head.")
 """Parameter-name prefixes of the scene encoder and detector (what ``--init-detector`` copies)."""
-
-
-def pick_view(
-    cached: list, mirrored: list, index: int, cfg: TrainConfig, epoch: int
-) -> CachedScene:
-    """``--freeze-scene``: the cached scene ``index`` as is, or its mirrored view (prompts with
-    left and right swapped) with ``cfg.flip_probability``, drawn from ``(seed, epoch, index)``."""
-    if not mirrored:
-        return cached[index]
-    rng = np.random.default_rng((cfg.seed, 13, epoch, index))
-    return mirrored[index] if rng.random() < cfg.flip_probability else cached[index]
 
 
 def init_from(model: torch.nn.Module, path: str, prefixes: tuple[str, ...] = ()) -> int:
@@ -195,6 +173,27 @@ def check_labels(spec: RootSpec, split: str) -> None:
 
 def _forward_step(model: torch.nn.Module, lidar: list, radar: list, prompts: list):
     return model(lidar, radar, prompts)
+
+
+def choose_step(
+    model: torch.nn.Module,
+    cfg: TrainConfig,
+    dataset: GroundingDataset | MixedFrames,
+    referent_cfg: ReferentTrainConfig,
+    frozen: FrozenScenes | None,
+    device: torch.device,
+) -> TrainStep:
+    """The step of this run's stage (:mod:`model.training.steps`), its step function bound to
+    ``model`` (looked up here when called, so that tests can wrap it)."""
+    amp = cfg.amp == "bf16"
+    if frozen is not None:
+        step = distributed.wrap_step(model, cached_referent_step)
+        return FrozenSceneStep(step, dataset, frozen, referent_cfg, cfg, device, amp)
+    if cfg.grounding == "referent":
+        step = distributed.wrap_step(model, referent_step)
+        return JointReferentStep(step, dataset, referent_cfg, cfg.seed, device, amp)
+    forward = distributed.wrap_step(model, _forward_step, find_unused=False)
+    return PaperStep(forward, model, dataset, device, amp)
 
 
 def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
@@ -279,44 +278,16 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
                 file=sys.stderr,
             )
     model.to(device)
-    cached = None
+    frozen = None
     if referent and cfg.freeze_scene:
         # Only the referent stage learns; every scene is encoded once by the frozen detector.
-        for p in model.parameters():
-            p.requires_grad_(False)
-        for p in model.grounding.parameters():
-            p.requires_grad_(True)
-        if cfg.text_encoder not in (None, "minilm"):
-            raise TrainingError("--freeze-scene banks frozen MiniLM prompt features: use minilm")
-        cached, mirrored, bank = [], [], TextBank({})
-        flip = AugmentConfig(flip_probability=1.0, lidar_keep_min=1.0, shuffle_points=False)
-        for spec in specs:
-            views = [(frames_of(spec), cached)]
-            if cfg.flip_probability > 0:  # every scene also encoded mirrored, prompts swapped
-                views.append((frames_of(spec, augment=flip), mirrored))
-            for frames, into in views:
-                part, part_bank = cache_scenes(
-                    model,
-                    frames,
-                    cfg.bank_prompts,
-                    seed=cfg.seed,
-                    progress=rank == 0,
-                    label_prompts=cfg.label_prompts,
-                    known=bank,
-                    prompt_config=referent_cfg.prompt_config(),
-                )
-                into += part
-                bank.entries.update(part_bank.entries)
+        roots = [functools.partial(frames_of, spec) for spec in specs]
+        frozen = freeze_scene(model, cfg, roots, referent_cfg, progress=rank == 0)
     params = [p for p in model.parameters_in_checkpoint_order() if p.requires_grad]
     optimizer = torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay, foreach=True)
     if run is not None:
         optimizer.load_state_dict(run.optimizer)
-    if cached is not None:
-        step = distributed.wrap_step(model, cached_referent_step)
-    elif referent:
-        step = distributed.wrap_step(model, referent_step)
-    else:
-        step = distributed.wrap_step(model, _forward_step, find_unused=False)
+    step = choose_step(model, cfg, dataset, referent_cfg, frozen, device)
 
     steps_per_epoch = len(epoch_batches(len(dataset), cfg.batch_size, 0, cfg.seed, rank, world))
     total_steps = cfg.epochs * steps_per_epoch
@@ -385,30 +356,8 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
                 halt_if_asked()
                 for group in optimizer.param_groups:
                     group["lr"] = cosine_lr(state.step, total_steps, cfg.lr, cfg.warmup_steps)
-                autocast = torch.autocast(device.type, torch.bfloat16, enabled=use_amp)
-                if referent:
-                    rngs = item_rngs(cfg.seed, state.epoch, indices)
-                    with autocast:
-                        if cached is not None:
-                            picked = [
-                                pick_view(cached, mirrored, dataset.resolve(i), cfg, state.epoch)
-                                for i in indices
-                            ]
-                            ref = step(picked, bank, rngs, referent_cfg)
-                        else:
-                            ref = step([dataset[i] for i in indices], rngs, referent_cfg)
-                    terms, total = ref.detection, ref.total
-                    extra = {"bce": ref.bce.item(), "listwise": ref.listwise.item()}
-                else:
-                    batch = collate([dataset[i] for i in indices])
-                    targets = _targets(batch, model, device)
-                    lidar = [t.to(device) for t in batch.lidar]
-                    radar = [t.to(device) for t in batch.radar]
-                    with autocast:
-                        output = step(lidar, radar, list(batch.prompts))
-                    terms = grounding_loss(float32_output(output), targets)
-                    total = terms.total
-                    extra = {}
+                loss = step(indices, state.epoch)
+                terms, total, extra = loss.detection, loss.total, loss.extra
                 if not total.requires_grad:  # no prompt in this shard: a zero-gradient step
                     total = total + sum(p.sum() * 0.0 for p in params)
                 optimizer.zero_grad(set_to_none=True)

@@ -18,6 +18,7 @@ import torch
 
 from model.head.losses import LossTerms
 from model.nets.text import encode_minilm_batched, pad_features
+from model.referent.head import referent_head
 from model.referent.scene_candidates import SceneCandidates
 from model.tpcnet import TPCNet
 from model.training.referent_step import (
@@ -25,7 +26,6 @@ from model.training.referent_step import (
     ReferentLoss,
     ReferentTrainConfig,
     _per_item,
-    _prompt_losses,
     frame_prompts,
 )
 from scenes.actors import CLASSES, Actor
@@ -172,7 +172,7 @@ def cached_referent_step(
     if not texts:
         return ReferentLoss(zero, LossTerms(zero, zero, zero), zero, zero, 0)
     text = bank.features(texts, device)
-    bce, listwise = _prompt_losses(model, chosen, rows, text, targets)
+    bce, listwise = referent_head(model).prompt_losses(chosen, rows, text, targets)
     total = cfg.referent_weight * (bce + cfg.listwise_weight * listwise)
     return ReferentLoss(total, LossTerms(zero, zero, zero), bce, listwise, len(texts))
 

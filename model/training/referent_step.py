@@ -36,13 +36,7 @@ from torch import Tensor
 
 from model.head.detector import HeadOutput
 from model.head.losses import LossTerms, grounding_loss
-from model.head.targets import (
-    BatchTargets,
-    anchor_points,
-    collate_targets,
-    draw_targets,
-    grid_cell_centres,
-)
+from model.head.targets import BatchTargets, grid_cell_centres
 from model.nets.grid import BevGrid
 from model.nets.text import (
     MiniLMTextEncoder,
@@ -52,10 +46,7 @@ from model.nets.text import (
     validate_prompt,
 )
 from model.referent.head import referent_head
-from model.referent.labelled import anchor_scores
-from model.referent.scene_candidates import SceneCandidates, stack_candidates
-from model.referent.stage import CandidateBatch, referent_loss
-from model.tpcnet import TPCNet, as_points
+from model.tpcnet import TPCNet
 from scenes.actors import CLASSES, Actor
 from scenes.boxes import CENTRE_MATCH_DISTANCE
 from scenes.calib import Calibration
@@ -119,8 +110,7 @@ def in_grid_actors(actors: Sequence[Actor], model: TPCNet) -> list[Actor]:
     """Actors of the metric classes whose anchor point lies in the head grid."""
     if not actors:
         return []
-    boxes = np.stack([a.box for a in actors])
-    inside = model.head_grid.contains(anchor_points(boxes, model.cfg.head.anchor))
+    inside = model.scene.anchors_in_grid(np.stack([a.box for a in actors]))
     return [a for a, ok in zip(actors, inside, strict=True) if ok and a.cls in CLASSES]
 
 
@@ -148,7 +138,7 @@ def training_candidates(
         boxes[:, :2] += rng.normal(0.0, cfg.jitter_xy, (len(boxes), 2))
         boxes[:, 3:6] *= np.exp(rng.normal(0.0, cfg.jitter_size, (len(boxes), 3)))
         boxes[:, 6] += rng.normal(0.0, cfg.jitter_yaw, len(boxes))
-    scores = anchor_scores(heat, boxes, labels, model.head_grid, model.cfg.head.anchor)
+    scores = model.scene.anchor_scores(heat, boxes, labels)
     false = []
     for i, (box, lab) in enumerate(zip(detections_boxes, detections_labels, strict=True)):
         same = [a for a in actors if CLASSES.index(a.cls) == lab]
@@ -162,32 +152,6 @@ def training_candidates(
         scores = np.concatenate([scores, detections_scores[false]])
         ids = np.concatenate([ids, np.full(len(false), -1, dtype=np.int64)])
     return boxes, labels, scores, ids
-
-
-def _prompt_losses(
-    model: TPCNet,
-    scenes: Sequence[SceneCandidates],
-    rows: Sequence[int],
-    text: TextFeatures,
-    targets: Sequence[np.ndarray],
-) -> tuple[Tensor, Tensor]:
-    """Referent losses of ``N`` prompts: prompt ``i`` asks about ``scenes[rows[i]]``, its encoded
-    text is row ``i`` of ``text`` and ``targets[i]`` marks its referents among that scene's
-    candidates (``(K_scene,)`` float32). Returns :func:`model.referent.stage.referent_loss`."""
-    device = model.device
-    batch = stack_candidates(scenes).index(torch.tensor(list(rows)))
-    batch = CandidateBatch(
-        batch.geometry.to(device),
-        batch.fused.to(device),
-        None if batch.lidar is None else batch.lidar.to(device),
-        None if batch.radar is None else batch.radar.to(device),
-        batch.padding.to(device),
-    )
-    logits = referent_head(model).stage(batch, text.tokens, text.numbers, text.padding_mask)
-    target = torch.zeros_like(logits)
-    for i, t in enumerate(targets):
-        target[i, : len(t)] = torch.from_numpy(t).to(device)
-    return referent_loss(logits, target, batch.padding)
 
 
 def float32_output(out: HeadOutput) -> HeadOutput:
@@ -232,15 +196,13 @@ def referent_step(
 ) -> ReferentLoss:
     """Losses of one batch of scenes (module docstring); call ``.total.backward()``. ``rng`` is
     one generator drawn from scene after scene, or one per scene (then a scene's jitter and
-    prompts do not depend on the others of the batch: :func:`model.training.loop.item_rngs`)."""
+    prompts do not depend on the others of the batch: :func:`model.training.steps.item_rngs`)."""
     device = model.device
     head = referent_head(model)
     rngs = _per_item(rng, len(frames))
-    lidar = [as_points(f.lidar, 4, "LiDAR").to(device) for f in frames]
-    radar = [as_points(f.radar, 7, "radar").to(device) for f in frames]
-    out, maps = model.detect(
-        lidar if model.cfg.uses_lidar else None, radar if model.cfg.uses_radar else None
-    )
+    lidar = model.scene.clouds([f.lidar for f in frames], len(frames), "lidar")
+    radar = model.scene.clouds([f.radar for f in frames], len(frames), "radar")
+    out, maps = model.detect(lidar, radar)
     actors = [in_grid_actors(f.actors, model) for f in frames]
     targets = detection_targets(model, frames, actors).to(device)
     out = float32_output(out)  # the losses and the decoding in float32 under autocast
@@ -285,7 +247,7 @@ def referent_step(
         zero = det.total.new_zeros(())
         return ReferentLoss(det.total, det, zero, zero, 0)
     text = step_text(model, texts)
-    bce, listwise = _prompt_losses(model, scenes, rows, text, target_rows)
+    bce, listwise = head.prompt_losses(scenes, rows, text, target_rows)
     total = det.total + cfg.referent_weight * (bce + cfg.listwise_weight * listwise)
     return ReferentLoss(total, det, bce, listwise, len(texts))
 
@@ -320,16 +282,9 @@ def detection_targets(
 ) -> BatchTargets:
     """Detector targets of a batch: every in-grid actor of each frame, and where a frame's labels
     cover only the camera view (:attr:`FrameItem.region`), no negatives outside it."""
-    targets = collate_targets(
-        [
-            draw_targets(
-                np.stack([a.box for a in acts]) if acts else np.zeros((0, 7)),
-                [a.cls for a in acts],
-                model.head_grid,
-                model.cfg.head,
-            )
-            for acts in actors
-        ]
+    targets = model.scene.detection_targets(
+        [np.stack([a.box for a in acts]) if acts else np.zeros((0, 7)) for acts in actors],
+        [[a.cls for a in acts] for acts in actors],
     )
     if all(f.region is None for f in frames):
         return targets
