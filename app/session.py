@@ -420,6 +420,9 @@ class ClientSession:
                 received=received,
             )
             self.query.results.content = f"*Running:* {md_text(text)}"
+        # Sent now: viser keeps only the latest pending value of a widget, so an answer that
+        # comes within its send window would replace the line before the browser saw it.
+        self.client.flush()
         return self.engine.submit(self._answer_job, request)
 
     def _stale(self, request: QueryRequest) -> bool:
