@@ -46,6 +46,29 @@ from scenes.calib import vod_lidar_calibration, vod_radar_calibration
 from scenes.root import Talk2RadarWriter
 from tests.browser_helpers import CHROMIUM_ARGS, find_chromium
 
+_EXIT_STATUS: list[int] = []
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    """Remember the run's exit status for :func:`pytest_unconfigure`."""
+    _EXIT_STATUS.append(int(exitstatus))
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_unconfigure(config: pytest.Config) -> None:
+    """Leave with the run's exit status once pytest has reported everything, without the
+    interpreter's teardown. A full run starts dozens of servers, worker pools and torch thread
+    pools in one process; once (1 run in 3 on a clean clone, after "1010 passed") a native
+    thread still joinable at teardown aborted the process ("terminate called without an active
+    exception"), turning a green run red. The tests' own cleanup has run by now; only the
+    process teardown is skipped. The app itself is unaffected (it is not a pytest process)."""
+    if not _EXIT_STATUS or os.environ.get("TALK2PC_TEST_FULL_TEARDOWN"):
+        return
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(_EXIT_STATUS[-1])
+
+
 torch.set_num_threads(1)
 
 GT_BOX = np.array([15.0, 2.0, -0.95, 4.2, 1.8, 1.5, 0.1])
