@@ -420,9 +420,7 @@ class ClientSession:
                 received=received,
             )
             self.query.results.content = f"*Running:* {md_text(text)}"
-        # Sent now: viser keeps only the latest pending value of a widget, so an answer that
-        # comes within its send window would replace the line before the browser saw it.
-        self.client.flush()
+        self.client.flush()  # viser sends only a widget's latest value: a fast answer hid the line
         return self.engine.submit(self._answer_job, request)
 
     def _stale(self, request: QueryRequest) -> bool:
