@@ -3,8 +3,8 @@
 An answer is the boxes a model returns for a sentence (LiDAR frame ``(K, 7)``, class names and
 scores, down to the model's smallest returned score); its **set** is the boxes scoring at least the
 operating threshold (what the app shows). A box **matches** a referent of its class when their BEV
-centres lie within :data:`MATCH_DISTANCE` of each other, one to one, boxes taken by score
-(:func:`scenes.boxes.match_by_centre`). Per case:
+centres lie within :data:`scenes.boxes.CENTRE_MATCH_DISTANCE` of each other, one to one, boxes
+taken by score (:func:`scenes.boxes.match_by_centre`). Per case:
 
 - ``empty``: the set is empty;
 - ``top1``: the highest-scoring box (any score) matches a referent; no box is a miss;
@@ -25,9 +25,6 @@ import numpy as np
 
 from scenes.actors import CLASSES
 from scenes.boxes import CENTRE_MATCH_DISTANCE, match_by_centre
-
-MATCH_DISTANCE = CENTRE_MATCH_DISTANCE
-"""Largest BEV centre distance (m) of a box from the referent it answers, per class."""
 
 FIGURES = {
     "out_of_class": ("empty",),
@@ -79,7 +76,7 @@ def _matches(
         return 0
     labels = np.array([CLASSES.index(answer.classes[i]) for i in order])
     target_labels = np.array([CLASSES.index(c) for c in target_cls])
-    limits = np.array([MATCH_DISTANCE[c] for c in CLASSES])
+    limits = np.array([CENTRE_MATCH_DISTANCE[c] for c in CLASSES])
     index = match_by_centre(answer.boxes[order], labels, targets, target_labels, limits)
     return int((index >= 0).sum())
 

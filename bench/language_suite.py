@@ -11,8 +11,9 @@ threshold for the answer set), then prints one markdown table: per family and fi
 named class, score 1). Rewording cases are also grounded in the generator's own wording of the
 same meaning where it has one (:mod:`bench.language_generator`), on the same cases.
 
-Model imports: only the public ``model`` names ``load_checkpoint`` and ``operating_threshold``
-(the CLI); the rest takes any object with ``encode_scene`` / ``ground`` as the app does.
+Model imports: only the public ``model`` names ``class_noun_prompt`` (the baseline's prompt, the
+same as ``model.evaluate``'s), ``load_checkpoint`` and ``operating_threshold`` (the CLI); the rest
+takes any object with ``encode_scene`` / ``ground`` as the app does.
 """
 
 from __future__ import annotations
@@ -53,13 +54,12 @@ from bench.language_score import (
     oracle_outcome,
     score,
 )
+from model import class_noun_prompt
 from scenes.durable import atomic_write_text
 from scenes.language_resolve import referable
 from scenes.root import Talk2RadarRoot
 from scenes.text_policy import PROMPT, clean_text
 
-CLASS_NOUNS = {"Car": "the cars", "Pedestrian": "the pedestrians", "Cyclist": "the cyclists"}
-ANY_NOUN = "the objects"
 REWORDING = "rewording"
 GENERATOR_COLUMNS = ("rewording, same cases", "generator wording")
 
@@ -135,7 +135,7 @@ def run_suite(
                 )
                 outcomes["model"].append((fam, mine))
                 sentence_rows[case.sentence.id].append(mine)
-                noun = CLASS_NOUNS.get(query.cls or "", ANY_NOUN)
+                noun = class_noun_prompt(query.cls)
                 if noun not in nouns:
                     nouns[noun] = _ground(model, features, noun)
                 outcomes["class noun"].append(

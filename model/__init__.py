@@ -41,6 +41,7 @@ if TYPE_CHECKING:
     from model.checkpoint_meta import CheckpointMeta
     from model.config import FusionConfig, ModelConfig, preset
     from model.evaluate import score_directories
+    from model.evaluation.baselines import class_noun_prompt
     from model.evaluation.predict import operating_threshold
     from model.features import Predictions, SceneFeatures, as_points
     from model.head.decode import decode
@@ -68,6 +69,7 @@ _EXPORTS = {
     "save_checkpoint": "model.checkpoint",
     "ModelConfig": "model.config",
     "score_directories": "model.evaluate",
+    "class_noun_prompt": "model.evaluation.baselines",
     "operating_threshold": "model.evaluation.predict",
     "Predictions": "model.features",
     "SceneFeatures": "model.features",
@@ -118,6 +120,7 @@ __all__ = [
     "build_config",
     "build_fusion",
     "build_model",
+    "class_noun_prompt",
     "collate_targets",
     "decode",
     "draw_targets",

@@ -22,14 +22,13 @@ from model.referent.head import referent_head
 from model.referent.scene_candidates import SceneCandidates
 from model.tpcnet import TPCNet
 from model.training.referent_step import (
-    MATCH_DISTANCE,
     ReferentLoss,
     ReferentTrainConfig,
     _per_item,
     frame_prompts,
 )
 from scenes.actors import CLASSES, Actor
-from scenes.boxes import match_by_centre
+from scenes.boxes import CENTRE_MATCH_DISTANCE, match_by_centre
 from scenes.frame_dataset import FrameDataset
 from scenes.prompts import PromptConfig
 
@@ -53,13 +52,13 @@ class CachedScene:
 
 def match_detections(boxes: np.ndarray, labels: np.ndarray, actors: Sequence[Actor]) -> np.ndarray:
     """Actor id ``(K,)`` of each detection (-1: none): detections in the given (score) order take
-    the nearest free actor of their class within :data:`MATCH_DISTANCE` of the BEV centre
-    (:func:`scenes.boxes.match_by_centre`)."""
+    the nearest free actor of their class within :data:`scenes.boxes.CENTRE_MATCH_DISTANCE` of
+    the BEV centre (:func:`scenes.boxes.match_by_centre`)."""
     if not actors:
         return np.full(len(boxes), -1, dtype=np.int64)
     targets = np.stack([a.box for a in actors])
     target_labels = np.array([CLASSES.index(a.cls) for a in actors], dtype=np.int64)
-    limits = np.array([MATCH_DISTANCE[c] for c in CLASSES])
+    limits = np.array([CENTRE_MATCH_DISTANCE[c] for c in CLASSES])
     index = match_by_centre(boxes, labels, targets, target_labels, limits)
     ids = np.array([a.actor_id for a in actors], dtype=np.int64)
     return np.where(index >= 0, ids[np.maximum(index, 0)], -1)
@@ -82,7 +81,6 @@ def cache_scenes(
     dataset: FrameDataset,
     prompts_per_scene: int,
     seed: int = 0,
-    phrasing: str = "train",
     progress: bool = True,
     label_prompts: int = 0,
     known: TextBank | None = None,
@@ -94,12 +92,12 @@ def cache_scenes(
     docstring). A ``dataset`` that flips every frame gives the mirrored views of the scenes.
     Prompts already in ``known`` (e.g. the other view's bank) are not encoded again; the bank
     returned holds only the new ones. ``prompt_config``: the generator's settings
-    (:meth:`model.training.referent_step.ReferentTrainConfig.prompt_config`; default: ``phrasing``'s
-    base prompts)."""
+    (:meth:`model.training.referent_step.ReferentTrainConfig.prompt_config`; default: the base
+    prompts in the training phrasings)."""
     from tqdm import tqdm
 
     model.eval()
-    pcfg = prompt_config or PromptConfig(phrasing=phrasing)
+    pcfg = prompt_config or PromptConfig()
     scenes = []
     with torch.no_grad():
         for i in tqdm(range(len(dataset)), desc="cache scenes", disable=not progress):

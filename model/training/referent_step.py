@@ -53,9 +53,6 @@ from scenes.calib import Calibration
 from scenes.frame_dataset import AnnotatedRegion, FrameItem
 from scenes.prompts import Prompt, PromptConfig, generate_prompts
 
-MATCH_DISTANCE = CENTRE_MATCH_DISTANCE
-"""A detection within this BEV centre distance (m) of a same-class actor is that actor."""
-
 
 @dataclass(frozen=True)
 class ReferentTrainConfig:
@@ -142,7 +139,7 @@ def training_candidates(
     false = []
     for i, (box, lab) in enumerate(zip(detections_boxes, detections_labels, strict=True)):
         same = [a for a in actors if CLASSES.index(a.cls) == lab]
-        limit = MATCH_DISTANCE[CLASSES[lab]]
+        limit = CENTRE_MATCH_DISTANCE[CLASSES[lab]]
         if all(np.hypot(*(a.box[:2] - box[:2])) > limit for a in same):
             false.append(i)
     false = false[: cfg.max_false]
@@ -315,7 +312,6 @@ def _outside(
 
 
 __all__ = [
-    "MATCH_DISTANCE",
     "ReferentLoss",
     "ReferentTrainConfig",
     "float32_output",
