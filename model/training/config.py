@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Literal, get_args
 
 import torch
 
@@ -211,10 +211,11 @@ class TrainConfig:
                 raise TrainingError(f"{flag} must be >= 1, got {getattr(self, name)}")
         if self.amp not in ("none", "bf16"):
             raise TrainingError(f"--amp must be none or bf16, got {self.amp!r}")
-        if self.language not in ("base", "extended"):
-            raise TrainingError(f"--language must be base or extended, got {self.language!r}")
-        if self.phrasing not in ("train", "heldout", "all"):
-            raise TrainingError(f"--phrasing must be train, heldout or all, got {self.phrasing!r}")
+        for name, kind in (("language", LanguageKind), ("phrasing", PhrasingKind)):
+            choices, value = get_args(kind), getattr(self, name)
+            if value not in choices:
+                allowed = ", ".join(choices[:-1]) + " or " + choices[-1]
+                raise TrainingError(f"--{name} must be {allowed}, got {value!r}")
         if not 0.0 <= self.text_noise <= 1.0:
             raise TrainingError(f"--text-noise must be in [0, 1], got {self.text_noise}")
         if self.grounding not in ("referent", "tpcnet"):
