@@ -36,7 +36,7 @@ from scenes.prompts import (
     is_count_question,
     perturb,
 )
-from scenes.prompts.families import Count, unsatisfiable
+from scenes.prompts.families import Behind, Count, unsatisfiable
 from scenes.prompts.features import DEFAULT_REGION, actor_features
 from scenes.prompts.nouns import OUT_OF_CLASS
 from tests.prompt_helpers import CAR, CYC, PED, flip_world, hand_world, make_actor, random_worlds
@@ -91,6 +91,39 @@ def test_unsatisfiable_needs_every_actor_clear_of_the_threshold():
     assert not unsatisfiable(
         Predicate("Car", (DepthBeyond(45.0),)), actor_features(guard), DEFAULT_REGION
     )
+
+
+def test_behind_us_is_never_true_of_a_referable_actor_and_reads_as_position():
+    world = hand_world()
+    feats = actor_features(world)
+    for cls in ("Car", "Pedestrian", "Cyclist", None):
+        pred = Predicate(cls, (Behind(),))
+        assert analyse(pred, world).ids == ()
+        assert unsatisfiable(pred, feats, DEFAULT_REGION)
+    behind = make_actor(9, "Car", -8.0, 0.0, 0.0, (0.0, 0.0), CAR)
+    assert Behind().holds(actor_features([behind])[0])
+    assert not Behind().holds(feats[0])
+    assert infer_tags("the car right behind us") == {"class", "position"}
+
+
+def test_unsatisfiable_family_writes_every_form():
+    """Behind us, contradictions (standing still yet moving) and values beyond any actor appear,
+    and each resolves to nothing (checked against the scene, not trusted)."""
+    cfg = PromptConfig(language="extended", family_rates=(0, 1, 0, 0, 0, 0, 0))
+    rng = np.random.default_rng(11)
+    behind = contradiction = absurd = 0
+    for world in random_worlds(11, 60):
+        feats = actor_features(world)
+        for p in generate_prompts(world, rng, 6, config=cfg):
+            if p.family != "unsatisfiable":
+                continue
+            assert p.referent_ids == ()
+            assert unsatisfiable(p.predicate, feats, DEFAULT_REGION), p.text
+            atoms = p.predicate.atoms
+            behind += any(isinstance(a, Behind) for a in atoms)
+            contradiction += MotionState(False) in atoms and len(atoms) == 2
+            absurd += bool(re.search(r"\b([6-9]\d|[1-9]\d\d)\b", p.text))
+    assert behind >= 10 and contradiction >= 10 and absurd >= 10, (behind, contradiction, absurd)
 
 
 @pytest.mark.parametrize(

@@ -4,7 +4,11 @@
 ``config.family_rates`` (attribute prompts get the rest), samples an expression of that family
 from the scene (:mod:`scenes.prompts.families`), resolves it exactly and keeps it only when it
 has no guard-band conflicts and is crisp; a family the scene does not admit on this draw is
-redrawn. Referent sets may be empty (out-of-class, unsatisfiable, a count of zero). Sentences use
+redrawn. Referent sets may be empty (out-of-class, unsatisfiable, a count of zero). The
+unsatisfiable family has four forms (:data:`UNSATISFIABLE_FORMS`): an imagined actor's attributes
+that fit nobody here, a distance or speed beyond any actor, a place behind us, and a contradiction
+(standing still yet approaching, or doing 20 km/h); each is kept only when it resolves crisply to
+nothing. Sentences use
 the extended wording (:mod:`scenes.prompts.phrasing_more`, :mod:`scenes.prompts.compose_render`).
 
 Tags: attribute, negation, unsatisfiable and count prompts carry their predicate's tags (the
@@ -42,6 +46,7 @@ from scenes.prompts.compose_render import (
     render_relation,
 )
 from scenes.prompts.families import (
+    Behind,
     Count,
     Direction,
     Exclusion,
@@ -59,7 +64,14 @@ from scenes.prompts.nouns import nonsense, nouns_for
 from scenes.prompts.phrasing import CLASS_KEYS, PHRASINGS
 from scenes.prompts.predicate import Predicate, Resolution
 from scenes.prompts.render import Prompt, Style, render_with_variants
-from scenes.prompts.sampling import FAMILIES, PromptConfig, depth_atom, sample_predicate, side_of
+from scenes.prompts.sampling import (
+    FAMILIES,
+    PromptConfig,
+    depth_atom,
+    sample_predicate,
+    side_of,
+    speed_atom,
+)
 from scenes.prompts.tags import infer_tags
 
 _NOUNS = {p: nouns_for(p) for p in PHRASINGS}
@@ -70,6 +82,9 @@ that say it as a direction of travel ("heading the same way as us")."""
 
 FAMILY_TRIES = 12
 """Draws of one family before another family is drawn (keeps the realised shares near the rates)."""
+
+ABSURD_SPEED = {"Car": (42.0, 90.0), "Pedestrian": (9.0, 30.0), "Cyclist": (15.0, 40.0)}
+"""Ground speeds (m/s) no actor of a class reaches, for the unsatisfiable family."""
 
 _EXTREMES = ("nearest", "farthest", "leftmost", "rightmost", "fastest")
 
@@ -107,14 +122,19 @@ def _sampled(sc: _Scene, f: ActorFeatures, max_atoms: int, extreme: bool) -> Pre
     return Predicate(f.cls, atoms, pred.extreme if extreme else None)
 
 
-def _fake(sc: _Scene) -> ActorFeatures:
-    """Features of an imagined actor in the region: a random class, place and motion."""
+def _fake(sc: _Scene, far: bool = False, fast: bool = False) -> ActorFeatures:
+    """Features of an imagined actor in the region: a random class, place and motion. ``far``:
+    60-400 m ahead, beyond any annotated actor; ``fast``: faster than its class moves
+    (:data:`ABSURD_SPEED`)."""
     rng = sc.rng
-    x = float(rng.uniform(4.0, 48.0))
-    y = float(np.tan(np.radians(rng.uniform(-28.0, 28.0))) * x)
-    speed = 0.0 if rng.random() < 0.35 else float(rng.uniform(1.0, 14.0))
-    heading = float(rng.uniform(-math.pi, math.pi))
+    x = float(rng.uniform(60.0, 400.0) if far else rng.uniform(4.0, 48.0))
+    y = float(np.tan(np.radians(rng.uniform(-28.0, 28.0))) * min(x, 48.0))
     cls = CLASSES[int(rng.integers(len(CLASSES)))]
+    if fast:
+        speed = float(rng.uniform(*ABSURD_SPEED[cls]))
+    else:
+        speed = 0.0 if rng.random() < 0.35 else float(rng.uniform(1.0, 14.0))
+    heading = float(rng.uniform(-math.pi, math.pi))
     size = {"Car": (4.5, 1.8, 1.6), "Pedestrian": (0.6, 0.6, 1.7)}.get(cls, (1.8, 0.6, 1.7))
     v = (speed * math.cos(heading), speed * math.sin(heading))
     return ActorFeatures.of(Actor(-1, cls, [x, y, size[2] / 2, *size, heading], v))
@@ -194,8 +214,76 @@ def _out_of_class(sc: _Scene) -> Prompt | None:
     return _prompt(text, variants, (), infer_tags(text), None, "out_of_class", None)
 
 
+def _unsat_sampled(sc: _Scene) -> Predicate | None:
+    """A predicate of an imagined actor (:func:`_fake`) that happens to fit nobody here."""
+    return _sampled(sc, _fake(sc), 2, extreme=True)
+
+
+def _unsat_absurd(sc: _Scene) -> Predicate | None:
+    """A distance or speed beyond any actor: "the car 250 m ahead", "a pedestrian doing 60 km/h"."""
+    rng = sc.rng
+    fast = rng.random() < 0.5
+    f = _fake(sc, far=not fast, fast=fast)
+    atom = speed_atom(f, rng) if fast else depth_atom(f, rng)
+    if atom is None:
+        return None
+    atoms: list[Atom] = [atom]
+    other = _sampled(sc, f, 1, extreme=False)
+    if (
+        other is not None
+        and other.atoms
+        and other.atoms[0].family != atom.family
+        and rng.random() < 0.4
+    ):
+        atoms.append(other.atoms[0])
+    return Predicate(f.cls if rng.random() < 0.9 else None, tuple(atoms))
+
+
+def _unsat_behind(sc: _Scene) -> Predicate | None:
+    """Something behind us (:class:`~scenes.prompts.families.Behind`), maybe with its motion."""
+    f = _fake(sc)
+    other = _sampled(sc, f, 1, extreme=False)
+    atoms: list[Atom] = [Behind()]
+    if other is not None and other.atoms and other.atoms[0].family in ("motion", "heading"):
+        atoms.append(other.atoms[0])
+    return Predicate(f.cls if sc.rng.random() < 0.9 else None, tuple(atoms))
+
+
+def _unsat_contradiction(sc: _Scene) -> Predicate | None:
+    """Standing still and moving at once: "the parked car approaching us", "a stationary
+    cyclist going 20 km/h"."""
+    rng = sc.rng
+    kmh = bool(rng.random() < 0.5)
+    speed = (
+        SpeedAbove(float(rng.choice((10, 15, 20, 25, 30, 40))), SpeedUnit.KMH)
+        if kmh
+        else SpeedAbove(float(rng.integers(2, 10)), SpeedUnit.MPS)
+    )
+    moving: list[Atom] = [
+        HeadingIs(Heading.APPROACHING),
+        HeadingIs(Heading.AWAY),
+        HeadingIs(Heading.CROSSING),
+        Travel(Direction.SAME),
+        Travel(Direction.OPPOSITE),
+        speed,
+    ]
+    atom = moving[int(rng.integers(len(moving)))]
+    cls = CLASSES[int(rng.integers(len(CLASSES)))]
+    return Predicate(cls, (MotionState(False), atom))
+
+
+UNSATISFIABLE_FORMS: tuple[tuple[Callable[[_Scene], Predicate | None], float], ...] = (
+    (_unsat_sampled, 0.4),
+    (_unsat_absurd, 0.25),
+    (_unsat_behind, 0.15),
+    (_unsat_contradiction, 0.2),
+)
+"""The unsatisfiable family's forms and their shares."""
+
+
 def _unsatisfiable(sc: _Scene) -> Prompt | None:
-    pred = _sampled(sc, _fake(sc), 2, extreme=True)
+    forms, shares = zip(*UNSATISFIABLE_FORMS, strict=True)
+    pred = forms[int(sc.rng.choice(len(forms), p=np.array(shares) / sum(shares)))](sc)
     if pred is None or not unsatisfiable(pred, sc.feats, sc.region):
         return None
     n = 1 if pred.extreme is not None or sc.rng.random() < 0.4 else 2

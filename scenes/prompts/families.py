@@ -13,8 +13,12 @@ referents do not change within one unit of threshold slack. Definitions (LiDAR f
 * :class:`Travel` -- a heading atom: moving with the velocity within 30 degrees of our direction
   of travel (+x, "heading the same way as us") or of the opposite one (-x, "coming the other
   way"), told apart by the sign of the ground radial velocity.
+* :class:`Behind` -- a position atom: behind the ego vehicle (centre at negative x), outside the
+  forward annotated area, so never true of a referable actor ("the car behind us").
 * unsatisfiable -- a plain :class:`Predicate` that resolves to no actor, crisp: no actor satisfies
-  it even with one unit of slack (loosened), and no guard-band actor does.
+  it even with one unit of slack (loosened), and no guard-band actor does. The generator also
+  writes contradictions (two atoms no actor meets at once: "the parked car approaching us"),
+  places behind us, and distances and speeds beyond any actor (:mod:`scenes.prompts.extended`).
 * :class:`Exclusion` -- ``base`` minus ``removed``: ``removed`` is ``base`` plus one atom
   ("every car but the ones on the right") or ``base`` with a superlative ("all the pedestrians
   except the nearest one"); both crisp, the removed set non-empty and a proper subset.
@@ -49,7 +53,7 @@ from dataclasses import dataclass
 from typing import ClassVar
 
 from scenes.actors import MOVING_SPEED
-from scenes.prompts.atoms import SLACK_ANGLE, SLACK_MOTION, Atom, Extreme
+from scenes.prompts.atoms import SLACK_ANGLE, SLACK_DEPTH, SLACK_MOTION, Atom, Extreme
 from scenes.prompts.features import ActorFeatures, ReferableRegion
 from scenes.prompts.predicate import Predicate, Resolution, analyse_features
 
@@ -129,6 +133,21 @@ class Travel(Atom):
         if f.crossing_angle_deg < 90.0 - TRAVEL_MAX_ANGLE_DEG - SLACK_ANGLE * slack:
             return False
         return f.radial_velocity > 0 if self.direction is Direction.SAME else f.radial_velocity < 0
+
+
+@dataclass(frozen=True)
+class Behind(Atom):
+    """Behind the ego vehicle (box centre at negative x): outside every referable region (the
+    annotated area is the camera's forward field of view), so a predicate with it is
+    unsatisfiable and its answer is empty ("the car behind us"). Slack moves the line by
+    :data:`~scenes.prompts.atoms.SLACK_DEPTH` metres."""
+
+    family: ClassVar[str] = "position"
+    tag: ClassVar[str] = "position"
+    slot: ClassVar[str] = "position.behind"
+
+    def holds(self, f: ActorFeatures, slack: float = 0.0) -> bool:
+        return f.x < SLACK_DEPTH * slack
 
 
 def negated(pred: Predicate) -> Atom | None:
@@ -329,6 +348,7 @@ def unsatisfiable(pred: Predicate, feats: Sequence[ActorFeatures], region: Refer
 
 
 __all__ = [
+    "Behind",
     "Count",
     "Direction",
     "Exclusion",

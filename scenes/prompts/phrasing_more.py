@@ -133,6 +133,10 @@ FAMILY_SLOTS: dict[str, Slot] = {
                              "{verb} in the opposite direction", "going the opposite way",
                              "moving in the opposite direction to {us}",
                              "{rel} {be} coming the other way")),
+    # ---- behind the ego vehicle (families.Behind): outside the annotated area -------------
+    "position.behind": Slot(("behind {us}", "right behind {us}", "directly behind {us}",
+                             "{rel} {be} behind {us}", "back behind {us}", "somewhere behind {us}",
+                             "following behind {us}")),
     # ---- exclusion --------------------------------------------------------------------------
     "excl.det": Slot(("all the", "all", "all of the", "the")),
     "excl.join": Slot(("except", "but", "except for", "other than", "apart from", "excluding",

@@ -52,7 +52,7 @@ FAMILIES = (
 """Prompt families (:attr:`scenes.prompts.render.Prompt.family`); ``attribute`` is today's
 predicate language, the others come with ``language="extended"`` (:mod:`scenes.prompts.families`)."""
 
-EXTENDED_RATES = (0.10, 0.08, 0.10, 0.10, 0.10, 0.10, 0.05)
+EXTENDED_RATES = (0.07, 0.11, 0.07, 0.07, 0.14, 0.14, 0.04)
 """Default shares of the non-attribute families in :data:`FAMILIES` order (out-of-class,
 unsatisfiable, negation, exclusion, ordinal, relation, count); the attribute family gets the rest."""
 
