@@ -1,6 +1,6 @@
 """LiDAR-frame geometry into the camera image: points to pixels, 3D box wireframes to 2D line
-segments, which boxes the camera sees (:func:`in_camera_view`), and the calibration of a resized
-image.
+segments, which boxes the camera sees (:func:`in_camera_view`) and VoD annotates
+(:func:`in_annotated_area`), and the calibration of a resized image.
 
 Conventions
     Inputs are in the LiDAR (sensor) frame of a :class:`~scenes.calib.Calibration` (x forward,
@@ -184,3 +184,19 @@ def in_camera_view(
     box2d = boxes_2d(cam, calib, image_size)
     area_ok = (box2d[:, 2] > box2d[:, 0]) & (box2d[:, 3] > box2d[:, 1])
     return (depth > 0.0) & area_ok
+
+
+ANNOTATED_RANGE = 50.0
+"""Metres from the LiDAR within which VoD annotates (box centre, 3D distance)."""
+
+
+def in_annotated_area(
+    boxes: np.ndarray,
+    calib: Calibration,
+    image_size: tuple[int, int] = IMAGE_SIZE,
+    max_range: float = ANNOTATED_RANGE,
+) -> np.ndarray:
+    """Which LiDAR-frame boxes ``(K, 7)`` VoD would annotate: centre within ``max_range`` metres
+    of the LiDAR and partly in the camera's view (:func:`in_camera_view`). Returns ``(K,)`` bool."""
+    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
+    return in_camera_view(b, calib, image_size) & (np.linalg.norm(b[:, :3], axis=1) <= max_range)

@@ -33,7 +33,7 @@ from scenes.layout import (
     sample_dir,
     sample_file,
 )
-from scenes.vod_labels import in_annotated_area
+from scenes.projection import in_annotated_area
 
 DONT_CARE = "DontCare"
 """VoD's name for a region whose objects are neither positives nor negatives."""

@@ -39,7 +39,7 @@ import numpy as np
 from scenes.actors import CLASSES
 from scenes.calib import IMAGE_SIZE, Calibration
 from scenes.kitti import ObjectLabel, boxes_to_labels
-from scenes.projection import in_camera_view
+from scenes.projection import in_annotated_area
 from scenes.sample_meta import SampleMeta
 from scenes.world.actor_meshes import rider_boxes
 
@@ -62,20 +62,6 @@ ABSENT_CLASSES = (
 """VoD classes of which the synthetic world has no object (never written)."""
 VOD_CLASSES = (*CLASSES, RIDER, *CLUTTER_CLASSES.values(), *ABSENT_CLASSES)
 """View-of-Delft's 13 classes."""
-ANNOTATED_RANGE = 50.0
-"""Metres from the LiDAR within which VoD annotates (box centre, 3D distance)."""
-
-
-def in_annotated_area(
-    boxes: np.ndarray,
-    calib: Calibration,
-    image_size: tuple[int, int] = IMAGE_SIZE,
-    max_range: float = ANNOTATED_RANGE,
-) -> np.ndarray:
-    """Which LiDAR-frame boxes ``(K, 7)`` VoD would annotate: centre within ``max_range`` metres
-    of the LiDAR and partly in the camera's view (:func:`in_camera_view`). Returns ``(K,)`` bool."""
-    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
-    return in_camera_view(b, calib, image_size) & (np.linalg.norm(b[:, :3], axis=1) <= max_range)
 
 
 @dataclass(frozen=True)
@@ -138,12 +124,10 @@ def frame_labels(
 
 __all__ = [
     "ABSENT_CLASSES",
-    "ANNOTATED_RANGE",
     "CLUTTER_CLASSES",
     "RIDER",
     "VOD_CLASSES",
     "VodObjects",
     "frame_labels",
     "frame_objects",
-    "in_annotated_area",
 ]
