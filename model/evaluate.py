@@ -274,6 +274,13 @@ class EvaluateConfig:
         "frame's labelled boxes from --scene-labels (grounding apart from detection)",
     )
     device: str = option("cpu", group=MODEL_MODE, help="cpu or cuda")
+    workers: int = option(
+        0,
+        group=MODEL_MODE,
+        help="processes that predict, this one and N-1 workers, each with one torch thread "
+        "(default 0: the usable cores, one per 40 distinct frames at most, 1 on cuda; 1: this "
+        "process alone, torch's threads as set)",
+    )
     limit: int = option(0, group=MODEL_MODE, help="first N frames only (0: all)")
     json: Path | None = option(None, help="write the results as JSON here")
     exact_overlaps: bool = option(
@@ -361,6 +368,7 @@ def _run_model_mode(cfg: EvaluateConfig) -> int:
     class-noun prompt and language-blind oracle side by side)."""
     from model.checkpoint import load_checkpoint
     from model.evaluation.predict import operating_threshold, write_predictions
+    from model.evaluation.predict_pool import auto_workers, frame_groups
     from model.evaluation.report import evaluate_predictions
     from scenes.root import Talk2RadarRoot
 
@@ -371,6 +379,10 @@ def _run_model_mode(cfg: EvaluateConfig) -> int:
             json_path = out_dir.with_name(out_dir.name + ".json")
     if cfg.threshold is not None and not 0.0 <= cfg.threshold < 1.0:
         raise EvaluationInputError(f"--threshold must be in [0, 1), got {cfg.threshold}")
+    if cfg.workers < 0:
+        raise EvaluationInputError(f"--workers must be 0 (automatic) or more, got {cfg.workers}")
+    if cfg.workers > 1 and cfg.device != "cpu":
+        raise EvaluationInputError(f"--workers {cfg.workers} runs on the CPU, not {cfg.device}")
 
     from scenes.scene_labels import SceneLabels
 
@@ -393,6 +405,7 @@ def _run_model_mode(cfg: EvaluateConfig) -> int:
         raise EvaluationInputError(
             f"{cfg.checkpoint}: --candidates labels needs a referent-path checkpoint"
         )
+    workers = cfg.workers or auto_workers(len(frame_groups(root, ids)), cfg.device)
     report = evaluate_predictions(
         model,
         root,
@@ -401,6 +414,7 @@ def _run_model_mode(cfg: EvaluateConfig) -> int:
         baselines=cfg.baselines,
         scene_labels=scene_labels,
         candidates=cfg.candidates,
+        workers=workers,
     )
     out = write_predictions(report.predictions, out_dir)
     # Score the files as written (4 decimals), as the official devkit reads them.
@@ -410,7 +424,7 @@ def _run_model_mode(cfg: EvaluateConfig) -> int:
     report = report.rescored(from_files)
     print(
         f"data: {cfg.data} split {cfg.split} ({len(ids)} frames); checkpoint {cfg.checkpoint}; "
-        f"candidates: {cfg.candidates}"
+        f"candidates: {cfg.candidates}; {workers} prediction process(es)"
         + ("" if scene_labels is None else f"; scene labels {cfg.scene_labels}")
     )
     source = "--threshold" if cfg.threshold is not None else "checkpoint"

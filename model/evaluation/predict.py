@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import time
 from collections import deque
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from itertools import islice
@@ -128,19 +128,37 @@ def scene_key(root: Talk2RadarRoot, sample_id: str) -> SceneKey:
 
 
 @dataclass(frozen=True)
+class Answer:
+    """The model's answer to one prompt on one scene (what ``model.ground`` returned).
+
+    Attributes:
+        boxes: ``(K, 7)`` float64 LiDAR frame, sorted by score.
+        scores: ``(K,)`` float64.
+        classes: ``K`` class names.
+    """
+
+    boxes: np.ndarray
+    scores: np.ndarray
+    classes: tuple[str, ...]
+
+
+@dataclass(frozen=True)
 class FramePrediction:
     """The model's answer for one sample, with its ground truth and timing.
 
     Attributes:
-        sample: The sample.
+        sample: The sample (from a worker process, :mod:`model.evaluation.predict_pool`, with
+            empty ``lidar`` and ``radar``: the points stay in the worker).
         boxes: ``(K, 7)`` LiDAR frame, sorted by score (every box the grounding threshold kept).
         scores: ``(K,)``.
         classes: ``K`` class names.
         labels: KITTI prediction labels of the boxes scoring at least ``min_label_score`` (see
             :func:`iterate_predictions`), filtered as :func:`prediction_labels`.
         seconds: ``encode_scene`` (of this sample's scene, measured once when shared) + ``ground``.
-        features: The encoded scene (to ground other prompts on it).
+        features: The encoded scene (to ground other prompts on it); None from a worker.
         scene_key: :func:`scene_key` of the sample.
+        extra: Each of :attr:`PredictSettings.extra_prompts`'s prompts for this sample -> its
+            answer on the same scene (e.g. the class-noun baseline).
     """
 
     sample: Sample
@@ -151,6 +169,133 @@ class FramePrediction:
     seconds: float
     features: SceneFeatures | None = field(default=None, repr=False, compare=False)
     scene_key: SceneKey = ()
+    extra: Mapping[str, Answer] = field(default_factory=dict, repr=False)
+
+
+@dataclass(frozen=True)
+class PredictSettings:
+    """How each sample is predicted (:class:`FramePredictor`); picklable where workers are used
+    (the callables then module-level functions or instances of module-level classes).
+
+    Attributes:
+        score_threshold: Decoding threshold given to ``ground`` (None: the model's own).
+        min_label_score: Only boxes scoring at least this become :attr:`FramePrediction.labels`.
+        cache_scenes: Encoded scenes kept (most recently used first) for the following samples
+            with the same :func:`scene_key`; ids in world order (as ``scenes.synth`` writes them)
+            encode each world once. 0 encodes every sample.
+        candidates: Referent path: the labelled boxes of a sample's frame, among which the
+            referent stage then chooses (``model.evaluate --candidates labels``); None: the
+            detector's proposals.
+        extra_prompts: Further prompts to ground on each sample's scene (answered once per scene
+            and prompt, :attr:`FramePrediction.extra`); None: none.
+    """
+
+    score_threshold: float | None = None
+    min_label_score: float = 0.0
+    cache_scenes: int = 4
+    candidates: Callable[[Sample], LabelledBoxes] | None = None
+    extra_prompts: Callable[[Sample], Sequence[str]] | None = None
+
+
+@dataclass(frozen=True)
+class FrameInput:
+    """A sample as read for prediction (:meth:`FramePredictor.read`)."""
+
+    sample: Sample
+    key: SceneKey
+    labelled: LabelledBoxes | None
+
+
+@dataclass
+class _Scene:
+    """An encoded scene in the cache: its features, encoding time and extra prompts' answers."""
+
+    features: SceneFeatures
+    seconds: float
+    answers: dict[str, Answer] = field(default_factory=dict)
+
+
+def _answer(pred: object) -> Answer:
+    return Answer(
+        np.asarray(pred.boxes, dtype=np.float64).reshape(-1, 7),  # type: ignore[attr-defined]
+        np.asarray(pred.scores, dtype=np.float64),  # type: ignore[attr-defined]
+        tuple(pred.classes),  # type: ignore[attr-defined]
+    )
+
+
+class FramePredictor:
+    """The per-sample work of a prediction run, one home for it whether it runs in this process
+    (:func:`iterate_predictions`) or in worker processes (:mod:`model.evaluation.predict_pool`):
+    read a sample, encode its scene once (an LRU cache of :attr:`PredictSettings.cache_scenes`
+    scenes), ground its prompt and the extra prompts, turn the answer into labels."""
+
+    def __init__(self, model: TPCNet, root: Talk2RadarRoot, settings: PredictSettings) -> None:
+        self.model = model
+        self.root = root
+        self.settings = settings
+        model.eval()
+        warm_up = getattr(getattr(model, "text_encoder", None), "warm_up", None)
+        if warm_up is not None:
+            warm_up()  # the text encoder loads while the first scenes are read and encoded
+        self._cache: LRUCache[SceneKey, _Scene] = LRUCache(max(settings.cache_scenes, 0))
+
+    def read(self, sid: str) -> FrameInput:
+        """Read sample ``sid`` (and its candidates); errors name the file."""
+        sample = self.root.load(sid)
+        if sample.prompt is None:
+            raise ValueError(f"{self.root.path}: sample {sid} has no prompt to ground")
+        candidates = self.settings.candidates
+        labelled = None if candidates is None else candidates(sample)
+        return FrameInput(sample, scene_key(self.root, sid), labelled)
+
+    def predict(self, item: FrameInput) -> FramePrediction:
+        """Encode (unless cached) and ground one read sample (no gradients)."""
+        model, settings, sample = self.model, self.settings, item.sample
+        with torch.no_grad():
+            scene = self._cache.get(item.key)
+            if scene is None:
+                start = time.perf_counter()
+                if item.labelled is None:
+                    features = model.encode_scene(sample.lidar, sample.radar)
+                else:
+                    features = model.encode_scene(
+                        sample.lidar, sample.radar, candidates=item.labelled
+                    )
+                scene = _Scene(features, time.perf_counter() - start)
+                self._cache.put(item.key, scene)
+            start = time.perf_counter()
+            pred = model.ground(
+                scene.features, sample.prompt, score_threshold=settings.score_threshold
+            )
+            seconds = scene.seconds + time.perf_counter() - start
+            extra = {}
+            for prompt in () if settings.extra_prompts is None else settings.extra_prompts(sample):
+                if prompt not in scene.answers:
+                    scene.answers[prompt] = _answer(
+                        model.ground(
+                            scene.features, prompt, score_threshold=settings.score_threshold
+                        )
+                    )
+                extra[prompt] = scene.answers[prompt]
+        answer = _answer(pred)
+        keep = answer.scores >= settings.min_label_score
+        labels = prediction_labels(
+            answer.boxes[keep],
+            [c for c, k in zip(answer.classes, keep, strict=True) if k],
+            answer.scores[keep],
+            sample.calib,
+        )
+        return FramePrediction(
+            sample,
+            answer.boxes,
+            answer.scores,
+            answer.classes,
+            labels,
+            seconds,
+            scene.features,
+            item.key,
+            extra,
+        )
 
 
 def iterate_predictions(
@@ -162,68 +307,20 @@ def iterate_predictions(
     min_label_score: float = 0.0,
     cache_scenes: int = 4,
     candidates: Callable[[Sample], LabelledBoxes] | None = None,
+    extra_prompts: Callable[[Sample], Sequence[str]] | None = None,
 ) -> Iterator[FramePrediction]:
-    """Run ``model.encode_scene`` + ``model.ground`` on each sample (eval mode, no gradients).
-
-    Args:
-        score_threshold: Decoding threshold given to ``ground`` (None: the model's own).
-        min_label_score: Only boxes scoring at least this become :attr:`FramePrediction.labels`.
-        cache_scenes: Encoded scenes kept (most recently used first) for the following samples
-            with the same :func:`scene_key`; ids in world order (as ``scenes.synth`` writes them)
-            encode each world once. 0 encodes every sample.
-        candidates: Referent path: the labelled boxes of a sample's frame, among which the
-            referent stage then chooses (``model.evaluate --candidates labels``); None: the
-            detector's proposals.
-    """
-    model.eval()
-    warm_up = getattr(getattr(model, "text_encoder", None), "warm_up", None)
-    if warm_up is not None:
-        warm_up()  # the text encoder loads while the first scenes are read and encoded
-
-    def read(sid: str) -> tuple[Sample, SceneKey, LabelledBoxes | None]:
-        sample = root.load(sid)
-        if sample.prompt is None:
-            raise ValueError(f"{root.path}: sample {sid} has no prompt to ground")
-        return sample, scene_key(root, sid), None if candidates is None else candidates(sample)
-
-    cache: LRUCache[SceneKey, tuple[SceneFeatures, float]] = LRUCache(max(cache_scenes, 0))
+    """Run ``model.encode_scene`` + ``model.ground`` on each sample in this process (eval mode,
+    no gradients; :class:`FramePredictor`, the arguments as :class:`PredictSettings`'s fields),
+    the next samples read ahead by a thread (:func:`read_ahead`)."""
+    settings = PredictSettings(
+        score_threshold, min_label_score, cache_scenes, candidates, extra_prompts
+    )
+    predictor = FramePredictor(model, root, settings)
     bar = tqdm(total=len(ids), desc="predict", unit="frame", disable=not progress)
-    with torch.no_grad(), bar:
-        for sample, key, labelled in read_ahead(read, ids):
+    with bar:
+        for item in read_ahead(predictor.read, ids):
             bar.update(1)
-            hit = cache.get(key)
-            if hit is not None:
-                features, encode_seconds = hit
-            else:
-                start = time.perf_counter()
-                if labelled is None:
-                    features = model.encode_scene(sample.lidar, sample.radar)
-                else:
-                    features = model.encode_scene(sample.lidar, sample.radar, candidates=labelled)
-                encode_seconds = time.perf_counter() - start
-                cache.put(key, (features, encode_seconds))
-            start = time.perf_counter()
-            pred = model.ground(features, sample.prompt, score_threshold=score_threshold)
-            seconds = encode_seconds + time.perf_counter() - start
-            scores = np.asarray(pred.scores, dtype=np.float64)
-            boxes = np.asarray(pred.boxes, dtype=np.float64).reshape(-1, 7)
-            keep = scores >= min_label_score
-            labels = prediction_labels(
-                boxes[keep],
-                [c for c, k in zip(pred.classes, keep, strict=True) if k],
-                scores[keep],
-                sample.calib,
-            )
-            yield FramePrediction(
-                sample,
-                boxes,
-                scores,
-                tuple(pred.classes),
-                labels,
-                seconds,
-                features,
-                key,
-            )
+            yield predictor.predict(item)
 
 
 def read_ahead(read: Callable[[str], T], ids: Sequence[str], ahead: int = 2) -> Iterator[T]:

@@ -26,6 +26,7 @@ All AP values are the entire-area 3D mAP at 11 recall points unless a table says
 
 from __future__ import annotations
 
+import contextlib
 import typing
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -45,11 +46,12 @@ from model.evaluation.grounding import (
 )
 from model.evaluation.metrics import VodResult, evaluate_frames
 from model.evaluation.predict import (
+    PredictSettings,
     decode_threshold,
-    iterate_predictions,
     operating_threshold,
     prediction_labels,
 )
+from model.evaluation.predict_pool import predictions
 from model.evaluation.report_file import (
     BASELINES,
     BASELINES_KEY,
@@ -248,6 +250,23 @@ def sample_tags(sample: Sample) -> frozenset[str]:
     return infer_tags(sample.prompt or "")
 
 
+def class_noun_of(sample: Sample) -> tuple[str]:
+    """The class-noun baseline's prompt for a sample (:func:`model.evaluation.baselines.
+    class_noun_prompt` of the class its prompt names): the extra prompt grounded on its scene."""
+    return (class_noun_prompt(named_class(sample_tags(sample), sample.classes)),)
+
+
+@dataclass(frozen=True)
+class SceneLabelCandidates:
+    """The candidates of ``--candidates labels``: a frame's labelled boxes from the scene labels
+    (a picklable callable, for prediction workers)."""
+
+    scene_labels: SceneLabels
+
+    def __call__(self, sample: Sample) -> LabelledBoxes:
+        return LabelledBoxes(*self.scene_labels.load(sample.sample_id).metric())
+
+
 def evaluate_predictions(
     model: TPCNet,
     root: Talk2RadarRoot,
@@ -258,6 +277,7 @@ def evaluate_predictions(
     baselines: bool = False,
     scene_labels: SceneLabels | None = None,
     candidates: CandidateSource = "detector",
+    workers: int = 1,
 ) -> GroundingReport:
     """Ground every sample of ``ids`` and score the answers.
 
@@ -274,6 +294,8 @@ def evaluate_predictions(
         candidates: ``"detector"`` (the detector's proposals) or ``"labels"`` (the frame's
             labelled boxes of the three classes: grounding apart from detection; needs
             ``scene_labels``).
+        workers: Processes that predict (:func:`model.evaluation.predict_pool.predictions`;
+            1: this process, the model as given; more: CPU only, the same predictions).
     """
     if not ids:
         raise ValueError(f"{root.path}: no samples to evaluate")
@@ -292,67 +314,62 @@ def evaluate_predictions(
     if scene_labels is not None and root.sidecar:
         root = Talk2RadarRoot(root.path, radar=root.radar_folder, sidecar=False)
 
-    def labelled(sample: Sample) -> LabelledBoxes:
-        assert scene_labels is not None
-        return LabelledBoxes(*scene_labels.load(sample.sample_id).metric())
-
     gt: dict[str, list[ObjectLabel]] = {}
     dt: dict[str, list[ObjectLabel]] = {}
     tags: dict[str, frozenset[str]] = {}
     seconds = []
     answers = AnswerSet()
     base: dict[BaselineName, AnswerSet] = {name: AnswerSet() for name in BASELINES}
-    noun_answers: dict[tuple[object, ...], PromptBoxes] = {}
     no_meta: list[str] = []
-    for pred in iterate_predictions(
-        model,
-        root,
-        ids,
-        ground_at,
-        progress=progress,
+    settings = PredictSettings(
+        score_threshold=ground_at,
         min_label_score=decode,
-        candidates=labelled if candidates == "labels" else None,
-    ):
-        sample = pred.sample
-        sid = sample.sample_id
-        gt[sid] = list(sample.labels)
-        dt[sid] = _as_written(pred.labels)  # as the files will hold them (rescored at no cost)
-        tags[sid] = sample_tags(sample)
-        seconds.append(pred.seconds)
-        where = f"{root.path}: sample {sid}"
-        referents = PromptBoxes.make(sample.boxes, sample.classes, source=f"{where} label_2")
-        answer = PromptBoxes.make(pred.boxes, pred.classes, pred.scores, source=f"{where} model")
-        answers.outcomes.append(prompt_outcome(sid, tags[sid], answer, referents, op))
-        if not baselines:
-            continue
-        cls = named_class(tags[sid], sample.classes)
-        noun = class_noun_prompt(cls)
-        key = (*pred.scene_key, noun)
-        if key not in noun_answers:
-            p = model.ground(pred.features, noun, score_threshold=ground_at)
-            noun_answers[key] = PromptBoxes.make(
-                p.boxes, p.classes, p.scores, source=f"{where} class noun"
+        candidates=None
+        if scene_labels is None or candidates != "labels"
+        else SceneLabelCandidates(scene_labels),
+        extra_prompts=class_noun_of if baselines else None,
+    )
+    stream = predictions(model, root, ids, settings, workers=workers, progress=progress)
+    with contextlib.closing(stream):  # an error or Ctrl-C here stops the workers at once
+        for pred in stream:
+            sample = pred.sample
+            sid = sample.sample_id
+            gt[sid] = list(sample.labels)
+            dt[sid] = _as_written(pred.labels)  # as the files will hold them (rescored at no cost)
+            tags[sid] = sample_tags(sample)
+            seconds.append(pred.seconds)
+            where = f"{root.path}: sample {sid}"
+            referents = PromptBoxes.make(sample.boxes, sample.classes, source=f"{where} label_2")
+            answer = PromptBoxes.make(
+                pred.boxes, pred.classes, pred.scores, source=f"{where} model"
             )
-        noun_boxes = noun_answers[key]
-        base["class_noun"].labels[sid] = _labels(noun_boxes, decode, sample)
-        base["class_noun"].outcomes.append(
-            prompt_outcome(sid, tags[sid], noun_boxes, referents, op)
-        )
-        if scene_labels is not None:
-            boxes, labels = scene_labels.load(sid).metric()
-            objects = [
-                Actor(i, CLASSES[int(lab)], box, np.zeros(2))
-                for i, (box, lab) in enumerate(zip(boxes, labels, strict=True))
-            ]
-            oracle = oracle_boxes(objects, cls)
-        elif sample.meta is None:
-            no_meta.append(sid)
-            continue
-        else:
-            skip = unsensed_ids(sample.meta, source=f"{root.path / 'meta' / sid}.json")
-            oracle = oracle_boxes(sample.meta.actors, cls, exclude=skip)
-        base["oracle"].labels[sid] = _labels(oracle, decode, sample)
-        base["oracle"].outcomes.append(prompt_outcome(sid, tags[sid], oracle, referents, op))
+            answers.outcomes.append(prompt_outcome(sid, tags[sid], answer, referents, op))
+            if not baselines:
+                continue
+            cls = named_class(tags[sid], sample.classes)
+            noun = pred.extra[class_noun_prompt(cls)]
+            noun_boxes = PromptBoxes.make(
+                noun.boxes, noun.classes, noun.scores, source=f"{where} class noun"
+            )
+            base["class_noun"].labels[sid] = _labels(noun_boxes, decode, sample)
+            base["class_noun"].outcomes.append(
+                prompt_outcome(sid, tags[sid], noun_boxes, referents, op)
+            )
+            if scene_labels is not None:
+                boxes, labels = scene_labels.load(sid).metric()
+                objects = [
+                    Actor(i, CLASSES[int(lab)], box, np.zeros(2))
+                    for i, (box, lab) in enumerate(zip(boxes, labels, strict=True))
+                ]
+                oracle = oracle_boxes(objects, cls)
+            elif sample.meta is None:
+                no_meta.append(sid)
+                continue
+            else:
+                skip = unsensed_ids(sample.meta, source=f"{root.path / 'meta' / sid}.json")
+                oracle = oracle_boxes(sample.meta.actors, cls, exclude=skip)
+            base["oracle"].labels[sid] = _labels(oracle, decode, sample)
+            base["oracle"].outcomes.append(prompt_outcome(sid, tags[sid], oracle, referents, op))
     report = build_report(gt, dt, tags, tuple(seconds))
     found: dict[BaselineName, BaselineResult] = {}
     notes: dict[BaselineName, str] = {}

@@ -1,0 +1,223 @@
+"""Prediction over a root by several processes, results in sample order.
+
+Why: on a CPU, one ``encode_scene`` is many small operations, so a second torch thread inside it
+gains almost nothing; frames predicted side by side in separate processes use every core. With
+``workers = N``, this process and ``N - 1`` worker processes predict, each with one torch thread.
+A worker is a fresh interpreter (the ``spawn`` start method: never ``fork`` after torch has
+started its threads) that rebuilds the model from the evaluated one's checkpoint payload
+(:class:`ModelSource`); every process runs the same
+:class:`model.evaluation.predict.FramePredictor` as the in-process path, so all give the same
+predictions.
+
+- Work goes out by frame (:func:`frame_groups`): consecutive samples with one
+  :func:`model.evaluation.predict.scene_key` are one task, so a shared scene is still encoded once.
+- The workers are kept :data:`IN_FLIGHT_PER_WORKER` frames ahead; whenever the next result due is
+  still a worker's, this process predicts the next frame not yet handed out, so it never waits
+  idle (above all while the workers start: an interpreter, torch's import, the model's and
+  MiniLM's loading, about 3 s on this 2-core machine).
+- Results come back in sample order, without the points of the sample or the encoded features
+  (the caller needs only labels, calibration and sidecar).
+- An error (a malformed file, a checkpoint a worker cannot rebuild) is raised as the same
+  exception with the same message when its sample's turn comes; the pool then stops: tasks not
+  started are cancelled, running ones finish (one frame each) and the workers exit. Workers ignore
+  SIGINT, so Ctrl-C interrupts this process only, which stops the pool the same way.
+- :func:`auto_workers`: the usable cores (``os.sched_getaffinity``), but at most one process per
+  :data:`MIN_FRAMES_PER_WORKER` frames: about the frames this process predicts while a worker
+  starts, so a shorter split would not win its start back; 1 is the in-process path
+  (:func:`model.evaluation.predict.iterate_predictions`).
+"""
+
+from __future__ import annotations
+
+import io
+import multiprocessing
+import os
+import signal
+from collections.abc import Iterator, Sequence
+from concurrent.futures import Future, ProcessPoolExecutor
+from dataclasses import dataclass, fields, replace
+from typing import TYPE_CHECKING, Any
+
+import torch
+from tqdm import tqdm
+
+from model.evaluation.predict import (
+    FramePrediction,
+    FramePredictor,
+    PredictSettings,
+    iterate_predictions,
+    scene_key,
+)
+from scenes.root import Sample, Talk2RadarRoot
+
+if TYPE_CHECKING:
+    from model.tpcnet import TPCNet
+
+MIN_FRAMES_PER_WORKER = 40
+"""Fewest distinct frames per predicting process that :func:`auto_workers` plans for (module
+docstring): below ``2 * 40`` frames a split is predicted in-process."""
+
+IN_FLIGHT_PER_WORKER = 2
+"""Frame tasks handed to each worker process ahead (it never waits for the next; few, so that the
+last frames end together)."""
+
+
+def usable_cores() -> int:
+    """The CPU cores this process may run on (``os.sched_getaffinity``; ``os.cpu_count``)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # not on Linux
+        return os.cpu_count() or 1
+
+
+def auto_workers(frames: int, device: str = "cpu", cores: int | None = None) -> int:
+    """Worker processes for ``frames`` distinct frames: ``min(cores, frames //
+    MIN_FRAMES_PER_WORKER)``, at least 1; always 1 off the CPU (a GPU runs one model)."""
+    if str(device) != "cpu":
+        return 1
+    cores = usable_cores() if cores is None else cores
+    return max(1, min(cores, frames // MIN_FRAMES_PER_WORKER))
+
+
+def frame_groups(root: Talk2RadarRoot, ids: Sequence[str]) -> list[tuple[str, ...]]:
+    """``ids`` cut into runs of consecutive samples of one frame (one :func:`scene_key`), in
+    order: each run is one worker task, so its scene is encoded once."""
+    groups: list[list[str]] = []
+    last: object = None
+    for sid in ids:
+        key = scene_key(root, sid)
+        if not groups or key != last:
+            groups.append([])
+        groups[-1].append(sid)
+        last = key
+    return [tuple(g) for g in groups]
+
+
+@dataclass(frozen=True)
+class ModelSource:
+    """A model as its checkpoint bytes (``torch.save`` of
+    :func:`model.checkpoint.checkpoint_payload`): sent to each worker, which rebuilds it with
+    :func:`model.checkpoint.model_from_payload` on the CPU."""
+
+    payload: bytes
+
+    @classmethod
+    def of(cls, model: TPCNet) -> ModelSource:
+        from model.checkpoint import checkpoint_payload
+
+        meta = dict(getattr(model, "checkpoint_metadata", None) or {})
+        buffer = io.BytesIO()
+        torch.save(checkpoint_payload(model, **meta), buffer)
+        return cls(buffer.getvalue())
+
+    def build(self) -> TPCNet:
+        from model.checkpoint import model_from_payload
+
+        payload = torch.load(io.BytesIO(self.payload), map_location="cpu", weights_only=True)
+        return model_from_payload(payload, "<the evaluated model>", "cpu")
+
+
+_WORKER: FramePredictor | BaseException | None = None
+"""This worker process's predictor, or the error that rebuilding it raised (re-raised by each
+task, so that it reaches the main process as a task's error)."""
+
+
+def _start_worker(source: ModelSource, root: Talk2RadarRoot, settings: PredictSettings) -> None:
+    """Worker initializer: one torch thread, SIGINT left to the main process, the model built."""
+    global _WORKER
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    torch.set_num_threads(1)
+    try:
+        _WORKER = FramePredictor(source.build(), root, settings)
+    except Exception as exc:  # raised again by the first task
+        _WORKER = exc
+
+
+def _predict_frame(ids: tuple[str, ...]) -> list[FramePrediction]:
+    """Worker task: :func:`_predict_group` with this worker's predictor."""
+    if isinstance(_WORKER, BaseException):
+        raise _WORKER
+    assert _WORKER is not None, "worker not started"
+    return _predict_group(_WORKER, ids)
+
+
+def _predict_group(predictor: FramePredictor, ids: tuple[str, ...]) -> list[FramePrediction]:
+    """Predict the samples of one frame (points dropped from the returned samples, the
+    features not returned)."""
+    out = []
+    for sid in ids:
+        pred = predictor.predict(predictor.read(sid))
+        out.append(replace(pred, sample=_without_points(pred.sample), features=None))
+    return out
+
+
+def _without_points(sample: Sample) -> Sample:
+    """``sample`` with empty ``(0, 4)`` LiDAR and ``(0, 7)`` radar arrays (nothing else
+    changed)."""
+    return replace(sample, lidar=sample.lidar[:0].copy(), radar=sample.radar[:0].copy())
+
+
+def _shallow(obj: Any) -> dict[str, Any]:
+    return {f.name: getattr(obj, f.name) for f in fields(obj)}
+
+
+def predictions(
+    model: TPCNet,
+    root: Talk2RadarRoot,
+    ids: Sequence[str],
+    settings: PredictSettings,
+    workers: int = 1,
+    progress: bool = True,
+) -> Iterator[FramePrediction]:
+    """Each sample's :class:`model.evaluation.predict.FramePrediction`, in the order of ``ids``:
+    in this process (``workers <= 1``: :func:`model.evaluation.predict.iterate_predictions`) or
+    by ``workers`` processes, this one and ``workers - 1`` spawned ones (module docstring; the
+    model must be on the CPU and ``settings`` picklable; the predictions carry no features and
+    their samples no points)."""
+    groups = frame_groups(root, ids) if workers > 1 else []
+    if len(groups) < 2:
+        yield from iterate_predictions(model, root, ids, progress=progress, **_shallow(settings))
+        return
+    device = next((p.device for p in model.parameters()), torch.device("cpu"))
+    if device.type != "cpu":
+        raise ValueError(f"prediction workers run on the CPU; the model is on {device}")
+    spawned = min(workers, len(groups)) - 1
+    here = FramePredictor(model, root, settings)
+    pool = ProcessPoolExecutor(
+        max_workers=spawned,
+        mp_context=multiprocessing.get_context("spawn"),
+        initializer=_start_worker,
+        initargs=(ModelSource.of(model), root, settings),
+    )
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)  # this process is one of the workers
+    bar = tqdm(total=len(ids), desc="predict", unit="frame", disable=not progress)
+    slots: dict[int, Future[list[FramePrediction]] | list[FramePrediction] | Exception] = {}
+    sent = 0  # groups handed out, in order
+    try:
+        with bar:
+            for index in range(len(groups)):
+                while True:
+                    queued = sum(isinstance(v, Future) and not v.done() for v in slots.values())
+                    while sent < len(groups) and queued < spawned * IN_FLIGHT_PER_WORKER:
+                        slots[sent] = pool.submit(_predict_frame, groups[sent])
+                        sent, queued = sent + 1, queued + 1
+                    head = slots[index]
+                    waiting = isinstance(head, Future) and not head.done()
+                    failed = any(isinstance(v, Exception) for v in slots.values())
+                    if not (waiting and sent < len(groups) and not failed):
+                        break
+                    try:  # the next group here, while the workers' are not back
+                        slots[sent] = _predict_group(here, groups[sent])
+                    except Exception as exc:  # raised when its turn comes
+                        slots[sent] = exc
+                    sent += 1
+                done = slots.pop(index)
+                if isinstance(done, Exception):
+                    raise done
+                for pred in done.result() if isinstance(done, Future) else done:
+                    bar.update(1)
+                    yield pred
+    finally:
+        torch.set_num_threads(threads)
+        pool.shutdown(wait=True, cancel_futures=True)
