@@ -9,7 +9,9 @@ Workload: ``python -m scenes.synth --frames 300 --prompts-per-world 1 --seed 5 -
 (300 samples, one prompt per world: every sample is a scene to encode), written once into
 ``--root`` (default ``/tmp/talk2pc-eval-300``) with an ``all`` split listing every sample; the
 command timed is ``python -m model.evaluate --data ROOT --split all --out ... --json ...`` with the
-bundled checkpoint and torch's default threads (``--eval-threads N``: ``OMP_NUM_THREADS=N``).
+bundled checkpoint, its default ``--workers`` (since issue 20: the usable cores, each predicting
+process with one torch thread) and torch's default threads (``--eval-threads N``:
+``OMP_NUM_THREADS=N``, which the code before issue 20 uses inside its one process).
 
 ``--baseline-code DIR``: also time the same command run from another checkout (the code before
 issue 20's changes: ``git archive <commit> | tar -x -C DIR``), alternating the two run by run so

@@ -29,13 +29,14 @@ predictions.
 
 from __future__ import annotations
 
-import io
 import multiprocessing
 import os
 import signal
+import tempfile
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
 from dataclasses import dataclass, fields, replace
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import torch
@@ -95,26 +96,25 @@ def frame_groups(root: Talk2RadarRoot, ids: Sequence[str]) -> list[tuple[str, ..
 
 @dataclass(frozen=True)
 class ModelSource:
-    """A model as its checkpoint bytes (``torch.save`` of
-    :func:`model.checkpoint.checkpoint_payload`): sent to each worker, which rebuilds it with
-    :func:`model.checkpoint.model_from_payload` on the CPU."""
+    """A model as a checkpoint file that each worker loads (on the CPU). A file, not bytes in the
+    workers' start arguments: ``spawn`` writes those into a pipe that the child reads only after
+    importing the main module, so a payload larger than the pipe would hold this process up
+    (and forever, were the child to fail before reading it)."""
 
-    payload: bytes
+    path: Path
 
     @classmethod
-    def of(cls, model: TPCNet) -> ModelSource:
-        from model.checkpoint import checkpoint_payload
+    def of(cls, model: TPCNet, folder: Path) -> ModelSource:
+        """Write ``model`` (weights, config, metadata) to ``folder/model.pt``."""
+        from model.checkpoint import save_checkpoint
 
         meta = dict(getattr(model, "checkpoint_metadata", None) or {})
-        buffer = io.BytesIO()
-        torch.save(checkpoint_payload(model, **meta), buffer)
-        return cls(buffer.getvalue())
+        return cls(save_checkpoint(folder / "model.pt", model, **meta))
 
     def build(self) -> TPCNet:
-        from model.checkpoint import model_from_payload
+        from model.checkpoint import load_checkpoint
 
-        payload = torch.load(io.BytesIO(self.payload), map_location="cpu", weights_only=True)
-        return model_from_payload(payload, "<the evaluated model>", "cpu")
+        return load_checkpoint(self.path, "cpu")
 
 
 _WORKER: FramePredictor | BaseException | None = None
@@ -183,11 +183,12 @@ def predictions(
         raise ValueError(f"prediction workers run on the CPU; the model is on {device}")
     spawned = min(workers, len(groups)) - 1
     here = FramePredictor(model, root, settings)
+    folder = tempfile.TemporaryDirectory(prefix="talk2pc-predict-")
     pool = ProcessPoolExecutor(
         max_workers=spawned,
         mp_context=multiprocessing.get_context("spawn"),
         initializer=_start_worker,
-        initargs=(ModelSource.of(model), root, settings),
+        initargs=(ModelSource.of(model, Path(folder.name)), root, settings),
     )
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # this process is one of the workers
@@ -221,3 +222,4 @@ def predictions(
     finally:
         torch.set_num_threads(threads)
         pool.shutdown(wait=True, cancel_futures=True)
+        folder.cleanup()
