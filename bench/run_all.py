@@ -119,9 +119,9 @@ MISS_NOTES: dict[str, str] = {
         "here this process and one spawned worker, one torch thread each; "
         "`model/evaluation/predict_pool.py`), which uses cores that other jobs leave free and "
         "nothing more: while a training holds the cores, one process or two get about the same "
-        "share of CPU (`OMP_NUM_THREADS=1 /usr/bin/time python -m model.evaluate --data "
-        "/tmp/h5-eval --split all --workers N` at load 4.5: 35.5 s wall and 32.6 CPU-s with "
-        "N = 2, 33.4 s and 30.5 CPU-s with N = 1), so under load the ratio is that of CPU work "
+        "share of CPU (`python -m model.evaluate --data /tmp/h5-eval --split all --workers 2` "
+        "under `/usr/bin/time` with `OMP_NUM_THREADS=1`, at load 4.5: 35.5 s wall and 32.6 "
+        "CPU-s; with `--workers 1`, 33.4 s and 30.5 CPU-s), so under load the ratio is that of CPU work "
         "per prompt; the workers' gain shows only when the cores are free."
     ),
     "KNN / DGGF": (
