@@ -8,9 +8,10 @@ Regenerate (only when a change of the outputs is intended, and say so in docs/RE
 
 which rewrites :data:`REFERENCE` and records in it the commit it ran on (``commit``), the
 generator version and torch's version. The committed file was first made on the code before
-issue 20's speed-ups, then regenerated on its inference forms of the network (see ``commit`` in
-the file; the change of outputs between the two: docs/RESULTS.md, "Issue 20's inference
-forms").
+issue 20's speed-ups, then regenerated on its inference forms of the network (the change of
+outputs between the two: docs/RESULTS.md, "Issue 20's inference forms"), and again when the
+shipped checkpoint became issue 23's stage 3b (its referent stage's weights changed; see
+``commit`` in the file).
 
 Inputs, all on this machine's CPU with one torch thread:
 
