@@ -19,7 +19,7 @@ from model.referent.candidates import (
     pool_bev,
     radar_evidence,
 )
-from model.referent.stage import CandidateBatch, ReferentStage, referent_loss
+from model.referent.stage import CandidateBatch, ReferentStage, geometry_width, referent_loss
 from model.training.referent_step import ReferentTrainConfig, referent_step
 from scenes.actors import Actor
 from scenes.augment import mirror_actor
@@ -99,7 +99,7 @@ def test_pool_bev_is_bilinear_in_metres():
 
 
 def _cands(k: int, pad: int = 0) -> CandidateBatch:
-    g = torch.randn(1, k + pad, 17)
+    g = torch.randn(1, k + pad, geometry_width(ReferentConfig()))
     padding = torch.zeros(1, k + pad, dtype=torch.bool)
     padding[0, k:] = True
     return CandidateBatch(

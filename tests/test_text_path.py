@@ -16,8 +16,8 @@ from model.nets.text import (
     load_minilm_forward,
     tokenize,
 )
-from model.referent.candidates import GEOMETRY_FEATURES, LIDAR_EVIDENCE, RADAR_EVIDENCE
-from model.referent.stage import CandidateBatch, ReferentStage
+from model.referent.candidates import LIDAR_EVIDENCE, RADAR_EVIDENCE
+from model.referent.stage import CandidateBatch, ReferentStage, geometry_width
 
 PROMPTS = (
     "the car ahead",
@@ -71,7 +71,7 @@ def test_referent_inference_form_equals_the_module_form(padded):
         padding[2, 1:] = True
         text_padding[1, 4:] = True
     cands = CandidateBatch(
-        torch.randn(n, k, GEOMETRY_FEATURES),
+        torch.randn(n, k, geometry_width(cfg)),
         torch.randn(n, k, 48),
         torch.randn(n, k, 40 + LIDAR_EVIDENCE),
         torch.randn(n, k, 44 + RADAR_EVIDENCE),

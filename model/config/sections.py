@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from typing import Any, Literal
 
 from model.config.errors import ConfigError, check_choice, check_positive_ints
-from model.config.serial import apply_overrides, from_plain, to_plain
+from model.config.serial import ABSENT, apply_overrides, from_plain, to_plain
 from model.nets.grid import BevGrid
 
 Modalities = Literal["lidar", "radar", "both"]
@@ -232,6 +232,9 @@ class ReferentConfig:
         min_score: Smallest referent probability :meth:`TPCNet.ground` returns when no threshold
             is given (the operating threshold that decides the returned *set* is stored in the
             checkpoint, see :func:`model.evaluation.predict.operating_threshold`).
+        context: Each candidate also reads its ranks among the other candidates and its
+            relations to them (:mod:`model.referent.context`: ordinals, "closest to the car").
+            A config written before this field existed reads as False (:data:`ABSENT`).
     """
 
     dim: int = 128
@@ -242,6 +245,7 @@ class ReferentConfig:
     max_candidates: int = 40
     candidate_threshold: float = 0.05
     min_score: float = 0.01
+    context: bool = field(default=True, metadata={ABSENT: False})
 
     def __post_init__(self) -> None:
         for name in ("dim", "layers", "heads", "ffn_ratio", "max_candidates"):

@@ -1,7 +1,8 @@
 """Configs to plain data and back: :func:`to_plain` (dicts, lists, str, int, float, bool) and
 :func:`from_plain`, which checks every field against its annotation and raises
 :class:`model.config.ConfigError` naming the dotted field (``fusion.agent_size``) of an unknown,
-missing or mistyped value; :func:`apply_overrides` edits a config by field paths and aliases.
+missing or mistyped value (a field added later says in its metadata what its absence meant,
+:data:`ABSENT`); :func:`apply_overrides` edits a config by field paths and aliases.
 
 Why not ``dacite`` or ``cattrs``: every error here names the dotted path of the field, also for
 an unknown key inside a section and for a value a section's own checks refuse (its
@@ -19,6 +20,10 @@ from typing import Any, Literal, TypeVar
 from model.config.errors import ConfigError
 
 T = TypeVar("T")
+
+ABSENT = "absent"
+"""Field metadata key: the value a field takes in plain data written before it existed
+(``field(default=True, metadata={ABSENT: False})``); any other missing field is an error."""
 
 
 def to_plain(value: Any) -> Any:
@@ -92,6 +97,8 @@ def from_plain(cls: type, data: Any, prefix: str) -> Any:
         raise ConfigError(
             f"config field {path!r} is unknown to this code ({cls.__name__} has {names})"
         )
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    data = {**{n: f.metadata[ABSENT] for n, f in fields.items() if ABSENT in f.metadata}, **data}
     missing = [n for n in names if n not in data]
     if missing:
         path = f"{prefix}.{missing[0]}" if prefix else missing[0]

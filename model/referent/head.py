@@ -96,6 +96,7 @@ class ReferentGrounding(GroundingHead):
             self.cfg.head.anchor,
             lidar if self.cfg.uses_lidar else None,
             radar if self.cfg.uses_radar else None,
+            context=self.cfg.referent.context,
         )
 
     def refer(self, cands: SceneCandidates | list[SceneCandidates], text: TextFeatures) -> Tensor:

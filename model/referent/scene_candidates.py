@@ -34,6 +34,7 @@ from model.referent.candidates import (
     pool_bev,
     radar_evidence,
 )
+from model.referent.context import context_features
 from model.referent.stage import CandidateBatch
 
 
@@ -84,6 +85,7 @@ def describe_candidates(
     anchor: str,
     lidar_points: np.ndarray | None,
     radar_points: np.ndarray | None,
+    context: bool = False,
 ) -> SceneCandidates:
     """Everything the referent stage reads about ``K`` candidates of one scene.
 
@@ -94,6 +96,8 @@ def describe_candidates(
         anchor: The head's anchor kind (``corner``, ``edge``, ``center``).
         lidar_points: ``(N, 4)`` (None when the model has no LiDAR).
         radar_points: ``(M, 7)`` in the LiDAR frame (None when the model has no radar).
+        context: Append :func:`model.referent.context.context_features` to the geometry
+            (``ReferentConfig.context``).
 
     Returns:
         :class:`SceneCandidates`; the pooled parts are differentiable in ``maps``.
@@ -108,7 +112,10 @@ def describe_candidates(
 
     centres = t(boxes[:, :2])
     anchors = t(anchor_points(boxes, anchor)) if len(boxes) else centres
-    geometry = t(geometry_features(boxes, labels, scores))
+    geometry = geometry_features(boxes, labels, scores)
+    if context:
+        geometry = np.concatenate([geometry, context_features(boxes, labels, scores)], axis=1)
+    geometry = t(geometry)
     fused = _pooled(maps.fused, grid, centres, anchors)
     lidar = radar = None
     if maps.lidar is not None:

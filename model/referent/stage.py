@@ -33,6 +33,7 @@ from torch import Tensor, nn
 from model.config import ReferentConfig
 from model.nets.numerals import NUMERIC_FEATURES
 from model.referent.candidates import GEOMETRY_FEATURES, LIDAR_EVIDENCE, RADAR_EVIDENCE
+from model.referent.context import CONTEXT_FEATURES
 
 
 @dataclass(frozen=True)
@@ -40,7 +41,9 @@ class CandidateBatch:
     """Padded candidate descriptions.
 
     Attributes:
-        geometry: ``(N, K, GEOMETRY_FEATURES)`` explicit geometry.
+        geometry: ``(N, K, G)`` explicit geometry, ``G`` = :func:`geometry_width` (with the
+            context features of :mod:`model.referent.context` after the first
+            ``GEOMETRY_FEATURES`` when ``ReferentConfig.context``).
         fused: ``(N, K, C_f)`` fused BEV features pooled at the box (centre and anchor).
         lidar: ``(N, K, C_l + LIDAR_EVIDENCE)`` or None for a radar-only model.
         radar: ``(N, K, C_r + RADAR_EVIDENCE)`` or None for a LiDAR-only model.
@@ -63,6 +66,11 @@ class CandidateBatch:
             pick(self.geometry), pick(self.fused), pick(self.lidar), pick(self.radar),
             pick(self.padding),
         )  # fmt: skip
+
+
+def geometry_width(cfg: ReferentConfig) -> int:
+    """Width of :attr:`CandidateBatch.geometry` for a stage of ``cfg``."""
+    return GEOMETRY_FEATURES + (CONTEXT_FEATURES if cfg.context else 0)
 
 
 def _mlp(inp: int, dim: int) -> nn.Sequential:
@@ -91,7 +99,7 @@ class ReferentStage(nn.Module):
         super().__init__()
         d = cfg.dim
         self.cfg = cfg
-        self.geometry = _mlp(GEOMETRY_FEATURES, d)
+        self.geometry = _mlp(geometry_width(cfg), d)
         self.fused = _mlp(fused_dim, d)
         self.lidar = _mlp(lidar_dim + LIDAR_EVIDENCE, d) if lidar_dim is not None else None
         self.radar = _mlp(radar_dim + RADAR_EVIDENCE, d) if radar_dim is not None else None
@@ -241,4 +249,4 @@ def referent_loss(logits: Tensor, targets: Tensor, padding: Tensor) -> tuple[Ten
     return bce, listwise
 
 
-__all__ = ["CandidateBatch", "ReferentStage", "referent_loss"]
+__all__ = ["CandidateBatch", "ReferentStage", "geometry_width", "referent_loss"]

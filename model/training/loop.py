@@ -112,20 +112,38 @@ SCENE_MODULES = ("lidar.", "radar.", "fusion.", "neck.", "head.")
 """Parameter-name prefixes of the scene encoder and detector (what ``--init-detector`` copies)."""
 
 
+def widened(own: torch.Tensor, given: torch.Tensor) -> torch.Tensor | None:
+    """``given`` ``(O, I)`` as a weight of ``own``'s shape ``(O, I + E)``: its columns first, the
+    ``E`` new input columns zero (a linear layer whose input grew computes what it did before),
+    or None when the shapes are not so related."""
+    if own.dim() != 2 or given.dim() != 2:
+        return None
+    if own.shape[0] != given.shape[0] or own.shape[1] <= given.shape[1]:
+        return None
+    out = torch.zeros_like(own)
+    out[:, : given.shape[1]] = given
+    return out
+
+
 def init_from(model: torch.nn.Module, path: str, prefixes: tuple[str, ...] = ()) -> int:
     """Copy every weight of the checkpoint at ``path`` whose name and shape match ``model``'s
     (e.g. the sensor branches, fusion, neck and head of a paper-path checkpoint into a referent
-    model), only names starting with one of ``prefixes`` when given; returns how many tensors
-    were copied."""
+    model), only names starting with one of ``prefixes`` when given; a linear weight whose input
+    grew (e.g. the referent stage's geometry with ``ReferentConfig.context`` switched on) is copied
+    into its first columns, the new ones zero (:func:`widened`). Returns how many tensors were
+    copied."""
     from model.checkpoint import read_checkpoint
 
     state = read_checkpoint(path)["state_dict"]
     own = model.state_dict()
-    same = {
-        k: v
-        for k, v in state.items()
-        if k in own and own[k].shape == v.shape and (not prefixes or k.startswith(prefixes))
-    }
+    same = {}
+    for k, v in state.items():
+        if k not in own or (prefixes and not k.startswith(prefixes)):
+            continue
+        if own[k].shape == v.shape:
+            same[k] = v
+        elif (grown := widened(own[k], v)) is not None:
+            same[k] = grown
     if not same:
         raise TrainingError(f"{path}: no weight matches this model's names and shapes")
     model.load_state_dict(same, strict=False)

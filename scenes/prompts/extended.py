@@ -83,8 +83,10 @@ that say it as a direction of travel ("heading the same way as us")."""
 FAMILY_TRIES = 12
 """Draws of one family before another family is drawn (keeps the realised shares near the rates)."""
 
-ABSURD_SPEED = {"Car": (42.0, 90.0), "Pedestrian": (9.0, 30.0), "Cyclist": (15.0, 40.0)}
-"""Ground speeds (m/s) no actor of a class reaches, for the unsatisfiable family."""
+ABSURD_SPEED = {"Car": (22.0, 90.0), "Pedestrian": (4.0, 30.0), "Cyclist": (10.0, 40.0)}
+"""Ground speeds (m/s) no actor of a class reaches, for the unsatisfiable family: from about 1.5
+times the fastest of its class in the world (:mod:`scenes.world.placement`: cars 15, cyclists 7,
+pedestrians 2 m/s) up, so that "a pedestrian doing 25 km/h" is said as well as "doing 100"."""
 
 _EXTREMES = ("nearest", "farthest", "leftmost", "rightmost", "fastest")
 
