@@ -52,19 +52,26 @@ PER_REFERENCE = 8
 """dx, dy, distance, depth beyond the far edge, own weight, rank / 4, bump 0, bump 1."""
 RELATION_FEATURES = len(CLASSES) * (len(REFERENCES) * PER_REFERENCE + 1)
 CONTEXT_FEATURES = RANK_FEATURES + RELATION_FEATURES
+RANK_NAMES = ("nearest", "farthest", "leftmost", "rightmost", "nearest_all", "farthest_all")
+"""The orderings of the rank block, in order."""
+
+
+def rank_columns(order: str) -> slice:
+    """Columns of ordering ``order`` (:data:`RANK_NAMES`): ``min(r, 6) / 4``, then the bumps."""
+    i = RANK_NAMES.index(order)
+    return slice(i * (1 + len(BUMPS)), (i + 1) * (1 + len(BUMPS)))
+
+
+def relation_columns(cls: str, reference: str) -> slice:
+    """Columns of the relation to class ``cls``'s ``reference`` (:data:`REFERENCES`): dx, dy,
+    distance, depth beyond its far edge, own weight, rank / 4, bump 0, bump 1."""
+    start = RANK_FEATURES + CLASSES.index(cls) * (len(REFERENCES) * PER_REFERENCE + 1)
+    start += REFERENCES.index(reference) * PER_REFERENCE
+    return slice(start, start + PER_REFERENCE)
 
 
 def _sigmoid(z: np.ndarray) -> np.ndarray:
     return 0.5 * (1.0 + np.tanh(0.5 * z))
-
-
-def soft_rank(key: np.ndarray, weight: np.ndarray, member: np.ndarray) -> np.ndarray:
-    """``(K,)`` soft ranks: for each ``i``, ``sum_j w_j sigmoid((key_j - key_i) / RANK_TAU)`` over
-    ``j != i`` with ``member[i, j]`` (``key``: larger comes first; ``member``: ``(K, K)`` bool)."""
-    k = len(key)
-    step = _sigmoid((key[None, :] - key[:, None]) / RANK_TAU)
-    mask = member & ~np.eye(k, dtype=bool)
-    return (step * weight[None, :] * mask).sum(axis=1)
 
 
 def _rank_code(rank: np.ndarray, bumps: tuple[int, ...]) -> np.ndarray:
@@ -74,15 +81,36 @@ def _rank_code(rank: np.ndarray, bumps: tuple[int, ...]) -> np.ndarray:
     return np.stack(cols, axis=1)
 
 
-def _softmax_rows(logits: np.ndarray, allowed: np.ndarray) -> np.ndarray:
-    """Row-wise softmax of ``logits`` ``(R, K)`` over the ``allowed`` entries (rows with none:
-    all zeros)."""
+def _softmax_last(logits: np.ndarray, allowed: np.ndarray) -> np.ndarray:
+    """Softmax of ``logits`` over the last axis, over the ``allowed`` entries only (a row with
+    none: all zeros)."""
     z = np.where(allowed, logits, -np.inf)
-    top = z.max(axis=1, keepdims=True)
+    top = z.max(axis=-1, keepdims=True)
     top = np.where(np.isfinite(top), top, 0.0)
     e = np.where(allowed, np.exp(z - top), 0.0)
-    total = e.sum(axis=1, keepdims=True)
+    total = e.sum(axis=-1, keepdims=True)
     return np.divide(e, total, out=np.zeros_like(e), where=total > 0)
+
+
+def _references(
+    x: np.ndarray, y: np.ndarray, depth: np.ndarray, labels: np.ndarray, log_w: np.ndarray
+) -> np.ndarray:
+    """Reference weights ``(C * R, K, K)``: ``[c * R + r, i, j]`` is candidate ``j``'s share in
+    class ``c``'s reference ``r`` (:data:`REFERENCES`) as seen from candidate ``i``."""
+    k = len(x)
+    n_cls, n_ref = len(CLASSES), len(REFERENCES)
+    of_c = labels[None, :] == np.arange(n_cls)[:, None]  # (C, K)
+    keys = np.stack([-depth, depth, y, -y])  # nearest, farthest, leftmost, rightmost
+    logit = keys[None, :, :] / REFERENCE_TAU + log_w  # (C, 4, K)
+    extreme = _softmax_last(logit, of_c[:, None, :])  # (C, 4, K): the same from every i
+    dist = np.hypot(x[:, None] - x[None, :], y[:, None] - y[None, :])
+    # The c candidate closest to candidate i, itself excluded.
+    allowed = of_c[:, None, :] & ~np.eye(k, dtype=bool)[None]
+    closest = _softmax_last((-dist / REFERENCE_TAU + log_w[None, :])[None], allowed)  # (C, K, K)
+    out = np.empty((n_cls, n_ref, k, k))
+    out[:, :4] = extreme[:, :, None, :]
+    out[:, 4] = closest
+    return out.reshape(n_cls * n_ref, k, k)
 
 
 def context_features(boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray) -> np.ndarray:
@@ -104,63 +132,64 @@ def context_features(boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray) 
     w = np.clip(np.asarray(scores, dtype=np.float64).reshape(k), 0.0, 1.0)
     depth = nearest_depth(b)
     x, y = b[:, 0], b[:, 1]
-    same = labels[:, None] == labels[None, :]
-    every = np.ones((k, k), dtype=bool)
+    others = ~np.eye(k, dtype=bool)
+    same = (labels[:, None] == labels[None, :]) & others
 
-    orders = (
-        (-depth, same), (depth, same), (y, same), (-y, same), (-depth, every), (depth, every),
-    )  # fmt: skip
-    parts = [_rank_code(soft_rank(key, w, member), BUMPS) for key, member in orders]
-    mass = np.array([w[labels == c].sum() for c in range(len(CLASSES))])
-    parts.append((mass[labels] / 4.0)[:, None])
+    # Ranks: [order, i, j] = w_j sigmoid((key_j - key_i) / tau) over the order's set.
+    keys = np.stack([-depth, depth, y, -y, -depth, depth])
+    member = np.stack([same] * 4 + [others] * 2)
+    step = _sigmoid((keys[:, None, :] - keys[:, :, None]) / RANK_TAU)
+    ranks = (step * w * member).sum(axis=2)  # (6, K)
+    n_cls = len(CLASSES)
+    mass = np.array([w[labels == c].sum() for c in range(n_cls)])
+    rank_part = np.concatenate(
+        [_rank_code(r, BUMPS) for r in ranks] + [(mass[labels] / 4.0)[:, None]], axis=1
+    )
 
-    log_w = 2.0 * np.log(np.maximum(w, 1e-6))
-    dist = np.hypot(x[:, None] - x[None, :], y[:, None] - y[None, :])
-    far_edge = 2.0 * x - depth
-    keys = {"nearest": -depth, "farthest": depth, "leftmost": y, "rightmost": -y}
-    for c in range(len(CLASSES)):
-        of_c = labels == c
-        for name in REFERENCES:
-            if name == "closest":
-                # Row i: the c candidate closest to candidate i, itself excluded.
-                allowed = of_c[None, :] & ~np.eye(k, dtype=bool)
-                a = _softmax_rows(-dist / REFERENCE_TAU + log_w[None, :], allowed)
-            else:
-                logit = keys[name] / REFERENCE_TAU + log_w
-                a = np.repeat(_softmax_rows(logit[None, :], of_c[None, :]), k, axis=0)
-            present = a.sum(axis=1) > 0
-            rx, ry, redge = a @ x, a @ y, a @ far_edge
-            dx, dy = rx - x, ry - y
-            d = np.hypot(dx, dy)
-            # Each candidate's soft rank by distance to (its own row's) reference among its class:
-            # "the pedestrian closest to the nearest car" is the pedestrian ranked 0.
-            to_ref = np.hypot(x[None, :] - rx[:, None], y[None, :] - ry[:, None])  # [i, j]
-            diag = to_ref[np.arange(k), np.arange(k)]
-            step = _sigmoid((diag[:, None] - to_ref) / RANK_TAU)
-            # The reference itself is no rival (weights 1 - a).
-            rivals = w[None, :] * (1.0 - a) * (same & ~np.eye(k, dtype=bool))
-            rank = (step * rivals).sum(axis=1)
-            block = np.concatenate(
+    # Relations, all C * R references at once ([q, i] rows).
+    a = _references(x, y, depth, labels, 2.0 * np.log(np.maximum(w, 1e-6)))
+    rx, ry, redge = a @ x, a @ y, a @ (2.0 * x - depth)  # (Q, K)
+    dx, dy = rx - x, ry - y
+    # Each candidate's soft rank by distance to (its own row's) reference among its class:
+    # "the pedestrian closest to the nearest car" is the pedestrian ranked 0; the reference
+    # itself is no rival (weights 1 - a).
+    to_ref = np.hypot(x[None, None, :] - rx[:, :, None], y[None, None, :] - ry[:, :, None])
+    diag = np.diagonal(to_ref, axis1=1, axis2=2)  # (Q, K)
+    step = _sigmoid((diag[:, :, None] - to_ref) / RANK_TAU)
+    rank = (step * (w * (1.0 - a)) * same).sum(axis=2)
+    code = np.exp(-((rank[..., None] - np.array([0.0, 1.0])) ** 2) / (2 * BUMP_WIDTH**2))
+    block = np.concatenate(
+        [
+            np.stack(
                 [
-                    np.stack(
-                        [
-                            dx / RELATION_SCALE,
-                            dy / RELATION_SCALE,
-                            d / RELATION_SCALE,
-                            (depth - redge) / RELATION_SCALE,
-                            np.diagonal(a),
-                        ],
-                        axis=1,
-                    ),
-                    _rank_code(rank, (0, 1)),
+                    dx / RELATION_SCALE,
+                    dy / RELATION_SCALE,
+                    np.hypot(dx, dy) / RELATION_SCALE,
+                    (depth - redge) / RELATION_SCALE,
+                    np.diagonal(a, axis1=1, axis2=2),
+                    np.minimum(rank, 6.0) / 4.0,
                 ],
-                axis=1,
-            )
-            parts.append(np.where(present[:, None], block, 0.0))
-        parts.append(np.full((k, 1), mass[c] / 4.0))
-    out = np.concatenate(parts, axis=1).astype(np.float32)
+                axis=2,
+            ),
+            code,
+        ],
+        axis=2,
+    )  # (Q, K, PER_REFERENCE)
+    block = np.where((a.sum(axis=2) > 0)[..., None], block, 0.0)
+    per_class = block.reshape(n_cls, len(REFERENCES), k, PER_REFERENCE).transpose(0, 2, 1, 3)
+    per_class = per_class.reshape(n_cls, k, len(REFERENCES) * PER_REFERENCE)
+    masses = np.broadcast_to(mass[:, None, None] / 4.0, (n_cls, k, 1))
+    relation_part = np.concatenate([per_class, masses], axis=2).transpose(1, 0, 2).reshape(k, -1)
+    out = np.concatenate([rank_part, relation_part], axis=1).astype(np.float32)
     assert out.shape == (k, CONTEXT_FEATURES), out.shape
     return out
 
 
-__all__ = ["CONTEXT_FEATURES", "context_features", "soft_rank"]
+__all__ = [
+    "CONTEXT_FEATURES",
+    "RANK_NAMES",
+    "REFERENCES",
+    "context_features",
+    "rank_columns",
+    "relation_columns",
+]
