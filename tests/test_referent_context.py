@@ -10,6 +10,7 @@ from model.config import ModelConfig, ReferentConfig
 from model.referent.context import (
     CONTEXT_FEATURES,
     context_features,
+    objectness,
     rank_columns,
     relation_columns,
 )
@@ -63,6 +64,17 @@ def test_a_faint_detection_barely_moves_a_rank():
     assert _rank(f, "nearest").tolist() == [0, 0]
     strong = context_features(boxes, labels, np.array([0.9, 0.9]))
     assert _rank(strong, "nearest").tolist() == [0, 1]
+
+
+def test_many_faint_detections_do_not_add_up_to_a_rank():
+    # Ten faint car peaks (score 0.1) in front of a real car: it is still the nearest car.
+    faint = [(5.0 + i, 8.0 - i, CAR, 0.1) for i in range(10)]
+    boxes, labels, scores = _scene([*faint, (20.0, 0.0, CAR, 0.8), (30.0, 0.0, CAR, 0.8)])
+    f = context_features(boxes, labels, scores)
+    assert _rank(f, "nearest")[10:].tolist() == [0, 1]
+    assert objectness(np.array([0.05, 0.1, 0.3, 0.6])) == pytest.approx(
+        [0.0067, 0.018, 0.5, 0.9975], abs=1e-3
+    )
 
 
 def test_relations_to_the_nearest_car():

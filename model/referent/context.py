@@ -12,19 +12,20 @@ about):
 - **Ranks** (:data:`RANK_FEATURES`): for each ordering (nearest and farthest by nearest-edge depth,
   leftmost and rightmost by centre ``y`` among the candidate's own class; nearest and farthest
   among all classes), a *soft rank* ``r_i = sum_j w_j sigmoid((key_j - key_i) / tau)`` over the
-  other candidates ``j`` (how many, weighted by their detection scores ``w_j``, come first), given
+  other candidates ``j`` (how many come first, each weighted by its objectness ``w_j``, a soft
+  step of its detection score at :data:`OBJECT_SCORE`: :func:`objectness`), given
   as ``min(r, 6) / 4`` and as bumps ``exp(-(r - n)^2 / (2 * 0.35^2))`` at ``n = 0 .. 3``; plus the
-  score mass of the candidate's class.
+  objectness mass of the candidate's class.
 - **Relations** (:data:`RELATION_FEATURES`): for each class ``c`` and each *reference* of that
   class (its nearest, farthest, leftmost, rightmost candidate, and the ``c`` candidate closest to
   this one), the reference's soft position (a softmax over ``c``'s candidates of the ordering key
-  over ``tau`` plus twice the log detection score, so that a faint detection must be much more
+  over ``tau`` plus the log objectness, so that a faint detection must be much more
   extreme to be the reference), and from it: ``dx``, ``dy`` and the BEV distance of the
   reference's centre from this candidate's, this candidate's depth beyond the reference's far edge
   (what "behind" measures), the weight this candidate itself has in the reference (1: it *is* the
   nearest car), and this candidate's soft rank by distance to the reference among its own class,
   as ``min(r, 6) / 4`` and bumps at 0 and 1 ("closest to", "second closest to"; the reference
-  itself is no rival), plus the score mass of each class.
+  itself is no rival), plus the objectness mass of each class.
 
 Frames and units: LiDAR frame (x forward, y left), metres; distances are divided by
 :data:`RELATION_SCALE`. ``K = 0`` gives ``(0, CONTEXT_FEATURES)``.
@@ -37,6 +38,8 @@ import numpy as np
 from model.referent.candidates import nearest_depth
 from scenes.actors import CLASSES
 
+OBJECT_SCORE = 0.3
+OBJECT_WIDTH = 0.05
 RANK_TAU = 0.5
 """Metres over which a soft rank's step goes from 0.27 to 0.73."""
 REFERENCE_TAU = 0.5
@@ -72,6 +75,14 @@ def relation_columns(cls: str, reference: str) -> slice:
 
 def _sigmoid(z: np.ndarray) -> np.ndarray:
     return 0.5 * (1.0 + np.tanh(0.5 * z))
+
+
+def objectness(scores: np.ndarray) -> np.ndarray:
+    """How much a candidate of detection score ``s`` counts as an object, ``(K,)`` in ``(0, 1)``:
+    ``sigmoid((s - OBJECT_SCORE) / OBJECT_WIDTH)``. A detector's faint peaks are many (up to 40
+    candidates above the 0.05 candidate threshold, about a third of a scene's score mass below
+    0.3); weighted by their raw scores they added up to whole places in a rank."""
+    return _sigmoid((np.clip(scores, 0.0, 1.0) - OBJECT_SCORE) / OBJECT_WIDTH)
 
 
 def _rank_code(rank: np.ndarray, bumps: tuple[int, ...]) -> np.ndarray:
@@ -129,7 +140,7 @@ def context_features(boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray) 
     if k == 0:
         return np.zeros((0, CONTEXT_FEATURES), dtype=np.float32)
     labels = np.asarray(labels, dtype=np.int64).reshape(k)
-    w = np.clip(np.asarray(scores, dtype=np.float64).reshape(k), 0.0, 1.0)
+    w = objectness(np.asarray(scores, dtype=np.float64).reshape(k))
     depth = nearest_depth(b)
     x, y = b[:, 0], b[:, 1]
     others = ~np.eye(k, dtype=bool)
@@ -147,7 +158,7 @@ def context_features(boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray) 
     )
 
     # Relations, all C * R references at once ([q, i] rows).
-    a = _references(x, y, depth, labels, 2.0 * np.log(np.maximum(w, 1e-6)))
+    a = _references(x, y, depth, labels, np.log(np.maximum(w, 1e-6)))
     rx, ry, redge = a @ x, a @ y, a @ (2.0 * x - depth)  # (Q, K)
     dx, dy = rx - x, ry - y
     # Each candidate's soft rank by distance to (its own row's) reference among its class:
@@ -190,6 +201,7 @@ __all__ = [
     "RANK_NAMES",
     "REFERENCES",
     "context_features",
+    "objectness",
     "rank_columns",
     "relation_columns",
 ]
