@@ -143,3 +143,24 @@ def test_a_grown_input_keeps_the_old_columns_and_zeroes_the_new():
     grown = widened(torch.empty(5, 7), old)
     assert grown is not None and torch.equal(grown[:, :3], old) and not grown[:, 3:].any()
     assert widened(torch.empty(6, 7), old) is None and widened(torch.empty(5, 3), old) is None
+
+
+def test_init_from_a_checkpoint_without_context_keeps_its_answers(tmp_path, untrained_model):
+    from model.checkpoint import save_checkpoint
+    from model.training.loop import init_from
+
+    old = untrained_model("referent", text_encoder="gru", referent__context=False)
+    path = save_checkpoint(tmp_path / "old.pt", old)
+    new = untrained_model("referent", seed=1, text_encoder="gru")
+    assert init_from(new, str(path)) == len(new.state_dict())
+    rng = np.random.default_rng(0)
+    lidar = np.c_[rng.uniform([2, -10, -1.5], [30, 10, 0.5], (3000, 3)), rng.uniform(0, 1, 3000)]
+    radar = np.c_[rng.uniform([2, -10, -1], [30, 10, 0.5], (60, 3)), rng.normal(0, 1, (60, 4))]
+    with torch.no_grad():
+        a = old.ground(
+            old.encode_scene(lidar.astype(np.float32), radar.astype(np.float32)), "a car"
+        )
+        b = new.ground(
+            new.encode_scene(lidar.astype(np.float32), radar.astype(np.float32)), "a car"
+        )
+    assert len(a.scores) and np.allclose(a.scores, b.scores, atol=1e-6)

@@ -125,13 +125,18 @@ def widened(own: torch.Tensor, given: torch.Tensor) -> torch.Tensor | None:
     return out
 
 
+WIDENABLE = ("referent.geometry.0.weight",)
+"""Checkpoint names of the weights whose input may have grown since (the referent stage's
+geometry layer, wider with ``ReferentConfig.context``); any other shape mismatch is not copied."""
+
+
 def init_from(model: torch.nn.Module, path: str, prefixes: tuple[str, ...] = ()) -> int:
     """Copy every weight of the checkpoint at ``path`` whose name and shape match ``model``'s
     (e.g. the sensor branches, fusion, neck and head of a paper-path checkpoint into a referent
-    model), only names starting with one of ``prefixes`` when given; a linear weight whose input
-    grew (e.g. the referent stage's geometry with ``ReferentConfig.context`` switched on) is copied
-    into its first columns, the new ones zero (:func:`widened`). Returns how many tensors were
-    copied."""
+    model), only names starting with one of ``prefixes`` when given; a weight of
+    :data:`WIDENABLE` whose input grew (the referent stage's geometry with
+    ``ReferentConfig.context`` switched on) is copied into its first columns, the new ones zero
+    (:func:`widened`). Returns how many tensors were copied."""
     from model.checkpoint import read_checkpoint
 
     state = read_checkpoint(path)["state_dict"]
@@ -142,7 +147,7 @@ def init_from(model: torch.nn.Module, path: str, prefixes: tuple[str, ...] = ())
             continue
         if own[k].shape == v.shape:
             same[k] = v
-        elif (grown := widened(own[k], v)) is not None:
+        elif k in WIDENABLE and (grown := widened(own[k], v)) is not None:
             same[k] = grown
     if not same:
         raise TrainingError(f"{path}: no weight matches this model's names and shapes")
