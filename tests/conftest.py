@@ -146,15 +146,25 @@ GROUNDINGS = ("tpcnet", "referent")
 """The two grounding paths (``model.config.ModelConfig.grounding``): the paper's, the shipped one."""
 
 
-def untrained_model(grounding: str = "tpcnet", seed: int = 0, **overrides: object):
+def untrained_model(
+    grounding: str = "tpcnet",
+    seed: int = 0,
+    operating_threshold: float | None = None,
+    **overrides: object,
+):
     """``build_model("small", grounding=grounding, **overrides)`` in eval mode, its random
     weights drawn from ``seed`` (torch's global random state is left as it was), so that a test
-    sees the same untrained model every run."""
+    sees the same untrained model every run. ``operating_threshold``: stored as a calibrated
+    checkpoint stores it (0: every candidate is an answer, for tests that draw answers whatever
+    an untrained stage happens to score)."""
     from model import build_model
 
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
-        return build_model("small", grounding=grounding, **overrides).eval()
+        model = build_model("small", grounding=grounding, **overrides).eval()
+    if operating_threshold is not None:
+        model.checkpoint_metadata = {"operating_threshold": operating_threshold}
+    return model
 
 
 @pytest.fixture(name="untrained_model", scope="session")

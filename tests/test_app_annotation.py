@@ -78,10 +78,9 @@ def annotating_app(
     """The app on a tiny root, on each grounding path."""
     root = write_tiny_root(tmp_path_factory.mktemp("annotate") / "root")
     with torch_threads(1):
-        model = untrained_model(grounding, text_encoder="gru", head__score_threshold=0.0)
-        # Every candidate is an answer: these tests draw answers, whatever an untrained
-        # referent stage happens to score (its probabilities straddle the uncalibrated 0.5).
-        model.checkpoint_metadata = {"operating_threshold": 0.0}
+        model = untrained_model(
+            grounding, text_encoder="gru", head__score_threshold=0.0, operating_threshold=0.0
+        )
         with serve_app(root, model) as app:
             yield app
 

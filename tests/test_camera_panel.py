@@ -115,10 +115,9 @@ def vod_app(tmp_path_factory, write_vod_root, torch_threads, serve_app, untraine
         sample_file(root / tree, IMAGE, "00001").unlink(missing_ok=True)
     sample_file(root / LIDAR_FOLDER, IMAGE, "00002").write_bytes(b"\xff\xd8 broken")
     with torch_threads(1):
-        model = untrained_model(grounding, text_encoder="gru", head__score_threshold=0.0)
-        # Every candidate is an answer: these tests draw answers, whatever an untrained
-        # referent stage happens to score (its probabilities straddle the uncalibrated 0.5).
-        model.checkpoint_metadata = {"operating_threshold": 0.0}
+        model = untrained_model(
+            grounding, text_encoder="gru", head__score_threshold=0.0, operating_threshold=0.0
+        )
         with serve_app(root, model, split="val", warm_up=False) as app:
             yield app
 

@@ -90,15 +90,15 @@ def from_plain(cls: type, data: Any, prefix: str) -> Any:
     if not isinstance(data, dict):
         raise ConfigError(f"config field {where!r}: expected a mapping, got {type(data).__name__}")
     hints = typing.get_type_hints(cls)
-    names = [f.name for f in dataclasses.fields(cls)]
+    fields = dataclasses.fields(cls)
+    names = [f.name for f in fields]
     unknown = sorted(set(data) - set(names))
     if unknown:
         path = f"{prefix}.{unknown[0]}" if prefix else unknown[0]
         raise ConfigError(
             f"config field {path!r} is unknown to this code ({cls.__name__} has {names})"
         )
-    fields = {f.name: f for f in dataclasses.fields(cls)}
-    data = {**{n: f.metadata[ABSENT] for n, f in fields.items() if ABSENT in f.metadata}, **data}
+    data = {**{f.name: f.metadata[ABSENT] for f in fields if ABSENT in f.metadata}, **data}
     missing = [n for n in names if n not in data]
     if missing:
         path = f"{prefix}.{missing[0]}" if prefix else missing[0]

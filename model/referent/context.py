@@ -86,10 +86,11 @@ def objectness(scores: np.ndarray) -> np.ndarray:
 
 
 def _rank_code(rank: np.ndarray, bumps: tuple[int, ...]) -> np.ndarray:
-    """``(K, 1 + len(bumps))``: ``min(r, 6) / 4`` and a Gaussian bump at each ``n``."""
+    """``(..., 1 + len(bumps))`` of soft ranks ``(...)``: ``min(r, 6) / 4`` and a Gaussian bump
+    at each ``n``."""
     cols = [np.minimum(rank, 6.0) / 4.0]
     cols += [np.exp(-((rank - n) ** 2) / (2 * BUMP_WIDTH**2)) for n in bumps]
-    return np.stack(cols, axis=1)
+    return np.stack(cols, axis=-1)
 
 
 def _softmax_last(logits: np.ndarray, allowed: np.ndarray) -> np.ndarray:
@@ -168,24 +169,17 @@ def context_features(boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray) 
     diag = np.diagonal(to_ref, axis1=1, axis2=2)  # (Q, K)
     step = _sigmoid((diag[:, :, None] - to_ref) / RANK_TAU)
     rank = (step * (w * (1.0 - a)) * same).sum(axis=2)
-    code = np.exp(-((rank[..., None] - np.array([0.0, 1.0])) ** 2) / (2 * BUMP_WIDTH**2))
-    block = np.concatenate(
+    place = np.stack(
         [
-            np.stack(
-                [
-                    dx / RELATION_SCALE,
-                    dy / RELATION_SCALE,
-                    np.hypot(dx, dy) / RELATION_SCALE,
-                    (depth - redge) / RELATION_SCALE,
-                    np.diagonal(a, axis1=1, axis2=2),
-                    np.minimum(rank, 6.0) / 4.0,
-                ],
-                axis=2,
-            ),
-            code,
+            dx / RELATION_SCALE,
+            dy / RELATION_SCALE,
+            np.hypot(dx, dy) / RELATION_SCALE,
+            (depth - redge) / RELATION_SCALE,
+            np.diagonal(a, axis1=1, axis2=2),
         ],
         axis=2,
-    )  # (Q, K, PER_REFERENCE)
+    )
+    block = np.concatenate([place, _rank_code(rank, (0, 1))], axis=2)  # (Q, K, PER_REFERENCE)
     block = np.where((a.sum(axis=2) > 0)[..., None], block, 0.0)
     per_class = block.reshape(n_cls, len(REFERENCES), k, PER_REFERENCE).transpose(0, 2, 1, 3)
     per_class = per_class.reshape(n_cls, k, len(REFERENCES) * PER_REFERENCE)

@@ -85,7 +85,8 @@ def describe_candidates(
     anchor: str,
     lidar_points: np.ndarray | None,
     radar_points: np.ndarray | None,
-    context: bool = False,
+    *,
+    context: bool,
 ) -> SceneCandidates:
     """Everything the referent stage reads about ``K`` candidates of one scene.
 
