@@ -235,6 +235,10 @@ class ReferentConfig:
         context: Each candidate also reads its ranks among the other candidates and its
             relations to them (:mod:`model.referent.context`: ordinals, "closest to the car").
             A config written before this field existed reads as False (:data:`ABSENT`).
+        text_gate: The sentence scales each geometry and context feature before the stage
+            embeds it (a FiLM-style gate, ``2 sigmoid(W t)`` of the mean text token ``t``, 1 at
+            initialisation): "the second pedestrian closest to the nearest car" picks its few
+            columns out of the context block. Older configs read as False (:data:`ABSENT`).
     """
 
     dim: int = 128
@@ -246,6 +250,7 @@ class ReferentConfig:
     candidate_threshold: float = 0.05
     min_score: float = 0.01
     context: bool = field(default=True, metadata={ABSENT: False})
+    text_gate: bool = field(default=True, metadata={ABSENT: False})
 
     def __post_init__(self) -> None:
         for name in ("dim", "layers", "heads", "ffn_ratio", "max_candidates"):

@@ -10,7 +10,10 @@ This stage sits after a text-agnostic C3D-RECHead and decides per candidate (see
    embedding (each the BEV features of that sensor's backbone pooled at the box, with that sensor's
    point evidence), plus the fused BEV features pooled at the box. The LiDAR and radar embeddings
    are scaled by a *prompt-conditioned gate* (sigmoid of a linear map of the mean text token): the
-   sentence decides which sensor to trust (the paper's argument for fusion, made per prompt).
+   sentence decides which sensor to trust (the paper's argument for fusion, made per prompt). With
+   ``ReferentConfig.text_gate`` the explicit geometry is gated the same way, feature by feature,
+   before its MLP (``2 sigmoid``, zero-initialised: 1 until trained), so that a sentence selects
+   the few rank or relation columns it asks about instead of the MLP mixing all of them.
 2. Text tokens: the frozen MiniLM token features concatenated with the value of the number each
    token belongs to (:mod:`model.nets.numerals`), projected to ``dim`` and contextualised by one
    self-attention layer.
@@ -104,6 +107,10 @@ class ReferentStage(nn.Module):
         self.lidar = _mlp(lidar_dim + LIDAR_EVIDENCE, d) if lidar_dim is not None else None
         self.radar = _mlp(radar_dim + RADAR_EVIDENCE, d) if radar_dim is not None else None
         self.sensor_gate = nn.Linear(d, 2 * d)
+        self.geometry_gate = nn.Linear(d, geometry_width(cfg)) if cfg.text_gate else None
+        if self.geometry_gate is not None:
+            nn.init.zeros_(self.geometry_gate.weight)
+            nn.init.zeros_(self.geometry_gate.bias)
         self.cand_norm = nn.LayerNorm(d)
         self.text_in = nn.Sequential(nn.Linear(text_dim + NUMERIC_FEATURES, d), nn.LayerNorm(d))
         self.text_context = nn.TransformerEncoderLayer(
@@ -125,17 +132,17 @@ class ReferentStage(nn.Module):
         x = self.text_in(torch.cat([tokens, numbers.to(tokens.dtype)], dim=-1))
         return self.text_context(x, src_key_padding_mask=padding)
 
-    def gates(self, text: Tensor, padding: Tensor) -> Tensor:
-        """Prompt-conditioned sensor gates ``(N, 2, dim)`` in ``(0, 1)``: LiDAR, radar."""
-        keep = (~padding).to(text.dtype)[..., None]
-        mean = (text * keep).sum(1) / keep.sum(1).clamp(min=1.0)
-        return torch.sigmoid(self.sensor_gate(mean)).view(-1, 2, self.cfg.dim)
-
     def candidate_tokens(self, cands: CandidateBatch, text: Tensor, text_padding: Tensor) -> Tensor:
-        """The candidates' tokens ``(N, K, dim)``: geometry + fused-map embeddings, plus each
-        sensor's embedding scaled by the prompt's gate for that sensor, normalised."""
-        gate = self.gates(text, text_padding)
-        x = self.geometry(cands.geometry) + self.fused(cands.fused)
+        """The candidates' tokens ``(N, K, dim)``: the (prompt-gated, with ``text_gate``)
+        geometry's and the fused map's embeddings, plus each sensor's embedding scaled by the
+        prompt's gate for that sensor ``(N, 2, dim)`` in ``(0, 1)``, normalised."""
+        keep = (~text_padding).to(text.dtype)[..., None]
+        mean = (text * keep).sum(1) / keep.sum(1).clamp(min=1.0)  # (N, dim)
+        gate = torch.sigmoid(self.sensor_gate(mean)).view(-1, 2, self.cfg.dim)
+        geometry = cands.geometry
+        if self.geometry_gate is not None:
+            geometry = geometry * (2.0 * torch.sigmoid(self.geometry_gate(mean)))[:, None, :]
+        x = self.geometry(geometry) + self.fused(cands.fused)
         if self.lidar is not None and cands.lidar is not None:
             x = x + gate[:, None, 0] * self.lidar(cands.lidar)
         if self.radar is not None and cands.radar is not None:

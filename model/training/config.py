@@ -24,6 +24,7 @@ from model.config import (
     TextFusionKind,
 )
 from model.training.data import DataSpecError, RootSpec, root_specs
+from scenes.prompts.sampling import FAMILIES
 
 AmpKind = Literal["none", "bf16"]
 """``--amp``: no autocast, or bfloat16 autocast of the forward passes (CUDA only)."""
@@ -169,6 +170,13 @@ class TrainConfig:
         help="referent path: share of generated prompts reworded by scenes.prompts.perturb "
         "(filler-word dropout, synonyms, typos, casing; the meaning kept), default 0",
     )
+    family_rates: tuple[float, ...] = option(
+        (),
+        flag="--family-rate",
+        help="--language extended: the share of prompts of each non-attribute family, given "
+        f"{len(FAMILIES) - 1} times in the order {', '.join(FAMILIES[1:])} (the attribute "
+        "family gets the rest; default: scenes.prompts.sampling.EXTENDED_RATES)",
+    )
     scene_limit: int = option(
         0, help="--freeze-scene: cache only the first N training scenes (0: all)"
     )
@@ -183,7 +191,7 @@ class TrainConfig:
     grad_clip: float = option(35.0, cli=False)
 
     def __post_init__(self) -> None:
-        for name in ("data", "data_weights", "scene_labels"):
+        for name in ("data", "data_weights", "scene_labels", "family_rates"):
             value = getattr(self, name)
             object.__setattr__(self, name, (value,) if isinstance(value, str) else tuple(value))
         try:
@@ -216,6 +224,15 @@ class TrainConfig:
             if value not in choices:
                 allowed = ", ".join(choices[:-1]) + " or " + choices[-1]
                 raise TrainingError(f"--{name} must be {allowed}, got {value!r}")
+        if self.family_rates:
+            r = self.family_rates
+            if self.language != "extended":
+                raise TrainingError("--family-rate is --language extended's")
+            if len(r) != len(FAMILIES) - 1 or min(r) < 0 or sum(r) > 1.0 + 1e-9:
+                raise TrainingError(
+                    f"--family-rate must be given {len(FAMILIES) - 1} times ({', '.join(FAMILIES[1:])}),"
+                    f" each >= 0, summing to <= 1; got {list(r)}"
+                )
         if not 0.0 <= self.text_noise <= 1.0:
             raise TrainingError(f"--text-noise must be in [0, 1], got {self.text_noise}")
         if self.grounding not in ("referent", "tpcnet"):

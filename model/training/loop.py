@@ -269,6 +269,7 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
         language=cfg.language,
         text_noise=cfg.text_noise,
         phrasing=cfg.phrasing,
+        family_rates=cfg.family_rates,
     )
 
     state = TrainState()

@@ -71,6 +71,8 @@ class ReferentTrainConfig:
             its labelled boxes, beside the given ones (:func:`frame_prompts`).
         language: Families of the generated prompts (``PromptConfig.language``).
         text_noise: Share of generated prompts reworded by :func:`scenes.prompts.perturb`.
+        family_rates: ``language="extended"``: the non-attribute families' shares
+            (``PromptConfig.family_rates``); empty: the generator's default.
     """
 
     prompts_per_scene: int = 8
@@ -84,11 +86,13 @@ class ReferentTrainConfig:
     label_prompts: int = 0
     language: str = "base"
     text_noise: float = 0.0
+    family_rates: tuple[float, ...] = ()
 
     def prompt_config(self) -> PromptConfig:
         """The generator's settings of these prompts."""
+        rates = {"family_rates": self.family_rates} if self.family_rates else {}
         return PromptConfig(
-            phrasing=self.phrasing, language=self.language, p_perturb=self.text_noise
+            phrasing=self.phrasing, language=self.language, p_perturb=self.text_noise, **rates
         )
 
 
