@@ -16,7 +16,9 @@ core of the 2-core machine of issue 20). Targets: ``encode_scene`` median ratio 
 
 Options (beside ``--quick``, ``--threads``, ``--out-dir`` of every benchmark): ``--frames N``,
 ``--repeats R``, ``--prompts P`` (per frame), ``--name`` (results file stem, default ``floor``;
-``<name>_baseline`` keeps a run of older code) and ``--baseline PATH`` (a previous result shown
+``<name>_baseline`` keeps a run of older code), ``--baseline-package DIR`` with
+``--baseline-checkpoint PATH`` (older code measured in the same run, on a checkpoint it can read)
+and ``--baseline PATH`` (a previous result shown
 beside this one; default ``bench/results/<name>_baseline.json`` where it exists). The section
 ``floor_1thread`` is the same benchmark with ``--threads 1 --name floor_1thread``.
 """
@@ -193,6 +195,7 @@ def run(
     name: str = "floor",
     baseline: Path | None = None,
     baseline_package: Path | None = None,
+    baseline_checkpoint: Path | None = None,
 ) -> BenchResult:
     """Measure (see the module docstring)."""
     start = time.perf_counter()
@@ -203,7 +206,8 @@ def run(
     model = loaded.model
     models = {"now": model}
     if baseline_package is not None:
-        models = {"baseline": load_baseline_package(baseline_package), "now": model}
+        old = load_baseline_package(baseline_package, baseline_checkpoint or CHECKPOINT)
+        models = {"baseline": old, "now": model}
     with tempfile.TemporaryDirectory(prefix="floor-vod-") as tmp:
         chosen = vod_frames(Path(tmp), n_frames, prompts=max(prompts, 1))
     for m in models.values():
@@ -287,7 +291,13 @@ def run(
         findings.append(
             f"Baseline: the code before issue 20's changes, measured in this run call by call "
             f"beside this checkout (package `model_base` under `{baseline_package}`, made by "
-            f"`{MAKE_BASELINE}`)."
+            f"`{MAKE_BASELINE}`), running "
+            + (
+                "the shipped checkpoint."
+                if baseline_checkpoint is None
+                else f"the checkpoint `{baseline_checkpoint}` (a checkpoint of the config that "
+                "code knows; its sizes are the shipped one's, so its FLOPs are too)."
+            )
         )
     elif base is not None:
         findings.append(f"Baseline ({base_path.name}): `{base_cmd}`.")
@@ -320,15 +330,17 @@ MAKE_BASELINE = (
 """How the baseline package was made (46e8685: main before issue 20's changes)."""
 
 
-def load_baseline_package(directory: Path) -> TPCNet:
-    """The shipped checkpoint loaded by an older copy of ``model`` renamed ``model_base`` (its
-    imports rewritten) under ``directory``, in eval mode, beside this repository's ``model``."""
+def load_baseline_package(directory: Path, checkpoint: Path = CHECKPOINT) -> TPCNet:
+    """``checkpoint`` (default: the shipped one) loaded by an older copy of ``model`` renamed
+    ``model_base`` (its imports rewritten) under ``directory``, in eval mode, beside this
+    repository's ``model``. An older copy may not know a newer checkpoint's config fields: give
+    it a checkpoint of its own time (``--baseline-checkpoint``)."""
     if not (directory / "model_base" / "checkpoint.py").is_file():
         raise SystemExit(f"error: {directory}/model_base/checkpoint.py not found; make it with: "
                          f"{MAKE_BASELINE}")  # fmt: skip
     sys.path.insert(0, str(directory))
     checkpoint = importlib.import_module("model_base.checkpoint")
-    return checkpoint.load_checkpoint(CHECKPOINT).eval()
+    return checkpoint.load_checkpoint(checkpoint).eval()
 
 
 def _call_data(c: TimedCall) -> dict:
@@ -354,6 +366,13 @@ def options(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="a folder holding an older copy of model/ as package model_base: measured in the "
         "same run, call by call beside this checkout",
+    )
+    parser.add_argument(
+        "--baseline-checkpoint",
+        type=Path,
+        default=None,
+        help="with --baseline-package: the checkpoint the older code runs (default: the shipped "
+        "one; an older copy of model/ may not read a newer checkpoint's config)",
     )
     parser.add_argument(
         "--baseline",

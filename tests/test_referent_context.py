@@ -143,13 +143,24 @@ def test_a_grown_input_keeps_the_old_columns_and_zeroes_the_new():
     grown = widened(torch.empty(5, 7), old)
     assert grown is not None and torch.equal(grown[:, :3], old) and not grown[:, 3:].any()
     assert widened(torch.empty(6, 7), old) is None and widened(torch.empty(5, 3), old) is None
+    rows = widened(torch.empty(8, 3), old, axis=0)  # a gate whose outputs grew
+    assert rows is not None and torch.equal(rows[:5], old) and not rows[5:].any()
+    assert (
+        widened(torch.empty(8, 3), old) is None and widened(torch.empty(5, 7), old, axis=0) is None
+    )
 
 
 def test_init_from_a_checkpoint_without_context_keeps_its_answers(tmp_path, untrained_model):
     from model.checkpoint import save_checkpoint
     from model.training.loop import init_from
 
-    old = untrained_model("referent", text_encoder="gru", referent__context=False)
+    old = untrained_model(
+        "referent",
+        text_encoder="gru",
+        referent__context=False,
+        referent__text_gate=False,
+        referent__numeric_compare=False,
+    )
     path = save_checkpoint(tmp_path / "old.pt", old)
     new = untrained_model("referent", seed=1, text_encoder="gru")
     gate = {k for k in new.state_dict() if "geometry_gate" in k}

@@ -239,6 +239,9 @@ class ReferentConfig:
             embeds it (a FiLM-style gate, ``2 sigmoid(W t)`` of the mean text token ``t``, 1 at
             initialisation): "the second pedestrian closest to the nearest car" picks its few
             columns out of the context block. Older configs read as False (:data:`ABSENT`).
+        numeric_compare: The stage also compares the prompt's numbers with each candidate's
+            depth and speed, explicitly (:mod:`model.referent.compare`: "faster than 50 km/h",
+            "beyond 40 m"). Older configs read as False (:data:`ABSENT`).
     """
 
     dim: int = 128
@@ -251,6 +254,7 @@ class ReferentConfig:
     min_score: float = 0.01
     context: bool = field(default=True, metadata={ABSENT: False})
     text_gate: bool = field(default=True, metadata={ABSENT: False})
+    numeric_compare: bool = field(default=True, metadata={ABSENT: False})
 
     def __post_init__(self) -> None:
         for name in ("dim", "layers", "heads", "ffn_ratio", "max_candidates"):

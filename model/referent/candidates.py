@@ -45,6 +45,11 @@ LIDAR_MARGIN = 0.2
 DEPTH_SCALE = 50.0
 LATERAL_SCALE = 25.0
 SPEED_SCALE = 10.0
+DEPTH_COLUMN = 12
+"""Column of :func:`geometry_features` holding the nearest-edge depth / :data:`DEPTH_SCALE`."""
+RADAR_MEDIAN_VC, RADAR_SLOPE_X, RADAR_SLOPE_Y = 4, 7, 8
+"""Columns of :func:`radar_evidence`: median ego-compensated radial velocity / :data:`SPEED_SCALE`,
+and the points' displacement over the ``time`` field along x and y."""
 
 
 def _boxes(boxes: np.ndarray) -> np.ndarray:
@@ -88,7 +93,7 @@ def geometry_features(boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray)
     out[:, 7:10] = np.log(np.maximum(b[:, 3:6], 1e-3))
     out[:, 10] = np.sin(b[:, 6])
     out[:, 11] = np.cos(b[:, 6])
-    out[:, 12] = depth / DEPTH_SCALE
+    out[:, DEPTH_COLUMN] = depth / DEPTH_SCALE
     out[:, 13] = np.arctan2(b[:, 1], b[:, 0])
     out[:, 14] = rng / DEPTH_SCALE
     out[:, 15] = np.abs(b[:, 1]) / LATERAL_SCALE

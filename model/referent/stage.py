@@ -13,7 +13,9 @@ This stage sits after a text-agnostic C3D-RECHead and decides per candidate (see
    sentence decides which sensor to trust (the paper's argument for fusion, made per prompt). With
    ``ReferentConfig.text_gate`` the explicit geometry is gated the same way, feature by feature,
    before its MLP (``2 sigmoid``, zero-initialised: 1 until trained), so that a sentence selects
-   the few rank or relation columns it asks about instead of the MLP mixing all of them.
+   the few rank or relation columns it asks about instead of the MLP mixing all of them. With
+   ``ReferentConfig.numeric_compare`` the geometry is first extended by the comparisons of the
+   prompt's numbers with the candidate's depth and speed (:mod:`model.referent.compare`).
 2. Text tokens: the frozen MiniLM token features concatenated with the value of the number each
    token belongs to (:mod:`model.nets.numerals`), projected to ``dim`` and contextualised by one
    self-attention layer.
@@ -36,6 +38,7 @@ from torch import Tensor, nn
 from model.config import ReferentConfig
 from model.nets.numerals import NUMERIC_FEATURES
 from model.referent.candidates import GEOMETRY_FEATURES, LIDAR_EVIDENCE, RADAR_EVIDENCE
+from model.referent.compare import COMPARE_FEATURES, compare_features
 from model.referent.context import CONTEXT_FEATURES
 
 
@@ -76,6 +79,12 @@ def geometry_width(cfg: ReferentConfig) -> int:
     return GEOMETRY_FEATURES + (CONTEXT_FEATURES if cfg.context else 0)
 
 
+def geometry_input_width(cfg: ReferentConfig) -> int:
+    """Width of the geometry the stage embeds: :func:`geometry_width`, plus the prompt's number
+    comparisons (:mod:`model.referent.compare`) with ``numeric_compare``."""
+    return geometry_width(cfg) + (COMPARE_FEATURES if cfg.numeric_compare else 0)
+
+
 def _mlp(inp: int, dim: int) -> nn.Sequential:
     return nn.Sequential(nn.Linear(inp, dim), nn.GELU(), nn.Linear(dim, dim))
 
@@ -102,12 +111,12 @@ class ReferentStage(nn.Module):
         super().__init__()
         d = cfg.dim
         self.cfg = cfg
-        self.geometry = _mlp(geometry_width(cfg), d)
+        self.geometry = _mlp(geometry_input_width(cfg), d)
         self.fused = _mlp(fused_dim, d)
         self.lidar = _mlp(lidar_dim + LIDAR_EVIDENCE, d) if lidar_dim is not None else None
         self.radar = _mlp(radar_dim + RADAR_EVIDENCE, d) if radar_dim is not None else None
         self.sensor_gate = nn.Linear(d, 2 * d)
-        self.geometry_gate = nn.Linear(d, geometry_width(cfg)) if cfg.text_gate else None
+        self.geometry_gate = nn.Linear(d, geometry_input_width(cfg)) if cfg.text_gate else None
         if self.geometry_gate is not None:
             nn.init.zeros_(self.geometry_gate.weight)
             nn.init.zeros_(self.geometry_gate.bias)
@@ -132,14 +141,21 @@ class ReferentStage(nn.Module):
         x = self.text_in(torch.cat([tokens, numbers.to(tokens.dtype)], dim=-1))
         return self.text_context(x, src_key_padding_mask=padding)
 
-    def candidate_tokens(self, cands: CandidateBatch, text: Tensor, text_padding: Tensor) -> Tensor:
-        """The candidates' tokens ``(N, K, dim)``: the (prompt-gated, with ``text_gate``)
-        geometry's and the fused map's embeddings, plus each sensor's embedding scaled by the
-        prompt's gate for that sensor ``(N, 2, dim)`` in ``(0, 1)``, normalised."""
+    def candidate_tokens(
+        self, cands: CandidateBatch, text: Tensor, numbers: Tensor, text_padding: Tensor
+    ) -> Tensor:
+        """The candidates' tokens ``(N, K, dim)``: the geometry's (with ``numeric_compare``
+        extended by the comparisons with the prompt's ``numbers`` ``(N, T, NUMERIC_FEATURES)``;
+        with ``text_gate`` gated by the prompt) and the fused map's embeddings, plus each
+        sensor's embedding scaled by the prompt's gate for that sensor ``(N, 2, dim)`` in
+        ``(0, 1)``, normalised."""
         keep = (~text_padding).to(text.dtype)[..., None]
         mean = (text * keep).sum(1) / keep.sum(1).clamp(min=1.0)  # (N, dim)
         gate = torch.sigmoid(self.sensor_gate(mean)).view(-1, 2, self.cfg.dim)
         geometry = cands.geometry
+        if self.cfg.numeric_compare:
+            compared = compare_features(geometry, cands.radar, numbers, text_padding)
+            geometry = torch.cat([geometry, compared], dim=-1)
         if self.geometry_gate is not None:
             geometry = geometry * (2.0 * torch.sigmoid(self.geometry_gate(mean)))[:, None, :]
         x = self.geometry(geometry) + self.fused(cands.fused)
@@ -162,8 +178,10 @@ class ReferentStage(nn.Module):
         (:meth:`_infer`): equal to float rounding, in a fraction of the time."""
         if not self.training and not torch.is_grad_enabled():
             return self._infer(cands, tokens, numbers, text_padding)
+        if numbers is None:
+            numbers = tokens.new_zeros((*tokens.shape[:2], NUMERIC_FEATURES))
         text = self.encode_text(tokens, numbers, text_padding)
-        x = self.candidate_tokens(cands, text, text_padding)
+        x = self.candidate_tokens(cands, text, numbers, text_padding)
         for block in self.blocks:
             x = block(
                 x,
@@ -190,7 +208,7 @@ class ReferentStage(nn.Module):
         text = self.text_in(torch.cat([tokens, numbers.to(tokens.dtype)], dim=-1))
         text = text + _attention(ctx.self_attn, ctx.norm1(text), None, text_mask)
         text = text + _feed_forward(ctx, ctx.norm2(text))
-        x = self.candidate_tokens(cands, text, text_padding)
+        x = self.candidate_tokens(cands, text, numbers, text_padding)
         cand_mask = _attend(cands.padding)
         for block in self.blocks:
             x = x + _attention(block.self_attn, block.norm1(x), None, cand_mask)
@@ -256,4 +274,10 @@ def referent_loss(logits: Tensor, targets: Tensor, padding: Tensor) -> tuple[Ten
     return bce, listwise
 
 
-__all__ = ["CandidateBatch", "ReferentStage", "geometry_width", "referent_loss"]
+__all__ = [
+    "CandidateBatch",
+    "ReferentStage",
+    "geometry_input_width",
+    "geometry_width",
+    "referent_loss",
+]

@@ -112,31 +112,39 @@ SCENE_MODULES = ("lidar.", "radar.", "fusion.", "neck.", "head.")
 """Parameter-name prefixes of the scene encoder and detector (what ``--init-detector`` copies)."""
 
 
-def widened(own: torch.Tensor, given: torch.Tensor) -> torch.Tensor | None:
-    """``given`` ``(O, I)`` as a weight of ``own``'s shape ``(O, I + E)``: its columns first, the
-    ``E`` new input columns zero (a linear layer whose input grew computes what it did before),
-    or None when the shapes are not so related."""
-    if own.dim() != 2 or given.dim() != 2:
+def widened(own: torch.Tensor, given: torch.Tensor, axis: int = 1) -> torch.Tensor | None:
+    """``given`` as a tensor of ``own``'s shape that is larger along ``axis`` only: ``given``
+    first along that axis, the new entries zero; or None when the shapes are not so related.
+    For a linear weight ``(O, I)`` whose input grew (``axis=1``) the layer computes what it did
+    before; for a gate whose outputs grew (``axis=0``, weight and bias) the new outputs are
+    ``2 sigmoid(0) = 1``."""
+    if own.dim() != given.dim() or not 0 <= axis < own.dim():
         return None
-    if own.shape[0] != given.shape[0] or own.shape[1] <= given.shape[1]:
+    others = [d for d in range(own.dim()) if d != axis]
+    if any(own.shape[d] != given.shape[d] for d in others) or own.shape[axis] <= given.shape[axis]:
         return None
     out = torch.zeros_like(own)
-    out[:, : given.shape[1]] = given
+    out.narrow(axis, 0, given.shape[axis]).copy_(given)
     return out
 
 
-WIDENABLE = ("referent.geometry.0.weight",)
-"""Checkpoint names of the weights whose input may have grown since (the referent stage's
-geometry layer, wider with ``ReferentConfig.context``); any other shape mismatch is not copied."""
+WIDENABLE = {
+    "referent.geometry.0.weight": 1,
+    "referent.geometry_gate.weight": 0,
+    "referent.geometry_gate.bias": 0,
+}
+"""Checkpoint names of the weights that may have grown since, and along which axis: the referent
+stage's geometry input (wider with ``ReferentConfig.context`` and ``numeric_compare``) and its
+text gate's outputs (as many as those inputs); any other shape mismatch is not copied."""
 
 
 def init_from(model: torch.nn.Module, path: str, prefixes: tuple[str, ...] = ()) -> int:
     """Copy every weight of the checkpoint at ``path`` whose name and shape match ``model``'s
     (e.g. the sensor branches, fusion, neck and head of a paper-path checkpoint into a referent
     model), only names starting with one of ``prefixes`` when given; a weight of
-    :data:`WIDENABLE` whose input grew (the referent stage's geometry with
-    ``ReferentConfig.context`` switched on) is copied into its first columns, the new ones zero
-    (:func:`widened`). Returns how many tensors were copied."""
+    :data:`WIDENABLE` that grew (the referent stage's geometry input with
+    ``ReferentConfig.context`` or ``numeric_compare`` switched on, and its text gate) is copied
+    into its first entries, the new ones zero (:func:`widened`). Returns how many tensors were copied."""
     from model.checkpoint import read_checkpoint
 
     state = read_checkpoint(path)["state_dict"]
@@ -147,7 +155,7 @@ def init_from(model: torch.nn.Module, path: str, prefixes: tuple[str, ...] = ())
             continue
         if own[k].shape == v.shape:
             same[k] = v
-        elif k in WIDENABLE and (grown := widened(own[k], v)) is not None:
+        elif k in WIDENABLE and (grown := widened(own[k], v, WIDENABLE[k])) is not None:
             same[k] = grown
     if not same:
         raise TrainingError(f"{path}: no weight matches this model's names and shapes")
