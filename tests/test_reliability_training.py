@@ -119,7 +119,7 @@ def test_signal_and_stop_epoch_then_resume_equal_an_uninterrupted_run(
     assert losses == wholes  # every step's loss, not only the end
     if stage == "freeze":  # the referent stage learned, the frozen detector did not move
         init = read_checkpoint(SHIPPED)["state_dict"]
-        moved = [k for k in a if not torch.equal(a[k], init[k])]
+        moved = [k for k in a if k not in init or not torch.equal(a[k], init[k])]
         assert moved and all(k.startswith("referent.") for k in moved)
 
 
