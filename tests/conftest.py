@@ -16,6 +16,9 @@ Fixtures (test modules take them by name; none imports another test module):
   seed (the same model every call), in eval mode, on either grounding path; ``grounding``: a
   module-scoped parameter, ``"tpcnet"`` (the paper's path) then ``"referent"`` (the shipped
   path), so that a module's app fixture taking it runs the module's tests on both paths.
+- ``random_scene(seed=0) -> (lidar, radar)``: a random cloud of 3,000 LiDAR points ``(N, 4)``
+  and 60 radar points ``(M, 7)`` (float32, LiDAR frame, 2-30 m ahead), for tests that only need
+  some candidates.
 - ``ws_client(port)``: a :class:`BrowserLikeClient` speaking viser's websocket protocol.
 - ``chromium``: Debian's Chromium (the test skips without it); ``chromium_args``: its flags.
 - ``torchrun(args, log, timeout)``: ``torchrun`` with 2 CPU processes on a free local port, output
@@ -165,6 +168,19 @@ def untrained_model(
     if operating_threshold is not None:
         model.checkpoint_metadata = {"operating_threshold": operating_threshold}
     return model
+
+
+def random_scene(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Random LiDAR ``(3000, 4)`` and radar ``(60, 7)`` points, float32, 2-30 m ahead."""
+    rng = np.random.default_rng(seed)
+    lidar = np.c_[rng.uniform([2, -10, -1.5], [30, 10, 0.5], (3000, 3)), rng.uniform(0, 1, 3000)]
+    radar = np.c_[rng.uniform([2, -10, -1], [30, 10, 0.5], (60, 3)), rng.normal(0, 1, (60, 4))]
+    return lidar.astype(np.float32), radar.astype(np.float32)
+
+
+@pytest.fixture(name="random_scene", scope="session")
+def _random_scene() -> Callable[..., tuple[np.ndarray, np.ndarray]]:
+    return random_scene
 
 
 @pytest.fixture(name="untrained_model", scope="session")

@@ -85,15 +85,13 @@ def test_crossing_motion_counts_as_speed_and_no_number_gives_zeros():
     assert not compare_features(geometry, radar, numbers, padding).any()
 
 
-def test_the_stage_reads_the_comparisons(untrained_model):
+def test_the_stage_reads_the_comparisons(untrained_model, random_scene):
     model = untrained_model("referent", text_encoder="gru", operating_threshold=0.0)
     stage = model.grounding.stage
     torch.nn.init.normal_(stage.geometry[0].weight, std=1.0)
-    rng = np.random.default_rng(0)
-    lidar = np.c_[rng.uniform([2, -10, -1.5], [30, 10, 0.5], (3000, 3)), rng.uniform(0, 1, 3000)]
-    radar = np.c_[rng.uniform([2, -10, -1], [30, 10, 0.5], (60, 3)), rng.normal(0, 1, (60, 4))]
+    lidar, radar = random_scene()
     with torch.no_grad():
-        scene = model.encode_scene(lidar.astype(np.float32), radar.astype(np.float32))
+        scene = model.encode_scene(lidar, radar)
         a = model.ground(scene, "cars faster than 10 m/s").scores
         cols = stage.geometry[0].weight[:, -COMPARE_FEATURES:]
         cols.zero_()

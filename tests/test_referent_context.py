@@ -150,7 +150,9 @@ def test_a_grown_input_keeps_the_old_columns_and_zeroes_the_new():
     )
 
 
-def test_init_from_a_checkpoint_without_context_keeps_its_answers(tmp_path, untrained_model):
+def test_init_from_a_checkpoint_without_context_keeps_its_answers(
+    tmp_path, untrained_model, random_scene
+):
     from model.checkpoint import save_checkpoint
     from model.training.loop import init_from
 
@@ -166,20 +168,16 @@ def test_init_from_a_checkpoint_without_context_keeps_its_answers(tmp_path, untr
     gate = {k for k in new.state_dict() if "geometry_gate" in k}
     assert len(gate) == 2  # its text gate (ReferentConfig.text_gate) is new, and starts at 1
     assert init_from(new, str(path)) == len(new.state_dict()) - len(gate)
-    rng = np.random.default_rng(0)
-    lidar = np.c_[rng.uniform([2, -10, -1.5], [30, 10, 0.5], (3000, 3)), rng.uniform(0, 1, 3000)]
-    radar = np.c_[rng.uniform([2, -10, -1], [30, 10, 0.5], (60, 3)), rng.normal(0, 1, (60, 4))]
+    lidar, radar = random_scene()
     with torch.no_grad():
-        a = old.ground(
-            old.encode_scene(lidar.astype(np.float32), radar.astype(np.float32)), "a car"
-        )
-        b = new.ground(
-            new.encode_scene(lidar.astype(np.float32), radar.astype(np.float32)), "a car"
-        )
+        a = old.ground(old.encode_scene(lidar, radar), "a car")
+        b = new.ground(new.encode_scene(lidar, radar), "a car")
     assert len(a.scores) and np.allclose(a.scores, b.scores, atol=1e-6)
 
 
-def test_the_text_gate_reads_the_sentence_and_older_configs_go_without(untrained_model):
+def test_the_text_gate_reads_the_sentence_and_older_configs_go_without(
+    untrained_model, random_scene
+):
     data = ModelConfig().to_dict()
     del data["referent"]["text_gate"]
     assert ModelConfig.from_dict(data).referent == ReferentConfig(text_gate=False)
@@ -187,11 +185,9 @@ def test_the_text_gate_reads_the_sentence_and_older_configs_go_without(untrained
     stage = model.grounding.stage
     assert stage.geometry_gate is not None and not stage.geometry_gate.weight.any()
     torch.nn.init.normal_(stage.geometry_gate.weight, std=1.0)
-    rng = np.random.default_rng(0)
-    lidar = np.c_[rng.uniform([2, -10, -1.5], [30, 10, 0.5], (3000, 3)), rng.uniform(0, 1, 3000)]
-    radar = np.c_[rng.uniform([2, -10, -1], [30, 10, 0.5], (60, 3)), rng.normal(0, 1, (60, 4))]
+    lidar, radar = random_scene()
     with torch.no_grad():
-        scene = model.encode_scene(lidar.astype(np.float32), radar.astype(np.float32))
+        scene = model.encode_scene(lidar, radar)
         a = model.ground(scene, "a car").scores
         torch.nn.init.zeros_(stage.geometry_gate.weight)
         b = model.ground(scene, "a car").scores
