@@ -480,3 +480,24 @@ def test_extended_language_banks_empty_answers_and_reworded_prompts(tiny_root):
     assert not any(not t.any() for s in base for t in s.targets)
     base_texts = {t for s in base for t in s.prompts}
     assert not base_texts & {t for s in extended for t in s.prompts}
+
+
+def test_family_rates_reach_the_generator_and_bad_ones_are_one_line_errors(tiny_root):
+    """``--family-rate``, given once per family, sets the extended generator's shares; a wrong
+    count, a negative share, a sum above 1 or the base language is refused with a one-line error."""
+    from model.training.config import TrainingError, parse_args
+
+    rates = ["0.05", "0.12", "0.06", "0.06", "0.17", "0.17", "0.03"]
+    flags = [x for r in rates for x in ("--family-rate", r)]
+    base = ["--data", str(tiny_root), "--out", "/tmp/x"]
+    cfg, _ = parse_args([*base, "--language", "extended", *flags])
+    assert cfg.family_rates == tuple(float(r) for r in rates)
+    rcfg = ReferentTrainConfig(language="extended", family_rates=cfg.family_rates)
+    assert rcfg.prompt_config().family_rates == cfg.family_rates
+    assert ReferentTrainConfig(language="extended").prompt_config().family_rates != cfg.family_rates
+    for bad in (flags[:4], [*flags[:-1], "-0.1"], [*flags[:-1], "0.9"]):
+        with pytest.raises(TrainingError, match="--family-rate") as err:
+            parse_args([*base, "--language", "extended", *bad])
+        assert "\n" not in str(err.value)
+    with pytest.raises(TrainingError, match="--language extended"):
+        parse_args([*base, *flags])

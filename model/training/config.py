@@ -24,7 +24,7 @@ from model.config import (
     TextFusionKind,
 )
 from model.training.data import DataSpecError, RootSpec, root_specs
-from scenes.prompts.sampling import FAMILIES
+from scenes.prompts.sampling import FAMILIES, PromptConfig
 
 AmpKind = Literal["none", "bf16"]
 """``--amp``: no autocast, or bfloat16 autocast of the forward passes (CUDA only)."""
@@ -225,14 +225,14 @@ class TrainConfig:
                 allowed = ", ".join(choices[:-1]) + " or " + choices[-1]
                 raise TrainingError(f"--{name} must be {allowed}, got {value!r}")
         if self.family_rates:
-            r = self.family_rates
             if self.language != "extended":
                 raise TrainingError("--family-rate is --language extended's")
-            if len(r) != len(FAMILIES) - 1 or min(r) < 0 or sum(r) > 1.0 + 1e-9:
+            try:  # the generator's own rule for the shares (one home)
+                PromptConfig(language="extended", family_rates=self.family_rates)
+            except ValueError as exc:
                 raise TrainingError(
-                    f"--family-rate must be given {len(FAMILIES) - 1} times ({', '.join(FAMILIES[1:])}),"
-                    f" each >= 0, summing to <= 1; got {list(r)}"
-                )
+                    f"--family-rate (given once per family: {', '.join(FAMILIES[1:])}): {exc}"
+                ) from exc
         if not 0.0 <= self.text_noise <= 1.0:
             raise TrainingError(f"--text-noise must be in [0, 1], got {self.text_noise}")
         if self.grounding not in ("referent", "tpcnet"):
