@@ -134,10 +134,8 @@ class ReferentStage(nn.Module):
         self.out_norm = nn.LayerNorm(d)
         self.out = nn.Linear(d, 1)
 
-    def encode_text(self, tokens: Tensor, numbers: Tensor | None, padding: Tensor) -> Tensor:
+    def encode_text(self, tokens: Tensor, numbers: Tensor, padding: Tensor) -> Tensor:
         """``(N, T, D_text)`` tokens + ``(N, T, NUMERIC_FEATURES)`` numbers -> ``(N, T, dim)``."""
-        if numbers is None:
-            numbers = tokens.new_zeros((*tokens.shape[:2], NUMERIC_FEATURES))
         x = self.text_in(torch.cat([tokens, numbers.to(tokens.dtype)], dim=-1))
         return self.text_context(x, src_key_padding_mask=padding)
 
@@ -176,10 +174,10 @@ class ReferentStage(nn.Module):
 
         At inference (eval mode, no gradient) the same computation runs written out
         (:meth:`_infer`): equal to float rounding, in a fraction of the time."""
+        if numbers is None:  # features made without numerals (TextFeatures.numbers is optional)
+            numbers = tokens.new_zeros((*tokens.shape[:2], NUMERIC_FEATURES))
         if not self.training and not torch.is_grad_enabled():
             return self._infer(cands, tokens, numbers, text_padding)
-        if numbers is None:
-            numbers = tokens.new_zeros((*tokens.shape[:2], NUMERIC_FEATURES))
         text = self.encode_text(tokens, numbers, text_padding)
         x = self.candidate_tokens(cands, text, numbers, text_padding)
         for block in self.blocks:
@@ -195,14 +193,12 @@ class ReferentStage(nn.Module):
     # ---------------------------------------------------------------- inference, written out
 
     def _infer(
-        self, cands: CandidateBatch, tokens: Tensor, numbers: Tensor | None, text_padding: Tensor
+        self, cands: CandidateBatch, tokens: Tensor, numbers: Tensor, text_padding: Tensor
     ) -> Tensor:
         """:meth:`forward` without gradients: the layers' arithmetic called directly
         (``F.linear``, fused ``scaled_dot_product_attention``, ``F.layer_norm``) instead of
         through ``nn.TransformerEncoderLayer`` / ``nn.TransformerDecoderLayer`` and their
         fast-path checks; masks are dropped where nothing is padded."""
-        if numbers is None:
-            numbers = tokens.new_zeros((*tokens.shape[:2], NUMERIC_FEATURES))
         text_mask = _attend(text_padding)
         ctx = self.text_context
         text = self.text_in(torch.cat([tokens, numbers.to(tokens.dtype)], dim=-1))
