@@ -127,3 +127,38 @@ def test_carry_moves_by_radar_speed_and_ego_motion_and_refits_only_unknown_speed
     assert not never[0].refit
     # A box whose speed the radar tells is not refit by default.
     assert not carry_boxes(away[None], ["Car"], radar, motion, 0.1, lidar)[0].refit
+
+
+def test_a_step_by_hand_pauses_the_drive(
+    sequence_root, ws_client, torch_threads, serve_app, untrained_model, monkeypatch
+) -> None:
+    """Page Up / Previous while the drive plays pauses it: the player cannot step over the
+    frame the person chose (it did, and the browser test saw the drive end on its last frame)."""
+    import app.annotate_tab.sequence as sequence
+
+    monkeypatch.setattr(sequence, "FRAME_RATE", 2.0)  # a step every 0.5 s: room to step between
+    root, _ = sequence_root
+    with torch_threads(1):
+        model = untrained_model("tpcnet", text_encoder="gru")
+        with serve_app(root, model) as app:
+            client = ws_client(app.port)
+            client.pump_until(
+                lambda: any("of this drive" in m for m in client.markdown.values()),
+                15,
+                "the Sequence folder",
+            )
+            start = app.frame.index
+            client.click("Play")
+            client.pump_until(lambda: app.frame.index == start + 1, 15, "the drive playing")
+            client.click("Drive", "Previous")
+            client.pump_until(lambda: app.frame.index == start, 15, "the step back")
+            client.drain(1.5)  # the player would have stepped twice by now
+            assert app.frame.index == start
+            assert not any(t.name == "talk2pc-play" and t.is_alive() for t in _threads())
+            client.close()
+
+
+def _threads():
+    import threading
+
+    return threading.enumerate()

@@ -140,9 +140,22 @@ class SequencePanel:
         return self.panel.session.go_to(found[0].frames[k].first) is not None
 
     def step(self, delta: int) -> bool:
-        """Show the drive's frame ``delta`` frames on (negative: back); False at its ends."""
+        """Show the drive's frame ``delta`` frames on (negative: back); False at its ends. A
+        step by hand (a key, a button) pauses the drive first, so the player cannot step over it."""
+        self.pause()
+        return self._step(delta)
+
+    def _step(self, delta: int) -> bool:
         found = self.position()
         return found is not None and self.go_to_frame(found[1] + delta)
+
+    def pause(self) -> None:
+        """Stop playing and wait for the player's last step (a no-op when not playing, or when
+        called by the player itself)."""
+        self._playing.clear()
+        player = self._player
+        if player is not None and player is not threading.current_thread():
+            player.join(timeout=30.0)
 
     def toggle_play(self) -> None:
         """Play the drive from the frame on screen, or pause it (Space)."""
@@ -165,7 +178,7 @@ class SequencePanel:
         try:
             while self._playing.is_set() and not self.panel.session.closed:
                 start = time.monotonic()
-                if not self.step(1):
+                if not self._step(1):
                     break
                 time.sleep(max(0.0, period - (time.monotonic() - start)))
         except Exception as exc:
@@ -186,7 +199,7 @@ class SequencePanel:
         """Carry the current pair to the drive's next frame (see the module docstring); asks
         first when the draft holds unsaved boxes (carrying leaves them unsaved on this frame)."""
         p = self.panel
-        self._playing.clear()
+        self.pause()
         with p.session.lock:
             draft = p.editor.draft
             unsaved = bool(draft.boxes) and p.on_screen() and p.editor.history.can_undo
@@ -271,4 +284,4 @@ class SequencePanel:
             if event.client is None:  # set by the server (a frame shown)
                 return
             k = int(round(float(w.slider.value))) - 1
-            p.guarded(lambda: self.go_to_frame(k))
+            p.guarded(lambda: (self.pause(), self.go_to_frame(k)))
