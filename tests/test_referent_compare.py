@@ -24,6 +24,7 @@ from model.referent.compare import (
     compare_features,
     prompt_numbers,
 )
+from model.referent.stage import geometry_width
 
 
 def _numbers(*texts: str) -> tuple[torch.Tensor, torch.Tensor]:
@@ -93,7 +94,8 @@ def test_the_stage_reads_the_comparisons(untrained_model, random_scene):
     with torch.no_grad():
         scene = model.encode_scene(lidar, radar)
         a = model.ground(scene, "cars faster than 10 m/s").scores
-        cols = stage.geometry[0].weight[:, -COMPARE_FEATURES:]
+        start = geometry_width(stage.cfg)  # the comparisons follow the geometry and context
+        cols = stage.geometry[0].weight[:, start : start + COMPARE_FEATURES]
         cols.zero_()
         b = model.ground(scene, "cars faster than 10 m/s").scores
     assert len(a) and not np.allclose(a, b, atol=1e-4)

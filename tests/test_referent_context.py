@@ -162,6 +162,7 @@ def test_init_from_a_checkpoint_without_context_keeps_its_answers(
         referent__context=False,
         referent__text_gate=False,
         referent__numeric_compare=False,
+        referent__subset_ranks=False,
     )
     path = save_checkpoint(tmp_path / "old.pt", old)
     new = untrained_model("referent", seed=1, text_encoder="gru")

@@ -242,6 +242,11 @@ class ReferentConfig:
         numeric_compare: The stage also compares the prompt's numbers with each candidate's
             depth and speed, explicitly (:mod:`model.referent.compare`: "faster than 50 km/h",
             "beyond 40 m"). Older configs read as False (:data:`ABSENT`).
+        subset_ranks: Each candidate also reads its ranks by speed and within its side or
+            motion state of its class, and its relations to each class's fastest, slowest,
+            moving, stationary, left, ahead and right candidate (:mod:`model.referent.subsets`:
+            "the second fastest cyclist", "the second cyclist on the left", "the car nearest to
+            the fastest cyclist"). Older configs read as False (:data:`ABSENT`).
     """
 
     dim: int = 128
@@ -255,6 +260,7 @@ class ReferentConfig:
     context: bool = field(default=True, metadata={ABSENT: False})
     text_gate: bool = field(default=True, metadata={ABSENT: False})
     numeric_compare: bool = field(default=True, metadata={ABSENT: False})
+    subset_ranks: bool = field(default=True, metadata={ABSENT: False})
 
     def __post_init__(self) -> None:
         for name in ("dim", "layers", "heads", "ffn_ratio", "max_candidates"):

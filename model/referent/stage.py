@@ -15,7 +15,9 @@ This stage sits after a text-agnostic C3D-RECHead and decides per candidate (see
    before its MLP (``2 sigmoid``, zero-initialised: 1 until trained), so that a sentence selects
    the few rank or relation columns it asks about instead of the MLP mixing all of them. With
    ``ReferentConfig.numeric_compare`` the geometry is first extended by the comparisons of the
-   prompt's numbers with the candidate's depth and speed (:mod:`model.referent.compare`).
+   prompt's numbers with the candidate's depth and speed (:mod:`model.referent.compare`), and with
+   ``ReferentConfig.subset_ranks`` by the ranks by speed and within a side or motion state, and
+   the relations to references picked by speed, side or motion (:mod:`model.referent.subsets`).
 2. Text tokens: the frozen MiniLM token features concatenated with the value of the number each
    token belongs to (:mod:`model.nets.numerals`), projected to ``dim`` and contextualised by one
    self-attention layer.
@@ -40,6 +42,7 @@ from model.nets.numerals import NUMERIC_FEATURES
 from model.referent.candidates import GEOMETRY_FEATURES, LIDAR_EVIDENCE, RADAR_EVIDENCE
 from model.referent.compare import COMPARE_FEATURES, compare_features
 from model.referent.context import CONTEXT_FEATURES
+from model.referent.subsets import SUBSET_FEATURES, subset_features
 
 
 @dataclass(frozen=True)
@@ -81,8 +84,13 @@ def geometry_width(cfg: ReferentConfig) -> int:
 
 def geometry_input_width(cfg: ReferentConfig) -> int:
     """Width of the geometry the stage embeds: :func:`geometry_width`, plus the prompt's number
-    comparisons (:mod:`model.referent.compare`) with ``numeric_compare``."""
-    return geometry_width(cfg) + (COMPARE_FEATURES if cfg.numeric_compare else 0)
+    comparisons (:mod:`model.referent.compare`) with ``numeric_compare``, plus the subset ranks
+    and picked references (:mod:`model.referent.subsets`) with ``subset_ranks``."""
+    return (
+        geometry_width(cfg)
+        + (COMPARE_FEATURES if cfg.numeric_compare else 0)
+        + (SUBSET_FEATURES if cfg.subset_ranks else 0)
+    )
 
 
 def _mlp(inp: int, dim: int) -> nn.Sequential:
@@ -154,6 +162,9 @@ class ReferentStage(nn.Module):
         if self.cfg.numeric_compare:
             compared = compare_features(geometry, cands.radar, numbers, text_padding)
             geometry = torch.cat([geometry, compared], dim=-1)
+        if self.cfg.subset_ranks:
+            subsets = subset_features(cands.geometry, cands.radar, cands.padding)
+            geometry = torch.cat([geometry, subsets], dim=-1)
         if self.geometry_gate is not None:
             geometry = geometry * (2.0 * torch.sigmoid(self.geometry_gate(mean)))[:, None, :]
         x = self.geometry(geometry) + self.fused(cands.fused)
