@@ -387,7 +387,7 @@ def _reference(sc: _Scene, r: ActorFeatures) -> Predicate | None:
     if side is not None:
         cands.append(Predicate(r.cls, (OnSide(side),)))
     cands.append(Predicate(r.cls, (MotionState(r.speed > MOVING_SPEED),)))
-    cands += [Predicate(r.cls, (), Extreme(e)) for e in _EXTREMES[:4]]
+    cands += [Predicate(r.cls, (), Extreme(e)) for e in _EXTREMES]
     for pred in cands:
         res = sc.analyse(pred)
         if res.ids == (r.actor_id,) and not res.conflicts and res.crisp:
