@@ -25,6 +25,7 @@ from model.referent.compare import (
     prompt_numbers,
 )
 from model.referent.stage import geometry_width
+from model.referent.subsets import SUBSET_FEATURES
 
 
 def _numbers(*texts: str) -> tuple[torch.Tensor, torch.Tensor]:
@@ -94,7 +95,8 @@ def test_the_stage_reads_the_comparisons(untrained_model, random_scene):
     with torch.no_grad():
         scene = model.encode_scene(lidar, radar)
         a = model.ground(scene, "cars faster than 10 m/s").scores
-        start = geometry_width(stage.cfg)  # the comparisons follow the geometry and context
+        # The comparisons follow the geometry and context, before the subset features.
+        start = geometry_width(stage.cfg) - SUBSET_FEATURES
         cols = stage.geometry[0].weight[:, start : start + COMPARE_FEATURES]
         cols.zero_()
         b = model.ground(scene, "cars faster than 10 m/s").scores

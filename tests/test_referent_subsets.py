@@ -13,6 +13,7 @@ from model.referent.candidates import (
     geometry_features,
 )
 from model.referent.compare import COMPARE_FEATURES
+from model.referent.stage import geometry_width
 from model.referent.subsets import (
     BUMPS,
     PER_PICKED,
@@ -22,7 +23,6 @@ from model.referent.subsets import (
     side_probabilities,
     subset_features,
 )
-from model.referent.stage import geometry_width
 from scenes.actors import CLASSES
 
 CAR, PED, CYC = (CLASSES.index(c) for c in ("Car", "Pedestrian", "Cyclist"))
@@ -132,7 +132,7 @@ def test_the_stage_reads_the_subset_features(untrained_model, random_scene) -> N
     with torch.no_grad():
         scene = model.encode_scene(lidar, radar)
         a = model.ground(scene, "the second fastest car").scores
-        start = geometry_width(stage.cfg) + COMPARE_FEATURES
+        start = geometry_width(stage.cfg) + COMPARE_FEATURES - SUBSET_FEATURES  # they come last
         assert stage.geometry[0].weight.shape[1] == start + SUBSET_FEATURES
         stage.geometry[0].weight[:, start:].zero_()
         b = model.ground(scene, "the second fastest car").scores

@@ -97,6 +97,7 @@ class ReferentGrounding(GroundingHead):
             lidar if self.cfg.uses_lidar else None,
             radar if self.cfg.uses_radar else None,
             context=self.cfg.referent.context,
+            subsets=self.cfg.referent.subset_ranks,
         )
 
     def refer(self, cands: SceneCandidates | list[SceneCandidates], text: TextFeatures) -> Tensor:

@@ -36,6 +36,7 @@ from model.referent.candidates import (
 )
 from model.referent.context import context_features
 from model.referent.stage import CandidateBatch
+from model.referent.subsets import subset_features
 
 
 @dataclass(frozen=True)
@@ -87,6 +88,7 @@ def describe_candidates(
     radar_points: np.ndarray | None,
     *,
     context: bool,
+    subsets: bool = False,
 ) -> SceneCandidates:
     """Everything the referent stage reads about ``K`` candidates of one scene.
 
@@ -99,6 +101,8 @@ def describe_candidates(
         radar_points: ``(M, 7)`` in the LiDAR frame (None when the model has no radar).
         context: Append :func:`model.referent.context.context_features` to the geometry
             (``ReferentConfig.context``).
+        subsets: Then append :func:`model.referent.subsets.subset_features` (text-free, so
+            computed once per scene rather than per prompt; ``ReferentConfig.subset_ranks``).
 
     Returns:
         :class:`SceneCandidates`; the pooled parts are differentiable in ``maps``.
@@ -129,6 +133,10 @@ def describe_candidates(
         radar = torch.cat(
             [_pooled(maps.radar, grid, centres, anchors), t(radar_evidence(boxes, pts))], dim=1
         )
+    if subsets:
+        padding = torch.zeros((1, len(boxes)), dtype=torch.bool, device=device)
+        sub = subset_features(geometry[None], None if radar is None else radar[None], padding)
+        geometry = torch.cat([geometry, sub[0].to(dtype)], dim=1)
     return SceneCandidates(boxes, labels, scores, geometry, fused, lidar, radar)
 
 

@@ -15,9 +15,10 @@ This stage sits after a text-agnostic C3D-RECHead and decides per candidate (see
    before its MLP (``2 sigmoid``, zero-initialised: 1 until trained), so that a sentence selects
    the few rank or relation columns it asks about instead of the MLP mixing all of them. With
    ``ReferentConfig.numeric_compare`` the geometry is first extended by the comparisons of the
-   prompt's numbers with the candidate's depth and speed (:mod:`model.referent.compare`), and with
-   ``ReferentConfig.subset_ranks`` by the ranks by speed and within a side or motion state, and
-   the relations to references picked by speed, side or motion (:mod:`model.referent.subsets`).
+   prompt's numbers with the candidate's depth and speed (:mod:`model.referent.compare`); with
+   ``ReferentConfig.subset_ranks`` the candidates' geometry carries the ranks by speed and within
+   a side or motion state, and the relations to references picked by speed, side or motion
+   (:mod:`model.referent.subsets`, computed once per scene with the candidates).
 2. Text tokens: the frozen MiniLM token features concatenated with the value of the number each
    token belongs to (:mod:`model.nets.numerals`), projected to ``dim`` and contextualised by one
    self-attention layer.
@@ -42,7 +43,7 @@ from model.nets.numerals import NUMERIC_FEATURES
 from model.referent.candidates import GEOMETRY_FEATURES, LIDAR_EVIDENCE, RADAR_EVIDENCE
 from model.referent.compare import COMPARE_FEATURES, compare_features
 from model.referent.context import CONTEXT_FEATURES
-from model.referent.subsets import SUBSET_FEATURES, subset_features
+from model.referent.subsets import SUBSET_FEATURES
 
 
 @dataclass(frozen=True)
@@ -52,7 +53,8 @@ class CandidateBatch:
     Attributes:
         geometry: ``(N, K, G)`` explicit geometry, ``G`` = :func:`geometry_width` (with the
             context features of :mod:`model.referent.context` after the first
-            ``GEOMETRY_FEATURES`` when ``ReferentConfig.context``).
+            ``GEOMETRY_FEATURES`` when ``ReferentConfig.context``, then those of
+            :mod:`model.referent.subsets` when ``ReferentConfig.subset_ranks``).
         fused: ``(N, K, C_f)`` fused BEV features pooled at the box (centre and anchor).
         lidar: ``(N, K, C_l + LIDAR_EVIDENCE)`` or None for a radar-only model.
         radar: ``(N, K, C_r + RADAR_EVIDENCE)`` or None for a LiDAR-only model.
@@ -78,19 +80,22 @@ class CandidateBatch:
 
 
 def geometry_width(cfg: ReferentConfig) -> int:
-    """Width of :attr:`CandidateBatch.geometry` for a stage of ``cfg``."""
-    return GEOMETRY_FEATURES + (CONTEXT_FEATURES if cfg.context else 0)
+    """Width of :attr:`CandidateBatch.geometry` for a stage of ``cfg``: the explicit geometry,
+    then the context features with ``context``, then the subset ranks and picked references
+    (:mod:`model.referent.subsets`) with ``subset_ranks``."""
+    return (
+        GEOMETRY_FEATURES
+        + (CONTEXT_FEATURES if cfg.context else 0)
+        + (SUBSET_FEATURES if cfg.subset_ranks else 0)
+    )
 
 
 def geometry_input_width(cfg: ReferentConfig) -> int:
     """Width of the geometry the stage embeds: :func:`geometry_width`, plus the prompt's number
-    comparisons (:mod:`model.referent.compare`) with ``numeric_compare``, plus the subset ranks
-    and picked references (:mod:`model.referent.subsets`) with ``subset_ranks``."""
-    return (
-        geometry_width(cfg)
-        + (COMPARE_FEATURES if cfg.numeric_compare else 0)
-        + (SUBSET_FEATURES if cfg.subset_ranks else 0)
-    )
+    comparisons (:mod:`model.referent.compare`) with ``numeric_compare``. The embedding's input
+    is ordered geometry, context, comparisons, subsets (the order the fields were added in, so
+    that a checkpoint without the later ones widens with zero columns at the end)."""
+    return geometry_width(cfg) + (COMPARE_FEATURES if cfg.numeric_compare else 0)
 
 
 def _mlp(inp: int, dim: int) -> nn.Sequential:
@@ -161,10 +166,12 @@ class ReferentStage(nn.Module):
         geometry = cands.geometry
         if self.cfg.numeric_compare:
             compared = compare_features(geometry, cands.radar, numbers, text_padding)
-            geometry = torch.cat([geometry, compared], dim=-1)
-        if self.cfg.subset_ranks:
-            subsets = subset_features(cands.geometry, cands.radar, cands.padding)
-            geometry = torch.cat([geometry, subsets], dim=-1)
+            if self.cfg.subset_ranks:  # geometry_input_width's order: the subsets come last
+                split = geometry.shape[-1] - SUBSET_FEATURES
+                parts = [geometry[..., :split], compared, geometry[..., split:]]
+            else:
+                parts = [geometry, compared]
+            geometry = torch.cat(parts, dim=-1)
         if self.geometry_gate is not None:
             geometry = geometry * (2.0 * torch.sigmoid(self.geometry_gate(mean)))[:, None, :]
         x = self.geometry(geometry) + self.fused(cands.fused)
