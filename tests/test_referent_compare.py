@@ -26,6 +26,7 @@ from model.referent.compare import (
 )
 from model.referent.stage import geometry_width
 from model.referent.subsets import SUBSET_FEATURES
+from tests.stage_helpers import answers_without
 
 
 def _numbers(*texts: str) -> tuple[torch.Tensor, torch.Tensor]:
@@ -89,15 +90,8 @@ def test_crossing_motion_counts_as_speed_and_no_number_gives_zeros():
 
 def test_the_stage_reads_the_comparisons(untrained_model, random_scene):
     model = untrained_model("referent", text_encoder="gru", operating_threshold=0.0)
-    stage = model.grounding.stage
-    torch.nn.init.normal_(stage.geometry[0].weight, std=1.0)
-    lidar, radar = random_scene()
-    with torch.no_grad():
-        scene = model.encode_scene(lidar, radar)
-        a = model.ground(scene, "cars faster than 10 m/s").scores
-        # The comparisons follow the geometry and context, before the subset features.
-        start = geometry_width(stage.cfg) - SUBSET_FEATURES
-        cols = stage.geometry[0].weight[:, start : start + COMPARE_FEATURES]
-        cols.zero_()
-        b = model.ground(scene, "cars faster than 10 m/s").scores
+    # The comparisons follow the geometry and context, before the subset features.
+    start = geometry_width(model.grounding.stage.cfg) - SUBSET_FEATURES
+    columns = slice(start, start + COMPARE_FEATURES)
+    a, b = answers_without(model, *random_scene(), "cars faster than 10 m/s", columns)
     assert len(a) and not np.allclose(a, b, atol=1e-4)

@@ -24,6 +24,7 @@ from model.referent.subsets import (
     subset_features,
 )
 from scenes.actors import CLASSES
+from tests.stage_helpers import answers_without
 
 CAR, PED, CYC = (CLASSES.index(c) for c in ("Car", "Pedestrian", "Cyclist"))
 
@@ -126,14 +127,8 @@ def test_sides_follow_the_ego_corridor() -> None:
 
 def test_the_stage_reads_the_subset_features(untrained_model, random_scene) -> None:
     model = untrained_model("referent", text_encoder="gru", operating_threshold=0.0)
-    stage = model.grounding.stage
-    torch.nn.init.normal_(stage.geometry[0].weight, std=1.0)
-    lidar, radar = random_scene()
-    with torch.no_grad():
-        scene = model.encode_scene(lidar, radar)
-        a = model.ground(scene, "the second fastest car").scores
-        start = geometry_width(stage.cfg) + COMPARE_FEATURES - SUBSET_FEATURES  # they come last
-        assert stage.geometry[0].weight.shape[1] == start + SUBSET_FEATURES
-        stage.geometry[0].weight[:, start:].zero_()
-        b = model.ground(scene, "the second fastest car").scores
+    width = model.grounding.stage.geometry[0].weight.shape[1]
+    assert width == geometry_width(model.grounding.stage.cfg) + COMPARE_FEATURES
+    columns = slice(width - SUBSET_FEATURES, width)  # they come last
+    a, b = answers_without(model, *random_scene(), "the second fastest car", columns)
     assert len(a) and not np.allclose(a, b, atol=1e-4)

@@ -38,7 +38,7 @@ from torch import Tensor
 
 from model.referent.candidates import DEPTH_COLUMN, DEPTH_SCALE, GEOMETRY_FEATURES, LATERAL_SCALE
 from model.referent.compare import candidate_speed
-from model.referent.context import OBJECT_SCORE, OBJECT_WIDTH, RELATION_SCALE
+from model.referent.context import BUMP_WIDTH, BUMPS, OBJECT_SCORE, OBJECT_WIDTH, RELATION_SCALE
 from scenes.actors import CLASSES, MOVING_SPEED
 from scenes.prompts.atoms import AHEAD_MAX_BEARING_DEG, LANE_HALF_WIDTH
 
@@ -50,9 +50,7 @@ MOTION_WIDTH = 0.1
 SIDE_WIDTH = 0.3
 """Metres: the width of the soft steps of the sides at ``+-LANE_HALF_WIDTH``."""
 PICK_TAU = 0.5
-"""Units (m/s or m) per unit of a picked reference's logit."""
-BUMPS = (0, 1, 2, 3)
-BUMP_WIDTH = 0.35
+"""Metres per second per unit of a speed-picked reference's logit."""
 SUBSET_ORDERS = (
     "fastest",
     "slowest",
