@@ -339,8 +339,8 @@ def load_baseline_package(directory: Path, checkpoint: Path = CHECKPOINT) -> TPC
         raise SystemExit(f"error: {directory}/model_base/checkpoint.py not found; make it with: "
                          f"{MAKE_BASELINE}")  # fmt: skip
     sys.path.insert(0, str(directory))
-    checkpoint = importlib.import_module("model_base.checkpoint")
-    return checkpoint.load_checkpoint(checkpoint).eval()
+    module = importlib.import_module("model_base.checkpoint")
+    return module.load_checkpoint(checkpoint).eval()
 
 
 def _call_data(c: TimedCall) -> dict:
