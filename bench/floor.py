@@ -153,7 +153,7 @@ def ratio_table(s: dict, baseline: dict | None) -> Table:
     ]
     if baseline is not None:
         notes.append(
-            f"Baseline: the same command on the code before issue 20's changes (its run: "
+            f"Baseline: the same command on older code (its run: "
             f"{baseline['rate_gflops']:.0f} GFLOP/s median rate); ratios are comparable across "
             "runs, times only as far as the machine's load was alike."
         )
@@ -289,9 +289,10 @@ def run(
     ]
     if baseline_package is not None:
         findings.append(
-            f"Baseline: the code before issue 20's changes, measured in this run call by call "
-            f"beside this checkout (package `model_base` under `{baseline_package}`, made by "
-            f"`{MAKE_BASELINE}`), running "
+            f"Baseline: an older copy of `model/`, measured in this run call by call beside "
+            f"this checkout (package `model_base` under `{baseline_package}`, made as "
+            f"`{MAKE_BASELINE}` with the commit it stands for; 46e8685 is main before issue "
+            "20's changes), running "
             + (
                 "the shipped checkpoint."
                 if baseline_checkpoint is None
