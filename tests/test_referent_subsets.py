@@ -103,7 +103,7 @@ def test_picked_references_fastest_parked_and_left() -> None:
     assert not _picked(f, PED, "fastest").any()
 
 
-def test_padding_is_no_rival_and_rows_of_one_scene_are_computed_once() -> None:
+def test_padding_is_no_rival_and_each_row_is_its_own_scene() -> None:
     g, r, pad = _batch([(10, 4, CYC, 2.0), (20, 5, CYC, 8.0), (30, 3, CYC, 5.0)])
     alone = subset_features(g[:, :2], r[:, :2], pad[:, :2])
     padded = subset_features(g, r, torch.tensor([[False, False, True]]))

@@ -88,7 +88,7 @@ def describe_candidates(
     radar_points: np.ndarray | None,
     *,
     context: bool,
-    subsets: bool = False,
+    subsets: bool,
 ) -> SceneCandidates:
     """Everything the referent stage reads about ``K`` candidates of one scene.
 

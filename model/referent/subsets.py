@@ -36,7 +36,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor
 
-from model.referent.candidates import DEPTH_COLUMN, DEPTH_SCALE, GEOMETRY_FEATURES, LATERAL_SCALE
+from model.referent.candidates import DEPTH_COLUMN, DEPTH_SCALE, LATERAL_SCALE
 from model.referent.compare import candidate_speed
 from model.referent.context import BUMP_WIDTH, BUMPS, OBJECT_SCORE, OBJECT_WIDTH, RELATION_SCALE
 from scenes.actors import CLASSES, MOVING_SPEED
@@ -51,6 +51,8 @@ SIDE_WIDTH = 0.3
 """Metres: the width of the soft steps of the sides at ``+-LANE_HALF_WIDTH``."""
 PICK_TAU = 0.5
 """Metres per second per unit of a speed-picked reference's logit."""
+PICK_STATE_TAU = 0.1
+"""Units of probability (moving, on a side) per unit of a state-picked reference's logit."""
 SUBSET_ORDERS = (
     "fastest",
     "slowest",
@@ -87,8 +89,8 @@ def side_probabilities(x: Tensor, y: Tensor) -> Tensor:
 
 
 def subset_features(geometry: Tensor, radar: Tensor | None, padding: Tensor) -> Tensor:
-    """The module docstring's features, ``(N, K, SUBSET_FEATURES)``; rows that hold the same
-    candidates (the prompts of one scene) are computed once.
+    """The module docstring's features, ``(N, K, SUBSET_FEATURES)``, each row its own scene
+    (:func:`model.referent.scene_candidates.describe_candidates` calls it once per scene).
 
     Args:
         geometry: ``(N, K, >= GEOMETRY_FEATURES)`` candidate geometry
@@ -96,21 +98,6 @@ def subset_features(geometry: Tensor, radar: Tensor | None, padding: Tensor) -> 
         radar: ``(N, K, C_r + RADAR_EVIDENCE)`` or None.
         padding: ``(N, K)`` bool, True at padding.
     """
-    n, k = padding.shape
-    if n > 1 and k > 0:
-        g = geometry[..., :GEOMETRY_FEATURES]
-        speed = candidate_speed(radar, geometry)
-        rows = torch.cat([g.flatten(1), speed, padding.to(g.dtype)], dim=1)
-        unique, inverse = torch.unique(rows, dim=0, return_inverse=True)
-        if len(unique) < n:
-            first = torch.zeros(len(unique), dtype=torch.long, device=rows.device)
-            first.scatter_(0, inverse, torch.arange(n, device=rows.device))
-            pick = None if radar is None else radar[first]
-            return _subset_features(geometry[first], pick, padding[first])[inverse]
-    return _subset_features(geometry, radar, padding)
-
-
-def _subset_features(geometry: Tensor, radar: Tensor | None, padding: Tensor) -> Tensor:
     n, k = padding.shape
     if k == 0:
         return geometry.new_zeros((n, 0, SUBSET_FEATURES))
@@ -149,7 +136,7 @@ def _subset_features(geometry: Tensor, radar: Tensor | None, padding: Tensor) ->
     keys = torch.stack(
         [speed, -speed, moving, 1 - moving, sides[..., 0], sides[..., 1], sides[..., 2]], dim=1
     )  # (N, P, K), larger = more the reference
-    scales = geometry.new_tensor([PICK_TAU, PICK_TAU, 0.1, 0.1, 0.1, 0.1, 0.1])[None, :, None]
+    scales = geometry.new_tensor([PICK_TAU] * 2 + [PICK_STATE_TAU] * 5)[None, :, None]
     logit = keys / scales + torch.log(w.clamp(min=1e-6))[:, None, :]
     of_c = (onehot.transpose(1, 2) > 0.5) & ~padding[:, None, :]  # (N, C, K)
     allowed = of_c[:, :, None, :]
