@@ -1,9 +1,9 @@
 """Decoding, candidate description and ``ground`` give what the reference code gave: the same
 candidates (boxes, labels, scores, every feature), the same answers and the same decoded boxes of
-an untrained head with hundreds of peaks, within 1e-4 and 1e-6 (reference file and its regeneration:
-:mod:`tests.decode_reference`; it was made on the code before issue 20's speed-ups and
-regenerated once for the network's inference forms, whose rounding change docs/RESULTS.md
-states)."""
+an untrained head with hundreds of peaks, within :data:`TOLERANCE` (:data:`DECODE_TOLERANCE` for
+that head's decoding alone). Reference file and its regeneration: :mod:`tests.decode_reference`;
+it was made on the code before issue 20's speed-ups and regenerated once for the network's
+inference forms, whose rounding change docs/RESULTS.md states."""
 
 from __future__ import annotations
 
