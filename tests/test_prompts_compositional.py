@@ -37,6 +37,7 @@ from scenes.prompts import (
     is_count_question,
     perturb,
 )
+from scenes.prompts.atoms import BASE_EXTREMES
 from scenes.prompts.families import Behind, Count, Travel, unsatisfiable
 from scenes.prompts.features import DEFAULT_REGION, actor_features
 from scenes.prompts.nouns import OUT_OF_CLASS
@@ -182,6 +183,38 @@ def test_ordinal_needs_clear_gaps_and_enough_members():
     assert not _resolve(Ordinal(Predicate("Car"), Extreme.FASTEST, 3), hand_world()).crisp
     with pytest.raises(ValueError):
         Ordinal(Predicate("Car"), Extreme.NEAREST, 1)
+
+
+def test_slowest_ranks_the_moving_only_and_is_crisp_only_among_movers():
+    movers = [
+        make_actor(0, "Car", 10.0, -3.0, 0.0, (10.0, 0.0), CAR),
+        make_actor(1, "Car", 20.0, -3.0, 0.0, (3.0, 0.0), CAR),
+        make_actor(2, "Car", 30.0, 3.0, 0.0, (6.0, 0.0), CAR),
+    ]
+    assert analyse(Predicate("Car", (), Extreme.SLOWEST), movers).ids == (1,)
+    second = _resolve(Ordinal(Predicate("Car"), Extreme.SLOWEST, 2), movers)
+    assert second.ids == (2,) and second.crisp
+    # a parked car is not the slowest, and makes "slowest" unclear (it might be said to be)
+    parked = [*movers, make_actor(3, "Car", 40.0, 3.0, 0.0, (0.0, 0.0), CAR)]
+    res = analyse(Predicate("Car", (), Extreme.SLOWEST), parked)
+    assert res.ids == (1,) and not res.crisp
+    assert not _resolve(Ordinal(Predicate("Car"), Extreme.SLOWEST, 2), parked).crisp
+    # the base generator never says it; the extended one does
+    assert Extreme.SLOWEST not in BASE_EXTREMES and Extreme.SLOWEST.tag == "velocity"
+
+
+def test_an_ordinal_over_every_class_ranks_all_referable_actors():
+    res = _resolve(Ordinal(Predicate(None), Extreme.NEAREST, 3), hand_world())
+    assert res.ids == (4,) and res.crisp  # depths 7.7 (3), 9.75 (2), 14.7 (4), 17.75 (0)
+
+
+def test_extended_ordinals_say_slowest_and_any_class(extended):
+    ordinals = [p for _, prompts in extended for p in prompts if p.family == "ordinal"]
+    assert any(p.expression.extreme is Extreme.SLOWEST for p in ordinals)
+    assert any(p.expression.base.cls is None for p in ordinals)
+    for p in ordinals:
+        if p.expression.extreme is Extreme.SLOWEST:
+            assert "slow" in p.text.lower() or "lowest speed" in p.text.lower(), p.text
 
 
 def _street() -> list:

@@ -277,20 +277,29 @@ class DepthBeyond(Atom):
 
 
 class Extreme(enum.Enum):
-    """Superlatives: pick the one actor that ranks first among the predicate's matches."""
+    """Superlatives: pick the one actor that ranks first among the predicate's matches.
+
+    ``FASTEST`` and ``SLOWEST`` rank the moving matches only (speed above
+    :data:`~scenes.actors.MOVING_SPEED`): "the slowest cyclist" is the slowest of the cyclists
+    that ride, and a superlative or ordinal by speed is crisp only when every match is clearly
+    moving or clearly standing (``SLOWEST``: clearly moving, as a standing actor might be said to
+    be the slowest). ``SLOWEST`` is the extended language's (:data:`BASE_EXTREMES` are the base
+    generator's, whose prompts stay byte-identical).
+    """
 
     NEAREST = "nearest"
     FARTHEST = "farthest"
     LEFTMOST = "leftmost"
     RIGHTMOST = "rightmost"
     FASTEST = "fastest"
+    SLOWEST = "slowest"
 
     @property
     def tag(self) -> str:
         """The prompt type tag of this superlative."""
         if self in (Extreme.NEAREST, Extreme.FARTHEST):
             return "depth"
-        if self is Extreme.FASTEST:
+        if self in (Extreme.FASTEST, Extreme.SLOWEST):
             return "velocity"
         return "position"
 
@@ -304,6 +313,8 @@ class Extreme(enum.Enum):
             return f.y
         if self is Extreme.RIGHTMOST:
             return -f.y
+        if self is Extreme.SLOWEST:
+            return -f.speed
         return f.speed
 
     @property
@@ -311,12 +322,27 @@ class Extreme(enum.Enum):
         """Smallest winner / runner-up score gap of a crisp superlative."""
         if self in (Extreme.NEAREST, Extreme.FARTHEST):
             return GAP_DEPTH
-        return GAP_SPEED if self is Extreme.FASTEST else GAP_Y
+        return GAP_SPEED if self.by_speed else GAP_Y
+
+    @property
+    def by_speed(self) -> bool:
+        """Ranks by speed, among the moving only (class docstring)."""
+        return self in (Extreme.FASTEST, Extreme.SLOWEST)
 
     def flipped(self) -> Extreme:
         """The superlative after the y -> -y flip."""
         swap = {Extreme.LEFTMOST: Extreme.RIGHTMOST, Extreme.RIGHTMOST: Extreme.LEFTMOST}
         return swap.get(self, self)
+
+
+BASE_EXTREMES = (
+    Extreme.NEAREST,
+    Extreme.FARTHEST,
+    Extreme.LEFTMOST,
+    Extreme.RIGHTMOST,
+    Extreme.FASTEST,
+)
+"""The base generator's superlatives (:class:`Extreme`)."""
 
 
 FAMILY_ORDER = ("position", "motion", "heading", "speed", "depth")

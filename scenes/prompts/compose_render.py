@@ -141,7 +141,9 @@ def render_exclusion(
 def render_ordinal(
     expr: Ordinal, rng: np.random.Generator, style: Style, phrasing: str, max_words: int
 ) -> tuple[str, tuple[str, ...]]:
-    """ "the second closest cyclist", "the third car from the left", "the farthest car but one"."""
+    """ "the second closest cyclist", "the third car from the left", "the farthest car but one",
+    "the pedestrian number two from the right", "the second slowest cyclist", "the third closest
+    object" (a class-free base)."""
     key = CLASS_KEYS[expr.base.cls]
     ext = expr.extreme
 
@@ -152,9 +154,10 @@ def render_ordinal(
         else:
             template = pk.pick(_extreme_word_slot(ext, "ord"))
         o = pk.pick(f"ord.{expr.rank}")
+        k = pk.pick(f"ord.k.{expr.rank}") if "{k}" in template else ""
 
         def core(noun: str) -> str:
-            return s.fill(template, n=noun, o=o, side=_side(ext))
+            return s.fill(template, n=noun, o=o, k=k, side=_side(ext))
 
         return finish(noun_phrase(expr.base, s, core_of=core), s)
 

@@ -16,6 +16,7 @@ import numpy as np
 from scenes.actors import MOVING_SPEED, Actor
 from scenes.prompts.atoms import (
     ABOUT_DEPTH_TOL,
+    BASE_EXTREMES,
     Atom,
     DepthAbout,
     DepthBetween,
@@ -93,7 +94,7 @@ def describe_predicate(
     cls_options: list[str | None] = [next(iter(classes)), None] if len(classes) == 1 else [None]
     extremes: list[Extreme | None] = [None]
     if len(subset) == 1:
-        extremes += list(Extreme)
+        extremes += list(BASE_EXTREMES)
     atoms = _candidate_atoms(subset)
     fallback: Predicate | None = None
     for k in range(4):

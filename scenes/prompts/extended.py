@@ -21,11 +21,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 
-from scenes.actors import CLASSES, MOVING_SPEED, Actor
+from scenes.actors import MOVING_SPEED, Actor
 from scenes.prompts.atoms import (
     Atom,
     Extreme,
@@ -46,7 +46,6 @@ from scenes.prompts.compose_render import (
     render_relation,
 )
 from scenes.prompts.families import (
-    Behind,
     Count,
     Direction,
     Exclusion,
@@ -55,7 +54,6 @@ from scenes.prompts.families import (
     Related,
     Relation,
     Travel,
-    analyse_cached,
     relation_holds,
     unsatisfiable,
 )
@@ -70,9 +68,10 @@ from scenes.prompts.sampling import (
     depth_atom,
     sample_predicate,
     side_of,
-    speed_atom,
 )
+from scenes.prompts.scene_draw import DrawScene, fake_actor, sampled
 from scenes.prompts.tags import infer_tags
+from scenes.prompts.unsatisfiable import UNSATISFIABLE_FORMS
 
 _NOUNS = {p: nouns_for(p) for p in PHRASINGS}
 
@@ -83,70 +82,17 @@ that say it as a direction of travel ("heading the same way as us")."""
 FAMILY_TRIES = 12
 """Draws of one family before another family is drawn (keeps the realised shares near the rates)."""
 
-ABSURD_SPEED = {"Car": (22.0, 90.0), "Pedestrian": (4.0, 30.0), "Cyclist": (10.0, 40.0)}
-"""Ground speeds (m/s) no actor of a class reaches, for the unsatisfiable family: from about 1.5
-times the fastest of its class in the world (:mod:`scenes.world.placement`: cars 15, cyclists 7,
-pedestrians 2 m/s) up, so that "a pedestrian doing 25 km/h" is said as well as "doing 100"."""
-
-_EXTREMES = ("nearest", "farthest", "leftmost", "rightmost", "fastest")
-
-
-@dataclass
-class _Scene:
-    feats: list[ActorFeatures]
-    inside: list[ActorFeatures]
-    region: ReferableRegion
-    rng: np.random.Generator
-    words: np.random.Generator
-    cfg: PromptConfig
-    style: Style
-    cache: dict = field(default_factory=dict)
-
-    def anchor(self) -> ActorFeatures:
-        return self.inside[int(self.rng.integers(len(self.inside)))]
-
-    def analyse(self, pred: Predicate) -> Resolution:
-        return analyse_cached(self.cache, self.feats, self.region, pred)
-
-    def resolve(self, expr: Exclusion | Ordinal | Related | Count) -> Resolution:
-        return expr.analyse(self.feats, self.region, self.cache)
-
-    def ok(self, res: Resolution) -> bool:
-        return not res.conflicts and (res.crisp or not self.cfg.require_crisp)
-
-
-def _sampled(sc: _Scene, f: ActorFeatures, max_atoms: int, extreme: bool) -> Predicate | None:
-    """A predicate true of ``f``, with its class, at most ``max_atoms`` atoms."""
-    pred = sample_predicate(f, sc.rng, sc.cfg)
-    if pred is None:
-        return None
-    atoms = pred.atoms[:max_atoms]
-    return Predicate(f.cls, atoms, pred.extreme if extreme else None)
-
-
-def _fake(sc: _Scene, far: bool = False, fast: bool = False) -> ActorFeatures:
-    """Features of an imagined actor in the region: a random class, place and motion. ``far``:
-    60-400 m ahead, beyond any annotated actor; ``fast``: faster than its class moves
-    (:data:`ABSURD_SPEED`)."""
-    rng = sc.rng
-    x = float(rng.uniform(60.0, 400.0) if far else rng.uniform(4.0, 48.0))
-    y = float(np.tan(np.radians(rng.uniform(-28.0, 28.0))) * min(x, 48.0))
-    cls = CLASSES[int(rng.integers(len(CLASSES)))]
-    if fast:
-        speed = float(rng.uniform(*ABSURD_SPEED[cls]))
-    else:
-        speed = 0.0 if rng.random() < 0.35 else float(rng.uniform(1.0, 14.0))
-    heading = float(rng.uniform(-math.pi, math.pi))
-    size = {"Car": (4.5, 1.8, 1.6), "Pedestrian": (0.6, 0.6, 1.7)}.get(cls, (1.8, 0.6, 1.7))
-    v = (speed * math.cos(heading), speed * math.sin(heading))
-    return ActorFeatures.of(Actor(-1, cls, [x, y, size[2] / 2, *size, heading], v))
+_EXTREMES = tuple(Extreme)
+P_CLASS_FREE_ORDINAL = 0.2
+"""Share of ordinals over every class ("the third closest object"), by depth: the ranks the
+referent stage states over all classes (:mod:`model.referent.context`)."""
 
 
 def _prompt(text: str, variants: tuple[str, ...], ids: Sequence[int], tags, pred, family, expr):
     return Prompt(text, tuple(sorted(ids)), frozenset(tags), pred, variants, family, expr)
 
 
-def _render(sc: _Scene) -> dict:
+def _render(sc: DrawScene) -> dict:
     c = sc.cfg
     return {"style": sc.style, "phrasing": c.phrasing, "max_words": c.max_words}
 
@@ -154,7 +100,7 @@ def _render(sc: _Scene) -> dict:
 # ---- families ---------------------------------------------------------------------------------
 
 
-def _with_travel(pred: Predicate, f: ActorFeatures, sc: _Scene) -> Predicate:
+def _with_travel(pred: Predicate, f: ActorFeatures, sc: DrawScene) -> Predicate:
     """``pred`` with its heading or motion atom said as a direction of travel
     (:class:`~scenes.prompts.families.Travel`), sometimes, where one is clearly true of ``f``."""
     directions = [d for d in Direction if Travel(d).holds(f, -1.0)]
@@ -165,7 +111,7 @@ def _with_travel(pred: Predicate, f: ActorFeatures, sc: _Scene) -> Predicate:
     return Predicate(pred.cls, (*rest, Travel(directions[0])), pred.extreme)
 
 
-def _attribute(sc: _Scene) -> Prompt | None:
+def _attribute(sc: DrawScene) -> Prompt | None:
     f = sc.anchor()
     pred = sample_predicate(f, sc.rng, sc.cfg)
     if pred is None:
@@ -193,7 +139,7 @@ def _attribute(sc: _Scene) -> Prompt | None:
     return _prompt(text, variants, res.ids, pred.tags, pred, "attribute", None)
 
 
-def _out_of_class(sc: _Scene) -> Prompt | None:
+def _out_of_class(sc: DrawScene) -> Prompt | None:
     if sc.rng.random() < sc.cfg.p_nonsense:
         text = nonsense(sc.words)
         if "class" in infer_tags(text):
@@ -206,7 +152,7 @@ def _out_of_class(sc: _Scene) -> Prompt | None:
     if sc.rng.random() < 0.55:
         # Where a thing is, not how it moves (a bench does not "move away").
         geometry = replace(sc.cfg, p_extreme=0.15, geometry_only=True)
-        base = sample_predicate(_fake(sc), sc.rng, geometry)
+        base = sample_predicate(fake_actor(sc), sc.rng, geometry)
         if base is not None:
             atoms, extreme = base.atoms[:2], base.extreme
     pred = Predicate(None, atoms, extreme)
@@ -216,74 +162,7 @@ def _out_of_class(sc: _Scene) -> Prompt | None:
     return _prompt(text, variants, (), infer_tags(text), None, "out_of_class", None)
 
 
-def _unsat_sampled(sc: _Scene) -> Predicate | None:
-    """A predicate of an imagined actor (:func:`_fake`) that happens to fit nobody here."""
-    return _sampled(sc, _fake(sc), 2, extreme=True)
-
-
-def _unsat_absurd(sc: _Scene) -> Predicate | None:
-    """A distance or speed beyond any actor: "the car 250 m ahead", "a pedestrian doing 60 km/h"."""
-    rng = sc.rng
-    fast = rng.random() < 0.5
-    f = _fake(sc, far=not fast, fast=fast)
-    atom = speed_atom(f, rng) if fast else depth_atom(f, rng)
-    if atom is None:
-        return None
-    atoms: list[Atom] = [atom]
-    other = _sampled(sc, f, 1, extreme=False)
-    if (
-        other is not None
-        and other.atoms
-        and other.atoms[0].family != atom.family
-        and rng.random() < 0.4
-    ):
-        atoms.append(other.atoms[0])
-    return Predicate(f.cls if rng.random() < 0.9 else None, tuple(atoms))
-
-
-def _unsat_behind(sc: _Scene) -> Predicate | None:
-    """Something behind us (:class:`~scenes.prompts.families.Behind`), maybe with its motion."""
-    f = _fake(sc)
-    other = _sampled(sc, f, 1, extreme=False)
-    atoms: list[Atom] = [Behind()]
-    if other is not None and other.atoms and other.atoms[0].family in ("motion", "heading"):
-        atoms.append(other.atoms[0])
-    return Predicate(f.cls if sc.rng.random() < 0.9 else None, tuple(atoms))
-
-
-def _unsat_contradiction(sc: _Scene) -> Predicate | None:
-    """Standing still and moving at once: "the parked car approaching us", "a stationary
-    cyclist going 20 km/h"."""
-    rng = sc.rng
-    kmh = bool(rng.random() < 0.5)
-    speed = (
-        SpeedAbove(float(rng.choice((10, 15, 20, 25, 30, 40))), SpeedUnit.KMH)
-        if kmh
-        else SpeedAbove(float(rng.integers(2, 10)), SpeedUnit.MPS)
-    )
-    moving: list[Atom] = [
-        HeadingIs(Heading.APPROACHING),
-        HeadingIs(Heading.AWAY),
-        HeadingIs(Heading.CROSSING),
-        Travel(Direction.SAME),
-        Travel(Direction.OPPOSITE),
-        speed,
-    ]
-    atom = moving[int(rng.integers(len(moving)))]
-    cls = CLASSES[int(rng.integers(len(CLASSES)))]
-    return Predicate(cls, (MotionState(False), atom))
-
-
-UNSATISFIABLE_FORMS: tuple[tuple[Callable[[_Scene], Predicate | None], float], ...] = (
-    (_unsat_sampled, 0.4),
-    (_unsat_absurd, 0.25),
-    (_unsat_behind, 0.15),
-    (_unsat_contradiction, 0.2),
-)
-"""The unsatisfiable family's forms and their shares."""
-
-
-def _unsatisfiable(sc: _Scene) -> Prompt | None:
+def _unsatisfiable(sc: DrawScene) -> Prompt | None:
     forms, shares = zip(*UNSATISFIABLE_FORMS, strict=True)
     pred = forms[int(sc.rng.choice(len(forms), p=np.array(shares) / sum(shares)))](sc)
     if pred is None or not unsatisfiable(pred, sc.feats, sc.region):
@@ -293,7 +172,7 @@ def _unsatisfiable(sc: _Scene) -> Prompt | None:
     return _prompt(text, variants, (), pred.tags, pred, "unsatisfiable", None)
 
 
-def _atom_of(g: ActorFeatures, sc: _Scene) -> Atom | None:
+def _atom_of(g: ActorFeatures, sc: DrawScene) -> Atom | None:
     """An atom true of ``g`` (to be negated, or to cut a subset out of a set)."""
     kind = int(sc.rng.integers(5))
     if kind == 0:
@@ -310,13 +189,13 @@ def _atom_of(g: ActorFeatures, sc: _Scene) -> Atom | None:
     return SpeedAbove(float(v), SpeedUnit.KMH) if v >= 5 else None
 
 
-def _negation(sc: _Scene) -> Prompt | None:
+def _negation(sc: DrawScene) -> Prompt | None:
     f = sc.anchor()
     other = sc.anchor()
     atom = _atom_of(other, sc)
     if atom is None or atom.holds(f, 1.0) or negation_slot(atom, CLASS_KEYS[f.cls]) is None:
         return None
-    base = _sampled(sc, f, 1, extreme=sc.rng.random() < 0.5)
+    base = sampled(sc, f, 1, extreme=sc.rng.random() < 0.5)
     if base is None:
         return None
     keep = tuple(a for a in base.atoms if a.family != atom.family)
@@ -328,9 +207,9 @@ def _negation(sc: _Scene) -> Prompt | None:
     return _prompt(text, variants, res.ids, pred.tags, pred, "negation", None)
 
 
-def _base_set(sc: _Scene, minimum: int) -> tuple[Predicate, Resolution] | None:
+def _base_set(sc: DrawScene, minimum: int) -> tuple[Predicate, Resolution] | None:
     f = sc.anchor()
-    base = _sampled(sc, f, 1 if sc.rng.random() < 0.4 else 0, extreme=False)
+    base = sampled(sc, f, 1 if sc.rng.random() < 0.4 else 0, extreme=False)
     if base is None:
         return None
     res = sc.analyse(base)
@@ -339,13 +218,13 @@ def _base_set(sc: _Scene, minimum: int) -> tuple[Predicate, Resolution] | None:
     return base, res
 
 
-def _exclusion(sc: _Scene) -> Prompt | None:
+def _exclusion(sc: DrawScene) -> Prompt | None:
     found = _base_set(sc, 2)
     if found is None:
         return None
     base, res = found
     if sc.rng.random() < 0.5:
-        removed = Predicate(base.cls, base.atoms, Extreme(_EXTREMES[int(sc.rng.integers(5))]))
+        removed = Predicate(base.cls, base.atoms, _EXTREMES[int(sc.rng.integers(len(_EXTREMES)))])
     else:
         pick = res.ids[int(sc.rng.integers(len(res.ids)))]
         g = next(f for f in sc.feats if f.actor_id == pick)
@@ -362,12 +241,19 @@ def _exclusion(sc: _Scene) -> Prompt | None:
     return _prompt(text, variants, out.ids, infer_tags(text), base, "exclusion", expr)
 
 
-def _ordinal(sc: _Scene) -> Prompt | None:
-    found = _base_set(sc, 2)
-    if found is None:
-        return None
-    base, res = found
-    extreme = Extreme(_EXTREMES[int(sc.rng.integers(5))])
+def _ordinal(sc: DrawScene) -> Prompt | None:
+    if sc.rng.random() < P_CLASS_FREE_ORDINAL:
+        base = Predicate(None)
+        res = sc.analyse(base)
+        extreme = (Extreme.NEAREST, Extreme.FARTHEST)[int(sc.rng.integers(2))]
+        if len(res.ids) < 2 or not sc.ok(res):
+            return None
+    else:
+        found = _base_set(sc, 2)
+        if found is None:
+            return None
+        base, res = found
+        extreme = _EXTREMES[int(sc.rng.integers(len(_EXTREMES)))]
     lateral = extreme in (Extreme.LEFTMOST, Extreme.RIGHTMOST)
     if lateral and any(isinstance(a, OnSide) for a in base.atoms):
         return None
@@ -380,14 +266,14 @@ def _ordinal(sc: _Scene) -> Prompt | None:
     return _prompt(text, variants, out.ids, infer_tags(text), base, "ordinal", expr)
 
 
-def _reference(sc: _Scene, r: ActorFeatures) -> Predicate | None:
+def _reference(sc: DrawScene, r: ActorFeatures) -> Predicate | None:
     """A predicate that picks exactly ``r``, crisply (the simplest that does)."""
     cands = [Predicate(r.cls)]
     side = side_of(r)
     if side is not None:
         cands.append(Predicate(r.cls, (OnSide(side),)))
     cands.append(Predicate(r.cls, (MotionState(r.speed > MOVING_SPEED),)))
-    cands += [Predicate(r.cls, (), Extreme(e)) for e in _EXTREMES]
+    cands += [Predicate(r.cls, (), e) for e in _EXTREMES]
     for pred in cands:
         res = sc.analyse(pred)
         if res.ids == (r.actor_id,) and not res.conflicts and res.crisp:
@@ -395,7 +281,7 @@ def _reference(sc: _Scene, r: ActorFeatures) -> Predicate | None:
     return None
 
 
-def _relation(sc: _Scene) -> Prompt | None:
+def _relation(sc: DrawScene) -> Prompt | None:
     relation = list(Relation)[int(sc.rng.integers(len(Relation)))]
     if relation is Relation.BETWEEN:
         reference = Predicate(sc.anchor().cls)
@@ -429,9 +315,9 @@ def _relation(sc: _Scene) -> Prompt | None:
     return _prompt(text, variants, out.ids, infer_tags(text), target, "relation", expr)
 
 
-def _count(sc: _Scene) -> Prompt | None:
-    f = _fake(sc) if sc.rng.random() < 0.25 else sc.anchor()
-    base = _sampled(sc, f, 2, extreme=False)
+def _count(sc: DrawScene) -> Prompt | None:
+    f = fake_actor(sc) if sc.rng.random() < 0.25 else sc.anchor()
+    base = sampled(sc, f, 2, extreme=False)
     if base is None:
         return None
     expr = Count(base)
@@ -442,7 +328,7 @@ def _count(sc: _Scene) -> Prompt | None:
     return _prompt(text, variants, res.ids, base.tags, base, "count", expr)
 
 
-_SAMPLERS: dict[str, Callable[[_Scene], Prompt | None]] = {
+_SAMPLERS: dict[str, Callable[[DrawScene], Prompt | None]] = {
     "attribute": _attribute,
     "out_of_class": _out_of_class,
     "unsatisfiable": _unsatisfiable,
@@ -476,7 +362,7 @@ def generate_extended(
         config.p_number_words,
     )
     words = np.random.default_rng(int(rng.integers(2**63)))
-    sc = _Scene(feats, inside, region, rng, words, config, style)
+    sc = DrawScene(feats, inside, region, rng, words, config, style)
     rates = np.array([max(0.0, 1.0 - sum(config.family_rates)), *config.family_rates])
     rates = rates / rates.sum()
     out: list[Prompt] = []

@@ -55,7 +55,7 @@ from typing import ClassVar
 from scenes.actors import MOVING_SPEED
 from scenes.prompts.atoms import SLACK_ANGLE, SLACK_DEPTH, SLACK_MOTION, Atom, Extreme
 from scenes.prompts.features import ActorFeatures, ReferableRegion
-from scenes.prompts.predicate import Predicate, Resolution, analyse_features
+from scenes.prompts.predicate import Predicate, Resolution, all_clearly_moving, analyse_features
 
 Cache = dict[Predicate, Resolution]
 """Resolutions of predicates over one scene (the generator's memo; keyed by predicate only, so
@@ -201,6 +201,8 @@ class Ordinal:
         b = analyse_cached(cache, feats, region, self.base)
         by_id = {f.actor_id: f for f in feats}
         ranked = sorted((by_id[i] for i in b.ids), key=lambda f: (-self.extreme.key(f), f.actor_id))
+        if self.extreme is Extreme.SLOWEST:
+            ranked = [f for f in ranked if f.speed > MOVING_SPEED]
         if len(ranked) < self.rank:
             return Resolution((), b.conflicts, b.crisp)
         chosen = ranked[self.rank - 1]
@@ -209,6 +211,9 @@ class Ordinal:
         crisp = b.crisp and gaps
         if self.extreme is Extreme.FASTEST:
             crisp = crisp and chosen.speed > MOVING_SPEED + SLACK_MOTION
+        if self.extreme is Extreme.SLOWEST:
+            inside = [f for f in feats if region.contains(f)]
+            crisp = crisp and all_clearly_moving(self.base, inside)
         return Resolution((chosen.actor_id,), b.conflicts, crisp)
 
     def flipped(self) -> Ordinal:

@@ -101,12 +101,21 @@ def _select(pred: Predicate, inside: Sequence[ActorFeatures], slack: float) -> t
     cands = [f for f in inside if pred.matches(f, slack)]
     if pred.extreme is None:
         return tuple(sorted(f.actor_id for f in cands))
+    if pred.extreme is Extreme.SLOWEST:
+        cands = [f for f in cands if f.speed > MOVING_SPEED]
     if not cands:
         return ()
     best = max(cands, key=lambda f: (pred.extreme.key(f), -f.actor_id))
     if pred.extreme is Extreme.FASTEST and best.speed <= MOVING_SPEED:
         return ()
     return (best.actor_id,)
+
+
+def all_clearly_moving(pred: Predicate, inside: Sequence[ActorFeatures]) -> bool:
+    """Every actor ``pred`` matches (its superlative aside) moves faster than
+    :data:`~scenes.actors.MOVING_SPEED` by the motion slack: what makes a ranking by slowness
+    crisp (a standing or borderline actor might be said to be the slowest)."""
+    return all(f.speed > MOVING_SPEED + SLACK_MOTION for f in inside if pred.matches(f, 1.0))
 
 
 def analyse_features(
@@ -121,6 +130,8 @@ def analyse_features(
         crisp = len(scores) < 2 or scores[0] - scores[1] >= pred.extreme.gap
         if pred.extreme is Extreme.FASTEST and scores:
             crisp = crisp and scores[0] > MOVING_SPEED + SLACK_MOTION
+        if pred.extreme is Extreme.SLOWEST:
+            crisp = crisp and all_clearly_moving(pred, inside)
     conflicts = tuple(
         sorted(f.actor_id for f in feats if region.in_guard(f) and pred.matches(f, 1.0))
     )

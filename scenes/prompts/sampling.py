@@ -16,6 +16,7 @@ import numpy as np
 
 from scenes.actors import MOVING_SPEED
 from scenes.prompts.atoms import (
+    BASE_EXTREMES,
     Atom,
     DepthAbout,
     DepthBetween,
@@ -226,7 +227,8 @@ def sample_predicate(
     cls = f.cls if (rng.random() < cfg.p_class or not atoms) else None
     extreme = None
     if rng.random() < cfg.p_extreme:
-        kinds = [e for e in Extreme if e is not Extreme.FASTEST or moving]
+        pool = Extreme if cfg.language == "extended" else BASE_EXTREMES
+        kinds = [e for e in pool if not e.by_speed or moving]
         extreme = kinds[int(rng.integers(len(kinds)))]
     if cls is None and not atoms and extreme is None:
         return None
