@@ -139,11 +139,13 @@ def _voxelize_one_cpu(
 ) -> Pillars:
     """:func:`voxelize` of one CPU cloud ``(N, F)``, in NumPy (its in-place masks and gathers
     cost a fraction of the tensor form's on ~190k points): the same arrays, the same values (the
-    range tests and the cell arithmetic in float32, as the tensor form does them)."""
+    range tests and the cell arithmetic in float32, as the tensor form does them). The three
+    coordinate columns are copied out once, so that the six range tests and the gathers after
+    them run over contiguous arrays (strided, each of them costs about twice as much)."""
     pts = points.numpy()
     ny, nx = grid.shape
     f32 = np.float32
-    x, y, z = pts[:, 0], pts[:, 1], pts[:, 2]
+    x, y, z = pts[:, :3].T.copy()
     inside = x >= f32(grid.x_min)
     inside &= x < f32(grid.x_max)
     inside &= y >= f32(grid.y_min)

@@ -48,6 +48,7 @@ from torch.nn.utils.rnn import pack_padded_sequence, pad_packed_sequence
 
 from model.config import TextConfig
 from model.nets.numerals import token_numeric_features
+from model.nets.onednn import FrozenLinear
 from scenes.lru import LRUCache
 
 LOG = logging.getLogger(__name__)
@@ -171,8 +172,10 @@ class MiniLMForward:
     norm, GELU feed-forward, residual and layer norm; ``last_hidden_state``), with less around
     it: the query, key and value projections as one matrix product, PyTorch's fused
     ``scaled_dot_product_attention``, no pooler (its output is not used), no mask for a single
-    prompt, no dropout modules, no per-call mask preparation. Outputs equal ``BertModel``'s to
-    float rounding (the fused projection may round differently), not bit for bit.
+    prompt, no dropout modules, no per-call mask preparation, the linear layers' weights
+    reordered once for oneDNN (:class:`model.nets.onednn.FrozenLinear`). Outputs equal
+    ``BertModel``'s to float rounding (the fused projection may round differently), not bit for
+    bit.
 
     Args:
         weights: The ``BertModel`` state dict (``embeddings.*``, ``encoder.layer.<i>.*``), e.g.
@@ -205,18 +208,22 @@ class MiniLMForward:
             qkv = [f"{pre}attention.self.{part}" for part in ("query", "key", "value")]
             self.layers.append(
                 (
-                    torch.cat([w(f"{n}.weight") for n in qkv]).contiguous(),
-                    torch.cat([w(f"{n}.bias") for n in qkv]).contiguous(),
-                    w(f"{pre}attention.output.dense.weight"),
-                    w(f"{pre}attention.output.dense.bias"),
+                    FrozenLinear(
+                        torch.cat([w(f"{n}.weight") for n in qkv]).contiguous(),
+                        torch.cat([w(f"{n}.bias") for n in qkv]).contiguous(),
+                    ),
+                    FrozenLinear(
+                        w(f"{pre}attention.output.dense.weight"),
+                        w(f"{pre}attention.output.dense.bias"),
+                    ),
                     (
                         w(f"{pre}attention.output.LayerNorm.weight"),
                         w(f"{pre}attention.output.LayerNorm.bias"),
                     ),
-                    w(f"{pre}intermediate.dense.weight"),
-                    w(f"{pre}intermediate.dense.bias"),
-                    w(f"{pre}output.dense.weight"),
-                    w(f"{pre}output.dense.bias"),
+                    FrozenLinear(
+                        w(f"{pre}intermediate.dense.weight"), w(f"{pre}intermediate.dense.bias")
+                    ),
+                    FrozenLinear(w(f"{pre}output.dense.weight"), w(f"{pre}output.dense.bias")),
                     (w(f"{pre}output.LayerNorm.weight"), w(f"{pre}output.LayerNorm.bias")),
                 )
             )
@@ -233,35 +240,14 @@ class MiniLMForward:
             x = self._norm(x + self.position[:length], self.norm)
             mask = None if valid is None else valid[:, None, None, :]
             heads, width = self.heads, self.dim // self.heads
-            for wqkv, bqkv, wo, bo, norm1, wi, bi, wf, bf, norm2 in self.layers:
-                qkv = _linear(x, wqkv, bqkv).view(b, length, 3, heads, width)
+            for qkv_proj, out_proj, norm1, up, down, norm2 in self.layers:
+                qkv = qkv_proj(x).view(b, length, 3, heads, width)
                 q, k, v = qkv.permute(2, 0, 3, 1, 4).unbind(0)  # (B, heads, L, width) each
                 a = F.scaled_dot_product_attention(q, k, v, attn_mask=mask, scale=self.scale)
                 a = a.transpose(1, 2).reshape(b, length, self.dim)
-                x = self._norm(_linear(a, wo, bo) + x, norm1)
-                h = _linear(x, wi, bi, gelu=True)
-                x = self._norm(_linear(h, wf, bf) + x, norm2)
+                x = self._norm(out_proj(a) + x, norm1)
+                x = self._norm(down(up(x, gelu=True)) + x, norm2)
             return x
-
-
-_ONEDNN_LINEAR = (
-    getattr(torch.ops.mkldnn, "_linear_pointwise", None)
-    if torch.backends.mkldnn.is_available()
-    else None
-)
-"""oneDNN's inner product as PyTorch exposes it to its compiler (``None`` where the build has
-none): on the CPU it multiplies a few prompt tokens by MiniLM's weight matrices in about 60 % of
-the time of ``F.linear``'s BLAS call (a single prompt is 10-30 rows: the regime where the BLAS
-kernel is least efficient)."""
-
-
-def _linear(x: Tensor, weight: Tensor, bias: Tensor, gelu: bool = False) -> Tensor:
-    """``F.linear(x, weight, bias)`` (then exact GELU when ``gelu``), through
-    :data:`_ONEDNN_LINEAR` on CPU float32 tensors (GELU fused into it); equal to float rounding."""
-    if _ONEDNN_LINEAR is not None and x.device.type == "cpu" and x.dtype == torch.float32:
-        return _ONEDNN_LINEAR(x, weight, bias, "gelu" if gelu else "none", [], "none")
-    y = F.linear(x, weight, bias)
-    return F.gelu(y) if gelu else y
 
 
 @lru_cache(maxsize=1)

@@ -8,6 +8,7 @@ candidates whose referent probability reaches the threshold, with
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Sequence
 
 import numpy as np
@@ -35,7 +36,7 @@ from model.referent.scene_candidates import (
     referent_heatmap,
     stack_candidates,
 )
-from model.referent.stage import CandidateBatch, ReferentStage, referent_loss
+from model.referent.stage import CandidateBatch, ReferentStage, SceneEmbeddings, referent_loss
 from scenes.actors import CLASSES
 
 UNCALIBRATED_REFERENT = 0.5
@@ -60,6 +61,9 @@ class ReferentGrounding(GroundingHead):
             2 * first if cfg.uses_lidar else None,
             2 * first if cfg.uses_radar else None,
         )
+        self._kept_scene: (
+            tuple[weakref.ref[SceneCandidates], tuple, CandidateBatch, SceneEmbeddings] | None
+        ) = None
 
     @property
     def min_score(self) -> float:
@@ -102,13 +106,41 @@ class ReferentGrounding(GroundingHead):
 
     def refer(self, cands: SceneCandidates | list[SceneCandidates], text: TextFeatures) -> Tensor:
         """Referent logits ``(N, K)`` of ``N`` prompts; ``cands`` is one scene shared by all the
-        prompts, or one scene per prompt."""
+        prompts, or one scene per prompt.
+
+        At inference (eval mode, no gradient) on one scene, the scene's batch and its
+        :meth:`ReferentStage.scene_embeddings` are kept for the next prompt on the same scene
+        (:meth:`_scene_batch`): per prompt only what depends on the text runs."""
         scenes = [cands] if isinstance(cands, SceneCandidates) else list(cands)
-        batch = stack_candidates(scenes)
         n = text.tokens.shape[0]
+        embedded = None
+        if len(scenes) == 1 and n == 1 and not self.training and not torch.is_grad_enabled():
+            batch, embedded = self._scene_batch(scenes[0])
+        else:
+            batch = stack_candidates(scenes)
         if len(scenes) == 1 and n > 1:
             batch = batch.index(torch.zeros(n, dtype=torch.long, device=batch.padding.device))
-        return self.stage(batch, text.tokens, text.numbers, text.padding_mask)
+        return self.stage(batch, text.tokens, text.numbers, text.padding_mask, embedded)
+
+    def _scene_batch(self, cands: SceneCandidates) -> tuple[CandidateBatch, SceneEmbeddings]:
+        """One scene's batch and its text-free embeddings, from a one-scene memory when the
+        scene is the one asked last and the embeddings' weights are the ones they were computed
+        with (checked by each parameter's storage and version counter, which every in-place
+        update, an optimiser step or ``load_state_dict``, advances)."""
+        stage = self.stage
+        weights = tuple(
+            (p.data_ptr(), p._version)
+            for module in (stage.fused, stage.lidar, stage.radar)
+            if module is not None
+            for p in module.parameters()
+        )
+        kept = self._kept_scene
+        if kept is not None and kept[0]() is cands and kept[1] == weights:
+            return kept[2], kept[3]
+        batch = stack_candidates([cands])
+        embedded = self.stage.scene_embeddings(batch)
+        self._kept_scene = (weakref.ref(cands), weights, batch, embedded)
+        return batch, embedded
 
     def prompt_losses(
         self,
@@ -195,7 +227,8 @@ class ReferentGrounding(GroundingHead):
         threshold = self.min_score if score_threshold is None else score_threshold
         clock = Clock(scene.device)
         if len(objects):
-            probs = torch.sigmoid(self.refer(objects, text)[0]).float().cpu().numpy()
+            with torch.inference_mode():  # (numbers out: nothing of it is kept for autograd)
+                probs = torch.sigmoid(self.refer(objects, text)[0]).float().cpu().numpy()
         else:
             probs = np.zeros(0, dtype=np.float32)
         t_ref = clock.lap()

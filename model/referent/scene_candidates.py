@@ -72,9 +72,11 @@ class SceneCandidates:
 
 
 def _pooled(feature_map: Tensor, grid: BevGrid, centres: Tensor, anchors: Tensor) -> Tensor:
-    return torch.cat(
-        [pool_bev(feature_map, grid, centres), pool_bev(feature_map, grid, anchors)], dim=1
-    )
+    """``(K, 2 C)``: the map pooled at the centres, then at the anchors (``(K, 2)`` each), in
+    one sampling call (each position is sampled on its own: the same values as two calls)."""
+    k = centres.shape[0]
+    both = pool_bev(feature_map, grid, torch.cat([centres, anchors]))
+    return torch.cat([both[:k], both[k:]], dim=1)
 
 
 def describe_candidates(
@@ -218,12 +220,13 @@ def referent_heatmap(
             # whole grid; the class maximum is taken after the float32 rounding (monotone).
             dx2 = ((x0[mine, None] + offsets[None, :]) - cells[mine, 0, None]) ** 2
             dy2 = ((y0[mine, None] + offsets[None, :]) - cells[mine, 1, None]) ** 2
+            # (-d2 / s is d2 / -s exactly; the product is rounded to float32 as it is stored,
+            # as astype would: the same values with two passes fewer)
             g = np.add(dx2[:, None, :], dy2[:, :, None])
-            np.negative(g, out=g)
-            np.divide(g, 2 * sigma_cells**2, out=g)
+            np.divide(g, -2 * sigma_cells**2, out=g)
             np.exp(g, out=g)
-            np.multiply(g, probabilities[mine, None, None], out=g)
-            g32 = g.astype(np.float32)
+            g32 = np.empty(g.shape, dtype=np.float32)
+            np.multiply(g, probabilities[mine, None, None], out=g32, casting="same_kind")
             canvas = np.zeros((h + 2 * size, w + 2 * size), dtype=np.float32)
             rows0, cols0 = (y0[mine] + radius + 1).tolist(), (x0[mine] + radius + 1).tolist()
             for k, (row, col) in enumerate(zip(rows0, cols0, strict=True)):

@@ -79,6 +79,17 @@ class CandidateBatch:
         )  # fmt: skip
 
 
+@dataclass(frozen=True)
+class SceneEmbeddings:
+    """The text-free part of the candidates' tokens: each candidate's embedding of its fused
+    map features and of each sensor's features (``(N, K, dim)``; None for an unused sensor),
+    the same for every prompt on a scene (:meth:`ReferentStage.scene_embeddings`)."""
+
+    fused: Tensor
+    lidar: Tensor | None
+    radar: Tensor | None
+
+
 def geometry_width(cfg: ReferentConfig) -> int:
     """Width of :attr:`CandidateBatch.geometry` for a stage of ``cfg``: the explicit geometry,
     then the context features with ``context``, then the subset ranks and picked references
@@ -152,14 +163,28 @@ class ReferentStage(nn.Module):
         x = self.text_in(torch.cat([tokens, numbers.to(tokens.dtype)], dim=-1))
         return self.text_context(x, src_key_padding_mask=padding)
 
+    def scene_embeddings(self, cands: CandidateBatch) -> SceneEmbeddings:
+        """The embeddings of :class:`SceneEmbeddings` for ``cands`` (no text involved)."""
+        return SceneEmbeddings(
+            self.fused(cands.fused),
+            None if self.lidar is None or cands.lidar is None else self.lidar(cands.lidar),
+            None if self.radar is None or cands.radar is None else self.radar(cands.radar),
+        )
+
     def candidate_tokens(
-        self, cands: CandidateBatch, text: Tensor, numbers: Tensor, text_padding: Tensor
+        self,
+        cands: CandidateBatch,
+        text: Tensor,
+        numbers: Tensor,
+        text_padding: Tensor,
+        embedded: SceneEmbeddings | None = None,
     ) -> Tensor:
         """The candidates' tokens ``(N, K, dim)``: the geometry's (with ``numeric_compare``
         extended by the comparisons with the prompt's ``numbers`` ``(N, T, NUMERIC_FEATURES)``;
         with ``text_gate`` gated by the prompt) and the fused map's embeddings, plus each
         sensor's embedding scaled by the prompt's gate for that sensor ``(N, 2, dim)`` in
-        ``(0, 1)``, normalised."""
+        ``(0, 1)``, normalised. ``embedded``: :meth:`scene_embeddings` of ``cands`` when already
+        computed (inference on a scene asked before)."""
         keep = (~text_padding).to(text.dtype)[..., None]
         mean = (text * keep).sum(1) / keep.sum(1).clamp(min=1.0)  # (N, dim)
         gate = torch.sigmoid(self.sensor_gate(mean)).view(-1, 2, self.cfg.dim)
@@ -174,11 +199,13 @@ class ReferentStage(nn.Module):
             geometry = torch.cat(parts, dim=-1)
         if self.geometry_gate is not None:
             geometry = geometry * (2.0 * torch.sigmoid(self.geometry_gate(mean)))[:, None, :]
-        x = self.geometry(geometry) + self.fused(cands.fused)
-        if self.lidar is not None and cands.lidar is not None:
-            x = x + gate[:, None, 0] * self.lidar(cands.lidar)
-        if self.radar is not None and cands.radar is not None:
-            x = x + gate[:, None, 1] * self.radar(cands.radar)
+        if embedded is None:
+            embedded = self.scene_embeddings(cands)
+        x = self.geometry(geometry) + embedded.fused
+        if embedded.lidar is not None:
+            x = x + gate[:, None, 0] * embedded.lidar
+        if embedded.radar is not None:
+            x = x + gate[:, None, 1] * embedded.radar
         return self.cand_norm(x)
 
     def forward(
@@ -187,15 +214,18 @@ class ReferentStage(nn.Module):
         tokens: Tensor,
         numbers: Tensor | None,
         text_padding: Tensor,
+        embedded: SceneEmbeddings | None = None,
     ) -> Tensor:
         """Referent logits ``(N, K)`` (padding positions hold -inf-like values, -1e4).
 
         At inference (eval mode, no gradient) the same computation runs written out
-        (:meth:`_infer`): equal to float rounding, in a fraction of the time."""
+        (:meth:`_infer`): equal to float rounding, in a fraction of the time; it takes the
+        scene's :meth:`scene_embeddings` as ``embedded`` where the caller kept them (they are
+        computed otherwise, and always in training)."""
         if numbers is None:  # features made without numerals (TextFeatures.numbers is optional)
             numbers = tokens.new_zeros((*tokens.shape[:2], NUMERIC_FEATURES))
         if not self.training and not torch.is_grad_enabled():
-            return self._infer(cands, tokens, numbers, text_padding)
+            return self._infer(cands, tokens, numbers, text_padding, embedded)
         text = self.encode_text(tokens, numbers, text_padding)
         x = self.candidate_tokens(cands, text, numbers, text_padding)
         for block in self.blocks:
@@ -211,7 +241,12 @@ class ReferentStage(nn.Module):
     # ---------------------------------------------------------------- inference, written out
 
     def _infer(
-        self, cands: CandidateBatch, tokens: Tensor, numbers: Tensor, text_padding: Tensor
+        self,
+        cands: CandidateBatch,
+        tokens: Tensor,
+        numbers: Tensor,
+        text_padding: Tensor,
+        embedded: SceneEmbeddings | None,
     ) -> Tensor:
         """:meth:`forward` without gradients: the layers' arithmetic called directly
         (``F.linear``, fused ``scaled_dot_product_attention``, ``F.layer_norm``) instead of
@@ -222,7 +257,7 @@ class ReferentStage(nn.Module):
         text = self.text_in(torch.cat([tokens, numbers.to(tokens.dtype)], dim=-1))
         text = text + _attention(ctx.self_attn, ctx.norm1(text), None, text_mask)
         text = text + _feed_forward(ctx, ctx.norm2(text))
-        x = self.candidate_tokens(cands, text, numbers, text_padding)
+        x = self.candidate_tokens(cands, text, numbers, text_padding, embedded)
         cand_mask = _attend(cands.padding)
         for block in self.blocks:
             x = x + _attention(block.self_attn, block.norm1(x), None, cand_mask)
@@ -291,6 +326,7 @@ def referent_loss(logits: Tensor, targets: Tensor, padding: Tensor) -> tuple[Ten
 __all__ = [
     "CandidateBatch",
     "ReferentStage",
+    "SceneEmbeddings",
     "geometry_input_width",
     "geometry_width",
     "referent_loss",
