@@ -42,13 +42,20 @@ def _connected(app, ws_client, timeout: float = 15.0):
     return client
 
 
+def _newest_session(app):
+    """The session of the browser that connected last (``app.sessions`` keeps connection order):
+    this test's, not an earlier test's whose disconnect the server may still be handling (such a
+    session leaves the navigator, and stops being told of changes, at any moment)."""
+    return [s for s in app.sessions.values() if s.nav is not None][-1]
+
+
 def test_prompt_run_enter_and_empty_prompt(running_app, ws_client) -> None:
     app = running_app
     client = _connected(app, ws_client)
     try:
         assert {"/scene/radar", "/scene/rings", "/scene/ego"} <= set(client.nodes)
         assert any("test note" in text for text in client.markdown.values())
-        session = next(iter(app.sessions.values()))
+        session = _newest_session(app)
         # Type a prompt and press Run (threshold 0 so that the untrained model returns boxes).
         client.set("Score threshold", 0.0)
         client.set("Prompt", "the car about 15 m ahead")
@@ -177,7 +184,7 @@ def test_reload_frames_updates_the_panels(running_app, ws_client, write_tiny_roo
     app = running_app
     client = _connected(app, ws_client)
     try:
-        session = next(s for s in app.sessions.values() if s.nav is not None)
+        session = _newest_session(app)
         count = len(app.frames)
         write_tiny_root(app.frames.root.path, frames=count + 1)
         app.reload_frames()
