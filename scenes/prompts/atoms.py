@@ -279,12 +279,12 @@ class DepthBeyond(Atom):
 class Extreme(enum.Enum):
     """Superlatives: pick the one actor that ranks first among the predicate's matches.
 
-    ``FASTEST`` and ``SLOWEST`` rank the moving matches only (speed above
-    :data:`~scenes.actors.MOVING_SPEED`): "the slowest cyclist" is the slowest of the cyclists
-    that ride, and a superlative or ordinal by speed is crisp only when every match is clearly
-    moving or clearly standing (``SLOWEST``: clearly moving, as a standing actor might be said to
-    be the slowest). ``SLOWEST`` is the extended language's (:data:`BASE_EXTREMES` are the base
-    generator's, whose prompts stay byte-identical).
+    ``SLOWEST`` ranks the moving matches only (speed above :data:`~scenes.actors.MOVING_SPEED`,
+    :meth:`ranks`): "the slowest cyclist" is the slowest of the cyclists that ride, and it is
+    crisp only when every match clearly moves (a standing actor might be said to be the slowest).
+    ``FASTEST`` ranks every match but names nobody when its winner stands, and is crisp only when
+    the winner clearly moves. ``SLOWEST`` is the extended language's (:data:`BASE_EXTREMES` are the
+    base generator's, whose prompts stay byte-identical).
     """
 
     NEAREST = "nearest"
@@ -324,9 +324,13 @@ class Extreme(enum.Enum):
             return GAP_DEPTH
         return GAP_SPEED if self.by_speed else GAP_Y
 
+    def ranks(self, f: ActorFeatures) -> bool:
+        """Whether ``f`` takes part in this superlative's ranking (``SLOWEST``: the moving only)."""
+        return self is not Extreme.SLOWEST or f.speed > MOVING_SPEED
+
     @property
     def by_speed(self) -> bool:
-        """Ranks by speed, among the moving only (class docstring)."""
+        """Ranks by speed (class docstring)."""
         return self in (Extreme.FASTEST, Extreme.SLOWEST)
 
     def flipped(self) -> Extreme:

@@ -201,8 +201,7 @@ class Ordinal:
         b = analyse_cached(cache, feats, region, self.base)
         by_id = {f.actor_id: f for f in feats}
         ranked = sorted((by_id[i] for i in b.ids), key=lambda f: (-self.extreme.key(f), f.actor_id))
-        if self.extreme is Extreme.SLOWEST:
-            ranked = [f for f in ranked if f.speed > MOVING_SPEED]
+        ranked = [f for f in ranked if self.extreme.ranks(f)]
         if len(ranked) < self.rank:
             return Resolution((), b.conflicts, b.crisp)
         chosen = ranked[self.rank - 1]

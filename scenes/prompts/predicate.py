@@ -101,8 +101,7 @@ def _select(pred: Predicate, inside: Sequence[ActorFeatures], slack: float) -> t
     cands = [f for f in inside if pred.matches(f, slack)]
     if pred.extreme is None:
         return tuple(sorted(f.actor_id for f in cands))
-    if pred.extreme is Extreme.SLOWEST:
-        cands = [f for f in cands if f.speed > MOVING_SPEED]
+    cands = [f for f in cands if pred.extreme.ranks(f)]
     if not cands:
         return ()
     best = max(cands, key=lambda f: (pred.extreme.key(f), -f.actor_id))
