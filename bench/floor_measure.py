@@ -6,8 +6,9 @@ timed calls, each beside the rate measured just before it.
   so that each call is compared with the rate the machine gave at that moment (its cores are
   shared with other jobs).
 - FLOPs: :func:`bench.measure.count_flops` (``torch.utils.flop_counter``: matrix products,
-  convolutions and attention; element-wise work, pooling and softmax count 0) of the very calls
-  that are timed: ``encode_scene`` split by stage through the modules that run it, and ``ground``
+  convolutions and attention; element-wise work, pooling and softmax count 0) of the calls that
+  are timed, in their module form: ``encode_scene`` as the scene encoder's ``detect`` with
+  gradients on, split by stage through the modules that run it, and ``ground``
   of the referent path as its two networks, the text encoder (every prompt new to it) and the
   referent stage (counted in its module form: PyTorch's fused attention fast path, which its
   inference may take, hides its attention from the counter).
@@ -61,10 +62,18 @@ def encode_flops(model: TPCNet, frame: VodFrame) -> dict[str, int]:
     """FLOPs of ``model.encode_scene(frame)`` per :data:`ENCODE_STAGES` plus ``total`` and the
     detection stage's ``neck`` and ``head`` (its decoding and candidate description count 0).
 
-    Stages are told apart by the classes of the modules that run them (``FlopCounterMode``
-    reports per module); FLOPs outside every named module go to ``detect``.
+    Counted on the scene encoder's module form, ``model.detect`` with gradients on (as training
+    runs it), so that every implementation of ``encode_scene`` has one floor: its inference
+    fast paths compute the same functions with these FLOPs (a compiled pass, such as the
+    pillars' :mod:`model.nets.pillar_kernel`, runs outside the counter's sight). The candidates'
+    pooling, a few thousand FLOPs, is left out. Stages are told apart by the classes of the
+    modules that run them (``FlopCounterMode`` reports per module); FLOPs outside every named
+    module go to ``detect``.
     """
-    counted = count_flops(lambda: model.encode_scene(frame.lidar, frame.radar))
+    lidar = model.scene.clouds([frame.lidar], 1, "lidar")
+    radar = model.scene.clouds([frame.radar], 1, "radar")
+    with torch.enable_grad():
+        counted = count_flops(lambda: model.detect(lidar, radar))
     parts = model_parts(model)
     branches = [b for b in (parts.lidar, parts.radar) if b is not None]
     stage_of: dict[str, str] = {}

@@ -24,7 +24,7 @@ The result says which models were used. The stage breakdown comes from the model
 :class:`model.features.GroundTimings`/``SceneTimings`` and is checked by timing the same stages from
 outside through public submodules (TPCNet path: ``text_encoder``, ``text_fusion``, ``neck``,
 ``head``, :func:`model.head.detector.decode.decode`; referent path: ``text_encoder``, ``model.refer`` on
-``features.objects``, :func:`model.referent.stage.stage.scene_candidates.referent_heatmap`, and the ``detect`` stage part by
+``features.objects``, :func:`model.referent.heatmap.referent_heatmap`, and the ``detect`` stage part by
 part). The referent path is profiled (cProfile) in every run, the TPCNet path when it misses a
 target. With CUDA, the ``paper`` preset (untrained) of both paths is measured on the GPU as well.
 
@@ -134,7 +134,7 @@ def measure_block(
         if key in checks:
             how = (
                 "`model.text_encoder`, `model.refer` on `features.objects` (sigmoid to numpy) "
-                "and the ranking with `model.referent.stage.stage.scene_candidates.referent_heatmap`, called one by one"
+                "and the ranking with `model.referent.heatmap.referent_heatmap`, called one by one"
                 if key == "referent"
                 else "the same stages called one by one through the model's public submodules"
             )

@@ -310,7 +310,7 @@ def measure_outside_referent(
 ) -> dict[str, list[float]]:
     """The referent path's ``ground`` stages timed from outside the model: ``text`` (the model's
     ``text_encoder``), ``referent`` (the referent head's ``refer`` on the scene's ``features.objects``, sigmoid
-    to numpy) and ``decode`` (ranking and :func:`model.referent.scene_candidates.referent_heatmap`)."""
+    to numpy) and ``decode`` (ranking and :func:`model.referent.heatmap.referent_heatmap`)."""
     out: dict[str, list[float]] = {k: [] for k in REFERENT.ground_stages}
     features: dict[int, SceneFeatures] = {}
     for scene, prompt in prompt_pairs(scenes)[:limit]:

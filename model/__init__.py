@@ -56,8 +56,9 @@ if TYPE_CHECKING:
     from model.nets.text import load_minilm, tokenize
     from model.protocol import GridExtent, GroundingModel, ModelSettings, PredictionsView
     from model.referent.head import UNCALIBRATED_REFERENT, referent_head
+    from model.referent.heatmap import referent_heatmap
     from model.referent.labelled import LabelledBoxes
-    from model.referent.scene_candidates import SceneMaps, referent_heatmap
+    from model.referent.scene_candidates import SceneMaps
     from model.tpcnet import TPCNet
 
 _EXPORTS = {
@@ -96,7 +97,7 @@ _EXPORTS = {
     "draw_targets": "model.head.targets",
     "referent_head": "model.referent.head",
     "SceneMaps": "model.referent.scene_candidates",
-    "referent_heatmap": "model.referent.scene_candidates",
+    "referent_heatmap": "model.referent.heatmap",
 }
 """Exported name -> the module that defines it."""
 

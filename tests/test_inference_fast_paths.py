@@ -148,6 +148,37 @@ def test_referent_head_remembers_the_last_scene_only_while_it_is_the_same(
         assert head._kept_scene[0]() is other.objects
 
 
+def test_ground_draws_on_the_scene_canvas_kept_from_the_last_prompt(untrained_model, random_scene):
+    from model.referent.heatmap import referent_heatmap
+
+    model = untrained_model("referent")
+    head = model.grounding
+    features = model.encode_scene(*random_scene())
+    objects = features.objects
+    assert objects is not None and len(objects) > 0
+    first = model.ground(features, "the nearest car", score_threshold=0.0)
+    kept = head._kept_canvas
+    assert kept is not None and kept[0]() is objects
+    second = model.ground(features, "the two pedestrians on the left", score_threshold=0.0)
+    assert head._kept_canvas is kept  # the same scene: the same canvas
+    assert len(first.scores) == len(second.scores) == len(objects)  # (all, at threshold 0)
+    # What each answer drew equals the heatmap function on that prompt's probabilities.
+    with torch.no_grad():
+        probs = torch.sigmoid(head.refer(objects, model.text_encoder(["the nearest car"]))[0])
+    want = referent_heatmap(
+        features.detection_heatmaps,
+        objects.boxes,
+        objects.labels,
+        probs.numpy().astype(np.float64),
+        model.head_grid,
+        model.cfg.head.anchor,
+    )
+    assert first.heatmaps.tobytes() == want.tobytes()
+    other = model.encode_scene(*random_scene())
+    model.ground(other, "the nearest car")
+    assert head._kept_canvas[0]() is other.objects
+
+
 def test_baca_blocked_attention_equals_the_unblocked_one(monkeypatch):
     from model.nets import baca
 
@@ -166,3 +197,44 @@ def test_baca_blocked_attention_equals_the_unblocked_one(monkeypatch):
         np.testing.assert_allclose(
             attention.attend(q, k, v).detach().numpy(), whole.numpy(), rtol=0, atol=1e-5
         )
+
+
+def _cloud_with_edges(seed: int, features: int) -> np.ndarray:
+    """Points inside and outside the small preset's grid and z range, on its far edges (rounding
+    puts some just below x_max into the next column), and 80 in one pillar (more than either
+    sensor keeps), in random order."""
+    rng = np.random.default_rng(seed)
+    n = 4000
+    pts = np.c_[
+        rng.uniform([-5, -30, -4], [56, 30, 3], (n, 3)), rng.normal(0, 20, (n, features - 3))
+    ]
+    pts[:50, 0] = np.nextafter(np.float32(51.2), np.float32(0))  # just below x_max
+    pts[50:100, 1] = np.float32(-25.6)  # exactly on y_min
+    pts[100:180, :3] = rng.uniform([10.0, 1.0, -1.0], [10.3, 1.3, 0.5], (80, 3))  # one pillar
+    return pts[rng.permutation(n)].astype(np.float32)
+
+
+@pytest.mark.parametrize("sensor", ["lidar", "radar"])
+def test_compiled_pillar_pass_equals_the_array_form(untrained_model, sensor):
+    # One cloud at inference runs model.nets.pillar_kernel; with gradients on, the same encoder
+    # runs its array form (voxelize, the pillars' max of the factorised map). Random BatchNorm
+    # statistics and signs, so that the sign flip and the folded normalisation both matter.
+    model = untrained_model("referent")
+    encoder = getattr(model.scene, sensor).pillars
+    gen = torch.Generator().manual_seed(3)
+    with torch.no_grad():
+        encoder.norm.weight.copy_(torch.randn(encoder.out_channels, generator=gen))
+        encoder.norm.running_mean.copy_(torch.randn(encoder.out_channels, generator=gen))
+        encoder.norm.running_var.copy_(torch.rand(encoder.out_channels, generator=gen) + 0.5)
+    for seed in range(3):
+        cloud = torch.from_numpy(_cloud_with_edges(seed, encoder.num_features))
+        with torch.no_grad():
+            got = encoder([cloud])
+        with torch.enable_grad():
+            want = encoder([cloud]).detach()
+        assert got.shape == want.shape == (1, encoder.out_channels, *encoder.grid.shape)
+        torch.testing.assert_close(got, want, rtol=1e-5, atol=1e-5)
+    with torch.no_grad():  # nothing in range: an all-zero canvas
+        assert not encoder([torch.zeros(0, encoder.num_features)]).any()
+        far = torch.full((5, encoder.num_features), 500.0)
+        assert not encoder([far]).any()

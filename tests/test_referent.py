@@ -423,7 +423,7 @@ def test_fast_point_evidence_matches_on_a_generated_scene(tiny_root):
 
 @pytest.mark.parametrize("seed", range(4))
 def test_fast_referent_heatmap_is_bit_identical_to_the_reference(seed):
-    from model.referent.scene_candidates import referent_heatmap
+    from model.referent.heatmap import referent_heatmap
 
     rng = np.random.default_rng(seed)
     grid = BevGrid(0.0, 51.2, -25.6, 25.6, 0.64)
@@ -501,3 +501,31 @@ def test_family_rates_reach_the_generator_and_bad_ones_are_one_line_errors(tiny_
         assert "\n" not in str(err.value)
     with pytest.raises(TrainingError, match="--language extended"):
         parse_args([*base, *flags])
+
+
+def test_a_scene_canvas_draws_every_prompt_as_the_heatmap_function_does():
+    # ReferentCanvas holds the text-free part (shading, windows at the widest radius); drawing
+    # any probabilities on it must give referent_heatmap's bits, and it refuses a probability
+    # above the p_max it was built for (its windows would be too narrow).
+    from model.referent.heatmap import ReferentCanvas, referent_heatmap
+
+    rng = np.random.default_rng(7)
+    grid = BevGrid(0.0, 51.2, -25.6, 25.6, 0.64)
+    detection = rng.random((3, 80, 80)).astype(np.float32)
+    k = 25
+    boxes = np.column_stack(
+        [
+            rng.uniform(-10, 60, k), rng.uniform(-30, 30, k), np.zeros(k),
+            rng.uniform(0.5, 5, k), rng.uniform(0.5, 2.5, k), np.ones(k), rng.uniform(-4, 4, k),
+        ]
+    )  # fmt: skip
+    labels = rng.integers(0, 3, k)
+    canvas = ReferentCanvas.of(detection, boxes, labels, grid, "corner")
+    for scale in (1.0, 1e-3, 1e-30, 0.0):
+        p = rng.random(k) * scale
+        want = referent_heatmap(detection, boxes, labels, p, grid, "corner")
+        assert canvas.draw(p).tobytes() == want.tobytes()
+    with pytest.raises(ValueError, match="p_max"):
+        ReferentCanvas.of(detection, boxes, labels, grid, "corner", p_max=0.5).draw(np.ones(k))
+    with pytest.raises(ValueError, match="probabilities"):
+        canvas.draw(np.ones(k + 1))

@@ -18,7 +18,10 @@ Choices where PointPillars' reference is silent or odd:
 
 - Voxelisation is done with tensor ops (one stable ``argsort`` of the flat cell keys, then
   ``unique_consecutive`` for the pillars and the within-pillar rank; ``index_add``/
-  ``scatter_reduce`` for the mean and the max), no Python loop over points, no compiled extension.
+  ``scatter_reduce`` for the mean and the max), no Python loop over points, no compiled extension
+  to build. One cloud at inference (the app's ``encode_scene``) takes
+  :mod:`model.nets.pillar_kernel` instead: the same arithmetic as one loop over the points,
+  compiled by numba on first use (issue 20: about a third of the time on a full LiDAR spin).
 - A pillar keeps its first ``max_points`` points in input order (32 LiDAR, 10 radar as the paper);
   the pillar mean is over the kept points. There is no cap on the number of pillars.
 - The max runs over the real points only: PointPillars' zero-padded slots (which become
@@ -40,6 +43,7 @@ from torch import Tensor, nn
 
 from model.config import PillarConfig
 from model.nets.grid import BevGrid
+from model.nets.pillar_kernel import PillarWeights, encode_cloud
 
 
 @dataclass(frozen=True)
@@ -304,6 +308,38 @@ class PillarEncoder(nn.Module):
         pooled -= torch.cat([mean, centre], dim=1) @ torch.cat([w_mean, w_centre], dim=1).t()
         return torch.relu(self.norm(pooled * sign))
 
+    def kernel_weights(self) -> PillarWeights:
+        """The eval-mode PFN as :func:`model.nets.pillar_kernel.encode_cloud` reads it: the
+        factorisation of :meth:`_pooled_eval` (sign-flipped channels, the offsets' xyz columns
+        folded into the raw point's map, the per-pillar term's weights) and the BatchNorm's
+        running statistics as a scale and a shift per channel."""
+        f = self.num_features
+        with torch.no_grad():
+            sign = torch.where(self.norm.weight >= 0, 1.0, -1.0)
+            weight = self.linear.weight * sign[:, None]
+            raw = weight[:, :f] * self.scale
+            raw[:, :3] += weight[:, f : f + 3] + weight[:, f + 3 :]
+            norm = self.norm
+            scale = norm.weight / torch.sqrt(norm.running_var + norm.eps)
+            shift = norm.bias - norm.running_mean * scale
+
+        def arr(t: Tensor) -> np.ndarray:
+            return np.ascontiguousarray(t.detach().cpu().numpy(), dtype=np.float32)
+
+        return PillarWeights(
+            raw_t=arr(raw.t()), pillar=arr(weight[:, f:]), sign=arr(sign), scale=arr(scale),
+            shift=arr(shift),
+        )  # fmt: skip
+
+    def _encode_one(self, cloud: Tensor) -> Tensor:
+        """:meth:`forward` of one CPU cloud ``(N, F)`` in eval mode: ``(1, C, H, W)``."""
+        g = self.grid
+        bounds = (g.x_min, g.x_max, g.y_min, g.y_max, self.z_min, self.z_max)
+        return encode_cloud(
+            cloud.reshape(-1, self.num_features), self.kernel_weights(), bounds, g.cell,
+            g.shape, self.max_points,
+        )  # fmt: skip
+
     def _pillar_points(self, pillars: Pillars) -> tuple[Tensor, Tensor]:
         """``(P, 3)`` mean of each pillar's kept points and ``(P, 3)`` its geometric centre."""
         pts = pillars.points
@@ -338,6 +374,13 @@ class PillarEncoder(nn.Module):
                     f"PillarEncoder: cloud {i} must have shape (N, {self.num_features}), "
                     f"got {tuple(c.shape)}"
                 )
+        if (
+            len(clouds) == 1
+            and clouds[0].device.type == "cpu"
+            and not self.norm.training
+            and not torch.is_grad_enabled()
+        ):  # one cloud at inference (the app, encode_scene): one compiled pass
+            return self._encode_one(clouds[0])
         pillars = voxelize(clouds, self.grid, self.z_min, self.z_max, self.max_points)
         ny, nx = self.grid.shape
         channels = self.out_channels

@@ -3,7 +3,7 @@ detector proposes every object of a scene once (:meth:`ReferentGrounding.encode`
 candidate threshold, :func:`model.referent.scene_candidates.describe_candidates`); per prompt only the text encoder
 and the referent stage (:class:`model.referent.stage.ReferentStage`) run, and the answer is the
 candidates whose referent probability reaches the threshold, with
-:func:`model.referent.scene_candidates.referent_heatmap` as its heatmap. Training: :meth:`proposals`,
+:class:`model.referent.heatmap.ReferentCanvas` (kept per scene) drawing its heatmap. Training: :meth:`proposals`,
 :meth:`describe` and :meth:`prompt_losses` (:mod:`model.training.referent_step`)."""
 
 from __future__ import annotations
@@ -28,12 +28,12 @@ from model.head.decode import Detections, decode
 from model.head.detector import HeadOutput
 from model.nets.scene_encoder import SceneEncoder
 from model.nets.text import TextFeatures
+from model.referent.heatmap import ReferentCanvas
 from model.referent.labelled import LabelledBoxes, with_context
 from model.referent.scene_candidates import (
     SceneCandidates,
     SceneMaps,
     describe_candidates,
-    referent_heatmap,
     stack_candidates,
 )
 from model.referent.stage import CandidateBatch, ReferentStage, SceneEmbeddings, referent_loss
@@ -64,6 +64,7 @@ class ReferentGrounding(GroundingHead):
         self._kept_scene: (
             tuple[weakref.ref[SceneCandidates], tuple, CandidateBatch, SceneEmbeddings] | None
         ) = None
+        self._kept_canvas: tuple[weakref.ref, weakref.ref, ReferentCanvas] | None = None
 
     @property
     def min_score(self) -> float:
@@ -141,6 +142,20 @@ class ReferentGrounding(GroundingHead):
         embedded = self.stage.scene_embeddings(batch)
         self._kept_scene = (weakref.ref(cands), weights, batch, embedded)
         return batch, embedded
+
+    def _canvas(
+        self, scene: SceneEncoder, objects: SceneCandidates, heat: np.ndarray
+    ) -> ReferentCanvas:
+        """The scene's :class:`ReferentCanvas` (the text-free part of the answer's heatmap),
+        from a one-scene memory when ``objects`` and ``heat`` are the ones asked last."""
+        kept = self._kept_canvas
+        if kept is not None and kept[0]() is objects and kept[1]() is heat:
+            return kept[2]
+        canvas = ReferentCanvas.of(
+            heat, objects.boxes, objects.labels, scene.head_grid, self.cfg.head.anchor
+        )
+        self._kept_canvas = (weakref.ref(objects), weakref.ref(heat), canvas)
+        return canvas
 
     def prompt_losses(
         self,
@@ -239,9 +254,7 @@ class ReferentGrounding(GroundingHead):
         order = order[probs[order] >= threshold]
         if features.answerable is not None:
             order = order[order < features.answerable]
-        heatmaps = referent_heatmap(
-            heat, objects.boxes, objects.labels, probs, scene.head_grid, self.cfg.head.anchor
-        )
+        heatmaps = self._canvas(scene, objects, heat).draw(probs)
         labels = objects.labels[order]
         return Answer(
             boxes=objects.boxes[order],

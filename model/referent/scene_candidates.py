@@ -1,11 +1,9 @@
-"""Candidates of one scene for the referent stage, and the answer's heatmap.
+"""Candidates of one scene for the referent stage.
 
 :func:`describe_candidates` turns boxes (detections at inference, actors plus false detections in
 training) and the scene's BEV maps into the per-candidate tensors of
 :class:`model.referent.stage.CandidateBatch`; :func:`stack_candidates` pads several scenes into one
-batch; :func:`referent_heatmap` draws what the app shows: the detector's class heatmaps kept where
-a candidate the sentence refers to sits (a Gaussian at each candidate's anchor cell, weighted by
-its referent probability), so that a person sees where the answer is and how sure it is.
+batch (the answer's heatmap is :mod:`model.referent.heatmap`'s).
 
 Maps (all on the head grid, ``(C, H, W)``, ``[c, iy, ix]``):
 
@@ -18,7 +16,6 @@ Maps (all on the head grid, ``(C, H, W)``, ``[c, iy, ix]``):
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -164,84 +161,9 @@ def stack_candidates(scenes: Sequence[SceneCandidates]) -> CandidateBatch:
     return CandidateBatch(geometry, _pad([s.fused for s in scenes], k), lidar, radar, padding)
 
 
-_FLOAT32_ZERO = 151 * math.log(2.0)
-"""``-ln`` of a value (``2**-151``) below half the smallest float32 subnormal: it rounds to 0."""
-
-
-def _gaussian_radius(p_max: float, sigma_cells: float) -> int:
-    """Cells beyond which ``p * exp(-d^2 / (2 sigma^2))`` rounds to 0 in float32 for every
-    ``p <= p_max`` (at least 0; one cell more than needed, against rounding)."""
-    d2 = 2 * sigma_cells**2 * (_FLOAT32_ZERO + math.log(max(p_max, 1e-300)))
-    return int(math.ceil(math.sqrt(max(d2, 0.0)))) + 1
-
-
-def referent_heatmap(
-    detection: np.ndarray,
-    boxes: np.ndarray,
-    labels: np.ndarray,
-    probabilities: np.ndarray,
-    grid: BevGrid,
-    anchor: str,
-    sigma_cells: float = 1.5,
-) -> np.ndarray:
-    """The answer's heatmap ``(3, H, W)`` in ``[0, 1]``.
-
-    Args:
-        detection: ``(3, H, W)`` sigmoid heatmaps of the text-agnostic detector on ``grid``.
-        boxes: ``(K, 7)`` candidates; labels ``(K,)``; probabilities ``(K,)`` referent scores.
-        grid: The head grid; anchor: the head's anchor kind.
-        sigma_cells: Width of the Gaussian drawn at each candidate's anchor cell.
-
-    Returns:
-        For each class, the largest ``p_k * gaussian_k`` over the class's candidates, shaded by
-        the detector's heatmap (half from it, relative to its peak): bright at the referred
-        objects, dark elsewhere.
-    """
-    _, h, w = detection.shape
-    weight = np.zeros_like(detection, dtype=np.float32)
-    labels = np.asarray(labels).reshape(-1)
-    probabilities = np.asarray(probabilities, dtype=np.float64).reshape(-1)
-    if len(boxes):
-        cells = grid.xy_to_cell(anchor_points(np.asarray(boxes).reshape(-1, 7), anchor))
-        radius = _gaussian_radius(float(probabilities.max()), sigma_cells)
-        size = 2 * radius + 1
-        # Candidate k only reaches the grid columns x0[k] - radius .. x0[k] + radius around its
-        # anchor cell (beyond, its value rounds to 0 in float32), and the same rows: a window of
-        # size x size cells, drawn on a canvas padded by `size` cells on every side.
-        x0 = np.floor(cells[:, 0]).astype(np.int64)
-        y0 = np.floor(cells[:, 1]).astype(np.int64)
-        inside = (x0 > -radius - 1) & (x0 < w + radius) & (y0 > -radius - 1) & (y0 < h + radius)
-        offsets = np.arange(size) - radius + 0.5
-        for c in range(detection.shape[0]):
-            mine = np.flatnonzero((labels == c) & inside)
-            if not len(mine):
-                continue
-            # p_k * exp(-d2 / (2 sigma^2)), element for element the same operations as on the
-            # whole grid; the class maximum is taken after the float32 rounding (monotone).
-            dx2 = ((x0[mine, None] + offsets[None, :]) - cells[mine, 0, None]) ** 2
-            dy2 = ((y0[mine, None] + offsets[None, :]) - cells[mine, 1, None]) ** 2
-            # (-d2 / s is d2 / -s exactly; the product is rounded to float32 as it is stored,
-            # as astype would: the same values with two passes fewer)
-            g = np.add(dx2[:, None, :], dy2[:, :, None])
-            np.divide(g, -2 * sigma_cells**2, out=g)
-            np.exp(g, out=g)
-            g32 = np.empty(g.shape, dtype=np.float32)
-            np.multiply(g, probabilities[mine, None, None], out=g32, casting="same_kind")
-            canvas = np.zeros((h + 2 * size, w + 2 * size), dtype=np.float32)
-            rows0, cols0 = (y0[mine] + radius + 1).tolist(), (x0[mine] + radius + 1).tolist()
-            for k, (row, col) in enumerate(zip(rows0, cols0, strict=True)):
-                view = canvas[row : row + size, col : col + size]
-                np.maximum(view, g32[k], out=view)
-            weight[c] = canvas[size : size + h, size : size + w]
-    peak = np.maximum(detection.reshape(detection.shape[0], -1).max(axis=1), 1e-6)
-    shape = 0.5 + 0.5 * detection / peak[:, None, None]
-    return np.clip(weight * shape, 0.0, 1.0).astype(np.float32)
-
-
 __all__ = [
     "SceneCandidates",
     "SceneMaps",
     "describe_candidates",
-    "referent_heatmap",
     "stack_candidates",
 ]
