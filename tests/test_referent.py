@@ -529,3 +529,34 @@ def test_a_scene_canvas_draws_every_prompt_as_the_heatmap_function_does():
         ReferentCanvas.of(detection, boxes, labels, grid, "corner", p_max=0.5).draw(np.ones(k))
     with pytest.raises(ValueError, match="probabilities"):
         canvas.draw(np.ones(k + 1))
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_box_point_pairs_are_the_brute_force_pairs_in_order(seed):
+    # Each box against every point with the definition's arithmetic (float64, in the box's
+    # frame, the x range), ordered by box, then x, then point index: the compiled pass's pairs.
+    from model.referent.point_pairs import box_point_pairs
+
+    boxes, lidar, _ = _scene_like(seed, k=12, n_lidar=3000)
+    for pts in (lidar.astype(np.float32), lidar):
+        for margin, use_z in ((0.2, True), (0.5, False)):
+            want_box, want_point = [], []
+            p = np.asarray(pts[:, :3], dtype=np.float64)
+            for b, box in enumerate(boxes):
+                c, s = np.cos(box[6]), np.sin(box[6])
+                dx, dy = p[:, 0] - box[0], p[:, 1] - box[1]
+                r = 0.5 * np.hypot(box[3], box[4]) + margin
+                inside = (np.abs(dx * c + dy * s) <= box[3] / 2 + margin) & (
+                    np.abs(-dx * s + dy * c) <= box[4] / 2 + margin
+                )
+                if use_z:
+                    inside &= np.abs(p[:, 2] - box[2]) <= box[5] / 2 + margin
+                inside &= (p[:, 0] >= box[0] - r) & (p[:, 0] < box[0] + r)
+                idx = np.flatnonzero(inside)
+                idx = idx[np.argsort(pts[idx, 0], kind="stable")]
+                want_box += [b] * len(idx)
+                want_point += idx.tolist()
+            got_box, got_point = box_point_pairs(pts, boxes, margin, use_z)
+            assert got_box.tolist() == want_box and got_point.tolist() == want_point
+    empty = box_point_pairs(lidar, boxes[:0], 0.2, True)
+    assert len(empty[0]) == len(empty[1]) == 0

@@ -7,8 +7,16 @@ import pytest
 import torch
 
 from model.config import ModelConfig, ReferentConfig
+from model.referent.candidates import nearest_depth
 from model.referent.context import (
+    BUMP_WIDTH,
+    BUMPS,
     CONTEXT_FEATURES,
+    PER_REFERENCE,
+    RANK_TAU,
+    REFERENCE_TAU,
+    REFERENCES,
+    RELATION_SCALE,
     context_features,
     objectness,
     rank_columns,
@@ -193,3 +201,141 @@ def test_the_text_gate_reads_the_sentence_and_older_configs_go_without(
         torch.nn.init.zeros_(stage.geometry_gate.weight)
         b = model.ground(scene, "a car").scores
     assert len(a) and not np.allclose(a, b, atol=1e-4)
+
+
+# ------------------------------------------------------ the compiled pass's reference (NumPy form)
+
+
+def _ref_sigmoid(z: np.ndarray) -> np.ndarray:
+    return 0.5 * (1.0 + np.tanh(0.5 * z))
+
+
+def _ref_rank_code(rank: np.ndarray, bumps: tuple[int, ...]) -> np.ndarray:
+    """``(..., 1 + len(bumps))`` of soft ranks ``(...)``: ``min(r, 6) / 4`` and a Gaussian bump
+    at each ``n``."""
+    cols = [np.minimum(rank, 6.0) / 4.0]
+    cols += [np.exp(-((rank - n) ** 2) / (2 * BUMP_WIDTH**2)) for n in bumps]
+    return np.stack(cols, axis=-1)
+
+
+def _ref_softmax_last(logits: np.ndarray, allowed: np.ndarray) -> np.ndarray:
+    """Softmax of ``logits`` over the last axis, over the ``allowed`` entries only (a row with
+    none: all zeros)."""
+    z = np.where(allowed, logits, -np.inf)
+    top = z.max(axis=-1, keepdims=True)
+    top = np.where(np.isfinite(top), top, 0.0)
+    e = np.where(allowed, np.exp(z - top), 0.0)
+    total = e.sum(axis=-1, keepdims=True)
+    return np.divide(e, total, out=np.zeros_like(e), where=total > 0)
+
+
+def _ref_references(
+    x: np.ndarray, y: np.ndarray, depth: np.ndarray, labels: np.ndarray, log_w: np.ndarray
+) -> np.ndarray:
+    """Reference weights ``(C * R, K, K)``: ``[c * R + r, i, j]`` is candidate ``j``'s share in
+    class ``c``'s reference ``r`` (:data:`REFERENCES`) as seen from candidate ``i``."""
+    k = len(x)
+    n_cls, n_ref = len(CLASSES), len(REFERENCES)
+    of_c = labels[None, :] == np.arange(n_cls)[:, None]  # (C, K)
+    keys = np.stack([-depth, depth, y, -y])  # nearest, farthest, leftmost, rightmost
+    logit = keys[None, :, :] / REFERENCE_TAU + log_w  # (C, 4, K)
+    extreme = _ref_softmax_last(logit, of_c[:, None, :])  # (C, 4, K): the same from every i
+    dist = np.hypot(x[:, None] - x[None, :], y[:, None] - y[None, :])
+    # The c candidate closest to candidate i, itself excluded.
+    allowed = of_c[:, None, :] & ~np.eye(k, dtype=bool)[None]
+    closest = _ref_softmax_last(
+        (-dist / REFERENCE_TAU + log_w[None, :])[None], allowed
+    )  # (C, K, K)
+    out = np.empty((n_cls, n_ref, k, k))
+    out[:, :4] = extreme[:, :, None, :]
+    out[:, 4] = closest
+    return out.reshape(n_cls * n_ref, k, k)
+
+
+def _reference_context_features(
+    boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray
+) -> np.ndarray:
+    """Ranks and relations of ``K`` candidates (module docstring).
+
+    Args:
+        boxes: ``(K, 7)`` LiDAR frame.
+        labels: ``(K,)`` class indices into :data:`scenes.actors.CLASSES`.
+        scores: ``(K,)`` detection scores in ``[0, 1]``.
+
+    Returns:
+        ``(K, CONTEXT_FEATURES)`` float32.
+    """
+    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
+    k = len(b)
+    if k == 0:
+        return np.zeros((0, CONTEXT_FEATURES), dtype=np.float32)
+    labels = np.asarray(labels, dtype=np.int64).reshape(k)
+    w = objectness(np.asarray(scores, dtype=np.float64).reshape(k))
+    depth = nearest_depth(b)
+    x, y = b[:, 0], b[:, 1]
+    others = ~np.eye(k, dtype=bool)
+    same = (labels[:, None] == labels[None, :]) & others
+
+    # Ranks: [order, i, j] = w_j sigmoid((key_j - key_i) / tau) over the order's set.
+    keys = np.stack([-depth, depth, y, -y, -depth, depth])
+    member = np.stack([same] * 4 + [others] * 2)
+    step = _ref_sigmoid((keys[:, None, :] - keys[:, :, None]) / RANK_TAU)
+    ranks = (step * w * member).sum(axis=2)  # (6, K)
+    n_cls = len(CLASSES)
+    mass = np.array([w[labels == c].sum() for c in range(n_cls)])
+    rank_part = np.concatenate(
+        [_ref_rank_code(r, BUMPS) for r in ranks] + [(mass[labels] / 4.0)[:, None]], axis=1
+    )
+
+    # Relations, all C * R references at once ([q, i] rows).
+    a = _ref_references(x, y, depth, labels, np.log(np.maximum(w, 1e-6)))
+    rx, ry, redge = a @ x, a @ y, a @ (2.0 * x - depth)  # (Q, K)
+    dx, dy = rx - x, ry - y
+    # Each candidate's soft rank by distance to (its own row's) reference among its class:
+    # "the pedestrian closest to the nearest car" is the pedestrian ranked 0; the reference
+    # itself is no rival (weights 1 - a).
+    to_ref = np.hypot(x[None, None, :] - rx[:, :, None], y[None, None, :] - ry[:, :, None])
+    diag = np.diagonal(to_ref, axis1=1, axis2=2)  # (Q, K)
+    step = _ref_sigmoid((diag[:, :, None] - to_ref) / RANK_TAU)
+    rank = (step * (w * (1.0 - a)) * same).sum(axis=2)
+    place = np.stack(
+        [
+            dx / RELATION_SCALE,
+            dy / RELATION_SCALE,
+            np.hypot(dx, dy) / RELATION_SCALE,
+            (depth - redge) / RELATION_SCALE,
+            np.diagonal(a, axis1=1, axis2=2),
+        ],
+        axis=2,
+    )
+    block = np.concatenate([place, _ref_rank_code(rank, (0, 1))], axis=2)  # (Q, K, PER_REFERENCE)
+    block = np.where((a.sum(axis=2) > 0)[..., None], block, 0.0)
+    per_class = block.reshape(n_cls, len(REFERENCES), k, PER_REFERENCE).transpose(0, 2, 1, 3)
+    per_class = per_class.reshape(n_cls, k, len(REFERENCES) * PER_REFERENCE)
+    masses = np.broadcast_to(mass[:, None, None] / 4.0, (n_cls, k, 1))
+    relation_part = np.concatenate([per_class, masses], axis=2).transpose(1, 0, 2).reshape(k, -1)
+    out = np.concatenate([rank_part, relation_part], axis=1).astype(np.float32)
+    assert out.shape == (k, CONTEXT_FEATURES), out.shape
+    return out
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_compiled_context_features_equal_the_numpy_form(seed):
+    # Random scenes of 1 to 40 candidates (a class missing in some, near ties in depth and y):
+    # the compiled pass equals the NumPy form it replaced, to float rounding.
+    rng = np.random.default_rng(seed)
+    for k in (1, 2, int(rng.integers(3, 41)), 40):
+        boxes = np.column_stack(
+            [
+                rng.uniform(0, 50, k), rng.uniform(-20, 20, k), rng.uniform(-1, 0, k),
+                rng.uniform(0.5, 5, k), rng.uniform(0.5, 2, k), rng.uniform(1, 2, k),
+                rng.uniform(-3, 3, k),
+            ]
+        )  # fmt: skip
+        boxes[k // 2 :, 0] = boxes[: k - k // 2, 0] + 1e-3
+        labels = rng.integers(0, 3 if seed % 2 else 2, k)
+        scores = rng.uniform(0, 1, k)
+        got = context_features(boxes, labels, scores)
+        want = _reference_context_features(boxes, labels, scores)
+        assert got.shape == want.shape == (k, CONTEXT_FEATURES) and got.dtype == np.float32
+        np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-6)

@@ -4,26 +4,47 @@ motion (model.referent.subsets), and the stage reading them."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
+from torch import Tensor
 
 from model.referent.candidates import (
+    DEPTH_COLUMN,
+    DEPTH_SCALE,
+    LATERAL_SCALE,
     RADAR_EVIDENCE,
     RADAR_MEDIAN_VC,
     SPEED_SCALE,
     geometry_features,
 )
-from model.referent.compare import COMPARE_FEATURES
+from model.referent.compare import COMPARE_FEATURES, candidate_speed
+from model.referent.context import (
+    BUMP_WIDTH,
+    OBJECT_SCORE,
+    OBJECT_WIDTH,
+    RELATION_SCALE,
+)
 from model.referent.stage import geometry_width
 from model.referent.subsets import (
+    _SCORE_COLUMN,
+    _X_COLUMN,
+    _Y_COLUMN,
     BUMPS,
+    DEPTH_TAU,
+    MOTION_WIDTH,
     PER_PICKED,
+    PICK_STATE_TAU,
+    PICK_TAU,
     PICKED,
+    SIDE_WIDTH,
+    SPEED_TAU,
     SUBSET_FEATURES,
     SUBSET_ORDERS,
     side_probabilities,
     subset_features,
 )
-from scenes.actors import CLASSES
+from scenes.actors import CLASSES, MOVING_SPEED
+from scenes.prompts.atoms import AHEAD_MAX_BEARING_DEG, LANE_HALF_WIDTH
 from tests.stage_helpers import answers_without
 
 CAR, PED, CYC = (CLASSES.index(c) for c in ("Car", "Pedestrian", "Cyclist"))
@@ -132,3 +153,128 @@ def test_the_stage_reads_the_subset_features(untrained_model, random_scene) -> N
     columns = slice(width - SUBSET_FEATURES, width)  # they come last
     a, b = answers_without(model, *random_scene(), "the second fastest car", columns)
     assert len(a) and not np.allclose(a, b, atol=1e-4)
+
+
+# ----------------------------------------------------------------- the compiled pass's reference
+
+
+def _reference_sides(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    left = torch.sigmoid((y - LANE_HALF_WIDTH) / SIDE_WIDTH)
+    right = torch.sigmoid((-y - LANE_HALF_WIDTH) / SIDE_WIDTH)
+    bearing = torch.rad2deg(torch.atan2(y.abs(), x.clamp(min=1e-3)))
+    ahead = (1.0 - left - right).clamp(min=0.0) * torch.sigmoid(AHEAD_MAX_BEARING_DEG - bearing)
+    return torch.stack([left, ahead, right], dim=-1)
+
+
+def _rank_code(rank: torch.Tensor, bumps: tuple[int, ...]) -> torch.Tensor:
+    cols = [rank.clamp(max=6.0) / 4.0]
+    cols += [torch.exp(-((rank - n) ** 2) / (2 * BUMP_WIDTH**2)) for n in bumps]
+    return torch.stack(cols, dim=-1)
+
+
+def _reference_subset_features(geometry: Tensor, radar: Tensor | None, padding: Tensor) -> Tensor:
+    """The features as their first, torch form computed them (float32, batched): what the
+    compiled pass must equal to float rounding."""
+    n, k = padding.shape
+    if k == 0:
+        return geometry.new_zeros((n, 0, SUBSET_FEATURES))
+    onehot = geometry[..., : len(CLASSES)]
+    x = geometry[..., _X_COLUMN] * DEPTH_SCALE
+    y = geometry[..., _Y_COLUMN] * LATERAL_SCALE
+    depth = geometry[..., DEPTH_COLUMN] * DEPTH_SCALE
+    real = (~padding).to(geometry.dtype)
+    w = torch.sigmoid((geometry[..., _SCORE_COLUMN].clamp(0, 1) - OBJECT_SCORE) / OBJECT_WIDTH)
+    w = w * real  # (N, K)
+    speed = candidate_speed(radar, geometry)
+    moving = torch.sigmoid((speed - MOVING_SPEED) / MOTION_WIDTH)
+    sides = _reference_sides(x, y)  # (N, K, 3)
+    eye = torch.eye(k, dtype=torch.bool, device=geometry.device)
+    same = (onehot @ onehot.transpose(1, 2)).masked_fill(eye, 0.0)  # (N, K, K)
+    rivals = same * w[:, None, :]  # [n, i, j]: j a rival of i
+    same_side = sides @ sides.transpose(1, 2)
+    same_motion = moving[..., :, None] * moving[..., None, :]
+    same_motion = same_motion + (1 - moving)[..., :, None] * (1 - moving)[..., None, :]
+    orders = (
+        (speed, SPEED_TAU, None),  # a larger key comes first
+        (-speed, SPEED_TAU, None),
+        (-depth, DEPTH_TAU, same_side),
+        (depth, DEPTH_TAU, same_side),
+        (-depth, DEPTH_TAU, same_motion),
+        (depth, DEPTH_TAU, same_motion),
+    )
+    ranks = []
+    for key, tau, member in orders:
+        step = torch.sigmoid((key[:, None, :] - key[:, :, None]) / tau)
+        weight = rivals if member is None else rivals * member
+        ranks.append(_rank_code((step * weight).sum(-1), BUMPS))
+    rank_part = torch.cat([*ranks, moving[..., None]], dim=-1)
+
+    # Picked references: [n, c, p, j] = j's share in class c's reference p.
+    keys = torch.stack(
+        [speed, -speed, moving, 1 - moving, sides[..., 0], sides[..., 1], sides[..., 2]], dim=1
+    )  # (N, P, K), larger = more the reference
+    scales = geometry.new_tensor([PICK_TAU] * 2 + [PICK_STATE_TAU] * 5)[None, :, None]
+    logit = keys / scales + torch.log(w.clamp(min=1e-6))[:, None, :]
+    of_c = (onehot.transpose(1, 2) > 0.5) & ~padding[:, None, :]  # (N, C, K)
+    allowed = of_c[:, :, None, :]
+    z = logit[:, None, :, :].masked_fill(~allowed, float("-inf"))  # (N, C, P, K)
+    any_c = allowed.any(-1, keepdim=True)
+    a = torch.softmax(z.masked_fill(~any_c, 0.0), dim=-1) * any_c  # (N, C, P, K)
+    rx, ry = (a * x[:, None, None, :]).sum(-1), (a * y[:, None, None, :]).sum(-1)
+    redge = (a * (2.0 * x - depth)[:, None, None, :]).sum(-1)  # (N, C, P)
+    dx = rx[..., None] - x[:, None, None, :]  # (N, C, P, K): from candidate i
+    dy = ry[..., None] - y[:, None, None, :]
+    own = a  # candidate i's weight in the reference
+    to_ref = torch.hypot(dx, dy)  # (N, C, P, K)
+    step = torch.sigmoid((to_ref[..., :, None] - to_ref[..., None, :]) / DEPTH_TAU)  # [.., i, j]
+    rival = rivals[:, None, None] * (1.0 - a)[..., None, :]
+    rank = (step * rival).sum(-1)
+    place = torch.stack(
+        [
+            dx / RELATION_SCALE,
+            dy / RELATION_SCALE,
+            to_ref / RELATION_SCALE,
+            (depth[:, None, None, :] - redge[..., None]) / RELATION_SCALE,
+            own,
+        ],
+        dim=-1,
+    )
+    block = torch.cat([place, _rank_code(rank, (0, 1))], dim=-1)  # (N, C, P, K, 8)
+    block = block * any_c[..., None]
+    picked = block.permute(0, 3, 1, 2, 4).reshape(n, k, -1)
+    out = torch.cat([rank_part, picked], dim=-1) * real[..., None]
+    return out
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_compiled_subset_features_equal_the_torch_form(seed):
+    # Random scenes (every class, or one missing; moving and still; all sides), a padded batch
+    # and a LiDAR-only model's (no radar): the compiled pass equals the torch form it replaced,
+    # to the float32 rounding of the latter (a soft rank sums up to 40 float32 terms; a bump's
+    # slope multiplies that error by up to ~5).
+    rng = np.random.default_rng(seed)
+    k = int(rng.integers(1, 41))
+    boxes = np.column_stack(
+        [
+            rng.uniform(0, 50, k), rng.uniform(-20, 20, k), rng.uniform(-1, 0, k),
+            rng.uniform(0.5, 5, k), rng.uniform(0.5, 2, k), rng.uniform(1, 2, k),
+            rng.uniform(-3, 3, k),
+        ]
+    )  # fmt: skip
+    labels = rng.integers(0, 3 if seed % 2 else 2, k)
+    geometry = torch.from_numpy(geometry_features(boxes, labels, rng.uniform(0, 1, k)))[None]
+    radar = torch.from_numpy(rng.normal(0, 0.5, (1, k, 6 + RADAR_EVIDENCE)).astype(np.float32))
+    padding = torch.zeros(1, k, dtype=torch.bool)
+    for r in (radar, None):
+        got = subset_features(geometry, r, padding)
+        want = _reference_subset_features(geometry, r, padding)
+        assert got.shape == want.shape == (1, k, SUBSET_FEATURES) and got.dtype == want.dtype
+        torch.testing.assert_close(got, want, rtol=1e-4, atol=2e-5)
+    # Two scenes padded into one batch: each row is its own scene, padding rows are zeros.
+    g2 = torch.cat([geometry, torch.roll(geometry, 1, dims=1)])
+    r2 = torch.cat([radar, radar])
+    pad2 = torch.zeros(2, k, dtype=torch.bool)
+    pad2[1, k // 2 :] = True
+    got = subset_features(g2, r2, pad2)
+    torch.testing.assert_close(got, _reference_subset_features(g2, r2, pad2), rtol=1e-4, atol=2e-5)
+    assert not got[1, k // 2 :].any()

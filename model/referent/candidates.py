@@ -32,6 +32,7 @@ import torch.nn.functional as F
 from torch import Tensor
 
 from model.nets.grid import BevGrid
+from model.referent.point_pairs import box_point_pairs
 from scenes.actors import CLASSES
 from scenes.boxes import bev_corners
 
@@ -101,107 +102,6 @@ def geometry_features(boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray)
     return out
 
 
-def _box_pairs(
-    points: np.ndarray, boxes: np.ndarray, margin: float, use_z: bool
-) -> tuple[np.ndarray, np.ndarray]:
-    """Every (box, point) pair with the point inside the box grown by ``margin`` (BEV footprint,
-    and ``|z - box z| <= h / 2 + margin`` with ``use_z``), for all ``K`` boxes at once.
-
-    Args:
-        points: ``(N, >=3)`` float32 or float64, LiDAR frame.
-        boxes: ``(K, 7)`` float64.
-
-    Returns:
-        ``(box, point)`` int64 index arrays ``(P,)``, sorted by box, then by the point's x, then by
-        the point's index (the order of a stable sort of the cloud by x), the order each box's
-        sums were defined in (the features are the same bit for bit). A point also needs ``box x - r <= x < box x + r`` with ``r`` half the box's diagonal plus
-        ``margin`` (the x range each box searched in a cloud sorted by x, which the features
-        were defined and the model trained with; it clips the grown box's corners).
-
-    One pass over the cloud: a grid of :data:`_CELL` cells, each box marking the cells under the
-    axis-aligned bounding box of its grown footprint (cut to its x range, plus 1 mm), and each
-    point in a marked cell paired with the boxes marking it; only those pairs get the exact test,
-    in float64. The cells are found in the points' own precision: a point of a footprint is at
-    least 1 mm inside its marked rectangle, far more than float32 rounding.
-    """
-    k = len(boxes)
-    empty = np.zeros(0, dtype=np.int64)
-    if k == 0 or len(points) == 0:
-        return empty, empty
-    cos, sin = np.cos(boxes[:, 6]), np.sin(boxes[:, 6])
-    # Half-extents of each grown footprint's axis-aligned bounding box, and of its x range
-    # (below), plus 1 mm.
-    length, width = boxes[:, 3] / 2 + margin, boxes[:, 4] / 2 + margin
-    r = 0.5 * np.hypot(boxes[:, 3], boxes[:, 4]) + margin
-    ex = np.minimum(np.abs(length * cos) + np.abs(width * sin), r) + 1e-3
-    ey = np.abs(length * sin) + np.abs(width * cos) + 1e-3
-    x0 = float((boxes[:, 0] - ex).min())
-    y0 = float((boxes[:, 1] - ey).min())
-    c0 = np.floor((boxes[:, 0] - ex - x0) / _CELL).astype(np.int64)
-    c1 = np.floor((boxes[:, 0] + ex - x0) / _CELL).astype(np.int64)
-    r0 = np.floor((boxes[:, 1] - ey - y0) / _CELL).astype(np.int64)
-    r1 = np.floor((boxes[:, 1] + ey - y0) / _CELL).astype(np.int64)
-    cols, rows = int(c1.max()) + 1, int(r1.max()) + 1
-    # One read of each strided column, then contiguous arithmetic (in the points' precision).
-    fx, fy = (points[:, 0] - x0) / _CELL, (points[:, 1] - y0) / _CELL
-    cand = np.flatnonzero((fx >= 0) & (fx < cols) & (fy >= 0) & (fy < rows))
-    col = np.minimum(fx[cand].astype(np.int64), cols - 1)
-    row = np.minimum(fy[cand].astype(np.int64), rows - 1)
-    cell = col * rows + row
-    # The boxes of each cell, as a CSR list (box indices ascending within a cell).
-    width = r1 - r0 + 1
-    cells = (c1 - c0 + 1) * width
-    owner = np.repeat(np.arange(k), cells)
-    local = np.arange(len(owner)) - np.repeat(np.cumsum(cells) - cells, cells)
-    marked = (c0[owner] + local // width[owner]) * rows + r0[owner] + local % width[owner]
-    box_of_cell = owner[np.argsort(marked, kind="stable")]
-    count = np.bincount(marked, minlength=cols * rows)
-    first = np.cumsum(count) - count
-    per_point = count[cell]
-    near = per_point > 0
-    cand, cell, per_point = cand[near], cell[near], per_point[near]
-    total = int(per_point.sum())
-    point = np.repeat(cand, per_point)
-    slot = np.repeat(first[cell] - (np.cumsum(per_point) - per_point), per_point)
-    box = box_of_cell[slot + np.arange(total)]
-    # The exact test (the same arithmetic as a box against each of its points).
-    p = np.asarray(points[point, :3], dtype=np.float64)
-    dx, dy = p[:, 0] - boxes[box, 0], p[:, 1] - boxes[box, 1]
-    c, s = cos[box], sin[box]
-    lx, ly = dx * c + dy * s, -dx * s + dy * c
-    keep = (np.abs(lx) <= (boxes[:, 3] / 2 + margin)[box]) & (
-        np.abs(ly) <= (boxes[:, 4] / 2 + margin)[box]
-    )
-    if use_z:
-        keep &= np.abs(p[:, 2] - boxes[box, 2]) <= (boxes[:, 5] / 2 + margin)[box]
-    # And within ``r`` of the centre along x, ``r`` = half the box's diagonal + margin (less than
-    # the grown box's half-diagonal: the features were defined, and the model trained, so).
-    keep &= (p[:, 0] >= (boxes[:, 0] - r)[box]) & (p[:, 0] < (boxes[:, 0] + r)[box])
-    box, point = box[keep], point[keep]
-    order = _by_box_then_x(box, point, points[point, 0], k, len(points))
-    return box[order], point[order]
-
-
-_CELL = 0.5
-"""Side (m) of the cells that pair points with boxes (:func:`_box_pairs`)."""
-
-
-def _by_box_then_x(box: np.ndarray, point: np.ndarray, x: np.ndarray, k: int, n: int) -> np.ndarray:
-    """The permutation that sorts pairs (given in ascending ``point`` order) by box, then x, then
-    point: one sort of unique 64-bit keys where they fit (float32 x: its bits in an
-    order-preserving form, -0.0 as +0.0), else two stable sorts."""
-    box_bits, point_bits = max(k - 1, 1).bit_length(), max(n - 1, 1).bit_length()
-    if x.dtype == np.float32 and box_bits + 32 + point_bits <= 64:
-        bits = (x + np.float32(0.0)).view(np.uint32)  # x + 0 turns -0.0 into +0.0
-        ordered = np.where(bits >> 31, ~bits, bits | np.uint32(1 << 31)).astype(np.uint64)
-        key = (box.astype(np.uint64) << np.uint64(32 + point_bits)) | (
-            ordered << np.uint64(point_bits)
-        )
-        return np.argsort(key | point.astype(np.uint64))
-    by_x = np.argsort(x, kind="stable")
-    return by_x[np.argsort(box[by_x].astype(np.int16 if k < 2**15 else np.int64), kind="stable")]
-
-
 def _segments(box: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Boxes that hold points, and where their runs of ``box`` (sorted) start and how long
     they are."""
@@ -224,7 +124,7 @@ def _points_by_box(
     that have points, their first rows and counts; None when no point is in any box."""
     b = _boxes(boxes)
     pts = _points(points, features)
-    box, idx = _box_pairs(pts, b, margin, use_z=use_z)
+    box, idx = box_point_pairs(pts, b, margin, use_z=use_z)
     if len(idx) == 0:
         return len(b), None
     return len(b), (np.asarray(pts[idx], dtype=np.float64), *_segments(box, len(b)))
@@ -235,7 +135,7 @@ def lidar_evidence(boxes: np.ndarray, lidar: np.ndarray) -> np.ndarray:
     :data:`LIDAR_MARGIN`), mean intensity / 255, height spread of those points (m), whether any.
 
     ``lidar``: ``(N, 4)`` (float32 as the model gets it, or float64); all boxes are served by one
-    pass over the cloud (:func:`_box_pairs`).
+    pass over the cloud (:func:`model.referent.point_pairs.box_point_pairs`).
     """
     k, grouped = _points_by_box(boxes, lidar, 4, LIDAR_MARGIN, use_z=True)
     out = np.zeros((k, LIDAR_EVIDENCE), dtype=np.float32)

@@ -5,8 +5,8 @@ nearest car") well but an ordinal ("the second closest cyclist", "third from the
 relation to another object ("the pedestrian closest to the nearest car", "the cyclist behind the
 car") poorly from a few thousand scenes: both need a comparison of every candidate with every
 other, and, for relations, with one candidate the sentence picks out. This module states those
-comparisons explicitly, for every candidate at once, as pure numpy functions of the candidates'
-boxes, classes and detection scores (no text; the stage decides which of them the sentence asks
+comparisons explicitly, for every candidate at once, as a pure function of the candidates'
+boxes, classes and detection scores (one compiled pass, numba) (no text; the stage decides which of them the sentence asks
 about):
 
 - **Ranks** (:data:`RANK_FEATURES`): for each ordering (nearest and farthest by nearest-edge depth,
@@ -33,7 +33,10 @@ Frames and units: LiDAR frame (x forward, y left), metres; distances are divided
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
+from numba import njit
 
 from model.referent.candidates import nearest_depth
 from scenes.actors import CLASSES
@@ -85,48 +88,128 @@ def objectness(scores: np.ndarray) -> np.ndarray:
     return _sigmoid((np.clip(scores, 0.0, 1.0) - OBJECT_SCORE) / OBJECT_WIDTH)
 
 
-def _rank_code(rank: np.ndarray, bumps: tuple[int, ...]) -> np.ndarray:
-    """``(..., 1 + len(bumps))`` of soft ranks ``(...)``: ``min(r, 6) / 4`` and a Gaussian bump
-    at each ``n``."""
-    cols = [np.minimum(rank, 6.0) / 4.0]
-    cols += [np.exp(-((rank - n) ** 2) / (2 * BUMP_WIDTH**2)) for n in bumps]
-    return np.stack(cols, axis=-1)
+@njit(inline="always")
+def _step(z: float) -> float:  # pragma: no cover - compiled into the kernel
+    """The logistic step, as ``0.5 (1 + tanh(z / 2))`` (its form since the features were
+    defined)."""
+    return 0.5 * (1.0 + math.tanh(0.5 * z))
 
 
-def _softmax_last(logits: np.ndarray, allowed: np.ndarray) -> np.ndarray:
-    """Softmax of ``logits`` over the last axis, over the ``allowed`` entries only (a row with
-    none: all zeros)."""
-    z = np.where(allowed, logits, -np.inf)
-    top = z.max(axis=-1, keepdims=True)
-    top = np.where(np.isfinite(top), top, 0.0)
-    e = np.where(allowed, np.exp(z - top), 0.0)
-    total = e.sum(axis=-1, keepdims=True)
-    return np.divide(e, total, out=np.zeros_like(e), where=total > 0)
+@njit(inline="always")
+def _code(out, i, col, rank, bumps):  # pragma: no cover - compiled into the kernel
+    """``min(r, 6) / 4`` and a Gaussian bump at each of ``bumps`` into ``out[i, col:]``."""
+    out[i, col] = min(rank, 6.0) / 4.0
+    for b in range(len(bumps)):
+        out[i, col + 1 + b] = math.exp(-((rank - bumps[b]) ** 2) / (2 * BUMP_WIDTH**2))
 
 
-def _references(
-    x: np.ndarray, y: np.ndarray, depth: np.ndarray, labels: np.ndarray, log_w: np.ndarray
-) -> np.ndarray:
-    """Reference weights ``(C * R, K, K)``: ``[c * R + r, i, j]`` is candidate ``j``'s share in
-    class ``c``'s reference ``r`` (:data:`REFERENCES`) as seen from candidate ``i``."""
-    k = len(x)
-    n_cls, n_ref = len(CLASSES), len(REFERENCES)
-    of_c = labels[None, :] == np.arange(n_cls)[:, None]  # (C, K)
-    keys = np.stack([-depth, depth, y, -y])  # nearest, farthest, leftmost, rightmost
-    logit = keys[None, :, :] / REFERENCE_TAU + log_w  # (C, 4, K)
-    extreme = _softmax_last(logit, of_c[:, None, :])  # (C, 4, K): the same from every i
-    dist = np.hypot(x[:, None] - x[None, :], y[:, None] - y[None, :])
-    # The c candidate closest to candidate i, itself excluded.
-    allowed = of_c[:, None, :] & ~np.eye(k, dtype=bool)[None]
-    closest = _softmax_last((-dist / REFERENCE_TAU + log_w[None, :])[None], allowed)  # (C, K, K)
-    out = np.empty((n_cls, n_ref, k, k))
-    out[:, :4] = extreme[:, :, None, :]
-    out[:, 4] = closest
-    return out.reshape(n_cls * n_ref, k, k)
+@njit(inline="always")
+def _softmax_into(a, logits, allowed, k):  # pragma: no cover - compiled into the kernel
+    """``a[:k]`` = softmax of ``logits[:k]`` over the ``allowed`` entries (all zeros if none)."""
+    top = -np.inf
+    for j in range(k):
+        if allowed[j]:
+            top = max(top, logits[j])
+    total = 0.0
+    for j in range(k):
+        a[j] = math.exp(logits[j] - top) if allowed[j] else 0.0
+        total += a[j]
+    for j in range(k):
+        a[j] = a[j] / total if total > 0 else 0.0
+
+
+@njit(nogil=True, cache=True)
+def _context(x, y, depth, labels, w, n_cls, out):  # pragma: no cover - compiled
+    """The module docstring's features of ``K`` candidates into ``out (K, CONTEXT_FEATURES)``
+    (float64 arithmetic, term for term)."""
+    k = x.shape[0]
+    n_ref = len(REFERENCES)
+    log_w = np.empty(k)
+    mass = np.zeros(n_cls)
+    for j in range(k):
+        log_w[j] = math.log(max(w[j], 1e-6))
+        mass[labels[j]] += w[j]
+    # Ranks: [order, i] = sum_j w_j sigmoid((key_j - key_i) / tau) over the order's set.
+    keys = np.empty((6, k))
+    for j in range(k):
+        keys[0, j], keys[1, j], keys[2, j] = -depth[j], depth[j], y[j]
+        keys[3, j], keys[4, j], keys[5, j] = -y[j], -depth[j], depth[j]
+    col = 0
+    for o in range(6):
+        for i in range(k):
+            rank = 0.0
+            for j in range(k):
+                if j != i and (o >= 4 or labels[j] == labels[i]):
+                    rank += _step((keys[o, j] - keys[o, i]) / RANK_TAU) * w[j]
+            _code(out, i, col, rank, BUMPS)
+        col += 1 + len(BUMPS)
+    for i in range(k):
+        out[i, col] = mass[labels[i]] / 4.0
+    col += 1
+    # Relations: class c's reference r as seen from candidate i, a[j] = j's share in it.
+    dist = np.empty((k, k))
+    for i in range(k):
+        for j in range(k):
+            dist[i, j] = math.hypot(x[i] - x[j], y[i] - y[j])
+    a = np.empty(k)
+    logits = np.empty(k)
+    allowed = np.empty(k, np.bool_)
+    to_ref = np.empty(k)
+    for c in range(n_cls):
+        start = col + c * (n_ref * PER_REFERENCE + 1)
+        for i in range(k):
+            out[i, start + n_ref * PER_REFERENCE] = mass[c] / 4.0
+        for r in range(n_ref):
+            # nearest, farthest, leftmost, rightmost (r < 4): the same reference from every i;
+            # the c candidate closest to i, itself excluded (r = 4): one per i
+            for i in range(k if r == n_ref - 1 else 1):
+                for j in range(k):
+                    if r == n_ref - 1:
+                        logits[j] = -dist[i, j] / REFERENCE_TAU + log_w[j]
+                        allowed[j] = labels[j] == c and j != i
+                    else:
+                        key = (-depth[j], depth[j], y[j], -y[j])[r]
+                        logits[j] = key / REFERENCE_TAU + log_w[j]
+                        allowed[j] = labels[j] == c
+                _softmax_into(a, logits, allowed, k)
+                total = 0.0
+                rx = ry = redge = 0.0
+                for j in range(k):
+                    total += a[j]
+                    rx += a[j] * x[j]
+                    ry += a[j] * y[j]
+                    redge += a[j] * (2.0 * x[j] - depth[j])
+                if not total > 0:  # no candidate of class c (but i): the blocks stay zeros
+                    continue
+                for j in range(k):
+                    to_ref[j] = math.hypot(x[j] - rx, y[j] - ry)
+                for q in range(i, i + 1) if r == n_ref - 1 else range(k):
+                    _relation(out, q, start + r * PER_REFERENCE, x, y, depth, labels, w, a, rx,
+                              ry, redge, to_ref)  # fmt: skip
+
+
+@njit(inline="always")
+def _relation(out, i, base, x, y, depth, labels, w, a, rx, ry, redge, to_ref):  # pragma: no cover
+    """Candidate ``i``'s block of one reference (soft position ``a``, centre ``rx, ry``, far
+    edge ``redge``; ``to_ref`` every candidate's distance to it) into ``out[i, base:]``."""
+    # i's soft rank by distance to the reference among its own class; the reference itself is
+    # no rival (weights 1 - a)
+    rank = 0.0
+    for j in range(x.shape[0]):
+        if j != i and labels[j] == labels[i]:
+            rank += _step((to_ref[i] - to_ref[j]) / RANK_TAU) * (w[j] * (1.0 - a[j]))
+    dx, dy = rx - x[i], ry - y[i]
+    out[i, base + 0] = dx / RELATION_SCALE
+    out[i, base + 1] = dy / RELATION_SCALE
+    out[i, base + 2] = math.hypot(dx, dy) / RELATION_SCALE
+    out[i, base + 3] = (depth[i] - redge) / RELATION_SCALE
+    out[i, base + 4] = a[i]
+    _code(out, i, base + 5, rank, (0, 1))
 
 
 def context_features(boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray) -> np.ndarray:
-    """Ranks and relations of ``K`` candidates (module docstring).
+    """Ranks and relations of ``K`` candidates (module docstring), in one compiled pass (numba,
+    cached beside this file; float64 arithmetic).
 
     Args:
         boxes: ``(K, 7)`` LiDAR frame.
@@ -138,56 +221,17 @@ def context_features(boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray) 
     """
     b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
     k = len(b)
+    out = np.zeros((k, CONTEXT_FEATURES), dtype=np.float64)
     if k == 0:
-        return np.zeros((0, CONTEXT_FEATURES), dtype=np.float32)
-    labels = np.asarray(labels, dtype=np.int64).reshape(k)
+        return out.astype(np.float32)
+    labels = np.ascontiguousarray(np.asarray(labels, dtype=np.int64).reshape(k))
     w = objectness(np.asarray(scores, dtype=np.float64).reshape(k))
     depth = nearest_depth(b)
-    x, y = b[:, 0], b[:, 1]
-    others = ~np.eye(k, dtype=bool)
-    same = (labels[:, None] == labels[None, :]) & others
-
-    # Ranks: [order, i, j] = w_j sigmoid((key_j - key_i) / tau) over the order's set.
-    keys = np.stack([-depth, depth, y, -y, -depth, depth])
-    member = np.stack([same] * 4 + [others] * 2)
-    step = _sigmoid((keys[:, None, :] - keys[:, :, None]) / RANK_TAU)
-    ranks = (step * w * member).sum(axis=2)  # (6, K)
-    n_cls = len(CLASSES)
-    mass = np.array([w[labels == c].sum() for c in range(n_cls)])
-    rank_part = np.concatenate(
-        [_rank_code(r, BUMPS) for r in ranks] + [(mass[labels] / 4.0)[:, None]], axis=1
-    )
-
-    # Relations, all C * R references at once ([q, i] rows).
-    a = _references(x, y, depth, labels, np.log(np.maximum(w, 1e-6)))
-    rx, ry, redge = a @ x, a @ y, a @ (2.0 * x - depth)  # (Q, K)
-    dx, dy = rx - x, ry - y
-    # Each candidate's soft rank by distance to (its own row's) reference among its class:
-    # "the pedestrian closest to the nearest car" is the pedestrian ranked 0; the reference
-    # itself is no rival (weights 1 - a).
-    to_ref = np.hypot(x[None, None, :] - rx[:, :, None], y[None, None, :] - ry[:, :, None])
-    diag = np.diagonal(to_ref, axis1=1, axis2=2)  # (Q, K)
-    step = _sigmoid((diag[:, :, None] - to_ref) / RANK_TAU)
-    rank = (step * (w * (1.0 - a)) * same).sum(axis=2)
-    place = np.stack(
-        [
-            dx / RELATION_SCALE,
-            dy / RELATION_SCALE,
-            np.hypot(dx, dy) / RELATION_SCALE,
-            (depth - redge) / RELATION_SCALE,
-            np.diagonal(a, axis1=1, axis2=2),
-        ],
-        axis=2,
-    )
-    block = np.concatenate([place, _rank_code(rank, (0, 1))], axis=2)  # (Q, K, PER_REFERENCE)
-    block = np.where((a.sum(axis=2) > 0)[..., None], block, 0.0)
-    per_class = block.reshape(n_cls, len(REFERENCES), k, PER_REFERENCE).transpose(0, 2, 1, 3)
-    per_class = per_class.reshape(n_cls, k, len(REFERENCES) * PER_REFERENCE)
-    masses = np.broadcast_to(mass[:, None, None] / 4.0, (n_cls, k, 1))
-    relation_part = np.concatenate([per_class, masses], axis=2).transpose(1, 0, 2).reshape(k, -1)
-    out = np.concatenate([rank_part, relation_part], axis=1).astype(np.float32)
-    assert out.shape == (k, CONTEXT_FEATURES), out.shape
-    return out
+    _context(
+        np.ascontiguousarray(b[:, 0]), np.ascontiguousarray(b[:, 1]), depth, labels, w,
+        len(CLASSES), out,
+    )  # fmt: skip
+    return out.astype(np.float32)
 
 
 __all__ = [

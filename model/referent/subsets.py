@@ -7,8 +7,8 @@ cyclist on the left", "the second closest moving car"), and relate to an object 
 speed, side or motion ("the car nearest to the fastest cyclist", "the cyclist closest to the
 parked car", "the pedestrian closest to the car on the left"). Stage 3f read these from attention
 alone and got them right about half as often as the whole-class forms (docs/RESULTS.md, the
-language suite's per-sentence figures). This module states them, for all candidates and prompt
-rows at once, as pure torch functions of the stage's inputs:
+language suite's per-sentence figures). This module states them, for all candidates of a scene at
+once, as a pure function of the stage's inputs (one compiled pass per scene, numba, float64):
 
 - **Subset ranks** (:data:`SUBSET_ORDERS`): a soft rank ``r_i = sum_j w_j m_ij sigmoid((key_j -
   key_i) / tau)`` over the other candidates ``j`` of ``i``'s class, ``w_j`` the objectness
@@ -33,7 +33,11 @@ no rival and no reference, and their own rows are zeros.
 
 from __future__ import annotations
 
+import math
+
+import numpy as np
 import torch
+from numba import njit
 from torch import Tensor
 
 from model.referent.candidates import DEPTH_COLUMN, DEPTH_SCALE, LATERAL_SCALE
@@ -70,27 +74,154 @@ SUBSET_FEATURES = (
 _X_COLUMN, _Y_COLUMN, _SCORE_COLUMN = 4, 5, 3
 
 
-def _rank_code(rank: Tensor, bumps: tuple[int, ...]) -> Tensor:
-    """``(..., 1 + len(bumps))`` of soft ranks ``(...)``."""
-    cols = [rank.clamp(max=6.0) / 4.0]
-    cols += [torch.exp(-((rank - n) ** 2) / (2 * BUMP_WIDTH**2)) for n in bumps]
-    return torch.stack(cols, dim=-1)
+@njit(inline="always")
+def _sigmoid(z: float) -> float:  # pragma: no cover - compiled into the kernel
+    return 1.0 / (1.0 + math.exp(-z))
+
+
+@njit(inline="always")
+def _side(x: float, y: float) -> tuple[float, float, float]:  # pragma: no cover - compiled
+    """Soft left / ahead / right of a candidate at ``x``, ``y`` (metres)."""
+    left = _sigmoid((y - LANE_HALF_WIDTH) / SIDE_WIDTH)
+    right = _sigmoid((-y - LANE_HALF_WIDTH) / SIDE_WIDTH)
+    bearing = math.degrees(math.atan2(abs(y), max(x, 1e-3)))
+    ahead = max(1.0 - left - right, 0.0) * _sigmoid(AHEAD_MAX_BEARING_DEG - bearing)
+    return left, ahead, right
+
+
+@njit(nogil=True, cache=True)
+def _sides(x, y):  # pragma: no cover - compiled
+    out = np.empty((x.shape[0], 3))
+    for i in range(x.shape[0]):
+        out[i, 0], out[i, 1], out[i, 2] = _side(x[i], y[i])
+    return out
 
 
 def side_probabilities(x: Tensor, y: Tensor) -> Tensor:
-    """``(..., 3)`` soft left / ahead / right of candidates at ``x``, ``y`` (metres): left of the
-    ego corridor (``y > LANE_HALF_WIDTH``), right of it, or in it within the bearing the prompts
-    call ahead; the rest (beside the bumper) is on no side."""
-    left = torch.sigmoid((y - LANE_HALF_WIDTH) / SIDE_WIDTH)
-    right = torch.sigmoid((-y - LANE_HALF_WIDTH) / SIDE_WIDTH)
-    bearing = torch.rad2deg(torch.atan2(y.abs(), x.clamp(min=1e-3)))
-    ahead = (1.0 - left - right).clamp(min=0.0) * torch.sigmoid(AHEAD_MAX_BEARING_DEG - bearing)
-    return torch.stack([left, ahead, right], dim=-1)
+    """``(..., 3)`` soft left / ahead / right of candidates at ``x``, ``y`` (metres, LiDAR
+    frame): left of the ego corridor (``y > LANE_HALF_WIDTH``), right of it, or in it within the
+    bearing the prompts call ahead; the rest (beside the bumper) is on no side. The definition
+    :func:`subset_features` uses (no gradient)."""
+    xs = x.detach().cpu().double().reshape(-1).numpy()
+    ys = y.detach().cpu().double().reshape(-1).numpy()
+    out = torch.from_numpy(_sides(xs, ys)).reshape(*x.shape, 3)
+    return out.to(device=x.device, dtype=x.dtype)
+
+
+@njit(nogil=True, cache=True)
+def _one_scene(  # pragma: no cover - compiled; its Python body is what numba compiles
+    onehot, x, y, depth, score, speed, out,
+):  # fmt: skip
+    """The features of one scene's ``K`` real candidates into ``out (K, SUBSET_FEATURES)``
+    (float64 arithmetic; the module docstring's definitions, term for term)."""
+    k = x.shape[0]
+    n_cls = onehot.shape[1]
+    w = np.empty(k)
+    moving = np.empty(k)
+    sides = np.empty((k, 3))
+    for i in range(k):
+        w[i] = _sigmoid((min(max(score[i], 0.0), 1.0) - OBJECT_SCORE) / OBJECT_WIDTH)
+        moving[i] = _sigmoid((speed[i] - MOVING_SPEED) / MOTION_WIDTH)
+        sides[i, 0], sides[i, 1], sides[i, 2] = _side(x[i], y[i])
+    rivals = np.zeros((k, k))  # [i, j]: j a rival of i (same class, weighted)
+    for i in range(k):
+        for j in range(k):
+            if i != j:
+                same = 0.0
+                for c in range(n_cls):
+                    same += onehot[i, c] * onehot[j, c]
+                rivals[i, j] = same * w[j]
+    bumps = len(BUMPS)
+    col = 0
+    for order in range(6):
+        for i in range(k):
+            rank = 0.0
+            for j in range(k):
+                if rivals[i, j] == 0.0:
+                    continue
+                if order < 2:  # fastest, slowest: every rival of the class
+                    sign = 1.0 if order == 0 else -1.0
+                    step = _sigmoid(sign * (speed[j] - speed[i]) / SPEED_TAU)
+                    member = 1.0
+                else:  # nearest / farthest within the same side (2, 3) or motion state (4, 5)
+                    sign = -1.0 if order % 2 == 0 else 1.0
+                    step = _sigmoid(sign * (depth[j] - depth[i]) / DEPTH_TAU)
+                    if order < 4:
+                        member = (
+                            sides[i, 0] * sides[j, 0]
+                            + sides[i, 1] * sides[j, 1]
+                            + sides[i, 2] * sides[j, 2]
+                        )
+                    else:
+                        member = moving[i] * moving[j] + (1.0 - moving[i]) * (1.0 - moving[j])
+                rank += step * rivals[i, j] * member
+            out[i, col] = min(rank, 6.0) / 4.0
+            for b in range(bumps):
+                out[i, col + 1 + b] = math.exp(-((rank - BUMPS[b]) ** 2) / (2 * BUMP_WIDTH**2))
+        col += 1 + bumps
+    for i in range(k):
+        out[i, col] = moving[i]
+    col += 1
+    # Picked references: a[j] = j's share in class c's reference p (softmax over c's candidates).
+    n_picked = len(PICKED)
+    a = np.empty(k)
+    logit = np.empty(k)
+    to_ref = np.empty(k)
+    for c in range(n_cls):
+        for p in range(n_picked):
+            base = col + (c * n_picked + p) * PER_PICKED
+            top = -np.inf
+            for j in range(k):
+                if onehot[j, c] > 0.5:
+                    if p == 0:
+                        key = speed[j] / PICK_TAU
+                    elif p == 1:
+                        key = -speed[j] / PICK_TAU
+                    elif p == 2:
+                        key = moving[j] / PICK_STATE_TAU
+                    elif p == 3:
+                        key = (1.0 - moving[j]) / PICK_STATE_TAU
+                    else:
+                        key = sides[j, p - 4] / PICK_STATE_TAU
+                    logit[j] = key + math.log(max(w[j], 1e-6))
+                    top = max(top, logit[j])
+            if top == -np.inf:  # no candidate of class c: its block stays zeros
+                continue
+            total = 0.0
+            for j in range(k):
+                a[j] = math.exp(logit[j] - top) if onehot[j, c] > 0.5 else 0.0
+                total += a[j]
+            rx = ry = redge = 0.0
+            for j in range(k):
+                a[j] /= total
+                rx += a[j] * x[j]
+                ry += a[j] * y[j]
+                redge += a[j] * (2.0 * x[j] - depth[j])
+            for i in range(k):
+                to_ref[i] = math.hypot(rx - x[i], ry - y[i])
+            for i in range(k):
+                rank = 0.0
+                for j in range(k):
+                    if rivals[i, j] != 0.0:
+                        step = _sigmoid((to_ref[i] - to_ref[j]) / DEPTH_TAU)
+                        rank += step * rivals[i, j] * (1.0 - a[j])
+                out[i, base + 0] = (rx - x[i]) / RELATION_SCALE
+                out[i, base + 1] = (ry - y[i]) / RELATION_SCALE
+                out[i, base + 2] = to_ref[i] / RELATION_SCALE
+                out[i, base + 3] = (depth[i] - redge) / RELATION_SCALE
+                out[i, base + 4] = a[i]
+                out[i, base + 5] = min(rank, 6.0) / 4.0
+                out[i, base + 6] = math.exp(-(rank**2) / (2 * BUMP_WIDTH**2))
+                out[i, base + 7] = math.exp(-((rank - 1.0) ** 2) / (2 * BUMP_WIDTH**2))
 
 
 def subset_features(geometry: Tensor, radar: Tensor | None, padding: Tensor) -> Tensor:
     """The module docstring's features, ``(N, K, SUBSET_FEATURES)``, each row its own scene
     (:func:`model.referent.scene_candidates.describe_candidates` calls it once per scene).
+
+    Text-free and without gradient (the inputs it reads, the geometry and the radar evidence,
+    come from NumPy): each scene's real candidates go through one compiled pass (numba, cached
+    beside this file; float64 arithmetic), padding rows are zeros.
 
     Args:
         geometry: ``(N, K, >= GEOMETRY_FEATURES)`` candidate geometry
@@ -99,74 +230,29 @@ def subset_features(geometry: Tensor, radar: Tensor | None, padding: Tensor) -> 
         padding: ``(N, K)`` bool, True at padding.
     """
     n, k = padding.shape
-    if k == 0:
-        return geometry.new_zeros((n, 0, SUBSET_FEATURES))
-    onehot = geometry[..., : len(CLASSES)]
-    x = geometry[..., _X_COLUMN] * DEPTH_SCALE
-    y = geometry[..., _Y_COLUMN] * LATERAL_SCALE
-    depth = geometry[..., DEPTH_COLUMN] * DEPTH_SCALE
-    real = (~padding).to(geometry.dtype)
-    w = torch.sigmoid((geometry[..., _SCORE_COLUMN].clamp(0, 1) - OBJECT_SCORE) / OBJECT_WIDTH)
-    w = w * real  # (N, K)
-    speed = candidate_speed(radar, geometry)
-    moving = torch.sigmoid((speed - MOVING_SPEED) / MOTION_WIDTH)
-    sides = side_probabilities(x, y)  # (N, K, 3)
-    eye = torch.eye(k, dtype=torch.bool, device=geometry.device)
-    same = (onehot @ onehot.transpose(1, 2)).masked_fill(eye, 0.0)  # (N, K, K)
-    rivals = same * w[:, None, :]  # [n, i, j]: j a rival of i
-    same_side = sides @ sides.transpose(1, 2)
-    same_motion = moving[..., :, None] * moving[..., None, :]
-    same_motion = same_motion + (1 - moving)[..., :, None] * (1 - moving)[..., None, :]
-    orders = (
-        (speed, SPEED_TAU, None),  # a larger key comes first
-        (-speed, SPEED_TAU, None),
-        (-depth, DEPTH_TAU, same_side),
-        (depth, DEPTH_TAU, same_side),
-        (-depth, DEPTH_TAU, same_motion),
-        (depth, DEPTH_TAU, same_motion),
-    )
-    ranks = []
-    for key, tau, member in orders:
-        step = torch.sigmoid((key[:, None, :] - key[:, :, None]) / tau)
-        weight = rivals if member is None else rivals * member
-        ranks.append(_rank_code((step * weight).sum(-1), BUMPS))
-    rank_part = torch.cat([*ranks, moving[..., None]], dim=-1)
-
-    # Picked references: [n, c, p, j] = j's share in class c's reference p.
-    keys = torch.stack(
-        [speed, -speed, moving, 1 - moving, sides[..., 0], sides[..., 1], sides[..., 2]], dim=1
-    )  # (N, P, K), larger = more the reference
-    scales = geometry.new_tensor([PICK_TAU] * 2 + [PICK_STATE_TAU] * 5)[None, :, None]
-    logit = keys / scales + torch.log(w.clamp(min=1e-6))[:, None, :]
-    of_c = (onehot.transpose(1, 2) > 0.5) & ~padding[:, None, :]  # (N, C, K)
-    allowed = of_c[:, :, None, :]
-    z = logit[:, None, :, :].masked_fill(~allowed, float("-inf"))  # (N, C, P, K)
-    any_c = allowed.any(-1, keepdim=True)
-    a = torch.softmax(z.masked_fill(~any_c, 0.0), dim=-1) * any_c  # (N, C, P, K)
-    rx, ry = (a * x[:, None, None, :]).sum(-1), (a * y[:, None, None, :]).sum(-1)
-    redge = (a * (2.0 * x - depth)[:, None, None, :]).sum(-1)  # (N, C, P)
-    dx = rx[..., None] - x[:, None, None, :]  # (N, C, P, K): from candidate i
-    dy = ry[..., None] - y[:, None, None, :]
-    own = a  # candidate i's weight in the reference
-    to_ref = torch.hypot(dx, dy)  # (N, C, P, K)
-    step = torch.sigmoid((to_ref[..., :, None] - to_ref[..., None, :]) / DEPTH_TAU)  # [.., i, j]
-    rival = rivals[:, None, None] * (1.0 - a)[..., None, :]
-    rank = (step * rival).sum(-1)
-    place = torch.stack(
-        [
-            dx / RELATION_SCALE,
-            dy / RELATION_SCALE,
-            to_ref / RELATION_SCALE,
-            (depth[:, None, None, :] - redge[..., None]) / RELATION_SCALE,
-            own,
-        ],
-        dim=-1,
-    )
-    block = torch.cat([place, _rank_code(rank, (0, 1))], dim=-1)  # (N, C, P, K, 8)
-    block = block * any_c[..., None]
-    picked = block.permute(0, 3, 1, 2, 4).reshape(n, k, -1)
-    out = torch.cat([rank_part, picked], dim=-1) * real[..., None]
-    return out
+    out = np.zeros((n, k, SUBSET_FEATURES), dtype=np.float64)
+    if k:
+        g = geometry.detach().cpu().double().numpy()
+        speed = candidate_speed(None if radar is None else radar.detach(), geometry.detach())
+        speeds = speed.cpu().double().numpy()
+        real = ~padding.cpu().numpy()
+        for row in range(n):
+            idx = np.flatnonzero(real[row])
+            if not len(idx):
+                continue
+            part = g[row, idx]
+            scene = np.zeros((len(idx), SUBSET_FEATURES))
+            _one_scene(
+                np.ascontiguousarray(part[:, : len(CLASSES)]),
+                part[:, _X_COLUMN] * DEPTH_SCALE,
+                part[:, _Y_COLUMN] * LATERAL_SCALE,
+                part[:, DEPTH_COLUMN] * DEPTH_SCALE,
+                np.ascontiguousarray(part[:, _SCORE_COLUMN]),
+                np.ascontiguousarray(speeds[row, idx]),
+                scene,
+            )
+            out[row, idx] = scene
+    return torch.from_numpy(out).to(device=geometry.device, dtype=geometry.dtype)
 
 
 __all__ = ["PICKED", "SUBSET_FEATURES", "SUBSET_ORDERS", "side_probabilities", "subset_features"]
