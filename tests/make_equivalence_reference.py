@@ -137,11 +137,16 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--checkpoint", required=True, help="checkpoint to run")
     parser.add_argument("--out", required=True, help="npz file to write")
+    parser.add_argument(
+        "--inputs",
+        help="take the inputs stored in this npz (an earlier reference) instead of generating "
+        "them: the outputs again after an intended change of arithmetic, on the same inputs",
+    )
     args = parser.parse_args(argv)
     torch.set_num_threads(1)
     from model.checkpoint import load_checkpoint
 
-    inputs = reference_inputs()
+    inputs = read_inputs(dict(np.load(args.inputs))) if args.inputs else reference_inputs()
     model = load_checkpoint(args.checkpoint)
     arrays = {**input_arrays(inputs), **pipeline_outputs(model, inputs)}
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)

@@ -180,23 +180,54 @@ def test_ground_draws_on_the_scene_canvas_kept_from_the_last_prompt(untrained_mo
 
 
 def test_baca_blocked_attention_equals_the_unblocked_one(monkeypatch):
-    from model.nets import baca
+    from model.nets import baca, baca_cpu
 
     torch.manual_seed(0)
     attention = baca.AgentCrossAttention(16, (5, 7), heads=1).eval()
     q, k, v = torch.randn(1, 16, 30, 40), torch.randn(1, 16, 1200), torch.randn(1, 16, 1200)
     with torch.no_grad():
-        monkeypatch.setattr(baca, "_BLOCK_SCORES", 1 << 30)  # nothing blocked
+        monkeypatch.setattr(baca_cpu, "BLOCK_SCORES", 1 << 30)  # nothing blocked
         whole = attention.attend(q, k, v)
-        monkeypatch.setattr(baca, "_BLOCK_SCORES", 12000)  # uneven blocks: 10 agents, 342 cells
-        assert baca._blocked(q.reshape(1, 16, -1), torch.zeros(1, 16, 35))
+        monkeypatch.setattr(baca_cpu, "BLOCK_SCORES", 12000)  # uneven blocks: 10 agents, 342 cells
+        assert baca_cpu.blocked(q.reshape(1, 16, -1), torch.zeros(1, 16, 35))
         blocked = attention.attend(q, k, v)
     torch.testing.assert_close(blocked, whole, rtol=0, atol=1e-6)
     with torch.enable_grad():  # the module form (training) is never blocked
-        assert not baca._blocked(q.reshape(1, 16, -1), torch.zeros(1, 16, 35))
+        assert not baca_cpu.blocked(q.reshape(1, 16, -1), torch.zeros(1, 16, 35))
         np.testing.assert_allclose(
             attention.attend(q, k, v).detach().numpy(), whole.numpy(), rtol=0, atol=1e-5
         )
+
+
+@pytest.mark.parametrize("shape", [(16, 30, 40), (24, 9, 11)])
+@pytest.mark.parametrize("block", [1 << 18, 12000])
+def test_one_head_baca_with_folded_projections_equals_the_module_form(monkeypatch, shape, block):
+    # CPU inference folds one-head BACA's projections into its agents (model.nets.baca_cpu:
+    # the softmax drops the keys' bias term, a softmax row sums to 1, the output bias goes to
+    # the merge); with gradients on the module form runs every projection. Random biases and
+    # BatchNorm statistics, so that every folded term matters; blocked and whole.
+    from model.nets import baca, baca_cpu
+
+    monkeypatch.setattr(baca_cpu, "BLOCK_SCORES", block)
+    torch.manual_seed(1)
+    c, h, w = shape
+    fusion = baca.BidirectionalAgentCrossAttention(c, (5, 7), heads=1).eval()
+    with torch.no_grad():
+        for module in fusion.modules():
+            if isinstance(module, torch.nn.Linear):
+                module.bias.normal_(0.0, 0.5)
+        fusion.merge[1].running_mean.normal_(0.0, 0.5)
+        fusion.merge[1].running_var.uniform_(0.5, 2.0)
+    f_l, f_r = torch.randn(1, c, h, w), torch.randn(1, c, h, w)
+    with torch.no_grad():
+        got = fusion(f_l, f_r)
+    with torch.enable_grad():
+        want = fusion(f_l, f_r).detach()
+    torch.testing.assert_close(got, want, rtol=1e-5, atol=1e-5)
+    four = baca.BidirectionalAgentCrossAttention(c, (5, 7), heads=4).eval()
+    with torch.no_grad():  # (several heads keep their projections: the plain inference form)
+        got = four(f_l, f_r)
+    torch.testing.assert_close(got, four(f_l, f_r).detach(), rtol=1e-5, atol=1e-5)
 
 
 def _cloud_with_edges(seed: int, features: int) -> np.ndarray:

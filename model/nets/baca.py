@@ -45,7 +45,6 @@ Single-modality models do not build a fusion module: ``lr`` is the sensor's own 
 from __future__ import annotations
 
 import math
-import threading
 from functools import lru_cache
 
 import torch
@@ -53,6 +52,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from model.config import FusionConfig
+from model.nets.baca_cpu import attend_blocked, blocked, folded_direction, softmax_scores
 
 
 @lru_cache(maxsize=32)
@@ -136,38 +136,6 @@ class _Projections(nn.Module):
         self.out = nn.Linear(channels, channels)
 
 
-_SCRATCH = threading.local()
-"""Per-thread score buffers of CPU inference (:func:`_softmax_scores`)."""
-
-
-def _scratch(slot: str, shape: tuple[int, ...], like: Tensor) -> Tensor:
-    """A buffer of ``shape`` for CPU inference, kept per thread and reused across calls (grown
-    when a call needs more). Without it every call allocates its multi-megabyte score tensors
-    afresh, and the allocator hands them back to the system and faults them in again on each
-    call (thousands of page faults per scene at the first stage)."""
-    buffers = getattr(_SCRATCH, "buffers", None)
-    if buffers is None:
-        buffers = _SCRATCH.buffers = {}
-    numel = math.prod(shape)
-    buf = buffers.get((slot, like.dtype))
-    if buf is None or buf.numel() < numel:
-        buf = buffers[(slot, like.dtype)] = torch.empty(numel, dtype=like.dtype)
-    return buf[:numel].view(shape)
-
-
-def _softmax_scores(a: Tensor, x: Tensor, scale: float) -> Tensor:
-    """``softmax(scale * a @ x)`` over the last dim: ``(N, M, d) @ (N, d, K) -> (N, M, K)``, the
-    scale applied inside the product. CPU inference writes into :func:`_scratch` buffers (the
-    result is only valid until the next call on this thread: consume it at once)."""
-    shape = (a.shape[0], a.shape[1], x.shape[2])
-    if a.device.type != "cpu" or torch.is_grad_enabled():
-        out = torch.empty(shape, dtype=a.dtype, device=a.device)
-        return torch.baddbmm(out, a, x, beta=0.0, alpha=scale).softmax(dim=-1)
-    scores = _scratch("scores", shape, a)
-    torch.baddbmm(scores, a, x, beta=0.0, alpha=scale, out=scores)
-    return torch.softmax(scores, -1, out=_scratch("probabilities", shape, a))
-
-
 def _project_many(linears: tuple[nn.Linear, ...], x: Tensor) -> Tensor:
     """Several ``nn.Linear`` of one input in one product: channel-major ``(B, C_in, L)`` ->
     ``(B, sum C_out, L)``, the outputs stacked along the channels in the order given."""
@@ -217,51 +185,13 @@ class AgentCrossAttention(_Projections):
         scale = d**-0.5
         agents = F.adaptive_avg_pool2d(q, self.agent_size).reshape(b * n, d, -1)  # A_a
         q, k, v = (t.reshape(b * n, d, -1) for t in (q, k, v))
-        if b * n == 1 and _blocked(q, agents):
-            return _attend_blocked(q[0], k[0], v[0], agents[0], scale).view(b, c, -1)
+        if b * n == 1 and blocked(q, agents):
+            return attend_blocked(q[0], k[0], v[0], agents[0], scale).view(b, c, -1)
         agents_t = agents.transpose(1, 2)  # (B n, l, d)
-        gather = _softmax_scores(agents_t, k, scale)  # (B n, l, L)
+        gather = softmax_scores(agents_t, k, scale)  # (B n, l, L)
         context = torch.bmm(v, gather.transpose(1, 2))  # f_ac^T: (B n, d, l)
-        spread = _softmax_scores(q.transpose(1, 2), agents, scale)  # (B n, L, l)
+        spread = softmax_scores(q.transpose(1, 2), agents, scale)  # (B n, L, l)
         return torch.bmm(context, spread.transpose(1, 2)).view(b, c, -1)  # f_ag^T
-
-
-_BLOCK_SCORES = 1 << 18
-"""Scores per block (1 MB of float32) of :func:`_attend_blocked`: about half of a core's L2."""
-
-
-def _blocked(q: Tensor, agents: Tensor) -> bool:
-    """Whether :func:`_attend_blocked` serves an attention of queries ``q (1, d, L)`` and agents
-    ``(1, d, l)``: CPU inference whose ``(l, L)`` scores do not fit two blocks (BACA's first
-    stage, 144 x 6400 on the small preset)."""
-    cells, count = q.shape[-1], agents.shape[-1]
-    return (
-        q.device.type == "cpu" and not torch.is_grad_enabled() and cells * count > 2 * _BLOCK_SCORES
-    )
-
-
-def _attend_blocked(q: Tensor, k: Tensor, v: Tensor, agents: Tensor, scale: float) -> Tensor:
-    """:meth:`AgentCrossAttention.attend` of one item and head, ``q, k, v (d, L)``, ``agents (d,
-    l)`` -> ``f_ag (d, L)``, in blocks: the agents' scores a block of agents at a time and the
-    queries' a block of queries at a time, each block's product, softmax and product done while
-    its scores are still in the core's cache (whole, they are a few megabytes, written and read
-    back from memory three times). Each output is the same sum of the same products as
-    unblocked (a block is a slice of rows or columns of one product): equal to float rounding,
-    and bit for bit where the BLAS keeps its summation order across block shapes (measured
-    so on the shipped model's first stage here: 40 agents, 1820 cells a block)."""
-    d, cells = q.shape
-    count = agents.shape[1]
-    context = q.new_empty(d, count)  # f_ac^T
-    step = max(1, _BLOCK_SCORES // cells)
-    for i in range(0, count, step):
-        gather = _softmax_scores(agents[None, :, i : i + step].transpose(1, 2), k[None], scale)
-        torch.mm(v, gather[0].t(), out=context[:, i : i + step])
-    out = q.new_empty(d, cells)
-    step = max(1, _BLOCK_SCORES // count)
-    for j in range(0, cells, step):
-        spread = _softmax_scores(q[None, :, j : j + step].transpose(1, 2), agents[None], scale)
-        torch.mm(context, spread[0].t(), out=out[:, j : j + step])
-    return out
 
 
 class VanillaCrossAttention(_Projections):
@@ -298,18 +228,23 @@ def _merge(channels: int) -> nn.Sequential:
     )
 
 
-def _merged(merge: nn.Sequential, both: Tensor) -> Tensor:
+def _merged(merge: nn.Sequential, both: Tensor, bias: Tensor | None = None) -> Tensor:
     """``merge`` (1x1 conv, BatchNorm, ReLU) of a channel-major ``(B, 2 C, L)`` tensor ->
-    ``(B, C, L)``. In eval mode for one item: one matrix product with the BatchNorm folded into
-    it (running statistics: an affine map per channel), then ReLU in place; the same values as
-    the three modules up to float rounding."""
+    ``(B, C, L)``; ``bias`` ``(2 C,)``, when given, is added to every cell of ``both`` first. In
+    eval mode for one item: one matrix product with the BatchNorm (running statistics: an affine
+    map per channel) and the bias folded into it, then ReLU in place; the same values as the
+    three modules up to float rounding."""
     conv, norm = merge[0], merge[1]
     if norm.training or both.shape[0] != 1 or torch.is_grad_enabled():
+        if bias is not None:
+            both = both + bias[:, None]
         b, c2, cells = both.shape
         return merge(both.view(b, c2, cells, 1)).view(b, -1, cells)
     scale = norm.weight / torch.sqrt(norm.running_var + norm.eps)
-    shift = norm.bias - norm.running_mean * scale
     weight = conv.weight.view(conv.weight.shape[0], -1) * scale[:, None]
+    shift = norm.bias - norm.running_mean * scale
+    if bias is not None:
+        shift = shift + weight @ bias
     return torch.addmm(shift[:, None], weight, both[0]).relu_().unsqueeze(0)
 
 
@@ -335,6 +270,26 @@ class _CrossFusion(nn.Module):
         pe = sinusoidal_position_encoding(c, height, width, f_l.device).to(f_l.dtype)
         x_l, x_r = f_l + pe, f_r + pe
         lid, rad = self.lidar_dir, self.radar_dir
+        if (
+            isinstance(lid, AgentCrossAttention)
+            and isinstance(rad, AgentCrossAttention)
+            and lid.heads == rad.heads == 1
+            and b == 1
+            and f_l.device.type == "cpu"
+            and not torch.is_grad_enabled()
+        ):  # one-head BACA at CPU inference: the projections folded into the agents
+            both = f_l.new_empty(2, c, height * width)
+            for att, xa, xb, fa, out in (
+                (lid, x_l, x_r, f_l, both[0]),
+                (rad, x_r, x_l, f_r, both[1]),
+            ):
+                folded_direction(
+                    att.q, att.k, att.v, att.out, att.agent_size, xa[0], xb[0].reshape(c, -1),
+                    fa[0].reshape(c, -1), out,
+                )  # fmt: skip
+            out_bias = torch.cat([lid.out.bias, rad.out.bias])
+            merged = _merged(self.merge, both.view(1, 2 * c, -1), out_bias)
+            return merged.view(b, c, height, width)
         if isinstance(lid, AgentCrossAttention) and isinstance(rad, AgentCrossAttention):
             # BACA: each sensor's map feeds its own queries and the other direction's keys and
             # values, so its three projections are one product (rows: Q, K, V).
