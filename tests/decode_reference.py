@@ -7,8 +7,9 @@ Regenerate (only when a change of the outputs is intended, and say so in docs/RE
     python -m tests.decode_reference
 
 which rewrites :data:`REFERENCE` and records in it the commit it ran on (``commit``), the
-generator version and torch's version. The committed file was first made on the code before
-issue 20's speed-ups, then regenerated on its inference forms of the network (the change of
+generator version and torch's version; ``python -m tests.decode_reference --compare`` prints
+how far the code as it is now is from the file, per kind of output. The committed file was
+first made on the code before issue 20's speed-ups, then regenerated on its inference forms of the network (the change of
 outputs between the two: docs/RESULTS.md, "Issue 20's inference forms"), and again when the
 shipped checkpoint changed (its referent stage's weights; see ``commit`` in the file: the
 last, stage 3i, was made on the model code of commit 2d4e681, before the inference fast paths of
@@ -138,7 +139,38 @@ def _commit() -> str:
     return head + (" (with uncommitted changes)" if dirty else "")
 
 
+def compare() -> int:
+    """Print, per kind of output, the largest absolute difference of the code as it is now from
+    the stored reference (every discrete output must be equal: exit 1 otherwise)."""
+    reference = dict(np.load(REFERENCE))
+    current = reference_outputs()
+    largest: dict[str, float] = {}
+    unequal = []
+    for key, want in reference.items():
+        if "/" not in key:
+            continue
+        got = current[key]
+        if want.dtype.kind in "iUb":
+            if got.shape != want.shape or not np.array_equal(got, want):
+                unequal.append(key)
+            continue
+        rest = key.split("/", 1)[1]  # (f<i>/cand_<x>, f<i>/p<j>/<x>, untrained/...)
+        if key.startswith("untrained/"):
+            kind = key
+        else:
+            kind = "answer " + rest.split("/", 1)[1] if "/" in rest else rest
+        diff = float(np.abs(got - want).max()) if want.size else 0.0
+        largest[kind] = max(largest.get(kind, 0.0), diff)
+    print(f"against {REFERENCE.name} (commit {reference['commit']}):")
+    for kind, diff in sorted(largest.items()):
+        print(f"  {kind:32s} {diff:.1e}")
+    print("discrete outputs: " + (f"DIFFER in {unequal}" if unequal else "all equal"))
+    return 1 if unequal else 0
+
+
 def main() -> int:
+    if "--compare" in sys.argv[1:]:
+        return compare()
     from scenes.synth_frame import GENERATOR_VERSION
 
     outputs = reference_outputs()

@@ -95,3 +95,18 @@ def test_the_stage_reads_the_comparisons(untrained_model, random_scene):
     columns = slice(start, start + COMPARE_FEATURES)
     a, b = answers_without(model, *random_scene(), "cars faster than 10 m/s", columns)
     assert len(a) and not np.allclose(a, b, atol=1e-4)
+
+
+def test_a_prompt_without_numbers_compares_nothing():
+    # Without a number every comparison column is 0: returned at once (no comparison made),
+    # the same zeros the comparisons give when the only number hides under the padding.
+    geometry, radar = _candidates([5.0, 30.0], [0.0, 12.0], [0.0, 0.0])
+    numbers, padding = _numbers("the nearest car")
+    quick = compare_features(geometry, radar, numbers, padding)
+    assert quick.shape == (1, 2, COMPARE_FEATURES) and not quick.any()
+    hidden = numbers.clone()
+    hidden[0, -1] = _numbers("a car 30 m ahead")[0][0, 3]  # a number, but in the padding
+    assert bool((hidden[..., 0] > 0.5).any())
+    torch.testing.assert_close(compare_features(geometry, radar, hidden, padding), quick)
+    with_number = compare_features(geometry, radar, *_numbers("cars 30 m ahead"))
+    assert with_number.any()

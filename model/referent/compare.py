@@ -93,6 +93,8 @@ def compare_features(
         radar: ``(N, K, C_r + RADAR_EVIDENCE)`` or None.
         numbers: ``(N, T, NUMERIC_FEATURES)``; padding: ``(N, T)`` text padding.
     """
+    if not bool((numbers[..., 0] > 0.5).any()):  # no number in any prompt: every column is 0
+        return geometry.new_zeros((*geometry.shape[:2], COMPARE_FEATURES))
     values, present = prompt_numbers(numbers.to(geometry.dtype), padding)
     v, on = values[:, None, :], present[:, None, :]  # (N, 1, M)
     depth = geometry[..., DEPTH_COLUMN, None] * DEPTH_SCALE  # (N, K, 1)
