@@ -17,7 +17,8 @@ core of the 2-core machine of issue 20). Targets: ``encode_scene`` median ratio 
 Options (beside ``--quick``, ``--threads``, ``--out-dir`` of every benchmark): ``--frames N``,
 ``--repeats R``, ``--prompts P`` (per frame), ``--name`` (results file stem, default ``floor``;
 ``<name>_baseline`` keeps a run of older code), ``--baseline-package DIR`` with
-``--baseline-checkpoint PATH`` (older code measured in the same run, on a checkpoint it can read)
+``--baseline-checkpoint PATH`` (older code measured in the same run, on a checkpoint it can read;
+``--baseline-commit REV`` names its commit in the report, and :data:`MAKE_BASELINE` makes it)
 and ``--baseline PATH`` (a previous result shown
 beside this one; default ``bench/results/<name>_baseline.json`` where it exists). The section
 ``floor_1thread`` is the same benchmark with ``--threads 1 --name floor_1thread``.
@@ -196,6 +197,7 @@ def run(
     baseline: Path | None = None,
     baseline_package: Path | None = None,
     baseline_checkpoint: Path | None = None,
+    baseline_commit: str | None = None,
 ) -> BenchResult:
     """Measure (see the module docstring)."""
     start = time.perf_counter()
@@ -291,8 +293,9 @@ def run(
         findings.append(
             f"Baseline: an older copy of `model/`, measured in this run call by call beside "
             f"this checkout (package `model_base` under `{baseline_package}`, made as "
-            f"`{MAKE_BASELINE}` with the commit it stands for; 46e8685 is main before issue "
-            "20's changes), running "
+            f"`{MAKE_BASELINE}` with REV "
+            + (f"{baseline_commit}" if baseline_commit else "the commit it stands for")
+            + "), running "
             + (
                 "the shipped checkpoint."
                 if baseline_checkpoint is None
@@ -325,10 +328,13 @@ def run(
 
 
 MAKE_BASELINE = (
-    "git archive 46e8685 model | tar -x -C DIR && mv DIR/model DIR/model_base && sed -i -E "
-    "'s/^(\\s*)(from|import) model([. ])/\\1\\2 model_base\\3/' DIR/model_base/*.py"
+    "git archive REV model | tar -x -C DIR && mv DIR/model DIR/model_base && "
+    "find DIR/model_base -name '*.py' -print0 | xargs -0 sed -i -E "
+    "'s/^(\\s*)(from|import) model([. ])/\\1\\2 model_base\\3/' && "
+    "sed -i -E 's/\"model\\./\"model_base./g' DIR/model_base/__init__.py"
 )
-"""How the baseline package was made (46e8685: main before issue 20's changes)."""
+"""How a baseline package is made from commit ``REV`` (every module's imports, and the package's
+lazy-import table, renamed to ``model_base``)."""
 
 
 def load_baseline_package(directory: Path, checkpoint: Path = CHECKPOINT) -> TPCNet:
@@ -374,6 +380,11 @@ def options(parser: argparse.ArgumentParser) -> None:
         default=None,
         help="with --baseline-package: the checkpoint the older code runs (default: the shipped "
         "one; an older copy of model/ may not read a newer checkpoint's config)",
+    )
+    parser.add_argument(
+        "--baseline-commit",
+        default=None,
+        help="with --baseline-package: the commit it was made from, for the report's note",
     )
     parser.add_argument(
         "--baseline",
