@@ -18,7 +18,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import torch
-import torch.nn.functional as F
 from torch import Tensor, nn
 
 from model.config import FpnConfig
@@ -58,35 +57,4 @@ class SecondFpn(nn.Module):
 
     def forward(self, stages: Sequence[Tensor]) -> Tensor:
         """``(lc_1, lc_2, lc_3)`` -> ``(B, sum(out_channels), H / S, W / S)``."""
-        if not self.training and not torch.is_grad_enabled():
-            return self._infer(stages)
         return torch.cat([block(x) for block, x in zip(self.blocks, stages, strict=True)], dim=1)
-
-    def _infer(self, stages: Sequence[Tensor]) -> Tensor:
-        """:meth:`forward` in eval mode without gradients: each block's BatchNorm folded into
-        its (transposed) convolution's weight and bias, ReLU in place, each written into its
-        channels of one channels-last output (the layout the head's convolutions read: no
-        concatenation, no reordering copy in the head). Equal to float rounding."""
-        outs = []
-        for block, x in zip(self.blocks, stages, strict=True):
-            conv, norm = block[0], block[1]
-            scale = norm.weight / torch.sqrt(norm.running_var + norm.eps)
-            shift = norm.bias - norm.running_mean * scale
-            if isinstance(conv, nn.ConvTranspose2d):  # weight (C_in, C_out, k, k)
-                weight = conv.weight * scale[None, :, None, None]
-                y = F.conv_transpose2d(x, weight, shift, stride=conv.stride)
-            else:  # weight (C_out, C_in, k, k)
-                weight = conv.weight * scale[:, None, None, None]
-                y = F.conv2d(x, weight, shift, stride=conv.stride)
-            outs.append(y.relu_())
-        b, _, height, width = outs[0].shape
-        out = (
-            outs[0]
-            .new_empty((b, self.out_channels, height, width))
-            .to(memory_format=torch.channels_last)
-        )
-        start = 0
-        for y in outs:
-            out[:, start : start + y.shape[1]] = y
-            start += y.shape[1]
-        return out
