@@ -421,23 +421,31 @@ def test_fast_point_evidence_matches_on_a_generated_scene(tiny_root):
         assert fast(boxes, pts).tobytes() == ref(boxes, pts).tobytes()
 
 
+def _heatmap_case(
+    rng: np.random.Generator, k: int, xs: tuple[float, float], ys: tuple[float, float]
+) -> tuple[BevGrid, np.ndarray, np.ndarray, np.ndarray]:
+    """A head grid, random detector heatmaps ``(3, 80, 80)`` and ``k`` boxes of random classes
+    whose centres are uniform in ``xs`` x ``ys``."""
+    grid = BevGrid(0.0, 51.2, -25.6, 25.6, 0.64)
+    detection = rng.random((3, 80, 80)).astype(np.float32)
+    boxes = np.column_stack(
+        [
+            rng.uniform(*xs, k), rng.uniform(*ys, k), np.zeros(k),
+            rng.uniform(0.5, 5, k), rng.uniform(0.5, 2.5, k), np.ones(k), rng.uniform(-4, 4, k),
+        ]
+    )  # fmt: skip
+    return grid, detection, boxes, rng.integers(0, 3, k)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_fast_referent_heatmap_is_bit_identical_to_the_reference(seed):
     from model.referent.heatmap import referent_heatmap
 
     rng = np.random.default_rng(seed)
-    grid = BevGrid(0.0, 51.2, -25.6, 25.6, 0.64)
-    detection = rng.random((3, 80, 80)).astype(np.float32)
     k = 40
     # Anchors inside the grid, on its border and well outside it (their Gaussians' tails still
     # reach in, or not); probabilities from certain to vanishing, and exactly 0.
-    boxes = np.column_stack(
-        [
-            rng.uniform(-20, 70, k), rng.uniform(-45, 45, k), np.zeros(k),
-            rng.uniform(0.5, 5, k), rng.uniform(0.5, 2.5, k), np.ones(k), rng.uniform(-4, 4, k),
-        ]
-    )  # fmt: skip
-    labels = rng.integers(0, 3, k)
+    grid, detection, boxes, labels = _heatmap_case(rng, k, (-20, 70), (-45, 45))
     probs = rng.random(k) ** rng.choice([1, 4, 40], k)
     probs[:3] = (0.0, 1e-30, 1.0)
     for anchor in ("corner", "center"):
@@ -509,17 +517,8 @@ def test_a_scene_canvas_draws_every_prompt_as_the_heatmap_function_does():
     # above the p_max it was built for (its windows would be too narrow).
     from model.referent.heatmap import ReferentCanvas, referent_heatmap
 
-    rng = np.random.default_rng(7)
-    grid = BevGrid(0.0, 51.2, -25.6, 25.6, 0.64)
-    detection = rng.random((3, 80, 80)).astype(np.float32)
-    k = 25
-    boxes = np.column_stack(
-        [
-            rng.uniform(-10, 60, k), rng.uniform(-30, 30, k), np.zeros(k),
-            rng.uniform(0.5, 5, k), rng.uniform(0.5, 2.5, k), np.ones(k), rng.uniform(-4, 4, k),
-        ]
-    )  # fmt: skip
-    labels = rng.integers(0, 3, k)
+    rng, k = np.random.default_rng(7), 25
+    grid, detection, boxes, labels = _heatmap_case(rng, k, (-10, 60), (-30, 30))
     canvas = ReferentCanvas.of(detection, boxes, labels, grid, "corner")
     for scale in (1.0, 1e-3, 1e-30, 0.0):
         p = rng.random(k) * scale

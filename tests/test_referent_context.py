@@ -255,16 +255,8 @@ def _ref_references(
 def _reference_context_features(
     boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray
 ) -> np.ndarray:
-    """Ranks and relations of ``K`` candidates (module docstring).
-
-    Args:
-        boxes: ``(K, 7)`` LiDAR frame.
-        labels: ``(K,)`` class indices into :data:`scenes.actors.CLASSES`.
-        scores: ``(K,)`` detection scores in ``[0, 1]``.
-
-    Returns:
-        ``(K, CONTEXT_FEATURES)`` float32.
-    """
+    """The features as their first, NumPy form computed them (whole arrays of candidate pairs):
+    what the compiled pass must equal to float rounding."""
     b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
     k = len(b)
     if k == 0:
