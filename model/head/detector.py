@@ -46,6 +46,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from model.config import HeadConfig
+from model.nets.folding import batchnorm_affine
 from scenes.actors import CLASSES
 
 NUM_CLASSES = len(CLASSES)
@@ -173,12 +174,9 @@ def _folded(weight: Tensor, norms: list[nn.Module]) -> tuple[Tensor, Tensor]:
     statistics; their channels in order make up the ``K``) as one conv's weight and bias:
     ``BN(conv(x, w)) = conv(x, w * s) + (beta - mean * s)``, ``s = gamma / sqrt(var + eps)``.
     A BatchNorm on a channels-last map is a slow pass of its own; folded it costs nothing."""
-    mean = torch.cat([n.running_mean for n in norms])
-    var = torch.cat([n.running_var for n in norms])
-    gamma = torch.cat([n.weight for n in norms])
-    beta = torch.cat([n.bias for n in norms])
-    scale = gamma / torch.sqrt(var + norms[0].eps)
-    return weight * scale.view(-1, 1, 1, 1), beta - mean * scale
+    affine = [batchnorm_affine(n) for n in norms]
+    scale = torch.cat([a for a, _ in affine])
+    return weight * scale.view(-1, 1, 1, 1), torch.cat([b for _, b in affine])
 
 
 def conv3x3_by_taps(x: Tensor, weight: Tensor, bias: Tensor | None, out: Tensor) -> Tensor:

@@ -53,6 +53,7 @@ from torch import Tensor, nn
 
 from model.config import FusionConfig
 from model.nets.baca_cpu import attend_blocked, blocked, folded_direction, softmax_scores
+from model.nets.folding import batchnorm_affine
 
 
 @lru_cache(maxsize=32)
@@ -240,9 +241,8 @@ def _merged(merge: nn.Sequential, both: Tensor, bias: Tensor | None = None) -> T
             both = both + bias[:, None]
         b, c2, cells = both.shape
         return merge(both.view(b, c2, cells, 1)).view(b, -1, cells)
-    scale = norm.weight / torch.sqrt(norm.running_var + norm.eps)
+    scale, shift = batchnorm_affine(norm)
     weight = conv.weight.view(conv.weight.shape[0], -1) * scale[:, None]
-    shift = norm.bias - norm.running_mean * scale
     if bias is not None:
         shift = shift + weight @ bias
     return torch.addmm(shift[:, None], weight, both[0]).relu_().unsqueeze(0)

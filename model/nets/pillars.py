@@ -42,6 +42,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from model.config import PillarConfig
+from model.nets.folding import batchnorm_affine
 from model.nets.grid import BevGrid
 from model.nets.pillar_kernel import PillarWeights, encode_cloud
 
@@ -293,41 +294,41 @@ class PillarEncoder(nn.Module):
         ``F``-wide product of the raw points, no per-point features built) and the pillar term
         subtracted after. The same values up to float rounding."""
         pts = pillars.points
-        f = self.num_features
-        sign = torch.where(self.norm.weight >= 0, 1.0, -1.0).to(pts.dtype)
-        weight = self.linear.weight * sign[:, None]  # (C, F + 6): max(-h) = -min(h)
-        w_mean, w_centre = weight[:, f : f + 3], weight[:, f + 3 :]
-        raw = weight[:, :f] * self.scale
-        raw[:, :3] += w_mean + w_centre
+        sign, raw, per_pillar = self._factorised(pts.dtype)
         h = F.linear(pts, raw)  # (N, C)
         pooled = torch.zeros(
             pillars.keys.numel(), self.out_channels, dtype=h.dtype, device=h.device
         )
         pooled = pooled.scatter_reduce(0, index, h, reduce="amax", include_self=False)
         mean, centre = self._pillar_points(pillars)
-        pooled -= torch.cat([mean, centre], dim=1) @ torch.cat([w_mean, w_centre], dim=1).t()
+        pooled -= torch.cat([mean, centre], dim=1) @ per_pillar.t()
         return torch.relu(self.norm(pooled * sign))
+
+    def _factorised(self, dtype: torch.dtype) -> tuple[Tensor, Tensor, Tensor]:
+        """The PFN's linear map split as :meth:`_pooled_eval` says: each channel's sign ``(C,)``
+        (+1 where the BatchNorm's gamma is >= 0, else -1: ``max(-h) = -min(h)``), the map of a
+        raw point ``M`` ``(C, F)`` and the per-pillar term's weights ``[W_mean, W_centre]``
+        ``(C, 6)``, both sign-flipped."""
+        f = self.num_features
+        sign = torch.where(self.norm.weight >= 0, 1.0, -1.0).to(dtype)
+        weight = self.linear.weight * sign[:, None]  # (C, F + 6)
+        raw = weight[:, :f] * self.scale
+        raw[:, :3] += weight[:, f : f + 3] + weight[:, f + 3 :]
+        return sign, raw, weight[:, f:]
 
     def kernel_weights(self) -> PillarWeights:
         """The eval-mode PFN as :func:`model.nets.pillar_kernel.encode_cloud` reads it: the
-        factorisation of :meth:`_pooled_eval` (sign-flipped channels, the offsets' xyz columns
-        folded into the raw point's map, the per-pillar term's weights) and the BatchNorm's
-        running statistics as a scale and a shift per channel."""
-        f = self.num_features
+        factorisation of :meth:`_pooled_eval` (:meth:`_factorised`) and the BatchNorm's running
+        statistics as a scale and a shift per channel."""
         with torch.no_grad():
-            sign = torch.where(self.norm.weight >= 0, 1.0, -1.0)
-            weight = self.linear.weight * sign[:, None]
-            raw = weight[:, :f] * self.scale
-            raw[:, :3] += weight[:, f : f + 3] + weight[:, f + 3 :]
-            norm = self.norm
-            scale = norm.weight / torch.sqrt(norm.running_var + norm.eps)
-            shift = norm.bias - norm.running_mean * scale
+            sign, raw, per_pillar = self._factorised(torch.float32)
+            scale, shift = batchnorm_affine(self.norm)
 
         def arr(t: Tensor) -> np.ndarray:
             return np.ascontiguousarray(t.detach().cpu().numpy(), dtype=np.float32)
 
         return PillarWeights(
-            raw_t=arr(raw.t()), pillar=arr(weight[:, f:]), sign=arr(sign), scale=arr(scale),
+            raw_t=arr(raw.t()), pillar=arr(per_pillar), sign=arr(sign), scale=arr(scale),
             shift=arr(shift),
         )  # fmt: skip
 

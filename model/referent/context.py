@@ -96,7 +96,7 @@ def _step(z: float) -> float:  # pragma: no cover - compiled into the kernel
 
 
 @njit(inline="always")
-def _code(out, i, col, rank, bumps):  # pragma: no cover - compiled into the kernel
+def rank_code_into(out, i, col, rank, bumps):  # pragma: no cover - compiled into the kernel
     """``min(r, 6) / 4`` and a Gaussian bump at each of ``bumps`` into ``out[i, col:]``."""
     out[i, col] = min(rank, 6.0) / 4.0
     for b in range(len(bumps)):
@@ -104,7 +104,7 @@ def _code(out, i, col, rank, bumps):  # pragma: no cover - compiled into the ker
 
 
 @njit(inline="always")
-def _softmax_into(a, logits, allowed, k):  # pragma: no cover - compiled into the kernel
+def softmax_into(a, logits, allowed, k):  # pragma: no cover - compiled into the kernel
     """``a[:k]`` = softmax of ``logits[:k]`` over the ``allowed`` entries (all zeros if none)."""
     top = -np.inf
     for j in range(k):
@@ -141,7 +141,7 @@ def _context(x, y, depth, labels, w, n_cls, out):  # pragma: no cover - compiled
             for j in range(k):
                 if j != i and (o >= 4 or labels[j] == labels[i]):
                     rank += _step((keys[o, j] - keys[o, i]) / RANK_TAU) * w[j]
-            _code(out, i, col, rank, BUMPS)
+            rank_code_into(out, i, col, rank, BUMPS)
         col += 1 + len(BUMPS)
     for i in range(k):
         out[i, col] = mass[labels[i]] / 4.0
@@ -171,7 +171,7 @@ def _context(x, y, depth, labels, w, n_cls, out):  # pragma: no cover - compiled
                         key = (-depth[j], depth[j], y[j], -y[j])[r]
                         logits[j] = key / REFERENCE_TAU + log_w[j]
                         allowed[j] = labels[j] == c
-                _softmax_into(a, logits, allowed, k)
+                softmax_into(a, logits, allowed, k)
                 total = 0.0
                 rx = ry = redge = 0.0
                 for j in range(k):
@@ -204,7 +204,7 @@ def _relation(out, i, base, x, y, depth, labels, w, a, rx, ry, redge, to_ref):  
     out[i, base + 2] = math.hypot(dx, dy) / RELATION_SCALE
     out[i, base + 3] = (depth[i] - redge) / RELATION_SCALE
     out[i, base + 4] = a[i]
-    _code(out, i, base + 5, rank, (0, 1))
+    rank_code_into(out, i, base + 5, rank, (0, 1))
 
 
 def context_features(boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray) -> np.ndarray:
@@ -240,6 +240,8 @@ __all__ = [
     "REFERENCES",
     "context_features",
     "objectness",
+    "rank_code_into",
     "rank_columns",
     "relation_columns",
+    "softmax_into",
 ]

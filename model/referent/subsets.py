@@ -42,7 +42,14 @@ from torch import Tensor
 
 from model.referent.candidates import DEPTH_COLUMN, DEPTH_SCALE, LATERAL_SCALE
 from model.referent.compare import candidate_speed
-from model.referent.context import BUMP_WIDTH, BUMPS, OBJECT_SCORE, OBJECT_WIDTH, RELATION_SCALE
+from model.referent.context import (
+    BUMPS,
+    OBJECT_SCORE,
+    OBJECT_WIDTH,
+    RELATION_SCALE,
+    rank_code_into,
+    softmax_into,
+)
 from scenes.actors import CLASSES, MOVING_SPEED
 from scenes.prompts.atoms import AHEAD_MAX_BEARING_DEG, LANE_HALF_WIDTH
 
@@ -131,7 +138,6 @@ def _one_scene(  # pragma: no cover - compiled; its Python body is what numba co
                 for c in range(n_cls):
                     same += onehot[i, c] * onehot[j, c]
                 rivals[i, j] = same * w[j]
-    bumps = len(BUMPS)
     col = 0
     for order in range(6):
         for i in range(k):
@@ -155,10 +161,8 @@ def _one_scene(  # pragma: no cover - compiled; its Python body is what numba co
                     else:
                         member = moving[i] * moving[j] + (1.0 - moving[i]) * (1.0 - moving[j])
                 rank += step * rivals[i, j] * member
-            out[i, col] = min(rank, 6.0) / 4.0
-            for b in range(bumps):
-                out[i, col + 1 + b] = math.exp(-((rank - BUMPS[b]) ** 2) / (2 * BUMP_WIDTH**2))
-        col += 1 + bumps
+            rank_code_into(out, i, col, rank, BUMPS)
+        col += 1 + len(BUMPS)
     for i in range(k):
         out[i, col] = moving[i]
     col += 1
@@ -166,13 +170,14 @@ def _one_scene(  # pragma: no cover - compiled; its Python body is what numba co
     n_picked = len(PICKED)
     a = np.empty(k)
     logit = np.empty(k)
+    allowed = np.empty(k, np.bool_)
     to_ref = np.empty(k)
     for c in range(n_cls):
         for p in range(n_picked):
             base = col + (c * n_picked + p) * PER_PICKED
-            top = -np.inf
             for j in range(k):
-                if onehot[j, c] > 0.5:
+                allowed[j] = onehot[j, c] > 0.5
+                if allowed[j]:
                     if p == 0:
                         key = speed[j] / PICK_TAU
                     elif p == 1:
@@ -184,16 +189,11 @@ def _one_scene(  # pragma: no cover - compiled; its Python body is what numba co
                     else:
                         key = sides[j, p - 4] / PICK_STATE_TAU
                     logit[j] = key + math.log(max(w[j], 1e-6))
-                    top = max(top, logit[j])
-            if top == -np.inf:  # no candidate of class c: its block stays zeros
+            softmax_into(a, logit, allowed, k)
+            if not allowed.any():  # no candidate of class c: its block stays zeros
                 continue
-            total = 0.0
-            for j in range(k):
-                a[j] = math.exp(logit[j] - top) if onehot[j, c] > 0.5 else 0.0
-                total += a[j]
             rx = ry = redge = 0.0
             for j in range(k):
-                a[j] /= total
                 rx += a[j] * x[j]
                 ry += a[j] * y[j]
                 redge += a[j] * (2.0 * x[j] - depth[j])
@@ -210,9 +210,7 @@ def _one_scene(  # pragma: no cover - compiled; its Python body is what numba co
                 out[i, base + 2] = to_ref[i] / RELATION_SCALE
                 out[i, base + 3] = (depth[i] - redge) / RELATION_SCALE
                 out[i, base + 4] = a[i]
-                out[i, base + 5] = min(rank, 6.0) / 4.0
-                out[i, base + 6] = math.exp(-(rank**2) / (2 * BUMP_WIDTH**2))
-                out[i, base + 7] = math.exp(-((rank - 1.0) ** 2) / (2 * BUMP_WIDTH**2))
+                rank_code_into(out, i, base + 5, rank, (0, 1))
 
 
 def subset_features(geometry: Tensor, radar: Tensor | None, padding: Tensor) -> Tensor:
