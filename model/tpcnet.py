@@ -158,8 +158,8 @@ class TPCNet(nn.Module):
                 ``None``) by a radar-only model.
             radar: ``(M, 7)`` radar points in the LiDAR frame; ignored by a LiDAR-only model.
             candidates: Referent path only: the frame's labelled boxes, among which the referent
-                stage then chooses instead of the detector's proposals (each gets the detector's
-                score at its anchor cell, :func:`model.referent.labelled.anchor_scores`).
+                stage then chooses instead of the detector's proposals (each with its label's
+                class and a certain score, :data:`model.referent.labelled.LABELLED_SCORE`).
 
         Returns:
             :class:`SceneFeatures` with ``lr_i`` of shape ``(1, C_i, H_i, W_i)``.

@@ -73,7 +73,7 @@ def test_ground_over_labelled_boxes_returns_only_those_boxes(tmp_path, write_vod
 
 
 def test_with_context_keeps_labels_first_and_drops_duplicates():
-    from model.referent.labelled import with_context
+    from model.referent.labelled import LABELLED_SCORE, with_context
 
     labelled = LabelledBoxes(
         np.array([[10.0, 0, -1, 4, 2, 1.5, 0], [20.0, 5, -1, 1, 1, 1.7, 0]]), [0, 1]
@@ -87,8 +87,9 @@ def test_with_context_keeps_labels_first_and_drops_duplicates():
         ]
     )
     boxes, labels, scores = with_context(
-        labelled, np.array([0.9, 0.8]), proposals, np.array([0, 0, 2, 0]), np.ones(4), 3
+        labelled, proposals, np.array([0, 0, 2, 0]), np.array([0.7, 0.6, 0.5, 0.4]), 3
     )
     assert len(boxes) == 3 and labels.tolist() == [0, 1, 0]
     np.testing.assert_allclose(boxes[2], proposals[1])
-    assert scores[:2].tolist() == [0.9, 0.8]
+    # a labelled box is certain, whatever the detector scored there; context keeps its score
+    assert scores.tolist() == [LABELLED_SCORE, LABELLED_SCORE, 0.6]

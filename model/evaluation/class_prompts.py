@@ -62,6 +62,7 @@ from model.evaluation.class_prompt_counts import (
     other_label_boxes,
 )
 from model.protocol import GroundingModel
+from scenes.actors import CLASSES
 from scenes.calib import IMAGE_SIZE
 from scenes.durable import atomic_write_text
 from scenes.layout import ID_WIDTH, LABEL, is_frame_id, sample_dir
@@ -70,6 +71,10 @@ from scenes.root import LIDAR_FOLDER, RADAR_FOLDERS, RootError, Sample, Talk2Rad
 
 FOVS = ("camera", "all")
 """Counted region: inside the camera image too, or anywhere within the range."""
+
+CANDIDATE_KINDS = ("detector", "labels")
+"""What the referent stage chooses among: the detector's proposals, or the frame's labelled
+(metric-class) boxes (grounding apart from detection, :mod:`model.referent.labelled`)."""
 
 
 @dataclass(frozen=True)
@@ -82,12 +87,16 @@ class ScoringConfig:
         fov: ``camera`` (also inside the camera image) or ``all``.
         sweep: Further thresholds to count at (pooled figures only; the model is asked once, at
             the smallest threshold).
+        candidates: :data:`CANDIDATE_KINDS`: ``labels`` grounds over the frame's labelled boxes
+            (every found object is then a labelled box, every false box a labelled box of
+            another class or one not asked for).
     """
 
     threshold: float
     max_range: float = 30.0
     fov: str = "camera"
     sweep: tuple[float, ...] = ()
+    candidates: str = "detector"
 
     def __post_init__(self) -> None:
         for name, value in [("threshold", self.threshold)] + [("sweep", t) for t in self.sweep]:
@@ -97,6 +106,10 @@ class ScoringConfig:
             raise ValueError(f"max_range must be positive, got {self.max_range}")
         if self.fov not in FOVS:
             raise ValueError(f"fov must be one of {FOVS}, got {self.fov!r}")
+        if self.candidates not in CANDIDATE_KINDS:
+            raise ValueError(
+                f"candidates must be one of {CANDIDATE_KINDS}, got {self.candidates!r}"
+            )
 
 
 @dataclass(frozen=True)
@@ -231,7 +244,12 @@ def score_frame(model: GroundingModel, sample: Sample, config: ScoringConfig) ->
     gt_boxes = np.asarray(sample.boxes, dtype=np.float64).reshape(-1, 7)
     gt_counted = counted(gt_boxes)
     other_boxes = other_label_boxes(sample.labels, sample.calib)
-    features = model.encode_scene(sample.lidar, sample.radar)
+    labelled = None
+    if config.candidates == "labels":
+        from model.referent.labelled import LabelledBoxes
+
+        labelled = LabelledBoxes(gt_boxes, [CLASSES.index(c) for c in sample.classes])
+    features = model.encode_scene(sample.lidar, sample.radar, candidates=labelled)
     per_threshold: list[list[PromptCount]] = [[] for _ in thresholds]
     for cls, prompt in CLASS_PROMPTS.items():
         pred = model.ground(features, prompt, score_threshold=min(thresholds))
@@ -373,6 +391,12 @@ def _parser() -> argparse.ArgumentParser:
         metavar="T",
         help="also count at these thresholds (pooled table; one model pass)",
     )
+    p.add_argument(
+        "--candidates",
+        default="detector",
+        choices=CANDIDATE_KINDS,
+        help="detector: the detector's proposals (default); labels: the frame's labelled boxes",
+    )
     p.add_argument("--limit", type=int, default=0, help="first N frames only (0: all)")
     p.add_argument("--device", default="cpu", help="cpu or cuda")
     p.add_argument("--json", type=Path, default=None, help="write the figures as JSON here")
@@ -417,14 +441,19 @@ def run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     model = load_checkpoint(args.checkpoint, device=args.device)
     threshold = operating_threshold(model) if args.threshold is None else args.threshold
     config = ScoringConfig(
-        float(threshold), args.max_range, args.fov, tuple(float(t) for t in args.sweep)
+        float(threshold),
+        args.max_range,
+        args.fov,
+        tuple(float(t) for t in args.sweep),
+        args.candidates,
     )
     meta = CheckpointMeta.of(model)
     print(
         f"data: {args.data} ({len(ids)} frames, split {args.split}, radar "
         f"{root.radar_folder or 'none'}); checkpoint {args.checkpoint} (step {meta.step}, "
         f"epoch {meta.epoch}); threshold {threshold:g} "
-        f"({'--threshold' if args.threshold is not None else 'checkpoint'})"
+        f"({'--threshold' if args.threshold is not None else 'checkpoint'}); candidates "
+        f"{args.candidates}"
     )
     if talk2radar:
         print(

@@ -190,6 +190,19 @@ class ReferentGrounding(GroundingHead):
         radar: list[Tensor] | None,
         candidates: LabelledBoxes | None,
     ) -> SceneFeatures:
+        return self.encode_views(scene, lidar, radar, (candidates,))[0]
+
+    def encode_views(
+        self,
+        scene: SceneEncoder,
+        lidar: list[Tensor] | None,
+        radar: list[Tensor] | None,
+        views: Sequence[LabelledBoxes | None],
+    ) -> list[SceneFeatures]:
+        """:meth:`encode` of one scene for each of ``views`` (None: the detector's proposals;
+        labelled boxes: those, with the proposals that overlap none of them as context), from one
+        pass of the sensors and the detector (the ``--freeze-scene`` cache describes a scene both
+        ways)."""
         stages = scene.sensors(lidar, radar, timed=True)
         clock = Clock(scene.device)
         limit = self.cfg.referent.max_candidates
@@ -197,31 +210,28 @@ class ReferentGrounding(GroundingHead):
         heat = torch.sigmoid(out.heatmap[0]).float().cpu().numpy()
         dets = self.proposals(scene, out, limit)[0]
         keep = slice(0, limit)
-        boxes, labels, scores = dets.boxes[keep], dets.labels[keep], dets.scores[keep]
-        answerable = None
-        if candidates is not None:
-            answerable = len(candidates)
-            labelled_scores = scene.anchor_scores(heat, candidates.boxes, candidates.labels)
-            boxes, labels, scores = with_context(
-                candidates, labelled_scores, boxes, labels, scores, limit
+        maps = stages.maps(neck, 0)
+        lidar_np = None if lidar is None else lidar[0].cpu().numpy()
+        radar_np = None if radar is None else radar[0].cpu().numpy()
+        result = []
+        for candidates in views:
+            boxes, labels, scores = dets.boxes[keep], dets.labels[keep], dets.scores[keep]
+            answerable = None
+            if candidates is not None:
+                answerable = len(candidates)
+                boxes, labels, scores = with_context(candidates, boxes, labels, scores, limit)
+            objects = self.describe(scene, boxes, labels, scores, maps, lidar_np, radar_np)
+            result.append(
+                stages.features(
+                    lidar,
+                    radar,
+                    clock.lap(),
+                    objects=objects,
+                    detection_heatmaps=heat,
+                    answerable=answerable,
+                )
             )
-        objects = self.describe(
-            scene,
-            boxes,
-            labels,
-            scores,
-            stages.maps(neck, 0),
-            None if lidar is None else lidar[0].cpu().numpy(),
-            None if radar is None else radar[0].cpu().numpy(),
-        )
-        return stages.features(
-            lidar,
-            radar,
-            clock.lap(),
-            objects=objects,
-            detection_heatmaps=heat,
-            answerable=answerable,
-        )
+        return result
 
     def check(self, scene: SceneEncoder, features: SceneFeatures) -> None:
         if features.objects is None or features.detection_heatmaps is None:

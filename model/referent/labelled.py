@@ -5,9 +5,19 @@ Grounding over the frame's labelled boxes (``model.evaluate --candidates labels`
 stage choose among boxes someone drew instead of the detector's proposals; this measures language
 grounding apart from detection and is the fastest way to annotate a labelled frame.
 
-A labelled box has no detection score of its own. It gets the one training gives an actor's box
-(:func:`anchor_scores`): the 3x3 maximum of its class heatmap around its anchor cell, so that the
-candidate description the referent stage reads means the same at training and at inference.
+A labelled box is ground truth: its class is its label's and it is certainly an object, so it
+enters the candidate description with its label's class one-hot and the detection score
+:data:`LABELLED_SCORE` (certain), whatever the detector makes of it. The detector's opinion of
+the box never decides its class: on frames unlike our synthetic world (real View-of-Delft frames,
+other sensors) the detector misses or mis-scores people the labels name, and reading its score at
+the box (as this module did before issue 37) made a labelled pedestrian "not a pedestrian". Only
+what labels do not say (motion from the radar points inside the box, point counts) comes from the
+sensors. The referent stage is trained on such candidates too (``--freeze-scene``'s labelled
+views, with the detector's pooled features at the boxes shifted: see
+:mod:`model.training.referent_cache`), so that it trusts the label over the detector.
+
+:func:`anchor_scores` remains what the joint referent step gives an actor's jittered box when it
+stands in for a detector proposal (the 3x3 maximum of its class heatmap around its anchor cell).
 
 Nor does a frame's handful of labelled boxes look like the candidate set the referent stage was
 trained on (the detector's 40 proposals, street clutter included): its self-attention reads the
@@ -77,6 +87,9 @@ def anchor_scores(
     return out
 
 
+LABELLED_SCORE = 1.0
+"""The detection score a labelled box enters the candidate description with: certain."""
+
 CONTEXT_DISTANCE = 1.0
 """A proposal whose BEV centre lies within this many metres of a labelled box (or that overlaps
 one) is that object again, not context."""
@@ -84,14 +97,14 @@ one) is that object again, not context."""
 
 def with_context(
     labelled: LabelledBoxes,
-    labelled_scores: np.ndarray,
     proposals: np.ndarray,
     proposal_labels: np.ndarray,
     proposal_scores: np.ndarray,
     max_total: int,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The labelled boxes followed by the proposals (in their score order) that overlap none of
-    them, at most ``max_total`` in all (the labelled boxes are always kept).
+    """The labelled boxes (score :data:`LABELLED_SCORE` each) followed by the proposals (in their
+    score order) that overlap none of them, at most ``max_total`` in all (the labelled boxes are
+    always kept).
 
     Returns:
         ``boxes (K, 7)``, ``labels (K,)``, ``scores (K,)``; the first ``len(labelled)`` rows are
@@ -108,6 +121,9 @@ def with_context(
         np.concatenate([labelled.boxes, props[keep]]),
         np.concatenate([labelled.labels, np.asarray(proposal_labels, dtype=np.int64)[keep]]),
         np.concatenate(
-            [np.asarray(labelled_scores, dtype=np.float64), np.asarray(proposal_scores)[keep]]
+            [
+                np.full(len(labelled), LABELLED_SCORE),
+                np.asarray(proposal_scores, dtype=np.float64)[keep],
+            ]
         ),
     )

@@ -177,6 +177,21 @@ class TrainConfig:
         f"{len(FAMILIES) - 1} times in the order {', '.join(FAMILIES[1:])} (the attribute "
         "family gets the rest; default: scenes.prompts.sampling.EXTENDED_RATES)",
     )
+    labelled_views: float = option(
+        0.5,
+        on_resume=True,
+        help="--freeze-scene: share of scenes drawn as their labelled view (the frame's objects "
+        "as labelled candidates with the label's class, the detector's other proposals as "
+        "context: what --candidates labels and the app's labelled boxes ground over); 0: none "
+        "cached (default 0.5)",
+    )
+    evidence_shift: float = option(
+        0.5,
+        on_resume=True,
+        help="--freeze-scene: in a labelled view, share of labelled boxes that read another "
+        "candidate's pooled detector features, so that the label decides the class "
+        "(default 0.5)",
+    )
     scene_limit: int = option(
         0, help="--freeze-scene: cache only the first N training scenes (0: all)"
     )

@@ -6,6 +6,18 @@ root) are encoded once by the frozen text encoder (:class:`TextBank`), and each 
 some of them per scene (:func:`cached_referent_step`) at a small fraction of a joint step's cost.
 Its candidates are exactly what inference sees: the detector's own boxes and scores, misses and
 false detections included.
+
+Labelled views (issue 37): the same checkpoint also grounds over a frame's labelled boxes
+(``model.evaluate --candidates labels``, the app's "Labelled boxes", the Annotate tab's
+sentence-first flow), where a candidate's class is its label's and its score certain
+(:mod:`model.referent.labelled`). So each scene is also cached as that kind of candidate set
+(:attr:`CachedScene.labelled`: its actors' boxes as the labelled boxes, the detector's other
+proposals as context), and a step draws a scene's labelled view with
+``TrainConfig.labelled_views``. Where the detector is wrong (a sensor it never saw, a person it
+does not see) the features it pools at a labelled box say "background" or "another class"; to
+teach the stage that the label decides, :func:`shift_evidence` gives some labelled boxes the
+pooled map features of another candidate of the scene (another object, or clutter the detector
+proposed), keeping their own explicit evidence (point counts, radar motion) and geometry.
 """
 
 from __future__ import annotations
@@ -18,7 +30,9 @@ import torch
 
 from model.head.losses import LossTerms
 from model.nets.text import encode_minilm_batched, pad_features
+from model.referent.candidates import LIDAR_EVIDENCE, RADAR_EVIDENCE
 from model.referent.head import referent_head
+from model.referent.labelled import LabelledBoxes
 from model.referent.scene_candidates import SceneCandidates
 from model.tpcnet import TPCNet
 from model.training.referent_step import (
@@ -42,12 +56,18 @@ class CachedScene:
         actor_ids: ``(K,)`` the actor each candidate detects, -1 for a false detection.
         prompts: Generated prompts with at least one detected referent.
         targets: Per prompt, ``(K,)`` float32: 1 where the candidate is a referent.
+        answerable: A labelled view: its first ``answerable`` candidates are the labelled boxes
+            (the rest is context); None: the detector's candidates.
+        labelled: The same scene with its actors' boxes as labelled candidates (module
+            docstring); None when not cached.
     """
 
     candidates: SceneCandidates
     actor_ids: np.ndarray
     prompts: tuple[str, ...]
     targets: tuple[np.ndarray, ...]
+    answerable: int | None = None
+    labelled: CachedScene | None = None
 
 
 def match_detections(boxes: np.ndarray, labels: np.ndarray, actors: Sequence[Actor]) -> np.ndarray:
@@ -62,6 +82,104 @@ def match_detections(boxes: np.ndarray, labels: np.ndarray, actors: Sequence[Act
     index = match_by_centre(boxes, labels, targets, target_labels, limits)
     ids = np.array([a.actor_id for a in actors], dtype=np.int64)
     return np.where(index >= 0, ids[np.maximum(index, 0)], -1)
+
+
+def _on_cpu(objects: SceneCandidates) -> SceneCandidates:
+    return replace(
+        objects,
+        geometry=objects.geometry.cpu(),
+        fused=objects.fused.cpu(),
+        lidar=None if objects.lidar is None else objects.lidar.cpu(),
+        radar=None if objects.radar is None else objects.radar.cpu(),
+    )
+
+
+def _cached(
+    objects: SceneCandidates,
+    ids: np.ndarray,
+    prompts: Sequence[tuple[str, tuple[int, ...]]],
+    answerable: int | None = None,
+) -> CachedScene:
+    """A cached view of ``objects`` (candidate actor ids ``ids (K,)``) with the prompts it can
+    answer: one that refers to nothing (the empty answer is an answer: things outside the
+    classes, attributes nothing here has) or to a candidate."""
+    usable = [(text, refs) for text, refs in prompts if not refs or np.isin(ids, refs).any()]
+    return CachedScene(
+        _on_cpu(objects),
+        ids,
+        tuple(text for text, _ in usable),
+        tuple(np.isin(ids, refs).astype(np.float32) for _, refs in usable),
+        answerable,
+    )
+
+
+def scene_views(
+    model: TPCNet, lidar: np.ndarray, radar: np.ndarray, actors: Sequence[Actor], labelled: bool
+) -> tuple[SceneCandidates, tuple[SceneCandidates, np.ndarray] | None]:
+    """One scene's candidates as inference builds them from the detector's proposals and, with
+    ``labelled``, over labelled boxes too, from one pass of the frozen encoder
+    (:meth:`model.referent.head.ReferentGrounding.encode_views`): the metric-class ``actors``
+    whose anchor lies in the head grid are the labelled boxes (their exact boxes, as a label gives
+    them), the detector's other proposals the context. The labelled view comes with its
+    candidates' actor ids ``(K,)`` (-1 for context); it is None without ``labelled`` or when no
+    actor is in the grid."""
+    kept: list[Actor] = []
+    boxes = None
+    if labelled:
+        metric = [a for a in actors if a.cls in CLASSES]
+        if metric:
+            all_boxes = np.stack([a.box for a in metric])
+            inside = model.scene.anchors_in_grid(all_boxes)
+            kept = [a for a, ok in zip(metric, inside, strict=True) if ok]
+            boxes = all_boxes[inside]
+    views = (None, LabelledBoxes(boxes, [CLASSES.index(a.cls) for a in kept])) if kept else (None,)
+    lidar_t = model.scene.clouds([lidar], 1, "lidar")
+    radar_t = model.scene.clouds([radar], 1, "radar")
+    with torch.no_grad():
+        features = referent_head(model).encode_views(model.scene, lidar_t, radar_t, views)
+    objects = [f.objects for f in features]
+    assert all(o is not None for o in objects)
+    if not kept:
+        return objects[0], None
+    ids = np.full(len(objects[1]), -1, dtype=np.int64)
+    ids[: len(kept)] = [a.actor_id for a in kept]
+    return objects[0], (objects[1], ids)
+
+
+def shift_evidence(scene: CachedScene, rng: np.random.Generator, share: float) -> CachedScene:
+    """A labelled view whose labelled boxes each, with probability ``share``, read the pooled map
+    features (fused, and the LiDAR and radar branches' pooled part) of another candidate of the
+    scene drawn at random, as on a frame where the detector sees something else there (module
+    docstring); their geometry (class one-hot from the label, score), point counts and radar
+    motion stay their own. A detector view, or ``share`` 0, comes back as is."""
+    n = scene.answerable or 0
+    k = len(scene.candidates)
+    if n == 0 or k < 2 or share <= 0:
+        return scene
+    moved = np.flatnonzero(rng.random(n) < share)
+    if not len(moved):
+        return scene
+    donors = rng.integers(0, k - 1, size=len(moved))
+    donors = donors + (donors >= moved)  # another candidate than itself
+    src = torch.arange(k)
+    src[torch.from_numpy(moved)] = torch.from_numpy(donors)
+    cands = scene.candidates
+
+    def pooled(t: torch.Tensor | None, evidence: int) -> torch.Tensor | None:
+        if t is None:
+            return None
+        out = t.clone()
+        width = t.shape[1] - evidence
+        out[:, :width] = t[src, :width]
+        return out
+
+    shifted = replace(
+        cands,
+        fused=cands.fused[src],
+        lidar=pooled(cands.lidar, LIDAR_EVIDENCE),
+        radar=pooled(cands.radar, RADAR_EVIDENCE),
+    )
+    return replace(scene, candidates=shifted)
 
 
 @dataclass
@@ -85,6 +203,7 @@ def cache_scenes(
     label_prompts: int = 0,
     known: TextBank | None = None,
     prompt_config: PromptConfig | None = None,
+    labelled: bool = False,
 ) -> tuple[list[CachedScene], TextBank]:
     """Encode every scene of ``dataset`` with the frozen model, generate ``prompts_per_scene``
     prompts per scene (labels source: take its given prompts, plus ``label_prompts`` from its
@@ -93,7 +212,8 @@ def cache_scenes(
     Prompts already in ``known`` (e.g. the other view's bank) are not encoded again; the bank
     returned holds only the new ones. ``prompt_config``: the generator's settings
     (:meth:`model.training.referent_step.ReferentTrainConfig.prompt_config`; default: the base
-    prompts in the training phrasings)."""
+    prompts in the training phrasings). ``labelled``: also cache each scene's labelled view
+    (:attr:`CachedScene.labelled`, :func:`labelled_view`), with the same prompts."""
     from tqdm import tqdm
 
     model.eval()
@@ -102,33 +222,15 @@ def cache_scenes(
     with torch.no_grad():
         for i in tqdm(range(len(dataset)), desc="cache scenes", disable=not progress):
             item = dataset[i]
-            objects = model.encode_scene(item.lidar, item.radar).objects
-            assert objects is not None
-            cpu = replace(
-                objects,
-                geometry=objects.geometry.cpu(),
-                fused=objects.fused.cpu(),
-                lidar=None if objects.lidar is None else objects.lidar.cpu(),
-                radar=None if objects.radar is None else objects.radar.cpu(),
-            )
+            objects, view = scene_views(model, item.lidar, item.radar, item.actors, labelled)
             ids = match_detections(objects.boxes, objects.labels, item.actors)
             rng = np.random.default_rng((seed, 11, i))
             prompts = frame_prompts(item, rng, prompts_per_scene, pcfg, label_prompts)
-            # A prompt is kept when it refers to nothing (the empty answer is an answer: things
-            # outside the classes, attributes nothing here has) or to a detected object.
-            usable = [
-                (text, refs) for text, refs in prompts if not refs or np.isin(ids, refs).any()
-            ]
-            scenes.append(
-                CachedScene(
-                    cpu,
-                    ids,
-                    tuple(text for text, _ in usable),
-                    tuple(np.isin(ids, refs).astype(np.float32) for _, refs in usable),
-                )
-            )
+            extra = None if view is None else _cached(*view, prompts, int((view[1] >= 0).sum()))
+            scenes.append(replace(_cached(objects, ids, prompts), labelled=extra))
     done = {} if known is None else known.entries
-    texts = [t for t in dict.fromkeys(t for s in scenes for t in s.prompts) if t not in done]
+    views = [v for s in scenes for v in (s, s.labelled) if v is not None]
+    texts = [t for t in dict.fromkeys(t for v in views for t in v.prompts) if t not in done]
     entries = {}
     max_tokens = model.cfg.text.max_tokens
     chunk = 256
@@ -181,4 +283,6 @@ __all__ = [
     "cache_scenes",
     "cached_referent_step",
     "match_detections",
+    "scene_views",
+    "shift_evidence",
 ]

@@ -32,7 +32,7 @@ from torch import Tensor
 from model.head.losses import LossTerms, grounding_loss
 from model.tpcnet import TPCNet
 from model.training.config import TrainConfig, TrainingError
-from model.training.referent_cache import CachedScene, TextBank, cache_scenes
+from model.training.referent_cache import CachedScene, TextBank, cache_scenes, shift_evidence
 from model.training.referent_step import ReferentTrainConfig, float32_output
 from scenes.dataset import AugmentConfig, GroundingDataset, collate
 from scenes.frame_dataset import FrameDataset
@@ -134,11 +134,20 @@ def pick_view(
     cached: list, mirrored: list, index: int, cfg: TrainConfig, epoch: int
 ) -> CachedScene:
     """``--freeze-scene``: the cached scene ``index`` as is, or its mirrored view (prompts with
-    left and right swapped) with ``cfg.flip_probability``, drawn from ``(seed, epoch, index)``."""
-    if not mirrored:
-        return cached[index]
+    left and right swapped) with ``cfg.flip_probability``; then, where it has one, its labelled
+    view (:attr:`CachedScene.labelled`) with ``cfg.labelled_views``, some of its labelled boxes
+    reading another candidate's pooled features with ``cfg.evidence_shift``
+    (:func:`model.training.referent_cache.shift_evidence`); all drawn from ``(seed, epoch,
+    index)``."""
     rng = np.random.default_rng((cfg.seed, 13, epoch, index))
-    return mirrored[index] if rng.random() < cfg.flip_probability else cached[index]
+    flip = rng.random() < cfg.flip_probability
+    scene = mirrored[index] if mirrored and flip else cached[index]
+    if scene.labelled is None:
+        return scene
+    pick = np.random.default_rng((cfg.seed, 17, epoch, index))
+    if pick.random() >= cfg.labelled_views:
+        return scene
+    return shift_evidence(scene.labelled, pick, cfg.evidence_shift)
 
 
 @dataclass(frozen=True)
@@ -204,6 +213,7 @@ def freeze_scene(
                 label_prompts=cfg.label_prompts,
                 known=bank,
                 prompt_config=referent_cfg.prompt_config(),
+                labelled=cfg.labelled_views > 0,
             )
             into += part
             bank.entries.update(part_bank.entries)
