@@ -40,10 +40,12 @@ if TYPE_CHECKING:
     )
     from model.checkpoint_meta import CheckpointMeta
     from model.config import FusionConfig, ModelConfig, preset
+    from model.core.features import Predictions, SceneFeatures, as_points
+    from model.core.labelled import LabelledBoxes
     from model.evaluate import score_directories
     from model.evaluation.baselines import class_noun_prompt
     from model.evaluation.predict import operating_threshold
-    from model.features import Predictions, SceneFeatures, as_points
+    from model.grounding.referent import UNCALIBRATED_REFERENT, referent_head
     from model.head.decode import decode
     from model.head.losses import grounding_loss
     from model.head.targets import collate_targets, draw_targets
@@ -55,9 +57,7 @@ if TYPE_CHECKING:
     )
     from model.nets.text import load_minilm, tokenize
     from model.protocol import GridExtent, GroundingModel, ModelSettings, PredictionsView
-    from model.referent.head import UNCALIBRATED_REFERENT, referent_head
     from model.referent.heatmap import referent_heatmap
-    from model.referent.labelled import LabelledBoxes
     from model.referent.scene_candidates import SceneMaps
     from model.tpcnet import TPCNet
 
@@ -72,15 +72,15 @@ _EXPORTS = {
     "score_directories": "model.evaluate",
     "class_noun_prompt": "model.evaluation.baselines",
     "operating_threshold": "model.evaluation.predict",
-    "Predictions": "model.features",
-    "SceneFeatures": "model.features",
-    "as_points": "model.features",
+    "Predictions": "model.core.features",
+    "SceneFeatures": "model.core.features",
+    "as_points": "model.core.features",
     "GridExtent": "model.protocol",
     "GroundingModel": "model.protocol",
     "ModelSettings": "model.protocol",
     "PredictionsView": "model.protocol",
-    "UNCALIBRATED_REFERENT": "model.referent.head",
-    "LabelledBoxes": "model.referent.labelled",
+    "UNCALIBRATED_REFERENT": "model.grounding.referent",
+    "LabelledBoxes": "model.core.labelled",
     "TPCNet": "model.tpcnet",
     # The parts the benchmarks (bench/) time or count on their own:
     "FusionConfig": "model.config",
@@ -95,7 +95,7 @@ _EXPORTS = {
     "grounding_loss": "model.head.losses",
     "collate_targets": "model.head.targets",
     "draw_targets": "model.head.targets",
-    "referent_head": "model.referent.head",
+    "referent_head": "model.grounding.referent",
     "SceneMaps": "model.referent.scene_candidates",
     "referent_heatmap": "model.referent.heatmap",
 }

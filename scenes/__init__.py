@@ -3,10 +3,15 @@
 ``scenes`` imports neither ``model``, ``annotate`` nor ``app``.
 """
 
-from scenes.actors import CLASSES, Actor
-from scenes.calib import Calibration, read_calib, vod_lidar_calibration, vod_radar_calibration
-from scenes.kitti import ObjectLabel, read_label_file, write_label_file
-from scenes.root import (
+from scenes.geometry.actors import CLASSES, Actor
+from scenes.geometry.calib import (
+    Calibration,
+    read_calib,
+    vod_lidar_calibration,
+    vod_radar_calibration,
+)
+from scenes.talk2radar.kitti import ObjectLabel, read_label_file, write_label_file
+from scenes.talk2radar.root import (
     RootError,
     Sample,
     SampleMeta,

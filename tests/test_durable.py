@@ -1,4 +1,4 @@
-"""scenes.durable: the temporaries' one naming rule, atomic writes (also when the write or its
+"""scenes.utils.durable: the temporaries' one naming rule, atomic writes (also when the write or its
 fsync fails), links, multi-file replacement, and JSON Lines logs with a torn last line."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from scenes import durable
-from scenes.durable import (
+from scenes.utils import durable
+from scenes.utils.durable import (
     append_json_line,
     append_line,
     atomic_file,

@@ -12,7 +12,7 @@ from model.config.sections import (
     PillarConfig,
     TextFusionConfig,
 )
-from model.nets.grid import BevGrid
+from model.core.grid import BevGrid
 
 
 def small_config() -> ModelConfig:

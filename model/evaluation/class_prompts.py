@@ -62,11 +62,11 @@ from model.evaluation.class_prompt_counts import (
     other_label_boxes,
 )
 from model.protocol import GroundingModel
-from scenes.calib import IMAGE_SIZE
-from scenes.durable import atomic_write_text
-from scenes.layout import ID_WIDTH, LABEL, is_frame_id, sample_dir
-from scenes.projection import in_camera_view
-from scenes.root import LIDAR_FOLDER, RADAR_FOLDERS, RootError, Sample, Talk2RadarRoot
+from scenes.geometry.calib import IMAGE_SIZE
+from scenes.geometry.projection import in_camera_view
+from scenes.talk2radar.layout import ID_WIDTH, LABEL, is_frame_id, sample_dir
+from scenes.talk2radar.root import LIDAR_FOLDER, RADAR_FOLDERS, RootError, Sample, Talk2RadarRoot
+from scenes.utils.durable import atomic_write_text
 
 FOVS = ("camera", "all")
 """Counted region: inside the camera image too, or anywhere within the range."""

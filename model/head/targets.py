@@ -19,7 +19,7 @@ For every ground-truth box (LiDAR frame, ``x, y, z, l, w, h, yaw``) of a metric 
 The flat cell index of the anchor cell is ``iy * W + ix`` (row-major over the ``(H, W)`` canvas),
 which is what :func:`model.head.losses.grounding_loss` gathers the regression map with.
 
-Box classes outside :data:`scenes.actors.CLASSES` are ignored: they stay in the arrays (so index
+Box classes outside :data:`scenes.geometry.actors.CLASSES` are ignored: they stay in the arrays (so index
 ``k`` still means input box ``k``) with ``label = -1`` and ``mask = False``.
 """
 
@@ -34,10 +34,10 @@ import torch
 from torch import Tensor
 
 from model.config import HeadConfig
+from model.core.grid import BevGrid
 from model.head.detector import NUM_CLASSES, REGRESSION_CHANNELS
-from model.nets.grid import BevGrid
-from scenes.actors import CLASSES
-from scenes.boxes import nearest_bev_corner, nearest_edge_midpoint
+from scenes.geometry.actors import CLASSES
+from scenes.geometry.boxes import nearest_bev_corner, nearest_edge_midpoint
 
 
 @dataclass(frozen=True)

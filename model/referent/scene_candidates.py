@@ -23,8 +23,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from model.core.grid import BevGrid
 from model.head.targets import anchor_points
-from model.nets.grid import BevGrid
 from model.referent.candidates import (
     geometry_features,
     lidar_evidence,

@@ -16,9 +16,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
+from model.grounding.referent import referent_head
 from model.head.losses import LossTerms
 from model.nets.text import encode_minilm_batched, pad_features
-from model.referent.head import referent_head
 from model.referent.scene_candidates import SceneCandidates
 from model.tpcnet import TPCNet
 from model.training.referent_step import (
@@ -27,10 +27,10 @@ from model.training.referent_step import (
     _per_item,
     frame_prompts,
 )
-from scenes.actors import CLASSES, Actor
-from scenes.boxes import CENTRE_MATCH_DISTANCE, match_by_centre
-from scenes.frame_dataset import FrameDataset
-from scenes.prompts import PromptConfig
+from scenes.datasets.frames import FrameDataset
+from scenes.geometry.actors import CLASSES, Actor
+from scenes.geometry.boxes import CENTRE_MATCH_DISTANCE, match_by_centre
+from scenes.language.prompts import PromptConfig
 
 
 @dataclass(frozen=True)
@@ -52,8 +52,8 @@ class CachedScene:
 
 def match_detections(boxes: np.ndarray, labels: np.ndarray, actors: Sequence[Actor]) -> np.ndarray:
     """Actor id ``(K,)`` of each detection (-1: none): detections in the given (score) order take
-    the nearest free actor of their class within :data:`scenes.boxes.CENTRE_MATCH_DISTANCE` of
-    the BEV centre (:func:`scenes.boxes.match_by_centre`)."""
+    the nearest free actor of their class within :data:`scenes.geometry.boxes.CENTRE_MATCH_DISTANCE` of
+    the BEV centre (:func:`scenes.geometry.boxes.match_by_centre`)."""
     if not actors:
         return np.full(len(boxes), -1, dtype=np.int64)
     targets = np.stack([a.box for a in actors])
