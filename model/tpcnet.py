@@ -30,7 +30,8 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
-from model.config import ModelConfig
+from model.config import ModelConfig, build_config
+from model.core.candidates import SceneMaps
 from model.core.features import (
     Clock,
     GroundTimings,
@@ -49,7 +50,6 @@ from model.grounding.referent import ReferentGrounding
 from model.grounding.scene_encoder import SceneEncoder
 from model.head.detector import HeadOutput
 from model.nets.text import build_text_encoder, validate_prompt
-from model.referent.scene_candidates import SceneMaps
 
 CHECKPOINT_NAMES = {
     "lidar": "scene.lidar",
@@ -245,3 +245,9 @@ __all__ = [
     "TPCNet",
     "as_points",
 ]
+
+
+def build_model(preset: str = "small", **overrides: Any) -> TPCNet:
+    """A freshly initialised :class:`TPCNet` for ``preset`` (``small`` or ``paper``) + overrides
+    (:func:`model.config.build_config`)."""
+    return TPCNet(build_config(preset, **overrides))

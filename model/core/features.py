@@ -16,8 +16,8 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from model.core.candidates import SceneCandidates
 from model.core.grid import BevGrid
-from model.referent.scene_candidates import SceneCandidates
 
 PointsLike = np.ndarray | Tensor
 

@@ -23,8 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from model.core.anchors import anchor_points
 from model.core.grid import BevGrid
-from model.head.targets import anchor_points
 from scenes.geometry.actors import CLASSES
 from scenes.geometry.boxes import bev_iou
 

@@ -16,6 +16,7 @@ import torch
 from torch import Tensor, nn
 
 from model.config import ModelConfig
+from model.core.candidates import SceneCandidates, SceneMaps
 from model.core.features import (
     Answer,
     Clock,
@@ -30,12 +31,7 @@ from model.head.decode import Detections, decode
 from model.head.detector import HeadOutput
 from model.nets.text import TextFeatures
 from model.referent.heatmap import ReferentCanvas
-from model.referent.scene_candidates import (
-    SceneCandidates,
-    SceneMaps,
-    describe_candidates,
-    stack_candidates,
-)
+from model.referent.scene_candidates import describe_candidates, stack_candidates
 from model.referent.stage import CandidateBatch, ReferentStage, SceneEmbeddings, referent_loss
 from scenes.geometry.actors import CLASSES
 

@@ -33,6 +33,8 @@ import torch
 from torch import Tensor, nn
 
 from model.config import LIDAR_FEATURES, RADAR_FEATURES, ModelConfig
+from model.core.anchors import anchor_points
+from model.core.candidates import SceneMaps
 from model.core.features import (
     Clock,
     MissingSensorError,
@@ -43,12 +45,11 @@ from model.core.features import (
 )
 from model.core.labelled import anchor_scores
 from model.head.detector import C3DRecHead, HeadOutput
-from model.head.targets import BatchTargets, anchor_points, collate_targets, draw_targets
+from model.head.targets import BatchTargets, collate_targets, draw_targets
 from model.nets.baca import build_fusion
 from model.nets.backbone import SecondBackbone
 from model.nets.fpn import SecondFpn
 from model.nets.pillars import PillarEncoder
-from model.referent.scene_candidates import SceneMaps
 
 
 class SensorBranch(nn.Module):

@@ -27,9 +27,9 @@ import torch
 import torch.nn.functional as F
 
 from model.config import HeadConfig
+from model.core.anchors import cell_centres
 from model.core.grid import BevGrid
 from model.head.detector import NUM_CLASSES, REGRESSION_CHANNELS, HeadOutput
-from model.head.targets import cell_centres
 from scenes.geometry.actors import CLASSES
 from scenes.geometry.boxes import paired_bev_iou, wrap_yaw
 

@@ -34,10 +34,10 @@ import torch
 from torch import Tensor
 
 from model.config import HeadConfig
+from model.core.anchors import anchor_points, cell_centres
 from model.core.grid import BevGrid
 from model.head.detector import NUM_CLASSES, REGRESSION_CHANNELS
 from scenes.geometry.actors import CLASSES
-from scenes.geometry.boxes import nearest_bev_corner, nearest_edge_midpoint
 
 
 @dataclass(frozen=True)
@@ -140,30 +140,6 @@ def draw_gaussian(heatmap: np.ndarray, row: int, col: int, radius: int) -> None:
     window = heatmap[row - top : row + bottom, col - left : col + right]
     patch = kernel[radius - top : radius + bottom, radius - left : radius + right]
     np.maximum(window, patch, out=window)
-
-
-def anchor_points(boxes: np.ndarray, anchor: str) -> np.ndarray:
-    """Anchor points ``(K, 2)`` (LiDAR frame, metres) of boxes ``(K, 7)`` for an anchor kind."""
-    if anchor == "corner":
-        return np.asarray(nearest_bev_corner(boxes, origin=(0.0, 0.0)), dtype=np.float64)
-    if anchor == "edge":
-        return np.asarray(nearest_edge_midpoint(boxes, origin=(0.0, 0.0)), dtype=np.float64)
-    if anchor == "center":
-        return np.asarray(boxes[:, :2], dtype=np.float64).copy()
-    raise ValueError(f"unknown anchor {anchor!r}")
-
-
-def grid_cell_centres(grid: BevGrid) -> np.ndarray:
-    """Metric centres ``(H * W, 2)`` of every cell of ``grid``, row-major (``[iy, ix]``)."""
-    h, w = grid.shape
-    rows, cols = np.meshgrid(np.arange(h), np.arange(w), indexing="ij")
-    return cell_centres(grid, cols.reshape(-1), rows.reshape(-1))
-
-
-def cell_centres(grid: BevGrid, cols: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """Metric centres ``(..., 2)`` of integer cells ``(cols, rows)``: the reference of ``(dx, dy)``."""
-    colrow = np.stack([np.asarray(cols, np.float64) + 0.5, np.asarray(rows, np.float64) + 0.5], -1)
-    return grid.cell_to_xy(colrow)
 
 
 def _check_boxes(boxes: np.ndarray, classes: Sequence[str]) -> np.ndarray:

@@ -43,9 +43,9 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from model import build_model
 from model.checkpoint import checkpoint_payload, model_from_payload, write_payload
 from model.checkpoint_meta import CheckpointMeta
+from model.tpcnet import build_model
 from model.training import distributed
 from model.training.config import TrainConfig, TrainingError, parse_args
 from model.training.data import MixedFrames, RootSpec, frame_dataset

@@ -16,10 +16,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
+from model.core.candidates import SceneCandidates
 from model.grounding.referent import referent_head
 from model.head.losses import LossTerms
 from model.nets.text import encode_minilm_batched, pad_features
-from model.referent.scene_candidates import SceneCandidates
 from model.tpcnet import TPCNet
 from model.training.referent_step import (
     ReferentLoss,

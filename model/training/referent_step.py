@@ -34,11 +34,12 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from model.core.anchors import grid_cell_centres
 from model.core.grid import BevGrid
 from model.grounding.referent import referent_head
 from model.head.detector import HeadOutput
 from model.head.losses import LossTerms, grounding_loss
-from model.head.targets import BatchTargets, grid_cell_centres
+from model.head.targets import BatchTargets
 from model.nets.text import (
     MiniLMTextEncoder,
     TextFeatures,
