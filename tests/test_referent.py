@@ -313,7 +313,7 @@ def _reference_radar_evidence(boxes, radar):
 
 
 def _reference_heatmap(detection, boxes, labels, probabilities, grid, anchor, sigma_cells=1.5):
-    from model.head.targets import anchor_points
+    from model.core.anchors import anchor_points
 
     _, h, w = detection.shape
     weight = np.zeros_like(detection, dtype=np.float32)
