@@ -239,7 +239,7 @@ def test_unreadable_lines_are_reported_never_fatal(tmp_path: Path) -> None:
 def test_every_writer_of_the_project_uses_this_module() -> None:
     """No other module of scenes/, annotate/, app/, model/, bench/ or launch.py renames files
     itself or names temporaries."""
-    root = Path(durable.__file__).parents[1]
+    root = Path(durable.__file__).parents[2]
     offenders = []
     packages = ("scenes", "annotate", "app", "model", "bench")
     files = [p for package in packages for p in sorted((root / package).rglob("*.py"))]
