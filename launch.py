@@ -41,7 +41,7 @@ from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
     from model import TPCNet
-    from scenes.root import Talk2RadarRoot
+    from scenes.talk2radar.root import Talk2RadarRoot
 
 REPO = Path(__file__).resolve().parent
 DEFAULT_DATA = REPO / "data" / "default"
@@ -135,7 +135,7 @@ def ensure_default_data(
             f"generating the synthetic scenes failed ({' '.join(cmd[1:])} exited with "
             f"{result.returncode})"
         )
-    from scenes.durable import atomic_write_text
+    from scenes.utils.durable import atomic_write_text
 
     atomic_write_text(out / COMPLETE_MARKER, f"frames={frames} seed={seed}\n")
     return out
@@ -148,8 +148,8 @@ SPLIT_PREFERENCE = ("test", "val", "train")
 def missing_files(root: Talk2RadarRoot, split: str) -> list[str]:
     """One message per frame of ``split`` that lacks a file the reader needs (LiDAR points and
     calib, label_2, the radar tree's points and calib), naming the first missing file."""
-    from scenes.layout import CALIB, LABEL, VELODYNE, sample_file
-    from scenes.root import format_id
+    from scenes.talk2radar.layout import CALIB, LABEL, VELODYNE, sample_file
+    from scenes.talk2radar.root import format_id
 
     trees = [(root.lidar_dir, (VELODYNE, CALIB, LABEL))]
     if root.radar_dir is not None:
@@ -168,7 +168,7 @@ def missing_files(root: Talk2RadarRoot, split: str) -> list[str]:
 
 def _split_problem(root: Talk2RadarRoot, split: str) -> str | None:
     """Why ``split`` cannot be served (None: it can)."""
-    from scenes.root import RootError
+    from scenes.talk2radar.root import RootError
 
     try:
         ids = root.ids(split)
@@ -178,7 +178,7 @@ def _split_problem(root: Talk2RadarRoot, split: str) -> str | None:
     if not ids:
         return f"{root.path}: split {split!r} lists no frame (splits: {root.splits()})"
     if missing:
-        from scenes.layout import VELODYNE, sample_dir, split_dir, split_file
+        from scenes.talk2radar.layout import VELODYNE, sample_dir, split_dir, split_file
 
         if split_dir(root.lidar_dir).is_dir():
             where = f"listed in {split_file(root.lidar_dir, split)}"
@@ -195,8 +195,8 @@ def open_root(path: Path, split: str | None) -> Talk2RadarRoot:
         LaunchError: not a root, an ImageSets folder without lists, an unknown or empty split, or a split listing
             frames whose files are missing (the message names the first such file).
     """
-    from scenes.layout import split_dir
-    from scenes.root import RootError, Talk2RadarRoot
+    from scenes.talk2radar.layout import split_dir
+    from scenes.talk2radar.root import RootError, Talk2RadarRoot
 
     if not path.is_dir():
         raise LaunchError(f"--data {path}: no such folder")
@@ -281,7 +281,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     for noisy in ("httpx", "websockets", "urllib3"):
         logging.getLogger(noisy).setLevel(logging.WARNING)
     from app.server import AppConfig, ServerStartError, Talk2PCApp, check_listen_address
-    from scenes.root import RootError
+    from scenes.talk2radar.root import RootError
 
     try:
         check_listen_address(args.host, args.port)

@@ -9,7 +9,7 @@ further on. Each box is moved in three steps, from the sensors only (never from 
    :func:`annotate.estimate_velocity`: road users move along their heading, and a crossing
    object, whose heading is nearly perpendicular to the line of sight, keeps only its radial
    part), times the time between the frames. A box without radar returns does not move.
-2. **The ego's motion** between the two frames' poses (:func:`scenes.poses.lidar_motion`): the
+2. **The ego's motion** between the two frames' poses (:func:`scenes.talk2radar.poses.lidar_motion`): the
    box is taken into the next frame's LiDAR frame (centre and heading).
 3. **A refit** to the next frame's LiDAR points (:func:`annotate.fit_box`, with the box's class
    as size prior) where the radar could not tell the box's speed (no radar point in it, or a
@@ -35,7 +35,7 @@ import numpy as np
 
 from annotate.evidence import EvidenceConfig, box_evidence, estimate_velocity
 from annotate.fitting import BoxRegion, FitError, fit_box
-from scenes.boxes import wrap_yaw
+from scenes.geometry.boxes import wrap_yaw
 
 REFITS = ("unknown speed", "always", "never")
 """The choices of :attr:`CarryConfig.refit`."""
@@ -116,7 +116,7 @@ def carry_boxes(
         classes: ``K`` class names (the refit's size prior).
         radar: ``(M, 7)`` this frame's radar points, LiDAR frame (``v_r_compensated`` column 5).
         motion: ``(4, 4)`` this frame's LiDAR coordinates -> the next frame's
-            (:func:`scenes.poses.lidar_motion`).
+            (:func:`scenes.talk2radar.poses.lidar_motion`).
         dt: Seconds between the frames.
         next_lidar: ``(N, >=3)`` the next frame's LiDAR points (None: no refit).
         config: Parameters (default :class:`CarryConfig()`).

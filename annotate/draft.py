@@ -23,8 +23,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from scenes.boxes import wrap_yaw
-from scenes.calib import LIDAR_HEIGHT
+from scenes.geometry.boxes import wrap_yaw
+from scenes.geometry.calib import LIDAR_HEIGHT
 
 DEFAULT_SIZES: dict[str, tuple[float, float, float]] = {
     "Car": (4.2, 1.8, 1.5),
@@ -66,7 +66,7 @@ def default_box(
 ) -> tuple[float, float, float, float, float, float, float]:
     """A box of the class's typical size standing on the ground at ``(x, y)`` (a ground click).
 
-    ``ground_z`` defaults to the ground of a LiDAR mounted :data:`scenes.calib.LIDAR_HEIGHT` above
+    ``ground_z`` defaults to the ground of a LiDAR mounted :data:`scenes.geometry.calib.LIDAR_HEIGHT` above
     it; classes without a typical size get the pedestrian's.
     """
     length, width, height = DEFAULT_SIZES.get(cls, DEFAULT_SIZES["Pedestrian"])

@@ -5,7 +5,7 @@ For each box (LiDAR frame): the LiDAR points inside, the radar points inside (th
 mean ego-motion-compensated radial velocity of those radar points (column 5,
 ``v_r_compensated``; positive = moving away, VoD's sign) and the motion it indicates, the BEV
 distance of the box centre from the ego LiDAR, and the prompt depth (the forward distance of the
-box's nearest BEV corner, what "about 15 m ahead" measures, see :mod:`scenes.prompts`).
+box's nearest BEV corner, what "about 15 m ahead" measures, see :mod:`scenes.language.prompts`).
 
 :func:`estimate_velocity` turns a mean radial velocity into a ground velocity for the prompt
 suggester. Radar measures only the component along the line of sight; road users move along their
@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scenes.actors import MOVING_SPEED
-from scenes.boxes import bev_corners, points_in_boxes
+from scenes.geometry.actors import MOVING_SPEED
+from scenes.geometry.boxes import bev_corners, points_in_boxes
 
 RADAR_VR_COMPENSATED = 5
 """Column of ``v_r_compensated`` in a radar point ``(x, y, z, rcs, v_r, v_r_compensated, time)``."""

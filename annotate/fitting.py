@@ -47,7 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from annotate.draft import DEFAULT_SIZES
-from scenes.boxes import points_in_boxes, wrap_yaw
+from scenes.geometry.boxes import points_in_boxes, wrap_yaw
 
 
 class FitError(ValueError):

@@ -18,8 +18,8 @@ import os
 from pathlib import Path
 
 from annotate.errors import StoreError, one_line, operation_error
-from scenes.durable import atomic_write_text, fsync_dir
-from scenes.textfile import read_text_file
+from scenes.utils.durable import atomic_write_text, fsync_dir
+from scenes.utils.textfile import read_text_file
 
 log = logging.getLogger(__name__)
 
@@ -41,7 +41,7 @@ class Journals:
         return self.pending_dir / f"{op}.json"
 
     def write(self, journal: dict) -> None:
-        """Write a journal (atomically, its folder fsynced: :func:`scenes.durable.atomic_write_text`)
+        """Write a journal (atomically, its folder fsynced: :func:`scenes.utils.durable.atomic_write_text`)
         before its operation starts.
 
         Raises:

@@ -1,9 +1,9 @@
 """The manifest: ``annotations/manifest.jsonl``, one JSON line per change of a saved pair.
 
-Lines are appended with ``O_APPEND`` and fsynced (:func:`scenes.durable.append_line`, called in one
+Lines are appended with ``O_APPEND`` and fsynced (:func:`scenes.utils.durable.append_line`, called in one
 place: :meth:`Manifest.append`); a failed append is truncated back, and a torn last line (a kill in
 the middle of a write) is skipped by the reader (:func:`read_manifest`, over
-:func:`scenes.durable.read_json_lines`) and terminated before the next append. Edits and deletions record the
+:func:`scenes.utils.durable.read_json_lines`) and terminated before the next append. Edits and deletions record the
 previous prompt and label text, so every version of a pair stays in the manifest. The line format
 is described in ``docs/ANNOTATION.md``; :class:`Manifest` is the store's view of the file (records,
 a pair's history and version, the listed pairs).
@@ -18,8 +18,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from annotate.errors import fs_errors
-from scenes.durable import append_line, read_json_lines
-from scenes.layout import format_id
+from scenes.talk2radar.layout import format_id
+from scenes.utils.durable import append_line, read_json_lines
 
 MANIFEST_FORMAT = 1
 """Version of the manifest line format (the ``format`` field)."""
@@ -56,7 +56,7 @@ class ManifestRecord:
         previous: For an edit or a delete: ``version``, ``prompt`` and ``label_text`` before.
         format: :data:`MANIFEST_FORMAT`.
         verdict: For a review: ``approved``, ``rejected`` or ``fixed``
-            (:data:`scenes.reviews.VERDICTS`); ``version`` is the version reviewed and
+            (:data:`scenes.talk2radar.reviews.VERDICTS`); ``version`` is the version reviewed and
             ``annotator`` the reviewer.
         note: For a review: the reviewer's note.
     """

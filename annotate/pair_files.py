@@ -1,6 +1,6 @@
 """What a saved pair's files hold, the same for a create and an update.
 
-The text of the files is :func:`scenes.writer.sample_text` (the one function that turns a sample
+The text of the files is :func:`scenes.talk2radar.writer.sample_text` (the one function that turns a sample
 into its files, for the writer's creates and the store's edits); this module adds what only a
 saved pair has: its sidecar (:func:`pair_meta`: the prompt's type tags, the draft boxes as actors
 and the annotation facts), and the image size its 2D boxes are clipped to
@@ -13,15 +13,15 @@ from annotate.draft import Draft
 from annotate.errors import StoreError
 from annotate.manifest import ManifestRecord
 from annotate.suggest import SuggestConfig, scene_actors
-from scenes.imagefile import ImageError
-from scenes.prompts import infer_tags
-from scenes.root import Sample
-from scenes.sample_meta import SampleMeta
+from scenes.language.prompts import infer_tags
+from scenes.talk2radar.imagefile import ImageError
+from scenes.talk2radar.root import Sample
+from scenes.talk2radar.sample_meta import SampleMeta
 
 
 def frame_image_size(sample: Sample) -> tuple[int, int]:
     """The image size the pair's 2D boxes are clipped to: the frame's camera image's, VoD's
-    without one (:attr:`scenes.root.Sample.image_size`); an unreadable image is a
+    without one (:attr:`scenes.talk2radar.root.Sample.image_size`); an unreadable image is a
     :class:`~annotate.errors.StoreError` naming the file."""
     try:
         return sample.image_size

@@ -11,8 +11,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from scenes.actors import CLASSES
-from scenes.boxes import bev_iou
+from scenes.geometry.actors import CLASSES
+from scenes.geometry.boxes import bev_iou
 
 MAX_PROPOSALS = 20
 """*Use predictions* adds at most this many boxes (the best scores)."""

@@ -9,7 +9,7 @@ the pair's current one (someone saved an edit meanwhile) is refused with
 :class:`~annotate.errors.ConflictError`.
 
 What the reviews say (a pair's current version and its latest review; the approved ids of a
-split for training and evaluation): :mod:`scenes.reviews`, the one reader.
+split for training and evaluation): :mod:`scenes.talk2radar.reviews`, the one reader.
 """
 
 from __future__ import annotations
@@ -20,9 +20,9 @@ from annotate.errors import ConflictError, StoreError
 from annotate.manifest import Action, ManifestRecord, conflict_message
 from annotate.store import AnnotationStore
 from annotate.validation import clean_annotator, clean_field
-from scenes.layout import format_id
-from scenes.reviews import VERDICTS, PairState, pair_states
-from scenes.text_policy import NOTE
+from scenes.talk2radar.layout import format_id
+from scenes.talk2radar.reviews import VERDICTS, PairState, pair_states
+from scenes.utils.text_policy import NOTE
 
 
 def record_review(
@@ -37,7 +37,7 @@ def record_review(
     """Record a review of version ``version`` of a pair (see the module docstring).
 
     Raises:
-        ValueError: ``verdict`` is not one of :data:`scenes.reviews.VERDICTS`.
+        ValueError: ``verdict`` is not one of :data:`scenes.talk2radar.reviews.VERDICTS`.
         ValidationError: the text policy refuses the reviewer's name or the note.
         StoreError: the pair is not listed in any split (deleted, or never saved).
         ConflictError: ``version`` is not the pair's current version.
@@ -45,7 +45,7 @@ def record_review(
     if verdict not in VERDICTS:
         raise ValueError(f"verdict must be one of {', '.join(VERDICTS)}, got {verdict!r}")
     sid = format_id(sample_id)
-    reviewer = clean_annotator(reviewer)  # the one text policy (scenes.text_policy)
+    reviewer = clean_annotator(reviewer)  # the one text policy (scenes.utils.text_policy)
     note = clean_field(note, NOTE, "note")
     with store.transactions.locked():
         splits = store.splits_of(sid)
@@ -71,5 +71,5 @@ def record_review(
 
 def review_states(store: AnnotationStore) -> dict[str, PairState]:
     """Every pair's current version and the latest review of it
-    (:func:`scenes.reviews.pair_states` of the store's manifest)."""
+    (:func:`scenes.talk2radar.reviews.pair_states` of the store's manifest)."""
     return pair_states(r.to_json() for r in store.records())

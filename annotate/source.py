@@ -3,7 +3,7 @@
 A frame read from a Talk2Radar root is linked, not rewritten (its sensor files and its camera image
 are hard-linked or copied into the pair's sample); a frame held only in memory gets its sensors
 written once under ``<root>/sources/<key>-<hash>/`` (:func:`write_source`), reused by every pair
-made on it. Paths come from :mod:`scenes.layout`.
+made on it. Paths come from :mod:`scenes.talk2radar.layout`.
 """
 
 from __future__ import annotations
@@ -15,9 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from scenes.calib import vod_radar_calibration
-from scenes.durable import link_or_copy
-from scenes.layout import (
+from scenes.geometry.calib import vod_radar_calibration
+from scenes.talk2radar.layout import (
     CALIB,
     SOURCE_IMAGE,
     SOURCE_SENSORS,
@@ -26,8 +25,9 @@ from scenes.layout import (
     sample_file,
     source_dir,
 )
-from scenes.root import Sample, Talk2RadarRoot
-from scenes.writer import SensorFiles, Talk2RadarWriter
+from scenes.talk2radar.root import Sample, Talk2RadarRoot
+from scenes.talk2radar.writer import SensorFiles, Talk2RadarWriter
+from scenes.utils.durable import link_or_copy
 
 
 @dataclass(frozen=True)

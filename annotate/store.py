@@ -1,12 +1,12 @@
 """Saved prompt-to-box pairs in a Talk2Radar root: create, reopen, edit, delete, never lose one.
 
 Each saved pair is one new sample of the root (the Talk2Radar unit: one frame's sensors, one prompt,
-the boxes it refers to), written with the pieces of :class:`scenes.writer.Talk2RadarWriter`:
+the boxes it refers to), written with the pieces of :class:`scenes.talk2radar.writer.Talk2RadarWriter`:
 sensor files and camera image hard-linked (or copied) from the source frame, calibration,
 ``label_2`` in the camera frame with projected 2D boxes, ``prompt/<id>.txt`` in the LiDAR and the
 radar tree, and the ``meta/<id>.json`` sidecar (type tags, actors with velocities, annotator). A
 create and an edit make the text of these files with the same function
-(:func:`scenes.writer.sample_text`), the 2D boxes clipped to the frame's image size. The id becomes visible by
+(:func:`scenes.talk2radar.writer.sample_text`), the 2D boxes clipped to the frame's image size. The id becomes visible by
 being appended to ``ImageSets/<split>.txt``; every change is recorded as one JSON line in
 ``<root>/annotations/manifest.jsonl`` (see ``docs/ANNOTATION.md`` for the format).
 
@@ -17,10 +17,10 @@ files), :mod:`annotate.source` (the frame a pair is made on), :mod:`annotate.pai
 sidecar), :mod:`annotate.errors`. This module is the public face: :class:`AnnotationStore`.
 
 - **Atomic files.** Every file is written to a temporary file, fsynced and renamed over the target,
-  its folder fsynced (:mod:`scenes.durable`); a reader sees the old or the new content, never a
+  its folder fsynced (:mod:`scenes.utils.durable`); a reader sees the old or the new content, never a
   part.
 - **Text.** The prompt and the annotator name are written in the text policy's form
-  (:mod:`scenes.text_policy`); a refusal is a :class:`~annotate.validation.ValidationError`.
+  (:mod:`scenes.utils.text_policy`); a refusal is a :class:`~annotate.validation.ValidationError`.
 - **Idempotent saves.** A :meth:`AnnotationStore.save` with the ``request`` key of an earlier one
   (the app's: its draft's version) writes nothing and returns that one's result.
 - **Ids.** Allocated under the lock, above the highest id in any ImageSets list, sample folder,
@@ -69,11 +69,10 @@ from annotate.validation import (
     clean_prompt,
     validate,
 )
-from scenes.actors import CLASSES
-from scenes.calib import read_calib
-from scenes.durable import replace_files
-from scenes.kitti import ObjectLabel, labels_to_boxes
-from scenes.layout import (
+from scenes.geometry.actors import CLASSES
+from scenes.geometry.calib import read_calib
+from scenes.talk2radar.kitti import ObjectLabel, labels_to_boxes
+from scenes.talk2radar.layout import (
     CALIB,
     RADAR_FOLDERS,
     format_id,
@@ -82,8 +81,9 @@ from scenes.layout import (
     sample_file,
     split_dir,
 )
-from scenes.root import Sample, Talk2RadarRoot
-from scenes.writer import SampleText, Talk2RadarWriter, sample_text
+from scenes.talk2radar.root import Sample, Talk2RadarRoot
+from scenes.talk2radar.writer import SampleText, Talk2RadarWriter, sample_text
+from scenes.utils.durable import replace_files
 
 _SPLIT_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.-]{0,63}")
 
@@ -389,7 +389,7 @@ class AnnotationStore:
 
     @staticmethod
     def _text(draft: Draft, sample: Sample, kept: Sequence[ObjectLabel] = ()) -> SampleText:
-        """The pair's files without the sidecar (:func:`scenes.writer.sample_text`): the draft's
+        """The pair's files without the sidecar (:func:`scenes.talk2radar.writer.sample_text`): the draft's
         boxes in the frame's calibration, clipped to its image size (:func:`frame_image_size`),
         then the ``kept`` labels."""
         size = frame_image_size(sample)

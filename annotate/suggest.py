@@ -2,8 +2,8 @@
 
 The boxes of the draft are the referents; the other objects of the scene (ground-truth actors of a
 synthetic frame, the model's predictions, the labels of a real frame) are the distractors the
-sentence must exclude. Both become :class:`scenes.actors.Actor` s and
-:func:`scenes.prompts.describe` finds the simplest predicate that selects exactly the referents,
+sentence must exclude. Both become :class:`scenes.geometry.actors.Actor` s and
+:func:`scenes.language.prompts.describe` finds the simplest predicate that selects exactly the referents,
 rendered with the same phrasing rules as the synthetic prompts.
 
 Velocities. A scene object may carry a known ground velocity (a synthetic actor). A draft box
@@ -23,9 +23,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from annotate.evidence import EvidenceConfig, box_evidence, estimate_velocity
-from scenes.actors import CLASSES, Actor
-from scenes.prompts import DEFAULT_REGION, Predicate, ReferableRegion, describe
-from scenes.root import Sample
+from scenes.geometry.actors import CLASSES, Actor
+from scenes.language.prompts import DEFAULT_REGION, Predicate, ReferableRegion, describe
+from scenes.talk2radar.root import Sample
 
 
 @dataclass(frozen=True)
@@ -85,7 +85,7 @@ class Suggestion:
         tags: Its type tags (``class``, ``depth``, ``velocity``, ``motion``, ``position``).
         reason: Why there is no sentence (None when there is one).
         actors: The actors the sentence was resolved over.
-        predicate: The predicate the sentence says (``scenes.prompts.resolve`` of it over
+        predicate: The predicate the sentence says (``scenes.language.prompts.resolve`` of it over
             ``actors.all`` gives exactly the draft boxes' ids ``0..K-1``).
     """
 

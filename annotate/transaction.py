@@ -11,7 +11,7 @@ transaction helper:
 - **Journal.** Before touching the root the operation writes its journal
   (:meth:`Transaction.begin`, :mod:`annotate.journal`); it is removed when the operation is done.
 - **Commit point.** A sample exists for readers once its id is in ``lidar/ImageSets/<split>.txt``
-  (:class:`scenes.root.Talk2RadarRoot` reads the LiDAR tree's lists). A create writes the
+  (:class:`scenes.talk2radar.root.Talk2RadarRoot` reads the LiDAR tree's lists). A create writes the
   sample's files first, then the radar tree's list, then the LiDAR tree's list (the commit), then
   the manifest line. A deletion removes the id from the LiDAR tree's lists first. An edit writes
   all its new files (fsynced) before the first replaces an old one.
@@ -47,8 +47,8 @@ from annotate.errors import (
 from annotate.journal import Journals
 from annotate.manifest import Manifest
 from annotate.tree import RootFiles, holds
-from scenes.durable import fsync_dir, replace_files
-from scenes.layout import format_id
+from scenes.talk2radar.layout import format_id
+from scenes.utils.durable import fsync_dir, replace_files
 
 try:  # POSIX only; elsewhere the in-process lock alone serialises writers.
     import fcntl

@@ -1,11 +1,11 @@
 """The files of a Talk2Radar root as the annotation store sees them: split lists and sample files.
 
-A sample's files are those :mod:`scenes.layout` names (:data:`scenes.layout.SAMPLE_FILES` in the
+A sample's files are those :mod:`scenes.talk2radar.layout` names (:data:`scenes.talk2radar.layout.SAMPLE_FILES` in the
 LiDAR tree and the radar tree, the sidecar ``meta/<id>.json``); it is visible once its id is in
 ``lidar/ImageSets/<split>.txt``. :class:`RootFiles` does the store's small file operations on
-them: split-list edits (each list replaced atomically, :func:`scenes.durable.atomic_write_text`),
+them: split-list edits (each list replaced atomically, :func:`scenes.utils.durable.atomic_write_text`),
 removal of a sample's files and of the temporaries a killed write leaves (the one naming rule of
-:func:`scenes.durable.temp_path`, matched by :func:`scenes.durable.remove_temporaries`), and the
+:func:`scenes.utils.durable.temp_path`, matched by :func:`scenes.utils.durable.remove_temporaries`), and the
 highest id in use.
 """
 
@@ -17,9 +17,8 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from annotate.errors import StoreError
-from scenes.durable import atomic_write_text, remove_temporaries
-from scenes.kitti import ObjectLabel, read_label_file
-from scenes.layout import (
+from scenes.talk2radar.kitti import ObjectLabel, read_label_file
+from scenes.talk2radar.layout import (
     LABEL,
     PROMPT,
     SAMPLE_FILES,
@@ -33,7 +32,8 @@ from scenes.layout import (
     split_dir,
     split_file,
 )
-from scenes.textfile import read_text_file
+from scenes.utils.durable import atomic_write_text, remove_temporaries
+from scenes.utils.textfile import read_text_file
 
 
 class RootFiles:
@@ -159,7 +159,7 @@ class RootFiles:
 
 def int_or_none(text: str) -> int | None:
     """The id on a line of a split list (None for anything but a frame id:
-    :func:`scenes.layout.is_frame_id`, the one id rule)."""
+    :func:`scenes.talk2radar.layout.is_frame_id`, the one id rule)."""
     text = text.strip()
     return int(text) if is_frame_id(text) else None
 

@@ -8,7 +8,7 @@ position and :attr:`Issue.field` a machine-readable field name (``prompt``, ``bo
 Errors:
 
 - the prompt is empty (after stripping), or the text policy refuses it
-  (:func:`scenes.text_policy.clean_text`: a control, invisible or line-break character, named in
+  (:func:`scenes.utils.text_policy.clean_text`: a control, invisible or line-break character, named in
   the message, since a Talk2Radar prompt file is one sentence and readers keep internal line
   breaks; more than 500 characters);
 - no box and the "refers to nothing" flag not set; or the flag set while boxes remain;
@@ -36,10 +36,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from annotate.draft import Draft
-from scenes.actors import CLASSES
-from scenes.boxes import bev_iou
-from scenes.calib import IMAGE_SIZE, Calibration, boxes_2d, boxes_lidar_to_camera
-from scenes.text_policy import ANNOTATOR, PROMPT, TextPolicyError, TextRule, clean_text
+from scenes.geometry.actors import CLASSES
+from scenes.geometry.boxes import bev_iou
+from scenes.geometry.calib import IMAGE_SIZE, Calibration, boxes_2d, boxes_lidar_to_camera
+from scenes.utils.text_policy import ANNOTATOR, PROMPT, TextPolicyError, TextRule, clean_text
 
 MIN_EVAL_HEIGHT_PX = 40.0
 """The official VoD evaluation ignores ground truth whose 2D box is at most this tall."""
@@ -309,7 +309,7 @@ def _image_issues(
 
 
 def clean_field(text: object, rule: TextRule, field: str) -> str:
-    """``text`` in the text policy's form under ``rule`` (:func:`scenes.text_policy.clean_text`).
+    """``text`` in the text policy's form under ``rule`` (:func:`scenes.utils.text_policy.clean_text`).
 
     Raises:
         ValidationError: the policy refuses it (one issue of ``field``, e.g. ``annotator``).
@@ -322,7 +322,7 @@ def clean_field(text: object, rule: TextRule, field: str) -> str:
 
 def clean_annotator(name: object) -> str:
     """The annotator (or reviewer) name as the manifest records it: :func:`clean_field` under
-    :data:`scenes.text_policy.ANNOTATOR`, ``anonymous`` when empty."""
+    :data:`scenes.utils.text_policy.ANNOTATOR`, ``anonymous`` when empty."""
     return clean_field(name, ANNOTATOR, "annotator") or "anonymous"
 
 

@@ -11,8 +11,8 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Sequence
 
-from scenes.actors import CLASSES
-from scenes.prompts import is_count_question
+from scenes.geometry.actors import CLASSES
+from scenes.language.prompts import is_count_question
 
 CLASS_WORDS: dict[str, tuple[str, str]] = {
     "Car": ("car", "cars"),

@@ -21,7 +21,7 @@ import numpy as np
 import viser
 
 from app.colors import GT_COLOR, RGB, class_color
-from scenes.boxes import box_corners, iou3d
+from scenes.geometry.boxes import box_corners, iou3d
 
 BOX_EDGES: tuple[tuple[int, int], ...] = (
     (0, 1),
@@ -37,7 +37,7 @@ BOX_EDGES: tuple[tuple[int, int], ...] = (
     (2, 6),
     (3, 7),
 )
-"""Corner index pairs of the 12 edges, for the corner order of :func:`scenes.boxes.box_corners`
+"""Corner index pairs of the 12 edges, for the corner order of :func:`scenes.geometry.boxes.box_corners`
 (bottom FL, RL, RR, FR, then top FL, RL, RR, FR)."""
 
 SEGMENTS_PER_BOX = len(BOX_EDGES) + 1

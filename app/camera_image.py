@@ -2,10 +2,10 @@
 points projected into it (pure numpy + Pillow; no GUI).
 
 Conventions: boxes are ``(K, 7)`` ``x, y, z, l, w, h, yaw`` and points ``(N, >=3)`` in the LiDAR
-frame; :mod:`scenes.projection` maps them into pixels (continuous coordinates: the image covers
+frame; :mod:`scenes.geometry.projection` maps them into pixels (continuous coordinates: the image covers
 ``[0, W] x [0, H]``; what lies behind the camera is cut, segments are clipped at the border).
 
-Speed: a camera image is decoded once per frame (:attr:`scenes.root.Sample.image`) and scaled
+Speed: a camera image is decoded once per frame (:attr:`scenes.talk2radar.root.Sample.image`) and scaled
 down once to :data:`DISPLAY_WIDTH` (VoD's 1936 px halve exactly); its calibration is scaled with
 it (:func:`display_image`), so projections land on the small image directly. The points overlay
 (:func:`paint_points`) is painted into a cached background; each redraw copies that background
@@ -21,8 +21,8 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from app.colors import RGB, depth_colors, label_font, velocity_colors
-from scenes.calib import Calibration
-from scenes.projection import project_box_edges, project_points, scale_calibration
+from scenes.geometry.calib import Calibration
+from scenes.geometry.projection import project_box_edges, project_points, scale_calibration
 
 DISPLAY_WIDTH = 968
 """Width (px) of the displayed image: VoD's 1936 x 1216 image halved."""

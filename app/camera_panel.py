@@ -4,7 +4,7 @@ A floating window of its own (viser's ``gui.add_panel``, placed at the bottom le
 view; the person can move, dock or minimise it), so the image stays in sight whichever tab of
 the control panel is open. It shows:
 
-- the frame's image (``image_2/<id>.jpg``, :attr:`scenes.root.Sample.image`) scaled to
+- the frame's image (``image_2/<id>.jpg``, :attr:`scenes.talk2radar.root.Sample.image`) scaled to
   :data:`app.camera_image.DISPLAY_WIDTH` pixels;
 - box layers drawn as 3D wireframes (:class:`app.camera_image.BoxLayer`), in the order of
   :data:`LAYER_ORDER`: the ground truth (thin, green, unlabelled), the current answer (class
@@ -48,8 +48,8 @@ from app.colors import GT_COLOR, class_color
 from app.engine import Predictions
 from app.scene_view import CameraPose, camera_view_pose
 from app.text import md_text
-from scenes.imagefile import check_principal_point
-from scenes.root import Sample
+from scenes.talk2radar.imagefile import check_principal_point
+from scenes.talk2radar.root import Sample
 
 log = logging.getLogger(__name__)
 
@@ -150,7 +150,7 @@ class CameraPanel:
         warning = None
         try:
             image = sample.image
-        except ValueError as exc:  # scenes.imagefile.ImageError names the file
+        except ValueError as exc:  # scenes.talk2radar.imagefile.ImageError names the file
             self.error = str(exc)
             log.warning("camera image of %s: %s", sample.sample_id, exc)
         else:

@@ -8,7 +8,7 @@
 - One lock guards the model (the module and its text cache are not meant for concurrent calls;
   on a 2-core machine running two forward passes at once gains nothing).
 - ``encode_scene`` runs once per (sample, modality): the features stay in an LRU cache
-  (:class:`scenes.lru.LRUCache`), so each prompt runs only ``ground``.
+  (:class:`scenes.utils.lru.LRUCache`), so each prompt runs only ``ground``.
   :meth:`GroundingEngine.prefetch` encodes a frame as soon as it is shown, before anyone types.
 - Modality: ``"lidar"`` and ``"radar"`` re-encode the scene with the other sensor's points emptied
   (a ``(0, F)`` array), which a model trained on both sensors accepts. A single-sensor model only
@@ -29,8 +29,8 @@ from typing import Any, Generic, Literal, TypeVar
 import numpy as np
 
 from model import GroundingModel, ModelSettings, PredictionsView
-from scenes.lru import LRUCache
-from scenes.root import Sample
+from scenes.talk2radar.root import Sample
+from scenes.utils.lru import LRUCache
 
 log = logging.getLogger(__name__)
 
@@ -45,7 +45,7 @@ MODALITY_LABELS: dict[str, Modality] = {
 
 
 Features = TypeVar("Features")
-"""A model's encoded scene (``model.features.SceneFeatures``); the engine only caches it."""
+"""A model's encoded scene (``model.core.features.SceneFeatures``); the engine only caches it."""
 
 Predictions = PredictionsView
 """What the app reads of one answer (:class:`model.protocol.PredictionsView`)."""

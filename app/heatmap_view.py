@@ -1,6 +1,6 @@
 """The C3D-RECHead heatmap as a translucent RGBA image lying on the ground.
 
-The head's heatmaps are ``(3, H, W)`` sigmoid scores on its BEV grid (:class:`model.nets.grid.BevGrid`:
+The head's heatmaps are ``(3, H, W)`` sigmoid scores on its BEV grid (:class:`model.core.grid.BevGrid`:
 ``heatmaps[c, iy, ix]``, row ``iy`` along +y, column ``ix`` along +x, LiDAR frame). One image
 shows all three classes: each cell takes the colour of its highest-scoring class
 (:data:`app.colors.CLASS_COLORS`) and an alpha of ``opacity * score``, so empty cells are clear.
@@ -22,7 +22,7 @@ import viser
 
 from app.colors import RGB, class_color
 from model import GridExtent
-from scenes.actors import CLASSES
+from scenes.geometry.actors import CLASSES
 
 GROUND_LIFT = 0.05
 """Metres between the ground estimate and the heatmap plane."""
@@ -70,7 +70,7 @@ def heatmap_rgba(
     Args:
         heatmaps: ``(C, H, W)`` scores in ``[0, 1]`` (values outside are clipped), ``[c, iy, ix]``.
         opacity: Global opacity in ``[0, 1]``; a cell's alpha is ``255 * opacity * max_c score``.
-        colors: ``C`` RGB colours; default: the class colours of :data:`scenes.actors.CLASSES`.
+        colors: ``C`` RGB colours; default: the class colours of :data:`scenes.geometry.actors.CLASSES`.
 
     Returns:
         ``(H, W, 4)`` uint8 RGBA, row ``iy``, column ``ix`` (pass it to viser unchanged).

@@ -14,9 +14,9 @@ from pathlib import Path
 import numpy as np
 
 from model import LabelledBoxes
-from scenes.actors import CLASSES
-from scenes.root import Sample, Talk2RadarRoot
-from scenes.scene_labels import SceneLabels
+from scenes.geometry.actors import CLASSES
+from scenes.talk2radar.root import Sample, Talk2RadarRoot
+from scenes.talk2radar.scene_labels import SceneLabels
 
 
 class LabelledFrames:
@@ -41,7 +41,7 @@ class LabelledFrames:
         """The metric-class labelled boxes of ``sample``'s frame (None: none known).
 
         Raises:
-            scenes.layout.RootError, scenes.kitti.LabelError: a missing or malformed label file.
+            scenes.talk2radar.layout.RootError, scenes.talk2radar.kitti.LabelError: a missing or malformed label file.
         """
         if self.labels is not None:
             if not self.labels.has(sample.sample_id):

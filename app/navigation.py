@@ -27,8 +27,8 @@ import viser
 
 from app.scene_view import estimate_ground_z
 from app.text import md_text
-from scenes.lru import LRUCache
-from scenes.root import RootError, Sample, Talk2RadarRoot
+from scenes.talk2radar.root import RootError, Sample, Talk2RadarRoot
+from scenes.utils.lru import LRUCache
 
 log = logging.getLogger(__name__)
 

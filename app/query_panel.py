@@ -20,7 +20,7 @@ server last wrote (the person has not typed since). A frame change made by anoth
 never touches the box: the new frame's own prompt is shown under the frame number and offered by
 *Use the frame's prompt*.
 
-Text policy: a prompt runs only once :func:`scenes.text_policy.clean_text` accepts it (control
+Text policy: a prompt runs only once :func:`scenes.utils.text_policy.clean_text` accepts it (control
 and line-separator characters refused with a message naming them, at most 500 characters); the
 session applies it, after :func:`one_line` has turned Enter's line breaks into spaces.
 """
@@ -40,8 +40,8 @@ from app.engine import MODALITY_LABELS, Answer, Modality, Predictions
 from app.heatmap_view import HeatmapView
 from app.navigation import Frame
 from app.text import md_text
-from scenes.root import Sample
-from scenes.text_policy import PROMPT, TextPolicyError, clean_text, collapse_spaces
+from scenes.talk2radar.root import Sample
+from scenes.utils.text_policy import PROMPT, TextPolicyError, clean_text, collapse_spaces
 
 CANDIDATE_SOURCES = {"Detector proposals": "detector", "Labelled boxes": "labels"}
 """GUI label -> what the referent stage chooses among (the "Candidates" control)."""
@@ -119,7 +119,7 @@ def submitted_prompt(value: str) -> str | None:
     """The prompt to run when the prompt box's value holds a line break (Enter), else None.
 
     The line breaks become spaces and runs of spaces collapse (:func:`one_line`,
-    :func:`scenes.text_policy.collapse_spaces`): ``"the car\\n"`` gives ``"the car"``; ``"\\n"``
+    :func:`scenes.utils.text_policy.collapse_spaces`): ``"the car\\n"`` gives ``"the car"``; ``"\\n"``
     gives ``""`` (an empty prompt, reported to the user). Other control characters are left for
     the text policy to refuse by name.
     """

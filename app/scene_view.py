@@ -37,8 +37,8 @@ from app.colors import (
     velocity_colors,
     velocity_legend,
 )
-from scenes.boxes import box_corners
-from scenes.calib import LIDAR_HEIGHT, Calibration
+from scenes.geometry.boxes import box_corners
+from scenes.geometry.calib import LIDAR_HEIGHT, Calibration
 
 log = logging.getLogger(__name__)
 

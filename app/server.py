@@ -60,7 +60,7 @@ from app.navigation import (
 )
 from app.scene_view import chase_pose
 from app.session import ClientSession, ExtraTab, SessionOptions
-from scenes.root import Talk2RadarRoot
+from scenes.talk2radar.root import Talk2RadarRoot
 
 log = logging.getLogger(__name__)
 

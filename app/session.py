@@ -77,7 +77,7 @@ from app.query_panel import (
 )
 from app.scene_view import SceneView, ViewPanel, build_view_panel
 from app.text import md_text
-from scenes.root import Sample
+from scenes.talk2radar.root import Sample
 
 log = logging.getLogger(__name__)
 
@@ -173,7 +173,7 @@ class ClientSession:
 
     @property
     def predictions(self) -> Predictions | None:
-        """The predictions drawn (``model.features.Predictions``), or None."""
+        """The predictions drawn (``model.core.features.Predictions``), or None."""
         return None if self.answer is None else self.answer.predictions
 
     def add_frame_listener(self, fn: Listener) -> None:

@@ -34,18 +34,18 @@ _REPO = Path(__file__).resolve().parents[1]
 if str(_REPO) not in sys.path:
     sys.path.insert(0, str(_REPO))
 
-from scenes.calib import sensor_to_lidar  # noqa: E402
-from scenes.camera import CameraConfig  # noqa: E402
-from scenes.durable import atomic_write_text  # noqa: E402
-from scenes.lidar_sim import ray_directions  # noqa: E402
-from scenes.root import Talk2RadarWriter  # noqa: E402
-from scenes.synth import (  # noqa: E402
+from scenes.geometry.calib import sensor_to_lidar  # noqa: E402
+from scenes.synth.camera import CameraConfig  # noqa: E402
+from scenes.synth.generate import (  # noqa: E402
     RADAR_FOLDER,
     SynthSettings,
     generate_root,
     synthesize,
     write_frame,
 )
+from scenes.synth.lidar import ray_directions  # noqa: E402
+from scenes.talk2radar.root import Talk2RadarWriter  # noqa: E402
+from scenes.utils.durable import atomic_write_text  # noqa: E402
 
 
 def bench_stages(settings: SynthSettings, worlds: int) -> dict:

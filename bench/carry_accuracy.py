@@ -4,7 +4,7 @@
 Without ``--data`` it writes a synthetic sequence root into a temporary folder (``python -m
 scenes.synth --sequence-length LENGTH --prompts-per-world 1 --no-camera --seed SEED``, WORLDS
 worlds) and measures on it. For every two consecutive frames of a drive (their poses
-consecutive, :func:`scenes.poses.consecutive`) and every actor of the first frame inside the
+consecutive, :func:`scenes.talk2radar.poses.consecutive`) and every actor of the first frame inside the
 annotated range with at least ``--min-points`` LiDAR points, its true box is carried to the next
 frame by each method below and compared with the actor's true box there (same actor id in the
 next frame's sidecar: the truth, which the carry itself never reads):
@@ -39,10 +39,10 @@ if str(_REPO) not in sys.path:
 
 from annotate.carry import CarryConfig, carry_boxes  # noqa: E402
 from annotate.evidence import box_evidence  # noqa: E402
-from scenes.actors import CLASSES  # noqa: E402
-from scenes.poses import FRAME_RATE, consecutive, lidar_motion, read_pose  # noqa: E402
-from scenes.root import Sample, Talk2RadarRoot  # noqa: E402
-from scenes.synth import SynthSettings, generate_root  # noqa: E402
+from scenes.geometry.actors import CLASSES  # noqa: E402
+from scenes.synth.generate import SynthSettings, generate_root  # noqa: E402
+from scenes.talk2radar.poses import FRAME_RATE, consecutive, lidar_motion, read_pose  # noqa: E402
+from scenes.talk2radar.root import Sample, Talk2RadarRoot  # noqa: E402
 
 METHODS = (
     "in place",

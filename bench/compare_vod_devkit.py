@@ -151,8 +151,13 @@ def _noisy(rng: np.random.Generator, boxes: np.ndarray, level: float) -> np.ndar
 def make_random_set(folder: Path, seed: int, frames: int, level: float) -> None:
     """Write ``folder/labels``, ``folder/preds`` (as a model writes them, 4 decimals) and
     ``folder/devkit_preds`` (the same predictions with the devkit's offsets subtracted)."""
-    from scenes.calib import vod_lidar_calibration
-    from scenes.kitti import ObjectLabel, boxes_to_labels, format_label_line, read_label_file
+    from scenes.geometry.calib import vod_lidar_calibration
+    from scenes.talk2radar.kitti import (
+        ObjectLabel,
+        boxes_to_labels,
+        format_label_line,
+        read_label_file,
+    )
 
     rng = np.random.default_rng(seed)
     calib = vod_lidar_calibration()

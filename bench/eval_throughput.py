@@ -31,7 +31,7 @@ from pathlib import Path
 from bench.common import bench_main
 from bench.measure import summarize
 from bench.report import REPO, BenchResult, Table, Target, fmt_ratio, machine_info
-from scenes.root import Talk2RadarRoot, Talk2RadarWriter
+from scenes.talk2radar.root import Talk2RadarRoot, Talk2RadarWriter
 
 PROMPTS = 300
 SEED = 5

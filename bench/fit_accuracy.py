@@ -27,8 +27,8 @@ if str(_REPO) not in sys.path:
 
 from annotate.draft import default_box  # noqa: E402
 from annotate.fitting import BoxRegion, FitConfig, FitError, fit_box  # noqa: E402
-from scenes.boxes import wrap_yaw  # noqa: E402
-from scenes.root import Talk2RadarRoot  # noqa: E402
+from scenes.geometry.boxes import wrap_yaw  # noqa: E402
+from scenes.talk2radar.root import Talk2RadarRoot  # noqa: E402
 
 WAYS: tuple[tuple[str, bool, FitConfig], ...] = (
     ("no class", False, FitConfig()),

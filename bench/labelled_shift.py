@@ -43,9 +43,9 @@ from model.evaluation.class_prompt_counts import (
     count_prompt,
     other_label_boxes,
 )
-from scenes.actors import CLASSES
-from scenes.calib import IMAGE_SIZE
-from scenes.projection import in_camera_view
+from scenes.geometry.actors import CLASSES
+from scenes.geometry.calib import IMAGE_SIZE
+from scenes.geometry.projection import in_camera_view
 
 CONDITIONS = ("as is", "blind", "shifted sensor")
 """The detector conditions, in table order (module docstring)."""
@@ -103,7 +103,7 @@ def frame_counts(
     model: torch.nn.Module, sample, condition: str, threshold: float, max_range: float
 ):
     """The three class prompts' :class:`PromptCount` on one sample of a full-labels root."""
-    from model.referent.labelled import LabelledBoxes
+    from model.core.labelled import LabelledBoxes
 
     gt_boxes = np.asarray(sample.boxes, dtype=np.float64).reshape(-1, 7)
     labels = [CLASSES.index(c) for c in sample.classes]
@@ -148,7 +148,7 @@ def run(
     from model.checkpoint import load_checkpoint
     from model.evaluation.class_prompts import root_frame_ids
     from model.evaluation.predict import operating_threshold
-    from scenes.root import Talk2RadarRoot
+    from scenes.talk2radar.root import Talk2RadarRoot
 
     model = load_checkpoint(checkpoint)
     model.eval()

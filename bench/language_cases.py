@@ -1,13 +1,13 @@
 """The language suite's data: its sentences, its fixed scenes and the (sentence, scene) cases.
 
 The suite file (``tests/data/language_suite.json``) holds sentences written by hand as people type
-them, each with a hand-written query (:mod:`scenes.language_query`), the ``scenes.synth`` arguments
+them, each with a hand-written query (:mod:`scenes.language.query`), the ``scenes.synth`` arguments
 of its fixed synthetic scenes and a fingerprint of those scenes (per scene: the actor count and a
 hash of the rounded boxes and velocities), so that a generator change that alters the scenes
 stops the suite with a clear error instead of silently changing it
 (``python -m bench.language_suite --write-fingerprint`` records the new scenes on purpose).
 
-A **case** is a sentence in a scene where :func:`scenes.language_resolve.resolve` gives an answer
+A **case** is a sentence in a scene where :func:`scenes.language.resolve.resolve` gives an answer
 (not refused): every scene for out-of-class sentences, the scenes where nothing matches for
 unsatisfiable ones, scenes with at least one referent for the single-referent and rewording
 families, any answer (the empty set included) for negation, exclusion and counting. At most
@@ -29,11 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-from scenes.actors import Actor
-from scenes.durable import atomic_write_text
-from scenes.language_query import Query, QueryError, parse_query
-from scenes.language_resolve import resolve
-from scenes.root import Talk2RadarRoot
+from scenes.geometry.actors import Actor
+from scenes.language.query import Query, QueryError, parse_query
+from scenes.language.resolve import resolve
+from scenes.talk2radar.root import Talk2RadarRoot
+from scenes.utils.durable import atomic_write_text
 
 SUITE_FILE = Path(__file__).resolve().parent.parent / "tests" / "data" / "language_suite.json"
 DEFAULT_SCENES = Path("runs/language-suite-scenes")
@@ -201,7 +201,7 @@ def ensure_scenes(suite: Suite, folder: str | Path) -> Talk2RadarRoot:
     """The suite's scenes under ``folder``, generated first when missing (``scenes.synth``)."""
     folder = Path(folder)
     if not (folder / "synth_manifest.jsonl").exists():
-        from scenes.synth import main as synth_main
+        from scenes.synth.generate import main as synth_main
 
         code = synth_main(["--out", str(folder), *suite.synth_args])
         if code != 0:

@@ -4,11 +4,11 @@ against.
 A rewording sentence says what one of the generator's predicates says (class, side, motion,
 heading, speed, depth, a superlative) in other words. :func:`generator_sentence` builds that
 predicate from the hand-written query (:func:`predicate_of`), keeps the case only where the
-generator's own resolution (:func:`scenes.prompts.analyse`) refers to exactly the suite's
+generator's own resolution (:func:`scenes.language.prompts.analyse`) refers to exactly the suite's
 referents without ambiguity, and renders it with the generator's training wording
-(:func:`scenes.prompts.render`, a generator seeded from the case). The runner grounds both
+(:func:`scenes.language.prompts.render`, a generator seeded from the case). The runner grounds both
 sentences on the same encoded scene, so the difference between the two rows is the wording alone.
-This is the one module of the suite that imports :mod:`scenes.prompts`; the suite's resolver does
+This is the one module of the suite that imports :mod:`scenes.language.prompts`; the suite's resolver does
 not.
 """
 
@@ -19,9 +19,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from scenes.actors import Actor
-from scenes.language_query import Cond, Depth, HeadingIs, Moving, Not, OnSide, Query, Speed
-from scenes.prompts import (
+from scenes.geometry.actors import Actor
+from scenes.language.prompts import (
     DepthAbout,
     DepthBetween,
     DepthBeyond,
@@ -38,8 +37,9 @@ from scenes.prompts import (
     analyse,
     render,
 )
-from scenes.prompts import HeadingIs as GenHeading
-from scenes.prompts import OnSide as GenSide
+from scenes.language.prompts import HeadingIs as GenHeading
+from scenes.language.prompts import OnSide as GenSide
+from scenes.language.query import Cond, Depth, HeadingIs, Moving, Not, OnSide, Query, Speed
 
 _EXTREMES = {
     "nearest": Extreme.NEAREST,

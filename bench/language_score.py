@@ -3,8 +3,8 @@
 An answer is the boxes a model returns for a sentence (LiDAR frame ``(K, 7)``, class names and
 scores, down to the model's smallest returned score); its **set** is the boxes scoring at least the
 operating threshold (what the app shows). A box **matches** a referent of its class when their BEV
-centres lie within :data:`scenes.boxes.CENTRE_MATCH_DISTANCE` of each other, one to one, boxes
-taken by score (:func:`scenes.boxes.match_by_centre`). Per case:
+centres lie within :data:`scenes.geometry.boxes.CENTRE_MATCH_DISTANCE` of each other, one to one, boxes
+taken by score (:func:`scenes.geometry.boxes.match_by_centre`). Per case:
 
 - ``empty``: the set is empty;
 - ``top1``: the highest-scoring box (any score) matches a referent; no box is a miss;
@@ -23,8 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scenes.actors import CLASSES
-from scenes.boxes import CENTRE_MATCH_DISTANCE, match_by_centre
+from scenes.geometry.actors import CLASSES
+from scenes.geometry.boxes import CENTRE_MATCH_DISTANCE, match_by_centre
 
 FIGURES = {
     "out_of_class": ("empty",),

@@ -4,7 +4,7 @@
 [--json docs/results/language-suite.json]`` generates the suite's fixed scenes when missing
 (:mod:`bench.language_cases`), checks their fingerprint, encodes each scene once
 (``TPCNet.encode_scene``) and grounds every case as the app does (the prompt through
-:func:`scenes.text_policy.clean_text`, ``TPCNet.ground``, the checkpoint's calibrated operating
+:func:`scenes.utils.text_policy.clean_text`, ``TPCNet.ground``, the checkpoint's calibrated operating
 threshold for the answer set), then prints one markdown table: per family and figure
 (:mod:`bench.language_score`) the model, the same model given only the class noun ("the cars";
 "the objects" where no class is named) and the language-blind oracle (every referable actor of the
@@ -55,10 +55,10 @@ from bench.language_score import (
     score,
 )
 from model import class_noun_prompt
-from scenes.durable import atomic_write_text
-from scenes.language_resolve import referable
-from scenes.root import Talk2RadarRoot
-from scenes.text_policy import PROMPT, clean_text
+from scenes.language.resolve import referable
+from scenes.talk2radar.root import Talk2RadarRoot
+from scenes.utils.durable import atomic_write_text
+from scenes.utils.text_policy import PROMPT, clean_text
 
 REWORDING = "rewording"
 GENERATOR_COLUMNS = ("rewording, same cases", "generator wording")

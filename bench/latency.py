@@ -2,7 +2,7 @@
 
 What the app does for a typed prompt, on scenes and prompts from the synthetic generator
 (64-beam LiDAR and 5-scan radar with realistic point counts; prompts from
-:func:`scenes.prompts.generate_prompts` over each world's sensed actors):
+:func:`scenes.language.prompts.generate_prompts` over each world's sensed actors):
 
 1. *cached scene*: ``model.ground(features, prompt)`` on a scene encoded beforehand;
 2. *new scene*: ``model.encode_scene(lidar, radar)`` followed by ``model.ground``;
@@ -21,7 +21,7 @@ are measured in the same run, taking turns prompt by prompt so that both see the
   ``checkpoints/tpcnet-small-faithful.pt``.
 
 The result says which models were used. The stage breakdown comes from the models' own
-:class:`model.features.GroundTimings`/``SceneTimings`` and is checked by timing the same stages from
+:class:`model.core.features.GroundTimings`/``SceneTimings`` and is checked by timing the same stages from
 outside through public submodules (TPCNet path: ``text_encoder``, ``text_fusion``, ``neck``,
 ``head``, :func:`model.head.detector.decode.decode`; referent path: ``text_encoder``, ``model.refer`` on
 ``features.objects``, :func:`model.referent.heatmap.referent_heatmap`, and the ``detect`` stage part by

@@ -1,7 +1,7 @@
 """Measurements of :mod:`bench.latency`: the models of both grounding paths, the timed calls, the
 stage timings from outside the model, the thread comparison and cProfile.
 
-Each path is described by a :class:`PathSpec` (which :class:`model.features.GroundTimings` and
+Each path is described by a :class:`PathSpec` (which :class:`model.core.features.GroundTimings` and
 ``SceneTimings`` fields its stages are). Timings are wall-clock milliseconds
 (``time.perf_counter``, CUDA synchronised before each reading); what is timed is exactly what the
 app calls: ``model.encode_scene(lidar, radar)`` and ``model.ground(features, prompt)``.
@@ -51,8 +51,8 @@ class PathSpec:
     Attributes:
         key: ``ModelConfig.grounding`` (``"referent"`` or ``"tpcnet"``).
         label: Name in the tables.
-        ground_stages: :class:`model.features.GroundTimings` fields that ``ground`` fills.
-        scene_stages: :class:`model.features.SceneTimings` fields that ``encode_scene`` fills.
+        ground_stages: :class:`model.core.features.GroundTimings` fields that ``ground`` fills.
+        scene_stages: :class:`model.core.features.SceneTimings` fields that ``encode_scene`` fills.
         stage_names: Table label of every stage.
     """
 

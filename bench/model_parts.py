@@ -2,7 +2,7 @@
 model (a scene encoder and a grounding head: ``model.scene``, ``model.grounding``) and for an
 older copy of ``model`` loaded beside it by :mod:`bench.floor` (``--baseline-package``: its
 parts were attributes of the model itself). The stages run are the model's own pipeline
-(:meth:`model.nets.scene_encoder.SceneEncoder.sensors`, the FPN, the head, the referent head's
+(:meth:`model.grounding.scene_encoder.SceneEncoder.sensors`, the FPN, the head, the referent head's
 ``proposals`` and ``describe``) wherever the model has it."""
 
 from __future__ import annotations

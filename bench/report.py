@@ -20,7 +20,7 @@ from typing import Any
 
 import torch
 
-from scenes.durable import atomic_write_text
+from scenes.utils.durable import atomic_write_text
 
 REPO = Path(__file__).resolve().parents[1]
 RESULTS_DIR = REPO / "bench" / "results"

@@ -36,7 +36,7 @@ from bench.common import (
     machine_info,
     read_result,
 )
-from scenes.durable import atomic_write_text
+from scenes.utils.durable import atomic_write_text
 
 BENCHMARKS = (
     "latency",

@@ -34,10 +34,10 @@ _REPO = Path(__file__).resolve().parents[1]
 if str(_REPO) not in sys.path:
     sys.path.insert(0, str(_REPO))
 
-from scenes.calib import sensor_to_lidar, vod_lidar_calibration, vod_radar_calibration  # noqa: E402
-from scenes.durable import atomic_write_text  # noqa: E402
-from scenes.prompts import DEFAULT_REGION  # noqa: E402
-from scenes.synth import SynthFrame, SynthSettings, synthesize  # noqa: E402
+from scenes.geometry.calib import sensor_to_lidar, vod_lidar_calibration, vod_radar_calibration  # noqa: E402
+from scenes.language.prompts import DEFAULT_REGION  # noqa: E402
+from scenes.synth.generate import SynthFrame, SynthSettings, synthesize  # noqa: E402
+from scenes.utils.durable import atomic_write_text  # noqa: E402
 
 X_MAX = 51.2
 """Forward limit (m) of the field of view used for every statistic."""

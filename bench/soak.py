@@ -40,7 +40,7 @@ from tqdm import tqdm
 from websockets.sync.client import connect
 
 from bench.common import REPO, RESULTS_DIR, BenchResult, Table, Target, machine_info, write_result
-from scenes.synth import SynthSettings, generate_root
+from scenes.synth.generate import SynthSettings, generate_root
 
 PROMPT = "the car ahead"
 SPLIT = "train"

@@ -11,10 +11,10 @@ radar accumulates 5 scans. The frames here are the generator's worlds sensed as 
 - only worlds whose counts fall in :data:`LIDAR_POINTS` and :data:`RADAR_POINTS` (the issue's
   ranges) and that have prompts are kept, in world order.
 
-Each kept frame is written by :class:`scenes.vod_writer.VodWriter` (the one writer of the VoD
+Each kept frame is written by :class:`scenes.talk2radar.vod_writer.VodWriter` (the one writer of the VoD
 layout, as the tests' fixtures write theirs: radar stored in the radar frame, a ``radar`` tree for
 the single scan, label_2 with the world's actors) into a folder, and read back through
-:class:`scenes.root.Talk2RadarRoot`, as the app and ``model.evaluate`` read a VoD root. The
+:class:`scenes.talk2radar.root.Talk2RadarRoot`, as the app and ``model.evaluate`` read a VoD root. The
 prompts come from the generator (a VoD root has none).
 """
 
@@ -25,12 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
-from scenes.calib import sensor_to_lidar, vod_lidar_calibration, vod_radar_calibration
-from scenes.kitti import boxes_to_labels
-from scenes.lidar_sim import LidarConfig
-from scenes.root import Talk2RadarRoot, format_id
-from scenes.synth_frame import SynthSettings, synthesize
-from scenes.vod_writer import VodWriter
+from scenes.geometry.calib import sensor_to_lidar, vod_lidar_calibration, vod_radar_calibration
+from scenes.synth.frame import SynthSettings, synthesize
+from scenes.synth.lidar import LidarConfig
+from scenes.talk2radar.kitti import boxes_to_labels
+from scenes.talk2radar.root import Talk2RadarRoot, format_id
+from scenes.talk2radar.vod_writer import VodWriter
 
 LIDAR_POINTS = (167_000, 189_000)
 """LiDAR points per frame (inclusive) of View-of-Delft's frames (issue 20)."""

@@ -55,8 +55,8 @@ def synthetic_scenes(
     prompt are skipped."""
     import numpy as np
 
-    from scenes.calib import sensor_to_lidar, vod_lidar_calibration, vod_radar_calibration
-    from scenes.synth import SynthSettings, synthesize
+    from scenes.geometry.calib import sensor_to_lidar, vod_lidar_calibration, vod_radar_calibration
+    from scenes.synth.generate import SynthSettings, synthesize
 
     settings = SynthSettings(seed=seed, prompts_per_world=prompts_per_world)
     radar_to_lidar = sensor_to_lidar(vod_lidar_calibration(), vod_radar_calibration())

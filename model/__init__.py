@@ -19,10 +19,12 @@ overrides such as ``fusion="bi_mhca"``, ``modalities="lidar"``, ``anchor="center
 ``section__field=value`` (e.g. ``head__score_threshold=0.3``).
 
 The names are loaded on first use (PEP 562), so that ``from model import GroundingModel`` does not
-import torch; :data:`_EXPORTS` says where each lives. The sub-packages: ``nets`` (encoders,
-fusion, text, the scene encoder), ``head`` (the detector head, targets, decoding, losses, the
-paper's grounding head), ``referent`` (the referent stage and its head), ``training`` and
-``evaluation``; see docs/DESIGN.md.
+import torch; :data:`_EXPORTS` says where each lives. The sub-packages, bottom layer first: ``core``
+(shared types: grid, anchors, labelled boxes, candidates, inputs and outputs), ``config``,
+``nets`` (encoders, fusion, text), ``head`` (the detector head, targets, decoding, losses) and
+``referent`` (the referent stage), ``grounding`` (the scene encoder, the grounding-head interface,
+the paper's head and the referent head), then ``tpcnet``, ``training`` and ``evaluation``; the
+layer order is docs/DESIGN.md's.
 """
 
 from __future__ import annotations
@@ -39,11 +41,14 @@ if TYPE_CHECKING:
         save_checkpoint,
     )
     from model.checkpoint_meta import CheckpointMeta
-    from model.config import FusionConfig, ModelConfig, preset
+    from model.config import FusionConfig, ModelConfig, build_config, preset
+    from model.core.candidates import SceneMaps
+    from model.core.features import Predictions, SceneFeatures, as_points
+    from model.core.labelled import LabelledBoxes
     from model.evaluate import score_directories
     from model.evaluation.baselines import class_noun_prompt
     from model.evaluation.predict import operating_threshold
-    from model.features import Predictions, SceneFeatures, as_points
+    from model.grounding.referent import UNCALIBRATED_REFERENT, referent_head
     from model.head.decode import decode
     from model.head.losses import grounding_loss
     from model.head.targets import collate_targets, draw_targets
@@ -55,11 +60,8 @@ if TYPE_CHECKING:
     )
     from model.nets.text import load_minilm, tokenize
     from model.protocol import GridExtent, GroundingModel, ModelSettings, PredictionsView
-    from model.referent.head import UNCALIBRATED_REFERENT, referent_head
     from model.referent.heatmap import referent_heatmap
-    from model.referent.labelled import LabelledBoxes
-    from model.referent.scene_candidates import SceneMaps
-    from model.tpcnet import TPCNet
+    from model.tpcnet import TPCNet, build_model
 
 _EXPORTS = {
     "CheckpointError": "model.checkpoint",
@@ -72,16 +74,18 @@ _EXPORTS = {
     "score_directories": "model.evaluate",
     "class_noun_prompt": "model.evaluation.baselines",
     "operating_threshold": "model.evaluation.predict",
-    "Predictions": "model.features",
-    "SceneFeatures": "model.features",
-    "as_points": "model.features",
+    "Predictions": "model.core.features",
+    "SceneFeatures": "model.core.features",
+    "as_points": "model.core.features",
     "GridExtent": "model.protocol",
     "GroundingModel": "model.protocol",
     "ModelSettings": "model.protocol",
     "PredictionsView": "model.protocol",
-    "UNCALIBRATED_REFERENT": "model.referent.head",
-    "LabelledBoxes": "model.referent.labelled",
+    "UNCALIBRATED_REFERENT": "model.grounding.referent",
+    "LabelledBoxes": "model.core.labelled",
     "TPCNet": "model.tpcnet",
+    "build_model": "model.tpcnet",
+    "build_config": "model.config",
     # The parts the benchmarks (bench/) time or count on their own:
     "FusionConfig": "model.config",
     "preset": "model.config",
@@ -95,8 +99,8 @@ _EXPORTS = {
     "grounding_loss": "model.head.losses",
     "collate_targets": "model.head.targets",
     "draw_targets": "model.head.targets",
-    "referent_head": "model.referent.head",
-    "SceneMaps": "model.referent.scene_candidates",
+    "referent_head": "model.grounding.referent",
+    "SceneMaps": "model.core.candidates",
     "referent_heatmap": "model.referent.heatmap",
 }
 """Exported name -> the module that defines it."""
@@ -148,17 +152,3 @@ def __getattr__(name: str) -> Any:
         globals()[name] = value
         return value
     raise AttributeError(f"module 'model' has no attribute {name!r}")
-
-
-def build_config(preset_name: str = "small", **overrides: Any) -> ModelConfig:
-    """The preset's :class:`ModelConfig` with ``overrides`` applied (see the module docstring)."""
-    from model.config import apply_overrides, preset
-
-    return apply_overrides(preset(preset_name), **overrides)
-
-
-def build_model(preset: str = "small", **overrides: Any) -> TPCNet:
-    """A freshly initialised :class:`TPCNet` for ``preset`` (``small`` or ``paper``) + overrides."""
-    from model.tpcnet import TPCNet
-
-    return TPCNet(build_config(preset, **overrides))

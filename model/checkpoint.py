@@ -11,7 +11,7 @@ File content (a ``torch.save`` of plain types, readable with ``torch.load(weight
   description, the epoch, the metric on it); it must be JSON-serialisable plain data.
 - Writing goes to a temporary file in the target directory, which is flushed and fsynced, then
   renamed over the target (``os.replace``) and the directory fsynced
-  (:func:`scenes.durable.atomic_file`), so a crash never leaves a half-written checkpoint.
+  (:func:`scenes.utils.durable.atomic_file`), so a crash never leaves a half-written checkpoint.
 - Loading fails with :class:`CheckpointError` naming the path when the file is missing, corrupt or
   of another format, and naming the field when the stored config does not match this code's
   :class:`model.config.ModelConfig` (an unknown, missing or mistyped field) or a weight is missing,
@@ -29,7 +29,7 @@ import torch
 
 from model.config import ConfigError, ModelConfig
 from model.tpcnet import TPCNet
-from scenes.durable import atomic_file
+from scenes.utils.durable import atomic_file
 
 DEFAULT_CHECKPOINT = Path(__file__).resolve().parents[1] / "checkpoints" / "tpcnet-small.pt"
 """The checkpoint the app serves and the commands read by default (``make run``)."""

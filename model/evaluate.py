@@ -43,9 +43,9 @@ from model.evaluation.metrics import VodResult, evaluate_frames
 
 if TYPE_CHECKING:
     from model.evaluation.report import GroundingReport
-from scenes.kitti import LabelError, ObjectLabel, parse_label_line, read_label_file
-from scenes.layout import ID_WIDTH, format_id, is_frame_id
-from scenes.textfile import read_text_file
+from scenes.talk2radar.kitti import LabelError, ObjectLabel, parse_label_line, read_label_file
+from scenes.talk2radar.layout import ID_WIDTH, format_id, is_frame_id
+from scenes.utils.textfile import read_text_file
 
 DEFAULT_EVAL_DIR = Path("runs") / "eval"
 """Model mode's default output folder's parent (relative to the working directory)."""
@@ -120,7 +120,7 @@ def load_label_dir(folder: str | Path) -> dict[str, list[ObjectLabel]]:
     Raises:
         EvaluationInputError: the folder is missing, holds no ``.txt`` files, or holds an entry
             that is not a readable ``<5-digit id>.txt`` file (see :func:`_frame_files`).
-        scenes.kitti.LabelError: an unreadable, non-UTF-8 or binary file, or a malformed line
+        scenes.talk2radar.kitti.LabelError: an unreadable, non-UTF-8 or binary file, or a malformed line
             (file and line named).
     """
     folder = Path(folder)
@@ -137,7 +137,7 @@ def read_prediction_file(path: str | Path) -> list[ObjectLabel]:
     which silently ranks it last, so here it is an error.
 
     Raises:
-        scenes.kitti.LabelError: an unreadable, non-UTF-8 or binary file, a malformed line, or a
+        scenes.talk2radar.kitti.LabelError: an unreadable, non-UTF-8 or binary file, a malformed line, or a
             line without a score.
     """
     path = Path(path)
@@ -168,7 +168,7 @@ def load_prediction_dir(
     Raises:
         EvaluationInputError: ``folder`` is missing, holds files for frames not in
             ``frame_ids``, or an entry that is not a readable ``<5-digit id>.txt`` file.
-        scenes.kitti.LabelError: an unreadable file, a malformed line or a line without a score
+        scenes.talk2radar.kitti.LabelError: an unreadable file, a malformed line or a line without a score
             (file and line named).
     """
     folder = Path(folder)
@@ -370,7 +370,7 @@ def _run_model_mode(cfg: EvaluateConfig) -> int:
     from model.evaluation.predict import operating_threshold, write_predictions
     from model.evaluation.predict_pool import auto_workers, frame_groups
     from model.evaluation.report import evaluate_predictions
-    from scenes.root import Talk2RadarRoot
+    from scenes.talk2radar.root import Talk2RadarRoot
 
     json_path, out_dir = cfg.json, cfg.out
     if out_dir is None:
@@ -384,7 +384,7 @@ def _run_model_mode(cfg: EvaluateConfig) -> int:
     if cfg.workers > 1 and cfg.device != "cpu":
         raise EvaluationInputError(f"--workers {cfg.workers} runs on the CPU, not {cfg.device}")
 
-    from scenes.scene_labels import SceneLabels
+    from scenes.talk2radar.scene_labels import SceneLabels
 
     radar = None if cfg.radar_folder == "none" else cfg.radar_folder
     if cfg.candidates == "labels" and cfg.scene_labels is None:

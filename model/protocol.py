@@ -13,7 +13,7 @@ import numpy as np
 
 
 class GridExtent(Protocol):
-    """The BEV extent of a heatmap grid (:class:`model.nets.grid.BevGrid` has it), metres,
+    """The BEV extent of a heatmap grid (:class:`model.core.grid.BevGrid` has it), metres,
     LiDAR frame."""
 
     @property
@@ -31,7 +31,7 @@ class GridExtent(Protocol):
 
 @runtime_checkable
 class PredictionsView(Protocol):
-    """What is read of one answer (:class:`model.features.Predictions` satisfies it)."""
+    """What is read of one answer (:class:`model.core.features.Predictions` satisfies it)."""
 
     @property
     def boxes(self) -> np.ndarray:
@@ -45,7 +45,7 @@ class PredictionsView(Protocol):
 
     @property
     def classes(self) -> tuple[str, ...]:
-        """``K`` class names (``scenes.actors.CLASSES``)."""
+        """``K`` class names (``scenes.geometry.actors.CLASSES``)."""
         ...
 
     @property
@@ -67,7 +67,7 @@ class ModelSettings(Protocol):
 
 
 Features = TypeVar("Features")
-"""A model's encoded scene (:class:`model.features.SceneFeatures`); callers only keep it."""
+"""A model's encoded scene (:class:`model.core.features.SceneFeatures`); callers only keep it."""
 
 
 @runtime_checkable

@@ -1,8 +1,8 @@
-"""TPCNet (fig. 3, section III-A): the shared scene encoder (:mod:`model.nets.scene_encoder`), the text
-encoder and one grounding head (:mod:`model.grounding_head`), assembled from a
+"""TPCNet (fig. 3, section III-A): the shared scene encoder (:mod:`model.grounding.scene_encoder`), the text
+encoder and one grounding head (:mod:`model.grounding.interface`), assembled from a
 :class:`model.config.ModelConfig`; ``cfg.grounding`` picks the head: ``tpcnet`` the paper's DGGF
-+ C3D-RECHead ranking (:mod:`model.head.paper`), ``referent`` the referent stage over the
-detector's candidates (:mod:`model.referent.head`).
++ C3D-RECHead ranking (:mod:`model.grounding.paper`), ``referent`` the referent stage over the
+detector's candidates (:mod:`model.grounding.referent`).
 
 The sensor branches and the LiDAR-radar fusion do not depend on the text, so the model splits in
 two calls for the app: :meth:`TPCNet.encode_scene` (once per scene) and :meth:`TPCNet.ground`
@@ -11,7 +11,7 @@ batch for training the paper's path; in eval mode ``ground(encode_scene(l, r), p
 head outputs as ``forward([l], [r], [p])`` (every normalisation is per sample or in
 running-statistics mode).
 
-Input rules: :mod:`model.features` (NaN or inf raise :class:`NonFiniteInputError`, a missing
+Input rules: :mod:`model.core.features` (NaN or inf raise :class:`NonFiniteInputError`, a missing
 required sensor :class:`MissingSensorError`). ``encode_scene``/``ground`` run under
 ``torch.no_grad`` and do not switch the mode: call ``model.eval()`` first for inference.
 
@@ -30,8 +30,9 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
-from model.config import ModelConfig
-from model.features import (
+from model.config import ModelConfig, build_config
+from model.core.candidates import SceneMaps
+from model.core.features import (
     Clock,
     GroundTimings,
     MissingSensorError,
@@ -42,14 +43,13 @@ from model.features import (
     SceneTimings,
     as_points,
 )
-from model.grounding_head import GroundingHead
+from model.core.labelled import LabelledBoxes
+from model.grounding.interface import GroundingHead
+from model.grounding.paper import PaperGrounding
+from model.grounding.referent import ReferentGrounding
+from model.grounding.scene_encoder import SceneEncoder
 from model.head.detector import HeadOutput
-from model.head.paper import PaperGrounding
-from model.nets.scene_encoder import SceneEncoder
 from model.nets.text import build_text_encoder, validate_prompt
-from model.referent.head import ReferentGrounding
-from model.referent.labelled import LabelledBoxes
-from model.referent.scene_candidates import SceneMaps
 
 CHECKPOINT_NAMES = {
     "lidar": "scene.lidar",
@@ -159,7 +159,7 @@ class TPCNet(nn.Module):
             radar: ``(M, 7)`` radar points in the LiDAR frame; ignored by a LiDAR-only model.
             candidates: Referent path only: the frame's labelled boxes, among which the referent
                 stage then chooses instead of the detector's proposals (each with its label's
-                class and a certain score, :data:`model.referent.labelled.LABELLED_SCORE`).
+                class and a certain score, :data:`model.core.labelled.LABELLED_SCORE`).
 
         Returns:
             :class:`SceneFeatures` with ``lr_i`` of shape ``(1, C_i, H_i, W_i)``.
@@ -245,3 +245,9 @@ __all__ = [
     "TPCNet",
     "as_points",
 ]
+
+
+def build_model(preset: str = "small", **overrides: Any) -> TPCNet:
+    """A freshly initialised :class:`TPCNet` for ``preset`` (``small`` or ``paper``) + overrides
+    (:func:`model.config.build_config`)."""
+    return TPCNet(build_config(preset, **overrides))

@@ -1,12 +1,23 @@
 """The data domain: frames, boxes, calibration, Talk2Radar / VoD IO, the synthetic world, prompts.
 
-``scenes`` imports neither ``model``, ``annotate`` nor ``app``.
+``scenes`` imports neither ``model``, ``annotate`` nor ``app``. Its rooms and their layer order:
+docs/DESIGN.md. The names below are the ones other packages use most; those of the heavier rooms
+(the generator, the datasets) are loaded on first use (PEP 562), so that ``import scenes`` costs
+no more than the formats.
 """
 
-from scenes.actors import CLASSES, Actor
-from scenes.calib import Calibration, read_calib, vod_lidar_calibration, vod_radar_calibration
-from scenes.kitti import ObjectLabel, read_label_file, write_label_file
-from scenes.root import (
+import importlib
+from typing import Any
+
+from scenes.geometry.actors import CLASSES, Actor
+from scenes.geometry.calib import (
+    Calibration,
+    read_calib,
+    vod_lidar_calibration,
+    vod_radar_calibration,
+)
+from scenes.talk2radar.kitti import ObjectLabel, read_label_file, write_label_file
+from scenes.talk2radar.root import (
     RootError,
     Sample,
     SampleMeta,
@@ -16,21 +27,52 @@ from scenes.root import (
     format_id,
 )
 
+_LAZY = {
+    "LRUCache": "scenes.utils.lru",
+    "atomic_write_text": "scenes.utils.durable",
+    "clean_text": "scenes.utils.text_policy",
+    "bev_iou": "scenes.geometry.boxes",
+    "wrap_yaw": "scenes.geometry.boxes",
+    "SynthSettings": "scenes.synth.generate",
+    "generate_root": "scenes.synth.generate",
+    "FrameDataset": "scenes.datasets.frames",
+    "GroundingDataset": "scenes.datasets.grounding",
+}
+"""Exported name -> the module that defines it (loaded on first use)."""
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'scenes' has no attribute {name!r}")
+
+
 __all__ = [
     "CLASSES",
     "Actor",
     "Calibration",
+    "FrameDataset",
+    "GroundingDataset",
+    "LRUCache",
     "ObjectLabel",
     "RootError",
     "Sample",
     "SampleMeta",
     "SensorFiles",
+    "SynthSettings",
     "Talk2RadarRoot",
     "Talk2RadarWriter",
+    "atomic_write_text",
+    "bev_iou",
+    "clean_text",
     "format_id",
+    "generate_root",
     "read_calib",
     "read_label_file",
     "vod_lidar_calibration",
     "vod_radar_calibration",
+    "wrap_yaw",
     "write_label_file",
 ]

@@ -11,12 +11,12 @@ trains, evaluates or annotates on real data can be run without the real data:
     sample of each synthetic world; the world's other prompts are left out and counted), its
     ``label_2`` = that prompt's referents only (the source sample's label file), and no Talk2PC
     file at all: no ``meta/``, no ``sources/``, no manifest.
-``OUT_VOD``: a View-of-Delft tree (:mod:`scenes.vod_writer`)
+``OUT_VOD``: a View-of-Delft tree (:mod:`scenes.talk2radar.vod_writer`)
     the same frame ids, ``lidar/`` and the radar trees with ``ImageSets/`` and
     ``training/{velodyne,calib,image_2,label_2}``, no ``prompt/``; ``label_2`` lists every object
     of the frame that View-of-Delft would annotate (within 50 m and in the camera's view) under
     VoD's class names, parked bicycles, racks, mopeds and the riders of cyclists included
-    (:mod:`scenes.vod_labels`). VoD withholds its test labels; the export writes them for every
+    (:mod:`scenes.synth.vod_labels`). VoD withholds its test labels; the export writes them for every
     split, so that grounding over labelled boxes can be measured on a test root.
 
 Both trees carry the lists ``train``, ``val``, ``test`` (those of ``--splits``) and, as VoD,
@@ -31,7 +31,7 @@ single scan (byte for byte the file ``scenes.synth --radar-scans 1`` writes for 
 refused.
 
 Sensor files and camera images are hard links to the source's (copies across filesystems:
-:func:`scenes.durable.link_or_copy`); text files are written atomically. Resumable: a frame whose
+:func:`scenes.utils.durable.link_or_copy`); text files are written atomically. Resumable: a frame whose
 label files exist in every tree, with its LiDAR file linked to the source's, is skipped; the
 ImageSets lists are written last. Errors are one line, ``error: ...``, exit code 2.
 """
@@ -49,10 +49,11 @@ from pathlib import Path
 
 from tqdm import tqdm
 
-from scenes.calib import read_calib
-from scenes.imagefile import label_image_size
-from scenes.kitti import ObjectLabel, label_file_text, read_label_file
-from scenes.layout import (
+from scenes.geometry.calib import read_calib
+from scenes.synth.vod_labels import frame_labels, frame_objects
+from scenes.talk2radar.imagefile import label_image_size
+from scenes.talk2radar.kitti import ObjectLabel, label_file_text, read_label_file
+from scenes.talk2radar.layout import (
     CALIB,
     LABEL,
     LIDAR_FOLDER,
@@ -68,11 +69,10 @@ from scenes.layout import (
     sample_dir,
     sample_file,
 )
-from scenes.pointcloud import RADAR_FEATURES, read_points, write_points
-from scenes.root import Talk2RadarRoot
-from scenes.vod_labels import frame_labels, frame_objects
-from scenes.vod_writer import VodWriter
-from scenes.writer import LABEL_DECIMALS, SampleText, SensorFiles, Talk2RadarWriter
+from scenes.talk2radar.pointcloud import RADAR_FEATURES, read_points, write_points
+from scenes.talk2radar.root import Talk2RadarRoot
+from scenes.talk2radar.vod_writer import VodWriter
+from scenes.talk2radar.writer import LABEL_DECIMALS, SampleText, SensorFiles, Talk2RadarWriter
 
 __all__ = ["RADAR_CHOICES", "SPLITS", "ExportReport", "export", "main", "source_frames"]
 

@@ -45,8 +45,8 @@ import viser
 import zstandard
 from websockets.sync.client import connect
 
-from scenes.calib import vod_lidar_calibration, vod_radar_calibration
-from scenes.root import Talk2RadarWriter
+from scenes.geometry.calib import vod_lidar_calibration, vod_radar_calibration
+from scenes.talk2radar.root import Talk2RadarWriter
 from tests.browser_helpers import CHROMIUM_ARGS, find_chromium
 
 _EXIT_STATUS: list[int] = []
@@ -455,8 +455,8 @@ val 1, test 1), the camera at a quarter of VoD's size."""
 def real_format_source(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The tiny synthetic root (with its sidecars) that :func:`real_format_roots` exports
     (:data:`REAL_FORMAT_SOURCE`). Read only."""
-    from scenes.camera import CameraConfig
-    from scenes.synth import SynthSettings, generate_root
+    from scenes.synth.camera import CameraConfig
+    from scenes.synth.generate import SynthSettings, generate_root
 
     spec = REAL_FORMAT_SOURCE
     settings = SynthSettings(

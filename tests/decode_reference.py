@@ -46,8 +46,8 @@ PROMPTS = 2
 
 def reference_frames() -> list[tuple[np.ndarray, np.ndarray, tuple[str, ...]]]:
     """``(lidar (N, 4), radar (M, 7), prompts)`` of each world of :data:`WORLDS`."""
-    from scenes.calib import sensor_to_lidar, vod_lidar_calibration, vod_radar_calibration
-    from scenes.synth_frame import SynthSettings, synthesize
+    from scenes.geometry.calib import sensor_to_lidar, vod_lidar_calibration, vod_radar_calibration
+    from scenes.synth.frame import SynthSettings, synthesize
 
     settings = SynthSettings(seed=SEED, radar_scans=1, prompts_per_world=PROMPTS, camera=None)
     radar_to_lidar = sensor_to_lidar(vod_lidar_calibration(), vod_radar_calibration())
@@ -171,7 +171,7 @@ def compare() -> int:
 def main() -> int:
     if "--compare" in sys.argv[1:]:
         return compare()
-    from scenes.synth_frame import GENERATOR_VERSION
+    from scenes.synth.frame import GENERATOR_VERSION
 
     outputs = reference_outputs()
     meta = {

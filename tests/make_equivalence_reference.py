@@ -10,7 +10,7 @@ What it does, on the CPU with one torch thread:
 
 1. writes a synthetic root (:func:`scenes.synth.generate_root`, seed :data:`SEED`,
    :data:`FRAMES` frames, one radar scan, no camera) into a temporary folder and reads its
-   samples back with :class:`scenes.root.Talk2RadarRoot`;
+   samples back with :class:`scenes.talk2radar.root.Talk2RadarRoot`;
 2. keeps every :data:`STRIDE`-th LiDAR point of each frame (the file stays small) and stores the
    clouds and prompts as the *inputs*, so that the test does not depend on the generator;
 3. per frame: ``detect`` (the text-agnostic detector: heatmap and regression checksums),
@@ -44,8 +44,8 @@ STRIDE = 6
 
 def reference_inputs() -> list[tuple[np.ndarray, np.ndarray, tuple[str, ...]]]:
     """``(lidar (N, 4), radar (M, 7) LiDAR frame, prompts)`` per frame of the fixed root."""
-    from scenes.root import Talk2RadarRoot
-    from scenes.synth import SynthSettings, generate_root
+    from scenes.synth.generate import SynthSettings, generate_root
+    from scenes.talk2radar.root import Talk2RadarRoot
 
     settings = SynthSettings(seed=SEED, radar_scans=1, prompts_per_world=2, camera=None)
     with tempfile.TemporaryDirectory() as tmp:

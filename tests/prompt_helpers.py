@@ -1,7 +1,7 @@
 """Worlds of actors and sentence readers for the prompt tests (test_prompts, test_prompt_phrasing).
 
 The readers (plural nouns, numbers in digits or words, counts) are written here independently of
-``scenes.prompts``' own patterns, so the tests check the generator against a second reading.
+``scenes.language.prompts``' own patterns, so the tests check the generator against a second reading.
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import re
 
 import numpy as np
 
-from scenes.actors import Actor
-from scenes.prompts.phrasing import SLOTS
+from scenes.geometry.actors import Actor
+from scenes.language.prompts.phrasing import SLOTS
 
 CAR = (4.5, 1.8, 1.6)
 PED = (0.6, 0.6, 1.7)

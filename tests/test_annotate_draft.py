@@ -21,7 +21,7 @@ from annotate import (
     proposals,
     validate,
 )
-from scenes.calib import vod_lidar_calibration
+from scenes.geometry.calib import vod_lidar_calibration
 
 CAR = (12.0, 3.0, -0.95, 4.2, 1.8, 1.5, 0.4)
 PED = (20.0, -5.0, -0.85, 0.7, 0.6, 1.7, -2.9)

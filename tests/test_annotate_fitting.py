@@ -24,8 +24,8 @@ from annotate import (
 )
 from annotate.fitting import Rectangle, complete_rectangle
 from scenes import Actor
-from scenes.boxes import points_in_boxes, wrap_yaw
-from scenes.prompts import resolve
+from scenes.geometry.boxes import points_in_boxes, wrap_yaw
+from scenes.language.prompts import resolve
 
 GROUND = -1.7
 MINIMUM = FitConfig(grow_to_typical=False)

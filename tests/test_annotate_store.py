@@ -27,10 +27,10 @@ from annotate import (
 )
 from annotate.errors import SplitError
 from scenes import Actor, SampleMeta, Talk2RadarRoot, Talk2RadarWriter, read_label_file
-from scenes.boxes import wrap_yaw
-from scenes.calib import vod_lidar_calibration, vod_radar_calibration
-from scenes.pointcloud import read_points
-from scenes.projection import scale_calibration
+from scenes.geometry.boxes import wrap_yaw
+from scenes.geometry.calib import vod_lidar_calibration, vod_radar_calibration
+from scenes.geometry.projection import scale_calibration
+from scenes.talk2radar.pointcloud import read_points
 
 CAR = (12.0, 3.0, -0.95, 4.2, 1.8, 1.5, 0.4)
 PED = (20.0, -5.0, -0.85, 0.7, 0.6, 1.7, -2.9)

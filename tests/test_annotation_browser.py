@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenes.layout import LABEL, LIDAR_FOLDER, sample_file
+from scenes.talk2radar.layout import LABEL, LIDAR_FOLDER, sample_file
 from tests.browser_helpers import (
     CHROMIUM_ARGS,
     PAGE_SIZE,
@@ -154,7 +154,7 @@ def _carry_target(root: Path):
     """``(actor, its box one frame later)``: an actor of the first frame of the served test split
     that moves (> 2 m/s) with radar points, in view, that a ground click and a fit can box."""
     from annotate import box_evidence
-    from scenes.root import Talk2RadarRoot
+    from scenes.talk2radar.root import Talk2RadarRoot
 
     r = Talk2RadarRoot(root)
     first, second = (r.load(sid) for sid in r.ids("test")[:2])
@@ -179,8 +179,8 @@ def test_browser_plays_a_sequence_and_carries_a_pair_to_the_next_frame(
     from playwright.sync_api import sync_playwright
 
     from model import build_model
-    from scenes.root import Talk2RadarRoot
-    from scenes.synth import SynthSettings, generate_root
+    from scenes.synth.generate import SynthSettings, generate_root
+    from scenes.talk2radar.root import Talk2RadarRoot
 
     root = tmp_path / "root"
     settings = SynthSettings(seed=11, prompts_per_world=1, camera=None, sequence_length=3)
@@ -257,7 +257,7 @@ def test_browser_reviews_the_pairs_of_a_split(
 
     from annotate import AnnotationStore, Draft, SourceFrame, default_box
     from model import build_model
-    from scenes.reviews import approved_ids, read_pair_states
+    from scenes.talk2radar.reviews import approved_ids, read_pair_states
 
     root = write_tiny_root(tmp_path / "root", frames=2)
     store = AnnotationStore(root)

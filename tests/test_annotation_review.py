@@ -1,5 +1,5 @@
 """Reviews of saved pairs (issue 19.4): the manifest's ``review`` lines (annotate.review) and the
-approved ids training and evaluation restrict to (scenes.reviews.approved_ids)."""
+approved ids training and evaluation restrict to (scenes.talk2radar.reviews.approved_ids)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import pytest
 from annotate import AnnotationStore, ConflictError, SourceFrame, StoreError, default_box
 from annotate.draft import Draft
 from annotate.review import record_review, review_states
-from scenes.layout import manifest_file
-from scenes.reviews import approved_ids
+from scenes.talk2radar.layout import manifest_file
+from scenes.talk2radar.reviews import approved_ids
 
 
 def _store_with_two_pairs(tmp_path, write_tiny_root):

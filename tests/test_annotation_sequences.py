@@ -1,5 +1,5 @@
-"""Sequences (issue 19.3): pose files (scenes.poses), the generator's ``--sequence-length``
-(scenes.synth, scenes.sequence), the drives of a split (scenes.drives) and carrying boxes to the
+"""Sequences (issue 19.3): pose files (scenes.talk2radar.poses), the generator's ``--sequence-length``
+(scenes.synth, scenes.synth.sequence), the drives of a split (scenes.talk2radar.drives) and carrying boxes to the
 next frame (annotate.carry)."""
 
 from __future__ import annotations
@@ -10,10 +10,11 @@ import numpy as np
 import pytest
 
 from annotate.carry import CarryConfig, carry_boxes, speed_known
-from scenes.calib import sensor_to_lidar, vod_lidar_calibration
-from scenes.drives import find_drives
-from scenes.layout import RootError
-from scenes.poses import (
+from scenes.geometry.calib import sensor_to_lidar, vod_lidar_calibration
+from scenes.synth.generate import SynthSettings, generate_root, synthesize
+from scenes.talk2radar.drives import find_drives
+from scenes.talk2radar.layout import RootError
+from scenes.talk2radar.poses import (
     FRAME_RATE,
     consecutive,
     lidar_motion,
@@ -21,8 +22,7 @@ from scenes.poses import (
     read_pose,
     synthetic_pose,
 )
-from scenes.root import Talk2RadarRoot
-from scenes.synth import SynthSettings, generate_root, synthesize
+from scenes.talk2radar.root import Talk2RadarRoot
 
 
 def test_pose_files_round_trip_and_name_the_bad_line(tmp_path) -> None:

@@ -69,9 +69,9 @@ class PairRun:
 def make_roots(out: Path, frames: int, seed: int) -> tuple[Path, Path]:
     """A synthetic root of ``2 * frames`` test frames (one prompt each) exported as the releases
     come: ``(t2r, vod)``."""
-    from scenes.camera import CameraConfig
     from scenes.export_real import export
-    from scenes.synth import SynthSettings, generate_root
+    from scenes.synth.camera import CameraConfig
+    from scenes.synth.generate import SynthSettings, generate_root
 
     camera = CameraConfig(image_scale=0.25, ray_step=4)
     settings = SynthSettings(seed=seed, camera=camera)
@@ -122,7 +122,7 @@ def drive(app, chromium: str, flow: str, indices, count: int) -> tuple[list[Pair
     reach in the overview; returns the pairs and the frames used."""
     from playwright.sync_api import sync_playwright
 
-    from scenes.root import Talk2RadarRoot
+    from scenes.talk2radar.root import Talk2RadarRoot
 
     store = app.annotations.store
     runs, used = [], []

@@ -19,7 +19,7 @@ from annotate import AnnotationStore, Draft, default_box, proposals
 from app.annotate_tab import AnnotationPanel
 from app.annotate_tab.formatting import NO_BOX, option_index, option_pair_id, pair_option
 from app.annotate_tab.view import box_at, ground_hit, wxyz_to_yaw, yaw_to_wxyz
-from scenes.root import Talk2RadarRoot
+from scenes.talk2radar.root import Talk2RadarRoot
 from tests.browser_helpers import PAGE_SIZE, pixel_of, poll
 
 # ---------------------------------------------------------------------- pure helpers

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from scenes.root import Sample
+from scenes.talk2radar.root import Sample
 from tests.browser_helpers import ARTIFACTS, CHROMIUM_ARGS, REPO, find_chromium, scene_has
 
 PROMPT = "the car about 15 m ahead"
@@ -131,7 +131,7 @@ def _attribute_sample(root: Path) -> tuple[int, Sample] | None:
     """``(frame index, sample)`` of the first test-split sample whose prompt names an attribute
     and whose frame holds same-class actors that are *not* referents (so a class-only answer
     would be wrong). Chosen from the data alone, never from what the model answers."""
-    from scenes.root import Talk2RadarRoot
+    from scenes.talk2radar.root import Talk2RadarRoot
 
     r = Talk2RadarRoot(root)
     for index, sid in enumerate(r.ids("test")):
@@ -163,7 +163,7 @@ def test_browser_attribute_prompt_shows_the_models_answer(tmp_path) -> None:
 
     from app import AppConfig, Talk2PCApp
     from model.checkpoint import load_checkpoint
-    from scenes.synth import SynthSettings, generate_root
+    from scenes.synth.generate import SynthSettings, generate_root
 
     root = tmp_path / "root"
     generate_root(root, 16, SynthSettings(seed=404), split_fractions=(0.0, 0.0, 1.0))
@@ -264,7 +264,7 @@ def test_browser_camera_panel_shows_projected_boxes(
     sight at 1400 x 860 and disabled for an empty draft; Esc leaves *Pair prompt*; Enter saves."""
     from app import AppConfig, Talk2PCApp
     from model import build_model
-    from scenes.root import Talk2RadarRoot
+    from scenes.talk2radar.root import Talk2RadarRoot
     from tests.camera_shot import drive_camera
 
     root = write_vod_root(tmp_path / "vod", frames=1, splits={"val": [0]})

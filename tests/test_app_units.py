@@ -59,9 +59,9 @@ from app.scene_view import (
     estimate_ground_z,
     ring_segments,
 )
-from scenes.layout import VELODYNE, sample_file
-from scenes.root import RootError, Talk2RadarRoot
-from scenes.text_policy import collapse_spaces
+from scenes.talk2radar.layout import VELODYNE, sample_file
+from scenes.talk2radar.root import RootError, Talk2RadarRoot
+from scenes.utils.text_policy import collapse_spaces
 
 # ---------------------------------------------------------------------------- colours
 

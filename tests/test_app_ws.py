@@ -14,7 +14,7 @@ import pytest
 
 from app.answer_words import answer_sentence
 from app.text import md_text
-from scenes.layout import VELODYNE, sample_file, split_dir
+from scenes.talk2radar.layout import VELODYNE, sample_file, split_dir
 from tests.markdown_helpers import assert_only_text
 
 

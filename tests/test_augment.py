@@ -6,8 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenes.actors import Actor
-from scenes.augment import (
+from scenes.datasets.augment import (
     beam_index,
     drop_beams,
     drop_points,
@@ -20,11 +19,12 @@ from scenes.augment import (
     single_scan,
     subsample_radar,
 )
-from scenes.dataset import AugmentConfig, GroundingDataset
-from scenes.frame_dataset import FrameDataset
-from scenes.lidar_sim import LidarConfig, beam_elevations
-from scenes.prompts import flip_left_right
-from scenes.root import Talk2RadarRoot
+from scenes.datasets.frames import FrameDataset
+from scenes.datasets.grounding import AugmentConfig, GroundingDataset
+from scenes.geometry.actors import Actor
+from scenes.language.prompts import flip_left_right
+from scenes.synth.lidar import LidarConfig, beam_elevations
+from scenes.talk2radar.root import Talk2RadarRoot
 
 
 def _lidar(n: int = 4000, seed: int = 0) -> np.ndarray:

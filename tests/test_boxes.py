@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from scenes.boxes import (
+from scenes.geometry.boxes import (
     bev_corners,
     bev_iou,
     box_corners,

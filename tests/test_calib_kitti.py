@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from scenes.calib import (
+from scenes.geometry.calib import (
     Calibration,
     CalibrationError,
     CameraBoxes,
@@ -15,7 +15,7 @@ from scenes.calib import (
     vod_lidar_calibration,
     vod_radar_calibration,
 )
-from scenes.kitti import (
+from scenes.talk2radar.kitti import (
     LabelError,
     boxes_to_labels,
     format_label_line,

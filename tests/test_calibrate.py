@@ -8,7 +8,7 @@ import pytest
 from model.evaluation.grounding import PromptBoxes
 from model.evaluation.predict import operating_threshold
 from model.training.calibrate import choose_threshold, main
-from scenes.layout import LABEL, LIDAR_FOLDER, sample_dir
+from scenes.talk2radar.layout import LABEL, LIDAR_FOLDER, sample_dir
 
 CAR = np.array([[15.0, 0.0, -0.9, 4.0, 1.8, 1.5, 0.0]])
 OTHER = np.array([[25.0, 5.0, -0.9, 4.0, 1.8, 1.5, 0.0]])

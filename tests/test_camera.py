@@ -6,9 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenes.actors import Actor
-from scenes.calib import CAMERA_IN_LIDAR, LIDAR_HEIGHT, vod_lidar_calibration
-from scenes.camera import (
+from scenes.geometry.actors import Actor
+from scenes.geometry.calib import CAMERA_IN_LIDAR, LIDAR_HEIGHT, vod_lidar_calibration
+from scenes.geometry.projection import image_size_at, project_points, scale_calibration
+from scenes.synth.camera import (
     CAR_DARK,
     CAR_LIGHT,
     CLOTHES,
@@ -19,9 +20,8 @@ from scenes.camera import (
     lighting_for,
     render_image,
 )
-from scenes.projection import image_size_at, project_points, scale_calibration
-from scenes.weather import CLEAR, FOG, RAIN
-from scenes.world import Mat, TaggedMesh, World, box_part, generate_world
+from scenes.synth.weather import CLEAR, FOG, RAIN
+from scenes.synth.world import Mat, TaggedMesh, World, box_part, generate_world
 
 CAM = np.array(CAMERA_IN_LIDAR)
 SMALL = CameraConfig(image_scale=0.125, ray_step=1)  # 242 x 152: fast
@@ -82,7 +82,7 @@ def test_image_size_and_geometry_follow_p2(scale, step):
     rows, cols = np.nonzero(car)
     # The car's pixels span the projection of its corners (P2 scaled to this size) to a pixel
     # or two (one ray per step x step pixels, upsampled).
-    from scenes.boxes import box_corners
+    from scenes.geometry.boxes import box_corners
 
     uv = project_points(box_corners(box)[0], _calib(scale), (width, height)).uv
     tol = 1.0 + step

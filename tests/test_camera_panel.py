@@ -18,9 +18,9 @@ from app.camera_image import (
 )
 from app.colors import GT_COLOR, class_color
 from app.scene_view import camera_view_pose
-from scenes.calib import CAMERA_IN_LIDAR, IMAGE_SIZE, VOD_INTRINSICS, vod_lidar_calibration
-from scenes.layout import IMAGE, LIDAR_FOLDER, RADAR_FOLDERS, sample_file
-from scenes.projection import project_points
+from scenes.geometry.calib import CAMERA_IN_LIDAR, IMAGE_SIZE, VOD_INTRINSICS, vod_lidar_calibration
+from scenes.geometry.projection import project_points
+from scenes.talk2radar.layout import IMAGE, LIDAR_FOLDER, RADAR_FOLDERS, sample_file
 
 WHITE = (255, 255, 255)
 

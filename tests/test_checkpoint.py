@@ -17,7 +17,7 @@ from model.checkpoint import (
     load_metadata,
     save_checkpoint,
 )
-from model.nets.grid import BevGrid
+from model.core.grid import BevGrid
 from model.tpcnet import TPCNet
 
 COARSE = BevGrid(0.0, 51.2, -25.6, 25.6, 1.28)

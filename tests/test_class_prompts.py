@@ -1,5 +1,5 @@
 """Class prompts on a fully labelled root (model.evaluation.class_prompts): exact counting with a fake model
-on a hand-written VoD-layout frame (written by scenes.vod_writer), the command line's errors, and
+on a hand-written VoD-layout frame (written by scenes.talk2radar.vod_writer), the command line's errors, and
 one smoke run of the bundled checkpoint on synthetic frames exported in the View-of-Delft layout
 (``real_format_roots``: python -m scenes.export_real)."""
 
@@ -20,12 +20,12 @@ from model.evaluation.class_prompt_counts import (
     count_prompt,
 )
 from model.evaluation.class_prompts import ScoringConfig, main, score_root
-from scenes.calib import vod_lidar_calibration, vod_radar_calibration
-from scenes.kitti import boxes_to_labels
-from scenes.layout import CALIB, LABEL, LIDAR_FOLDER, PROMPT, sample_dir, sample_file
-from scenes.projection import in_camera_view
-from scenes.root import Talk2RadarRoot
-from scenes.vod_writer import VodWriter
+from scenes.geometry.calib import vod_lidar_calibration, vod_radar_calibration
+from scenes.geometry.projection import in_camera_view
+from scenes.talk2radar.kitti import boxes_to_labels
+from scenes.talk2radar.layout import CALIB, LABEL, LIDAR_FOLDER, PROMPT, sample_dir, sample_file
+from scenes.talk2radar.root import Talk2RadarRoot
+from scenes.talk2radar.vod_writer import VodWriter
 
 RADAR = "radar"
 

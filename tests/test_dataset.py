@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 
 from scenes import Talk2RadarWriter
-from scenes.augment import flip_sample
-from scenes.calib import vod_lidar_calibration, vod_radar_calibration
-from scenes.dataset import AugmentConfig, GroundingDataset, collate
-from scenes.prompts import flip_left_right
+from scenes.datasets.augment import flip_sample
+from scenes.datasets.grounding import AugmentConfig, GroundingDataset, collate
+from scenes.geometry.calib import vod_lidar_calibration, vod_radar_calibration
+from scenes.language.prompts import flip_left_right
 
 BOXES = np.array([[12.0, 3.0, -0.9, 4.2, 1.8, 1.5, 0.4]])
 

@@ -37,7 +37,7 @@ def current() -> dict[str, np.ndarray]:
 
 
 def test_reference_inputs_are_todays_generator(reference) -> None:
-    from scenes.synth_frame import GENERATOR_VERSION
+    from scenes.synth.frame import GENERATOR_VERSION
 
     assert int(reference["generator_version"]) == GENERATOR_VERSION, (
         "the generator changed since the reference was made: its frames are other inputs; "

@@ -1,4 +1,4 @@
-"""scenes.durable: the temporaries' one naming rule, atomic writes (also when the write or its
+"""scenes.utils.durable: the temporaries' one naming rule, atomic writes (also when the write or its
 fsync fails), links, multi-file replacement, and JSON Lines logs with a torn last line."""
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from scenes import durable
-from scenes.durable import (
+from scenes.utils import durable
+from scenes.utils.durable import (
     append_json_line,
     append_line,
     atomic_file,
@@ -239,7 +239,7 @@ def test_unreadable_lines_are_reported_never_fatal(tmp_path: Path) -> None:
 def test_every_writer_of_the_project_uses_this_module() -> None:
     """No other module of scenes/, annotate/, app/, model/, bench/ or launch.py renames files
     itself or names temporaries."""
-    root = Path(durable.__file__).parents[1]
+    root = Path(durable.__file__).parents[2]
     offenders = []
     packages = ("scenes", "annotate", "app", "model", "bench")
     files = [p for package in packages for p in sorted((root / package).rglob("*.py"))]

@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 
 from model.evaluate import main, score_directories
-from scenes.kitti import ObjectLabel, format_label_line, read_label_file
-from scenes.layout import LIDAR_FOLDER, PROMPT, sample_file
+from scenes.talk2radar.kitti import ObjectLabel, format_label_line, read_label_file
+from scenes.talk2radar.layout import LIDAR_FOLDER, PROMPT, sample_file
 
 REPO = Path(__file__).resolve().parents[1]
 

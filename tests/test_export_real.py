@@ -15,17 +15,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenes.calib import boxes_lidar_to_camera
 from scenes.export_real import export, main
-from scenes.kitti import read_label_file
-from scenes.layout import TRAIN_VAL
-from scenes.pointcloud import read_points
-from scenes.root import Talk2RadarRoot
-from scenes.sample_meta import SampleMeta
-from scenes.scene_labels import SceneLabels, objects_from_labels
-from scenes.vod_labels import ABSENT_CLASSES, VOD_CLASSES, frame_objects
-from scenes.world import RIDER_IN_CYCLIST, cyclist_mesh, rider_boxes
-from scenes.world.materials import Mat
+from scenes.geometry.calib import boxes_lidar_to_camera
+from scenes.synth.vod_labels import ABSENT_CLASSES, VOD_CLASSES, frame_objects
+from scenes.synth.world import RIDER_IN_CYCLIST, cyclist_mesh, rider_boxes
+from scenes.synth.world.materials import Mat
+from scenes.talk2radar.kitti import read_label_file
+from scenes.talk2radar.layout import TRAIN_VAL
+from scenes.talk2radar.pointcloud import read_points
+from scenes.talk2radar.root import Talk2RadarRoot
+from scenes.talk2radar.sample_meta import SampleMeta
+from scenes.talk2radar.scene_labels import SceneLabels, objects_from_labels
 
 TREES = ("lidar", "radar", "radar_5frames")
 SPLITS = ("train", "val", "test")
@@ -311,7 +311,7 @@ def test_the_command_line_reports_what_it_wrote(tmp_path, real_format_source, ca
 def test_the_newest_scan_is_the_single_scan_generation(tmp_path):
     """``--radar radar`` from a 5-scan root gives, byte for byte, the radar files that
     ``scenes.synth --radar-scans 1`` writes for the same seed (scan 0 is drawn first)."""
-    from scenes.synth import SynthSettings, generate_root
+    from scenes.synth.generate import SynthSettings, generate_root
 
     for scans in (1, 5):
         settings = SynthSettings(seed=77, radar_scans=scans, camera=None)
@@ -322,9 +322,9 @@ def test_the_newest_scan_is_the_single_scan_generation(tmp_path):
 
 
 def test_the_training_frames_read_the_exported_pair(real_format_roots):
-    """The referent path's labels source (scenes.frame_dataset) on the pair: one frame per sample,
+    """The referent path's labels source (scenes.datasets.frames) on the pair: one frame per sample,
     the given prompt, its referents found among the View-of-Delft objects, never a sidecar."""
-    from scenes.frame_dataset import FrameDataset
+    from scenes.datasets.frames import FrameDataset
 
     t2r, vod = real_format_roots
     frames = FrameDataset(t2r, "train", scene_labels=SceneLabels(vod))

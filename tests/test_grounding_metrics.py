@@ -22,11 +22,11 @@ from model.evaluation.grounding import (
     prompt_outcome,
     summarize,
 )
-from scenes.actors import Actor
-from scenes.boxes import iou3d
-from scenes.prompts import DEFAULT_REGION
-from scenes.root import Talk2RadarRoot
-from scenes.synth import SynthSettings, generate_root
+from scenes.geometry.actors import Actor
+from scenes.geometry.boxes import iou3d
+from scenes.language.prompts import DEFAULT_REGION
+from scenes.synth.generate import SynthSettings, generate_root
+from scenes.talk2radar.root import Talk2RadarRoot
 
 REPO = Path(__file__).resolve().parents[1]
 CAR = np.array([20.0, 0.0, -0.9, 4.0, 1.8, 1.5, 0.0])

@@ -13,15 +13,15 @@ import torch
 
 from model import LabelledBoxes
 from model.checkpoint import load_checkpoint
+from model.core.candidates import SceneCandidates
+from model.core.labelled import LABELLED_SCORE
 from model.evaluation.class_prompt_counts import CLASS_PROMPTS
 from model.evaluation.predict import operating_threshold
 from model.referent.candidates import LIDAR_EVIDENCE, RADAR_EVIDENCE
-from model.referent.labelled import LABELLED_SCORE
-from model.referent.scene_candidates import SceneCandidates
 from model.training.referent_cache import CachedScene, scene_views, shift_evidence
-from scenes.actors import CLASSES
-from scenes.root import Talk2RadarRoot
-from scenes.scene_labels import SceneLabels
+from scenes.geometry.actors import CLASSES
+from scenes.talk2radar.root import Talk2RadarRoot
+from scenes.talk2radar.scene_labels import SceneLabels
 
 SHIPPED = "checkpoints/tpcnet-small.pt"
 
@@ -137,7 +137,7 @@ def test_shift_evidence_moves_only_the_pooled_features_of_labelled_boxes():
 def test_scene_views_describe_detector_and_labelled_candidates_from_one_pass(
     shipped, real_format_source
 ):
-    from scenes.frame_dataset import FrameDataset
+    from scenes.datasets.frames import FrameDataset
 
     item = FrameDataset(Talk2RadarRoot(real_format_source), "train")[0]
     objects, view = scene_views(shipped, item.lidar, item.radar, item.actors, labelled=True)

@@ -1,4 +1,4 @@
-"""scenes.language_query and scenes.language_resolve: each operator on hand-built scenes, the
+"""scenes.language.query and scenes.language.resolve: each operator on hand-built scenes, the
 borderline refusals, and the query reader's errors. The expected referents are worked out by hand
 in the comments (LiDAR frame, x forward, y left)."""
 
@@ -8,9 +8,9 @@ import math
 
 import pytest
 
-from scenes.actors import Actor
-from scenes.language_query import QueryError, parse_query
-from scenes.language_resolve import resolve
+from scenes.geometry.actors import Actor
+from scenes.language.query import QueryError, parse_query
+from scenes.language.resolve import resolve
 
 CAR = (4.0, 2.0, 1.5)
 PED = (0.6, 0.6, 1.7)

@@ -23,9 +23,9 @@ from bench.language_cases import (
 )
 from bench.language_score import Answer, oracle_outcome, score
 from bench.language_suite import main
-from scenes.actors import Actor
-from scenes.language_resolve import resolve
-from scenes.prompts import PromptConfig, generate_prompts
+from scenes.geometry.actors import Actor
+from scenes.language.prompts import PromptConfig, generate_prompts
+from scenes.language.resolve import resolve
 
 TINY_ARGS = ["--frames", "2", "--prompts-per-world", "1", "--seed", "5"]
 TINY_ARGS += ["--split-fractions", "0", "0", "1", "--no-camera", "--quiet"]

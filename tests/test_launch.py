@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from app.server import AppConfig, ServerStartError, Talk2PCApp, check_listen_address
-from scenes.layout import LIDAR_FOLDER, VELODYNE, sample_dir
+from scenes.talk2radar.layout import LIDAR_FOLDER, VELODYNE, sample_dir
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -9,10 +9,10 @@ import pytest
 import torch
 
 from model.config import HeadConfig
+from model.core.grid import BevGrid
 from model.head.detector import C3DRecHead, HeadOutput
 from model.head.losses import focal_heatmap_loss, gather_regression, grounding_loss
 from model.head.targets import BatchTargets, collate_targets, draw_targets
-from model.nets.grid import BevGrid
 
 GRID = BevGrid(x_min=0.0, x_max=8.0, y_min=-4.0, y_max=4.0, cell=0.5)  # (16, 16)
 

@@ -1,4 +1,4 @@
-"""scenes.lru.LRUCache: recency order, the count and byte bounds, removal, threads."""
+"""scenes.utils.lru.LRUCache: recency order, the count and byte bounds, removal, threads."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import threading
 
 import pytest
 
-from scenes.lru import LRUCache
+from scenes.utils.lru import LRUCache
 
 
 def test_get_marks_used_and_the_least_recently_used_goes_first() -> None:

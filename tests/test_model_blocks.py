@@ -22,6 +22,7 @@ from model.config import (
     apply_overrides,
     preset,
 )
+from model.core.grid import BevGrid
 from model.nets.baca import (
     AgentCrossAttention,
     BidirectionalAgentCrossAttention,
@@ -43,7 +44,6 @@ from model.nets.dggf import (
     static_max_relative,
 )
 from model.nets.fpn import SecondFpn
-from model.nets.grid import BevGrid
 from model.nets.pillars import PillarEncoder, _stable_order, voxelize
 from model.nets.text import (
     BiGRUTextEncoder,

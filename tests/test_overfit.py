@@ -8,9 +8,9 @@ import torch
 from model import build_model
 from model.head.losses import grounding_loss
 from model.head.targets import collate_targets, draw_targets
-from scenes.boxes import iou3d
-from scenes.dataset import GroundingDataset, collate
-from scenes.synth import SynthSettings, generate_root
+from scenes.datasets.grounding import GroundingDataset, collate
+from scenes.geometry.boxes import iou3d
+from scenes.synth.generate import SynthSettings, generate_root
 
 
 @pytest.mark.slow

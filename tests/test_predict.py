@@ -14,9 +14,9 @@ from model.evaluation.predict import (
     scene_key,
     write_predictions,
 )
-from scenes.calib import vod_lidar_calibration, vod_radar_calibration
-from scenes.kitti import read_label_file
-from scenes.root import Talk2RadarRoot, Talk2RadarWriter
+from scenes.geometry.calib import vod_lidar_calibration, vod_radar_calibration
+from scenes.talk2radar.kitti import read_label_file
+from scenes.talk2radar.root import Talk2RadarRoot, Talk2RadarWriter
 
 
 def test_prediction_labels_filter_and_format(tmp_path):

@@ -20,7 +20,7 @@ from model.evaluation.predict_pool import (
 )
 from model.evaluation.report import class_noun_of, evaluate_predictions
 from model.evaluation.report_file import SECONDS
-from scenes.root import Talk2RadarRoot
+from scenes.talk2radar.root import Talk2RadarRoot
 
 
 @pytest.fixture(scope="module")
@@ -91,8 +91,8 @@ def test_a_worker_error_is_one_line_naming_the_file(tmp_path, write_tiny_root, c
 
 
 def test_frame_groups_keep_the_samples_of_one_frame_together(tmp_path):
-    from scenes.calib import vod_lidar_calibration, vod_radar_calibration
-    from scenes.root import Talk2RadarWriter
+    from scenes.geometry.calib import vod_lidar_calibration, vod_radar_calibration
+    from scenes.talk2radar.root import Talk2RadarWriter
 
     rng = np.random.default_rng(0)
     writer = Talk2RadarWriter(tmp_path)
@@ -113,7 +113,7 @@ def test_frame_groups_keep_the_samples_of_one_frame_together(tmp_path):
 
 
 def test_labelled_candidates_in_workers(real_format_roots, trained):
-    from scenes.scene_labels import SceneLabels
+    from scenes.talk2radar.scene_labels import SceneLabels
 
     t2r, vod = real_format_roots
     assert trained.cfg.grounding == "referent"

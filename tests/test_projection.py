@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenes.calib import CAMERA_IN_LIDAR, IMAGE_SIZE, vod_lidar_calibration
-from scenes.projection import (
+from scenes.geometry.calib import CAMERA_IN_LIDAR, IMAGE_SIZE, vod_lidar_calibration
+from scenes.geometry.projection import (
     BOX_EDGES,
     MIN_DEPTH,
     image_size_at,

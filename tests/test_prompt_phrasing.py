@@ -1,4 +1,4 @@
-"""Tests for scenes.prompts' phrasing variants: coverage, the train / held-out split, truth of
+"""Tests for scenes.language.prompts' phrasing variants: coverage, the train / held-out split, truth of
 every variant (counts, numbers, tags, flips) in both streams, and the typed forms of infer_tags."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from scenes.prompts import (
+from scenes.language.prompts import (
     HELDOUT_VARIANTS,
     TRAIN_VARIANTS,
     DepthBetween,
@@ -22,8 +22,8 @@ from scenes.prompts import (
     render_with_variants,
     spell_number,
 )
-from scenes.prompts.numbers import NUMBER_STYLES
-from scenes.prompts.phrasing import SLOTS, group_of, variant_id
+from scenes.language.prompts.numbers import NUMBER_STYLES
+from scenes.language.prompts.phrasing import SLOTS, group_of, variant_id
 from tests.prompt_helpers import (
     WORD_VALUES,
     flip_world,
@@ -303,8 +303,8 @@ def test_infer_tags_typed_forms(text, tags):
 
 
 def test_synth_phrasing_option_says_the_same_prompts_in_other_words():
-    from scenes.calib import sensor_to_lidar, vod_lidar_calibration, vod_radar_calibration
-    from scenes.synth import SynthError, SynthSettings, _parser, synthesize
+    from scenes.geometry.calib import sensor_to_lidar, vod_lidar_calibration, vod_radar_calibration
+    from scenes.synth.generate import SynthError, SynthSettings, _parser, synthesize
 
     args = ["--out", "root", "--frames", "4"]
     assert _parser().parse_args(args).phrasing == "train"

@@ -1,4 +1,4 @@
-"""Tests for scenes.prompts: exact referents, rendering, tags, flip, describe().
+"""Tests for scenes.language.prompts: exact referents, rendering, tags, flip, describe().
 
 The phrasing variants and their train / held-out split: tests/test_prompt_phrasing.py.
 """
@@ -11,7 +11,7 @@ import re
 import numpy as np
 import pytest
 
-from scenes.prompts import (
+from scenes.language.prompts import (
     DEFAULT_REGION,
     ActorFeatures,
     DepthAbout,

@@ -12,7 +12,7 @@ from collections import Counter
 import numpy as np
 import pytest
 
-from scenes.prompts import (
+from scenes.language.prompts import (
     HELDOUT_VARIANTS,
     DepthBeyond,
     DepthWithin,
@@ -37,10 +37,10 @@ from scenes.prompts import (
     is_count_question,
     perturb,
 )
-from scenes.prompts.atoms import BASE_EXTREMES
-from scenes.prompts.families import Behind, Count, Travel, unsatisfiable
-from scenes.prompts.features import DEFAULT_REGION, actor_features
-from scenes.prompts.nouns import OUT_OF_CLASS
+from scenes.language.prompts.atoms import BASE_EXTREMES
+from scenes.language.prompts.families import Behind, Count, Travel, unsatisfiable
+from scenes.language.prompts.features import DEFAULT_REGION, actor_features
+from scenes.language.prompts.nouns import OUT_OF_CLASS
 from tests.prompt_helpers import CAR, CYC, PED, flip_world, hand_world, make_actor, random_worlds
 
 
@@ -282,7 +282,7 @@ def test_count_is_the_counted_set_and_count_questions_are_detected():
 
 
 def test_direction_of_travel():
-    from scenes.prompts.families import Direction, Travel
+    from scenes.language.prompts.families import Direction, Travel
 
     w = hand_world()  # car 0 drives away along +x, car 1 comes along -x, cyclist 5 along +x
     assert analyse(Predicate(None, (Travel(Direction.SAME),)), w).ids == (0, 5)
@@ -447,7 +447,7 @@ def test_extended_tags_follow_the_predicate(extended):
 
 
 def test_extended_never_says_the_lane_as_in_front_of_us(extended):
-    from scenes.prompts.render import _CHOICES
+    from scenes.language.prompts.render import _CHOICES
 
     for phrasing in ("train", "heldout", "all"):
         lane = _CHOICES[("extended", phrasing)]["position.ahead"]
@@ -479,7 +479,7 @@ def test_out_of_class_nouns_name_no_class():
 
 
 def test_out_of_class_nouns_split_between_the_streams():
-    from scenes.prompts.nouns import HELDOUT_NOUNS, nouns_for
+    from scenes.language.prompts.nouns import HELDOUT_NOUNS, nouns_for
 
     assert 0.25 < len(HELDOUT_NOUNS) / len(OUT_OF_CLASS) < 0.4
     assert set(nouns_for("train")) | set(nouns_for("heldout")) == set(OUT_OF_CLASS)
@@ -499,8 +499,8 @@ def test_out_of_class_nouns_split_between_the_streams():
 
 
 def test_synth_writes_and_reads_an_extended_root(tmp_path):
-    from scenes.root import Talk2RadarRoot
-    from scenes.synth import SynthSettings, main
+    from scenes.synth.generate import SynthSettings, main
+    from scenes.talk2radar.root import Talk2RadarRoot
 
     out = tmp_path / "root"
     args = ["--out", str(out), "--frames", "8", "--prompts-per-world", "8", "--seed", "1"]

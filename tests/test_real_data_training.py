@@ -13,9 +13,9 @@ import torch
 from model.checkpoint import load_checkpoint
 from model.training.data import DataSpecError, MixedFrames, root_specs
 from model.training.loop import SCENE_MODULES, main
-from scenes.frame_dataset import FrameDataset
-from scenes.layout import meta_dir
-from scenes.synth import SynthSettings, generate_root
+from scenes.datasets.frames import FrameDataset
+from scenes.synth.generate import SynthSettings, generate_root
+from scenes.talk2radar.layout import meta_dir
 
 
 @pytest.fixture(scope="module")
@@ -161,7 +161,7 @@ def test_joint_training_with_scene_labels_ignores_outside_the_camera_view(
 ):
     from model import build_model
     from model.training.referent_step import detection_targets, in_grid_actors
-    from scenes.scene_labels import SceneLabels
+    from scenes.talk2radar.scene_labels import SceneLabels
 
     t2r, vod = real_format_roots
     frames = FrameDataset(t2r, "train", scene_labels=SceneLabels(vod))

@@ -9,7 +9,7 @@ import torch
 
 from model import build_model
 from model.config import ReferentConfig
-from model.nets.grid import BevGrid
+from model.core.grid import BevGrid
 from model.nets.numerals import number_spans, token_numeric_features
 from model.nets.text import tokenize_with_numbers
 from model.referent.candidates import (
@@ -21,12 +21,12 @@ from model.referent.candidates import (
 )
 from model.referent.stage import CandidateBatch, ReferentStage, geometry_width, referent_loss
 from model.training.referent_step import ReferentTrainConfig, referent_step
-from scenes.actors import Actor
-from scenes.augment import mirror_actor
-from scenes.dataset import AugmentConfig
-from scenes.frame_dataset import FrameDataset, SensorAugment, scene_ids
-from scenes.root import Talk2RadarRoot
-from scenes.synth import SynthSettings, generate_root
+from scenes.datasets.augment import mirror_actor
+from scenes.datasets.frames import FrameDataset, SensorAugment, scene_ids
+from scenes.datasets.grounding import AugmentConfig
+from scenes.geometry.actors import Actor
+from scenes.synth.generate import SynthSettings, generate_root
+from scenes.talk2radar.root import Talk2RadarRoot
 
 
 @pytest.fixture(scope="module")
@@ -313,7 +313,7 @@ def _reference_radar_evidence(boxes, radar):
 
 
 def _reference_heatmap(detection, boxes, labels, probabilities, grid, anchor, sigma_cells=1.5):
-    from model.head.targets import anchor_points
+    from model.core.anchors import anchor_points
 
     _, h, w = detection.shape
     weight = np.zeros_like(detection, dtype=np.float32)

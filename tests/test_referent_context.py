@@ -23,7 +23,7 @@ from model.referent.context import (
     relation_columns,
 )
 from model.training.loop import widened
-from scenes.actors import CLASSES
+from scenes.geometry.actors import CLASSES
 
 CAR, PED, CYC = (CLASSES.index(c) for c in ("Car", "Pedestrian", "Cyclist"))
 

@@ -43,8 +43,8 @@ from model.referent.subsets import (
     side_probabilities,
     subset_features,
 )
-from scenes.actors import CLASSES, MOVING_SPEED
-from scenes.prompts.atoms import AHEAD_MAX_BEARING_DEG, LANE_HALF_WIDTH
+from scenes.geometry.actors import CLASSES, MOVING_SPEED
+from scenes.language.prompts.atoms import AHEAD_MAX_BEARING_DEG, LANE_HALF_WIDTH
 from tests.stage_helpers import answers_without
 
 CAR, PED, CYC = (CLASSES.index(c) for c in ("Car", "Pedestrian", "Cyclist"))

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from scenes import synth
+from scenes.synth import generate as synth
 
 
 def _error_line(capsys: pytest.CaptureFixture) -> str:

@@ -1,5 +1,5 @@
 """Fuzz-style robustness (issue 11): a few hundred random malformed label, calib, prompt, sidecar,
-split-list and point files fed to the reader (:meth:`scenes.root.Talk2RadarRoot.load`) and the
+split-list and point files fed to the reader (:meth:`scenes.talk2radar.root.Talk2RadarRoot.load`) and the
 evaluator (``python -m model.evaluate --labels --preds``). Each either loads or raises the
 project's error type for that kind of file, with one line naming the file; never another
 exception, never a hang (each case runs under a timer).
@@ -24,10 +24,10 @@ import numpy as np
 import pytest
 
 from model.evaluate import EvaluationInputError, main, score_directories
-from scenes.actors import Actor
-from scenes.calib import CalibrationError
-from scenes.kitti import LabelError, format_label_line, read_label_file
-from scenes.layout import (
+from scenes.geometry.actors import Actor
+from scenes.geometry.calib import CalibrationError
+from scenes.talk2radar.kitti import LabelError, format_label_line, read_label_file
+from scenes.talk2radar.layout import (
     CALIB,
     LABEL,
     LIDAR_FOLDER,
@@ -39,8 +39,8 @@ from scenes.layout import (
     sample_file,
     split_file,
 )
-from scenes.pointcloud import PointCloudError
-from scenes.root import RootError, SampleMeta, Talk2RadarRoot
+from scenes.talk2radar.pointcloud import PointCloudError
+from scenes.talk2radar.root import RootError, SampleMeta, Talk2RadarRoot
 
 SEED = 11
 CASES_PER_FILE = 40

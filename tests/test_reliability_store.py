@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 
 from annotate import AnnotationStore, Draft, SourceFrame, ValidationError
-from scenes.layout import PROMPT, sample_file
-from scenes.root import Talk2RadarRoot
-from scenes.text_policy import forbidden_characters
+from scenes.talk2radar.layout import PROMPT, sample_file
+from scenes.talk2radar.root import Talk2RadarRoot
+from scenes.utils.text_policy import forbidden_characters
 
 SEED = 21
 FUZZ_CASES = 40

@@ -24,8 +24,8 @@ from model.checkpoint import load_checkpoint, read_checkpoint, save_checkpoint
 from model.training.loop import TrainConfig, main, train
 from model.training.state import LAST_FILE, STATE_FILE, RunState, load_run
 from model.training.stop_signal import TrainingInterrupted
-from scenes.layout import LABEL, LIDAR_FOLDER, sample_dir
-from scenes.synth import SynthSettings, generate_root
+from scenes.synth.generate import SynthSettings, generate_root
+from scenes.talk2radar.layout import LABEL, LIDAR_FOLDER, sample_dir
 
 REPO = Path(__file__).resolve().parents[1]
 SHIPPED = REPO / "checkpoints" / "tpcnet-small.pt"

@@ -22,8 +22,8 @@ import weakref
 import pytest
 
 from annotate import AnnotationStore
-from scenes.layout import PROMPT, sample_file
-from scenes.root import Talk2RadarRoot
+from scenes.talk2radar.layout import PROMPT, sample_file
+from scenes.talk2radar.root import Talk2RadarRoot
 
 FRAMES = 3
 

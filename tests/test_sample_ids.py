@@ -1,6 +1,6 @@
 """One frame-id rule for every reader and command (issue 21): exactly 5 ASCII digits.
 
-``scenes.layout`` holds the rule; the split-list reader (``Talk2RadarRoot.ids``), ``launch.py``,
+``scenes.talk2radar.layout`` holds the rule; the split-list reader (``Talk2RadarRoot.ids``), ``launch.py``,
 ``model.evaluate`` (split lists and label / prediction file names) and ``model.evaluation.class_prompts``
 (label file names) refuse the same entries with one line naming the file (and line).
 """
@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenes.layout import RootError, format_id, is_frame_id, parse_id, parse_split_list
-from scenes.root import Talk2RadarRoot
+from scenes.talk2radar.layout import RootError, format_id, is_frame_id, parse_id, parse_split_list
+from scenes.talk2radar.root import Talk2RadarRoot
 
 BAD = [
     "0_0010",  # int() reads it as 10

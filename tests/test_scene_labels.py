@@ -7,11 +7,11 @@ import pytest
 
 from model import LabelledBoxes
 from model.checkpoint import load_checkpoint
-from scenes.actors import CLASSES
-from scenes.calib import IMAGE_SIZE, vod_lidar_calibration
-from scenes.layout import RootError
-from scenes.root import Talk2RadarRoot
-from scenes.scene_labels import SceneLabels, class_index, fov_mask
+from scenes.geometry.actors import CLASSES
+from scenes.geometry.calib import IMAGE_SIZE, vod_lidar_calibration
+from scenes.talk2radar.layout import RootError
+from scenes.talk2radar.root import Talk2RadarRoot
+from scenes.talk2radar.scene_labels import SceneLabels, class_index, fov_mask
 
 
 def test_scene_labels_read_every_object_with_vod_names(tmp_path, write_vod_root):
@@ -73,7 +73,7 @@ def test_ground_over_labelled_boxes_returns_only_those_boxes(tmp_path, write_vod
 
 
 def test_with_context_keeps_labels_first_and_drops_duplicates():
-    from model.referent.labelled import LABELLED_SCORE, with_context
+    from model.core.labelled import LABELLED_SCORE, with_context
 
     labelled = LabelledBoxes(
         np.array([[10.0, 0, -1, 4, 2, 1.5, 0], [20.0, 5, -1, 1, 1, 1.7, 0]]), [0, 1]

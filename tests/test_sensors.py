@@ -8,18 +8,23 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from scenes.actors import Actor
-from scenes.calib import LIDAR_HEIGHT, sensor_to_lidar, vod_lidar_calibration, vod_radar_calibration
-from scenes.lidar_sim import (
+from scenes.geometry.actors import Actor
+from scenes.geometry.calib import (
+    LIDAR_HEIGHT,
+    sensor_to_lidar,
+    vod_lidar_calibration,
+    vod_radar_calibration,
+)
+from scenes.synth.lidar import (
     LidarConfig,
     beam_elevations,
     intensity_response,
     ray_directions,
     simulate_lidar,
 )
-from scenes.radar_sim import CLUTTER, GHOST, RadarConfig, simulate_radar
-from scenes.weather import CLEAR, FOG, RAIN, weather_named
-from scenes.world import (
+from scenes.synth.radar import CLUTTER, GHOST, RadarConfig, simulate_radar
+from scenes.synth.weather import CLEAR, FOG, RAIN, weather_named
+from scenes.synth.world import (
     REFLECTIVITY,
     Mat,
     RayCaster,

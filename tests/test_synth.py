@@ -8,12 +8,11 @@ import numpy as np
 import pytest
 
 from scenes import Talk2RadarRoot
-from scenes.boxes import wrap_yaw
-from scenes.calib import vod_lidar_calibration
-from scenes.camera import CameraConfig
-from scenes.lidar_sim import LidarScan
-from scenes.radar_sim import RadarScan
-from scenes.synth import (
+from scenes.geometry.boxes import wrap_yaw
+from scenes.geometry.calib import vod_lidar_calibration
+from scenes.synth.camera import CameraConfig
+from scenes.synth.frame import GENERATOR_VERSION
+from scenes.synth.generate import (
     MANIFEST,
     SynthError,
     SynthSettings,
@@ -23,7 +22,8 @@ from scenes.synth import (
     sensed_actor_ids,
     world_streams,
 )
-from scenes.synth_frame import GENERATOR_VERSION
+from scenes.synth.lidar import LidarScan
+from scenes.synth.radar import RadarScan
 
 FRAMES = 5
 

@@ -9,10 +9,10 @@ import pytest
 import torch
 
 from model.config import HeadConfig
+from model.core.grid import BevGrid
 from model.head.decode import Detections, decode, rotated_nms
 from model.head.detector import HeadOutput
 from model.head.targets import collate_targets, draw_targets, gaussian_radius
-from model.nets.grid import BevGrid
 
 # 0.5 m cells: every coordinate below is exact in binary floating point.
 GRID = BevGrid(x_min=0.0, x_max=50.0, y_min=-25.0, y_max=25.0, cell=0.5)  # (H, W) = (100, 100)
@@ -369,7 +369,7 @@ def test_rotated_nms_max_keep_is_a_prefix_of_the_full_run():
 def _greedy_reference(boxes, scores, labels, iou_threshold):
     """Per class, the plain greedy NMS over the whole IoU matrix; merged by descending score
     (ties: lower class, then lower index) as the decoder has always merged the classes."""
-    from scenes.boxes import bev_iou
+    from scenes.geometry.boxes import bev_iou
 
     kept = []
     for c in np.unique(labels):

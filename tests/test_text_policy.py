@@ -1,10 +1,10 @@
-"""The one text policy (issue 21): :mod:`scenes.text_policy`."""
+"""The one text policy (issue 21): :mod:`scenes.utils.text_policy`."""
 
 from __future__ import annotations
 
 import pytest
 
-from scenes.text_policy import (
+from scenes.utils.text_policy import (
     ANNOTATOR,
     PROMPT,
     TextPolicyError,

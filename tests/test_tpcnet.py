@@ -11,11 +11,11 @@ import torch
 
 from model import build_config, build_model
 from model.config import ALIASES, ConfigError
+from model.core.grid import BevGrid
 from model.head.decode import decode
 from model.head.detector import HeadOutput
 from model.head.losses import grounding_loss
 from model.head.targets import collate_targets, draw_targets
-from model.nets.grid import BevGrid
 from model.nets.text import EmptyPromptError
 from model.tpcnet import MissingSensorError, NonFiniteInputError, TPCNet
 

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from scenes.synth import SynthSettings, generate_root
+from scenes.synth.generate import SynthSettings, generate_root
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -71,8 +71,8 @@ def test_every_stage_steps_under_bfloat16_autocast(tmp_path: Path, write_tiny_ro
     from model.training.loop import init_from
     from model.training.referent_cache import cache_scenes, cached_referent_step
     from model.training.referent_step import ReferentTrainConfig, float32_output, referent_step
-    from scenes.dataset import GroundingDataset, collate
-    from scenes.frame_dataset import FrameDataset
+    from scenes.datasets.frames import FrameDataset
+    from scenes.datasets.grounding import GroundingDataset, collate
 
     root = tmp_path / "root"
     generate_root(root, 4, SynthSettings(seed=3, prompts_per_world=1), (0.5, 0.25, 0.25))

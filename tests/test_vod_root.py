@@ -15,7 +15,7 @@ import pytest
 
 import launch
 from app.server import default_pairs_root
-from scenes.root import RootError, Talk2RadarRoot
+from scenes.talk2radar.root import RootError, Talk2RadarRoot
 
 
 def _files(root: Path) -> dict[str, tuple[int, int]]:

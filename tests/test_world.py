@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from trimesh.ray.ray_pyembree import RayMeshIntersector
 
-from scenes.actors import Actor
-from scenes.boxes import bev_iou
-from scenes.calib import LIDAR_HEIGHT
-from scenes.world import (
+from scenes.geometry.actors import Actor
+from scenes.geometry.boxes import bev_iou
+from scenes.geometry.calib import LIDAR_HEIGHT
+from scenes.synth.world import (
     CAR_SIZE,
     CYCLIST_SIZE,
     EGO_FOOTPRINT,

@@ -2,7 +2,7 @@
 ``conftest.py``). Not a test module.
 
 The layout is the release's, as a researcher downloads it (written by
-:class:`scenes.vod_writer.VodWriter`): ``lidar/`` and one radar tree (``radar`` by default: a
+:class:`scenes.talk2radar.vod_writer.VodWriter`): ``lidar/`` and one radar tree (``radar`` by default: a
 single scan) with ``ImageSets/`` and ``training/{velodyne,calib,label_2,image_2}``, the camera
 image a 1936 x 1216 JPEG (VoD's size and intrinsics), the radar points stored in the radar's own
 frame (2.51 m ahead of and 1.15 m below the LiDAR), label_2 listing *every* object given (the
@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
-from scenes.calib import IMAGE_SIZE, vod_lidar_calibration, vod_radar_calibration
-from scenes.kitti import boxes_to_labels
-from scenes.projection import project_box_edges
-from scenes.vod_writer import VodWriter
+from scenes.geometry.calib import IMAGE_SIZE, vod_lidar_calibration, vod_radar_calibration
+from scenes.geometry.projection import project_box_edges
+from scenes.talk2radar.kitti import boxes_to_labels
+from scenes.talk2radar.vod_writer import VodWriter
 
 GROUND_Z = -1.7
 """The flat ground of every fixture frame (LiDAR frame)."""
@@ -114,7 +114,7 @@ def write_vod_root(
     splits: Mapping[str, Sequence[int]] | None = None,
 ) -> Path:
     """Write a VoD-layout root (see the module docstring) with ``frames`` frames, ids
-    ``00000..``, through the one writer of the layout (:class:`scenes.vod_writer.VodWriter`);
+    ``00000..``, through the one writer of the layout (:class:`scenes.talk2radar.vod_writer.VodWriter`);
     ``splits`` maps ImageSets names to frame indices (default ``val``: all of them, ``train``:
     the first; ``{}``: no ImageSets folder, as the devkit's example set). Returns ``path``."""
     rng = np.random.default_rng(seed)

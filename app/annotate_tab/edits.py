@@ -34,7 +34,7 @@ from app.annotate_tab.panel import AnnotationPanel, Part
 from app.annotate_tab.referents import ReferentPicker
 from app.annotate_tab.view import box_at, box_tag, ground_hit, screen_axes, wxyz_to_yaw
 from app.query_panel import submitted_prompt
-from scenes.actors import CLASSES
+from scenes.geometry.actors import CLASSES
 
 
 class DraftEdits:

@@ -21,9 +21,9 @@ from typing import Protocol
 
 from annotate import AnnotationStore, StoreError
 from app.session import ClientSession
-from scenes.drives import Drives, find_drives
-from scenes.layout import RootError
-from scenes.root import Talk2RadarRoot
+from scenes.talk2radar.drives import Drives, find_drives
+from scenes.talk2radar.layout import RootError
+from scenes.talk2radar.root import Talk2RadarRoot
 
 log = logging.getLogger(__name__)
 
@@ -94,7 +94,7 @@ class AnnotationHub:
         return self._error
 
     def drives(self, root: Talk2RadarRoot, ids: tuple[str, ...]) -> Drives:
-        """The drives of a split list of ``root`` (:func:`scenes.drives.find_drives`), computed
+        """The drives of a split list of ``root`` (:func:`scenes.talk2radar.drives.find_drives`), computed
         once per list and shared by every browser; none when a pose file is malformed
         (:attr:`drives_error` says which)."""
         key = (str(root.path), tuple(ids))

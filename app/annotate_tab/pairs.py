@@ -28,7 +28,7 @@ from annotate import (
 from app.annotate_tab.formatting import option_pair_id
 from app.annotate_tab.panel import AnnotationPanel, DraftFrame
 from app.scene_view import estimate_ground_z
-from scenes.root import Talk2RadarRoot
+from scenes.talk2radar.root import Talk2RadarRoot
 
 log = logging.getLogger(__name__)
 

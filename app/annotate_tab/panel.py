@@ -58,7 +58,7 @@ from app.annotate_tab.view import DraftView, draft_layer
 from app.annotate_tab.widgets import AnnotationWidgets, build_annotation_widgets
 from app.session import ClientSession
 from app.text import md_text
-from scenes.root import Sample
+from scenes.talk2radar.root import Sample
 
 log = logging.getLogger(__name__)
 

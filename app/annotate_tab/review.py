@@ -14,7 +14,7 @@ Each verdict is a ``review`` line of the manifest with the reviewer's name (*Ann
 *Save options*) (:func:`annotate.review.record_review`, docs/ANNOTATION.md), and the next pair
 opens. Approving with unsaved edits is refused (save them as a fix, or undo them); a pair changed
 by someone else since it was opened is refused too (reopen it). Training and evaluation read the
-approved pairs of a split with :func:`scenes.reviews.approved_ids`.
+approved pairs of a split with :func:`scenes.talk2radar.reviews.approved_ids`.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ from app.annotate_tab.pairs import PairActions
 from app.annotate_tab.panel import AnnotationPanel
 from app.annotate_tab.widgets import SPLITS
 from app.text import md_text
-from scenes.reviews import PairState
+from scenes.talk2radar.reviews import PairState
 
 PREVIOUS, NEXT = "Previous", "Next"
 """The step buttons."""

@@ -1,6 +1,6 @@
 """Sequences in the Annotate tab: play a drive, and carry a pair to the next frame.
 
-On a split whose frames come as drives (pose files, :mod:`scenes.drives`: View-of-Delft, or
+On a split whose frames come as drives (pose files, :mod:`scenes.talk2radar.drives`: View-of-Delft, or
 ``python -m scenes.synth --sequence-length N``), the *Sequence* folder shows where the frame on
 screen is in its drive, a *Play* / *Pause* button (the drive plays at up to 10 Hz, as fast as the
 frames draw, and stops at its last frame), the *Drive frame* slider and *Previous* / *Next*
@@ -32,8 +32,8 @@ from annotate import Draft
 from annotate.carry import carry_boxes
 from app.annotate_tab.panel import AnnotationPanel, Part
 from app.text import md_text
-from scenes.drives import Drive, Drives
-from scenes.poses import FRAME_RATE, lidar_motion
+from scenes.talk2radar.drives import Drive, Drives
+from scenes.talk2radar.poses import FRAME_RATE, lidar_motion
 
 log = logging.getLogger(__name__)
 

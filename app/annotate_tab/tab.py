@@ -26,7 +26,7 @@ from app.annotate_tab.review import ReviewPanel
 from app.annotate_tab.sequence import SequencePanel
 from app.annotate_tab.widgets import NEW_PAIR, REDO, UNDO
 from app.session import ClientSession
-from scenes.actors import CLASSES
+from scenes.geometry.actors import CLASSES
 
 
 def build_annotation_tab(session: ClientSession, hub: AnnotationHub) -> AnnotationPanel:

@@ -36,7 +36,7 @@ import viser
 from annotate import Draft
 from app.boxes_view import BoxesView, BoxStyle
 from app.camera_image import BoxLayer
-from scenes.boxes import points_in_boxes
+from scenes.geometry.boxes import points_in_boxes
 
 DRAFT_COLOR = (235, 235, 255)
 """Draft boxes that are not selected (near-white: unlike every class, GT and radar colour)."""

@@ -15,7 +15,7 @@ import viser
 
 from annotate import DEFAULT_SPLITS
 from app.annotate_tab.formatting import NO_BOX, NO_PAIRS, NO_READY
-from scenes.actors import CLASSES
+from scenes.geometry.actors import CLASSES
 
 SPLITS = DEFAULT_SPLITS
 """Splits offered when saving (the store's default, ``train``, is selected); the store refuses any

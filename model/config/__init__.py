@@ -45,7 +45,7 @@ the command lines take their choices from), ``serial`` (plain data and back, ove
 from __future__ import annotations
 
 from model.config.errors import ConfigError
-from model.config.presets import PRESETS, paper_config, preset, small_config
+from model.config.presets import PRESETS, build_config, paper_config, preset, small_config
 from model.config.sections import (
     ANCHORS,
     LIDAR_FEATURES,
@@ -93,6 +93,7 @@ __all__ = [
     "TextFusionConfig",
     "TextFusionKind",
     "apply_overrides",
+    "build_config",
     "from_plain",
     "paper_config",
     "preset",

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from model.config.errors import ConfigError
 from model.config.sections import (
     BackboneConfig,
@@ -12,7 +14,8 @@ from model.config.sections import (
     PillarConfig,
     TextFusionConfig,
 )
-from model.nets.grid import BevGrid
+from model.config.serial import apply_overrides
+from model.core.grid import BevGrid
 
 
 def small_config() -> ModelConfig:
@@ -40,3 +43,9 @@ def preset(name: str) -> ModelConfig:
     if name not in PRESETS:
         raise ConfigError(f"unknown preset {name!r}; choose one of {sorted(PRESETS)}")
     return PRESETS[name]()
+
+
+def build_config(preset_name: str = "small", **overrides: Any) -> ModelConfig:
+    """The preset's :class:`ModelConfig` with ``overrides`` applied (:func:`model.config.serial.
+    apply_overrides`: ``fusion="bi_mhca"``, ``section__field=value``, ...)."""
+    return apply_overrides(preset(preset_name), **overrides)

@@ -8,7 +8,7 @@ from typing import Any, Literal
 
 from model.config.errors import ConfigError, check_choice, check_positive_ints
 from model.config.serial import ABSENT, apply_overrides, from_plain, to_plain
-from model.nets.grid import BevGrid
+from model.core.grid import BevGrid
 
 Modalities = Literal["lidar", "radar", "both"]
 FusionKind = Literal["baca", "bi_mhca", "lidar_query", "radar_query", "conv_gate"]

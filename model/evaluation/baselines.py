@@ -2,7 +2,7 @@
 
 - **Language-blind oracle** (:func:`oracle_boxes`): a perfect detector that reads only the class
   noun. For each prompt it returns every ground-truth actor of the named class inside the annotated
-  region (:data:`scenes.prompts.DEFAULT_REGION`, tested on :meth:`ActorFeatures.of`), each with
+  region (:data:`scenes.language.prompts.DEFAULT_REGION`, tested on :meth:`ActorFeatures.of`), each with
   score 1. The actors are the frame's full list from the sample's sidecar
   (``Talk2RadarRoot.load(id).meta.actors``), not only the referents of ``label_2``, less those the
   sidecar lists as unsensed (:func:`unsensed_ids`: no LiDAR or radar return, so no prompt refers to
@@ -23,9 +23,9 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from model.evaluation.grounding import CLASS_TAG, PromptBoxes
-from scenes.actors import Actor
-from scenes.prompts import DEFAULT_REGION, ActorFeatures, ReferableRegion
-from scenes.root import SampleMeta
+from scenes.geometry.actors import Actor
+from scenes.language.prompts import DEFAULT_REGION, ActorFeatures, ReferableRegion
+from scenes.talk2radar.root import SampleMeta
 
 CLASS_NOUNS: dict[str | None, str] = {
     "Car": "the cars",

@@ -13,14 +13,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from model.evaluation.metrics import MIN_OVERLAPS
-from scenes.actors import CLASSES
-from scenes.boxes import bev_iou, iou3d
-from scenes.calib import (
+from scenes.geometry.actors import CLASSES
+from scenes.geometry.boxes import bev_iou, iou3d
+from scenes.geometry.calib import (
     Calibration,
     CameraBoxes,
     boxes_camera_to_lidar,
 )
-from scenes.kitti import ObjectLabel
+from scenes.talk2radar.kitti import ObjectLabel
 
 CLASS_PROMPTS: dict[str, str] = {
     "Cyclist": "the cyclists",

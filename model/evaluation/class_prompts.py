@@ -62,19 +62,19 @@ from model.evaluation.class_prompt_counts import (
     other_label_boxes,
 )
 from model.protocol import GroundingModel
-from scenes.actors import CLASSES
-from scenes.calib import IMAGE_SIZE
-from scenes.durable import atomic_write_text
-from scenes.layout import ID_WIDTH, LABEL, is_frame_id, sample_dir
-from scenes.projection import in_camera_view
-from scenes.root import LIDAR_FOLDER, RADAR_FOLDERS, RootError, Sample, Talk2RadarRoot
+from scenes.geometry.actors import CLASSES
+from scenes.geometry.calib import IMAGE_SIZE
+from scenes.geometry.projection import in_camera_view
+from scenes.talk2radar.layout import ID_WIDTH, LABEL, is_frame_id, sample_dir
+from scenes.talk2radar.root import LIDAR_FOLDER, RADAR_FOLDERS, RootError, Sample, Talk2RadarRoot
+from scenes.utils.durable import atomic_write_text
 
 FOVS = ("camera", "all")
 """Counted region: inside the camera image too, or anywhere within the range."""
 
 CANDIDATE_KINDS = ("detector", "labels")
 """What the referent stage chooses among: the detector's proposals, or the frame's labelled
-(metric-class) boxes (grounding apart from detection, :mod:`model.referent.labelled`)."""
+(metric-class) boxes (grounding apart from detection, :mod:`model.core.labelled`)."""
 
 
 @dataclass(frozen=True)
@@ -246,7 +246,7 @@ def score_frame(model: GroundingModel, sample: Sample, config: ScoringConfig) ->
     other_boxes = other_label_boxes(sample.labels, sample.calib)
     labelled = None
     if config.candidates == "labels":
-        from model.referent.labelled import LabelledBoxes
+        from model.core.labelled import LabelledBoxes
 
         labelled = LabelledBoxes(gt_boxes, [CLASSES.index(c) for c in sample.classes])
     features = model.encode_scene(sample.lidar, sample.radar, candidates=labelled)

@@ -6,7 +6,7 @@ prompt's answer on its own, as the referring-expression literature does (ScanRef
 
 All boxes are ``(K, 7)`` float arrays ``x, y, z, l, w, h, yaw`` in the LiDAR frame (x forward,
 y left, z up, metres; ``z`` at the geometric centre, ``yaw`` counter-clockwise about +z), compared
-by the exact 3D IoU of :func:`scenes.boxes.iou3d`. A predicted box can only match a referent of the
+by the exact 3D IoU of :func:`scenes.geometry.boxes.iou3d`. A predicted box can only match a referent of the
 same class. Every figure of a summary is a percentage (0..100) like the official mAP.
 
 Per prompt:
@@ -43,10 +43,10 @@ import numpy as np
 
 from model.evaluation.metrics import MIN_OVERLAPS
 from model.evaluation.report_file import BY_GROUP, BY_TYPE, OVERALL, THRESHOLD, SummaryFigures
-from scenes.boxes import iou3d
+from scenes.geometry.boxes import iou3d
 
 GROUNDING_TYPES: tuple[str, ...] = ("class", "depth", "velocity", "motion", "position")
-"""Prompt type tags the metrics are split by (``scenes.prompts`` tags)."""
+"""Prompt type tags the metrics are split by (``scenes.language.prompts`` tags)."""
 
 CLASS_TAG = "class"
 """The tag of a prompt that names a class; every other tag names an attribute."""

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from model.evaluation.protocol import FrameObjects, Metric
-from scenes.boxes import bev_iou, iou3d
+from scenes.geometry.boxes import bev_iou, iou3d
 
 
 def image_iou(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -33,7 +33,7 @@ def image_intersection_over_first(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 
 def camera_to_overlap_boxes(boxes: np.ndarray) -> np.ndarray:
-    """Camera boxes ``(K, 7)`` ``x, y, z, l, h, w, ry`` -> ``(K, 7)`` boxes for :mod:`scenes.boxes`.
+    """Camera boxes ``(K, 7)`` ``x, y, z, l, h, w, ry`` -> ``(K, 7)`` boxes for :mod:`scenes.geometry.boxes`.
 
     The result lives in the right-handed frame ``(x_cam, z_cam, -y_cam)`` (right, forward, up) with
     the geometric centre and a counter-clockwise yaw: ``(x, z, -y + h/2, l, w, h, -ry)``. A camera

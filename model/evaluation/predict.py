@@ -28,15 +28,15 @@ import torch
 from tqdm import tqdm
 
 from model.checkpoint_meta import CheckpointMeta
-from model.referent.head import UNCALIBRATED_REFERENT
-from model.referent.labelled import LabelledBoxes
-from scenes.calib import IMAGE_SIZE, Calibration, bottom_centres
-from scenes.kitti import ObjectLabel, boxes_to_labels, write_label_file
-from scenes.lru import LRUCache
-from scenes.root import Sample, Talk2RadarRoot
+from model.core.labelled import LabelledBoxes
+from model.grounding.referent import UNCALIBRATED_REFERENT
+from scenes.geometry.calib import IMAGE_SIZE, Calibration, bottom_centres
+from scenes.talk2radar.kitti import ObjectLabel, boxes_to_labels, write_label_file
+from scenes.talk2radar.root import Sample, Talk2RadarRoot
+from scenes.utils.lru import LRUCache
 
 if TYPE_CHECKING:
-    from model.features import SceneFeatures
+    from model.core.features import SceneFeatures
     from model.tpcnet import TPCNet
 
 T = TypeVar("T")
@@ -123,7 +123,7 @@ SceneKey = tuple[object, ...]
 
 
 def scene_key(root: Talk2RadarRoot, sample_id: str) -> SceneKey:
-    """The identity of a sample's frame: :meth:`scenes.root.Talk2RadarRoot.frame_key`."""
+    """The identity of a sample's frame: :meth:`scenes.talk2radar.root.Talk2RadarRoot.frame_key`."""
     return root.frame_key(sample_id)
 
 

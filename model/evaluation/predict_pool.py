@@ -49,7 +49,7 @@ from model.evaluation.predict import (
     iterate_predictions,
     scene_key,
 )
-from scenes.root import Sample, Talk2RadarRoot
+from scenes.talk2radar.root import Sample, Talk2RadarRoot
 
 if TYPE_CHECKING:
     from model.tpcnet import TPCNet

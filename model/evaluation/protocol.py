@@ -30,7 +30,7 @@ Protocol, step by step (every number below is the devkit's):
   of ``left, top, right, bottom`` (no +1); BEV IoU of the rectangles centred at ``(x, z)`` with
   length ``l`` along ``(cos ry, -sin ry)`` and width ``w`` across it; 3D IoU = BEV intersection area
   x vertical overlap of ``[y - h, y]`` over the union of volumes. The BEV and 3D overlaps are exact
-  (:mod:`scenes.boxes`), so identical boxes have IoU 1, which the devkit gets wrong.
+  (:mod:`scenes.geometry.boxes`), so identical boxes have IoU 1, which the devkit gets wrong.
 - Score thresholds: in every frame, each ground truth with state != -1 takes the highest-scoring
   free detection with state != -1 above the minimum overlap; the scores of the pairs with both
   states 0 are pooled over all frames, sorted in descending order and thinned to at most 41
@@ -74,8 +74,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scenes.actors import CLASSES
-from scenes.kitti import ObjectLabel
+from scenes.geometry.actors import CLASSES
+from scenes.talk2radar.kitti import ObjectLabel
 
 NUM_SAMPLE_POINTS = 41
 """Slots of the precision / recall / aos curves (recall 0, 1/40, ..., 1)."""

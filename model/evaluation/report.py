@@ -3,7 +3,7 @@
 - Overall: :func:`model.evaluation.metrics.evaluate_frames` over every frame of the split.
 - Per prompt type (the paper's table III): frames grouped by their prompt's type tags (``depth``,
   ``velocity``, ``motion``, ``position``); a prompt with several tags counts in each. Tags come from
-  the sample's sidecar where present, else from :func:`scenes.prompts.infer_tags` on the text (so
+  the sample's sidecar where present, else from :func:`scenes.language.prompts.infer_tags` on the text (so
   real Talk2Radar prompts are grouped by the same keyword rules).
 - Per depth bin (table IV): "we partition the predicted objects into six depth intervals, each
   spanning 10 meters". An object's depth is its camera-frame forward distance (the label's
@@ -34,6 +34,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from model.core.labelled import LabelledBoxes
 from model.evaluation.baselines import class_noun_prompt, named_class, oracle_boxes, unsensed_ids
 from model.evaluation.grounding import (
     CandidateSource,
@@ -65,12 +66,11 @@ from model.evaluation.report_file import (
     SECONDS,
     BaselineName,
 )
-from model.referent.labelled import LabelledBoxes
-from scenes.actors import CLASSES, Actor
-from scenes.kitti import ObjectLabel, format_label_line, parse_label_line
-from scenes.prompts import infer_tags
-from scenes.root import Sample, Talk2RadarRoot
-from scenes.scene_labels import SceneLabels
+from scenes.geometry.actors import CLASSES, Actor
+from scenes.language.prompts import infer_tags
+from scenes.talk2radar.kitti import ObjectLabel, format_label_line, parse_label_line
+from scenes.talk2radar.root import Sample, Talk2RadarRoot
+from scenes.talk2radar.scene_labels import SceneLabels
 
 if TYPE_CHECKING:
     from model.tpcnet import TPCNet
@@ -243,7 +243,7 @@ def _labels(boxes: PromptBoxes, min_score: float, sample: Sample) -> list[Object
 
 
 def sample_tags(sample: Sample) -> frozenset[str]:
-    """The sidecar's prompt type tags, else :func:`scenes.prompts.infer_tags` of the prompt."""
+    """The sidecar's prompt type tags, else :func:`scenes.language.prompts.infer_tags` of the prompt."""
     meta = sample.meta
     if meta is not None and meta.tags:
         return frozenset(meta.tags)

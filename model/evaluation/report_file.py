@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from model.evaluation.protocol import AREAS
-from scenes.actors import CLASSES
+from scenes.geometry.actors import CLASSES
 
 BaselineName = Literal["class_noun", "oracle"]
 """A baseline: the class-noun prompt, the language-blind oracle (JSON keys under ``baselines``)."""

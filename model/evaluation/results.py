@@ -9,7 +9,7 @@ import numpy as np
 
 from model.evaluation.protocol import AREAS
 from model.evaluation.report_file import MAOS, MAP_3D, MAP_BEV, R40, class_key
-from scenes.actors import CLASSES
+from scenes.geometry.actors import CLASSES
 
 
 @dataclass(frozen=True)

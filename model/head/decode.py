@@ -9,7 +9,7 @@ Per batch item (CenterPoint's decoder, spec section 3.7, with the anchor of sect
    round trip through :func:`model.head.targets.draw_targets` is exact up to float32 storage of the
    small offset), ``z`` as regressed, ``(l, w, h) = exp(log size)``,
    ``yaw = atan2(sin, cos)`` wrapped to ``[-pi, pi)``;
-5. rotated NMS per class with the exact BEV IoU of :func:`scenes.boxes.paired_bev_iou`
+5. rotated NMS per class with the exact BEV IoU of :func:`scenes.geometry.boxes.paired_bev_iou`
    (``HeadConfig.nms_iou``), then the ``HeadConfig.max_detections`` best boxes by score: one
    greedy pass over all classes in descending score order (:func:`class_nms`), which stops once
    that many boxes are kept and compares only boxes whose bounding circles overlap.
@@ -27,11 +27,11 @@ import torch
 import torch.nn.functional as F
 
 from model.config import HeadConfig
+from model.core.anchors import cell_centres
+from model.core.grid import BevGrid
 from model.head.detector import NUM_CLASSES, REGRESSION_CHANNELS, HeadOutput
-from model.head.targets import cell_centres
-from model.nets.grid import BevGrid
-from scenes.actors import CLASSES
-from scenes.boxes import paired_bev_iou, wrap_yaw
+from scenes.geometry.actors import CLASSES
+from scenes.geometry.boxes import paired_bev_iou, wrap_yaw
 
 
 @dataclass(frozen=True)
@@ -96,7 +96,7 @@ def class_nms(
     ``iou_threshold``; the visit stops once ``max_keep`` boxes are kept, so that only the boxes
     before that point are ever compared. Comparisons are vectorised: per block of the visit
     order, the pairs (earlier kept or in-block box, in-block box) of one class whose bounding
-    circles overlap get their exact IoU (:func:`scenes.boxes.paired_bev_iou`) in one call; the
+    circles overlap get their exact IoU (:func:`scenes.geometry.boxes.paired_bev_iou`) in one call; the
     first block holds ``4 * max_keep`` boxes (at least 64), which usually suffices.
 
     Args:

@@ -1,10 +1,10 @@
 """C3D-RECHead: anchor-point heatmaps and box regression (paper section III-E, eqs. 13-17, fig. 7).
 
 The head turns the fused BEV feature map ``(B, C, H, W)`` (rows ``iy`` along +y, columns ``ix``
-along +x; see :mod:`model.nets.grid`) into
+along +x; see :mod:`model.core.grid`) into
 
 - ``heatmap (B, 3, H, W)``: raw logits, one channel per class in the order of
-  :data:`scenes.actors.CLASSES` (Car, Pedestrian, Cyclist). A box's heatmap peaks at its *anchor
+  :data:`scenes.geometry.actors.CLASSES` (Car, Pedestrian, Cyclist). A box's heatmap peaks at its *anchor
   point* (below), not at its centre;
 - ``regression (B, 8, H, W)``: read at the anchor cell, the channels are
   ``(dx, dy, z, log l, log w, log h, sin yaw, cos yaw)``. ``(dx, dy)`` is the offset **in metres**
@@ -47,7 +47,7 @@ from torch import Tensor, nn
 
 from model.config import HeadConfig
 from model.nets.folding import batchnorm_affine
-from scenes.actors import CLASSES
+from scenes.geometry.actors import CLASSES
 
 NUM_CLASSES = len(CLASSES)
 """Heatmap channels: Car, Pedestrian, Cyclist."""

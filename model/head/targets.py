@@ -19,7 +19,7 @@ For every ground-truth box (LiDAR frame, ``x, y, z, l, w, h, yaw``) of a metric 
 The flat cell index of the anchor cell is ``iy * W + ix`` (row-major over the ``(H, W)`` canvas),
 which is what :func:`model.head.losses.grounding_loss` gathers the regression map with.
 
-Box classes outside :data:`scenes.actors.CLASSES` are ignored: they stay in the arrays (so index
+Box classes outside :data:`scenes.geometry.actors.CLASSES` are ignored: they stay in the arrays (so index
 ``k`` still means input box ``k``) with ``label = -1`` and ``mask = False``.
 """
 
@@ -34,10 +34,10 @@ import torch
 from torch import Tensor
 
 from model.config import HeadConfig
+from model.core.anchors import anchor_points, cell_centres
+from model.core.grid import BevGrid
 from model.head.detector import NUM_CLASSES, REGRESSION_CHANNELS
-from model.nets.grid import BevGrid
-from scenes.actors import CLASSES
-from scenes.boxes import nearest_bev_corner, nearest_edge_midpoint
+from scenes.geometry.actors import CLASSES
 
 
 @dataclass(frozen=True)
@@ -140,30 +140,6 @@ def draw_gaussian(heatmap: np.ndarray, row: int, col: int, radius: int) -> None:
     window = heatmap[row - top : row + bottom, col - left : col + right]
     patch = kernel[radius - top : radius + bottom, radius - left : radius + right]
     np.maximum(window, patch, out=window)
-
-
-def anchor_points(boxes: np.ndarray, anchor: str) -> np.ndarray:
-    """Anchor points ``(K, 2)`` (LiDAR frame, metres) of boxes ``(K, 7)`` for an anchor kind."""
-    if anchor == "corner":
-        return np.asarray(nearest_bev_corner(boxes, origin=(0.0, 0.0)), dtype=np.float64)
-    if anchor == "edge":
-        return np.asarray(nearest_edge_midpoint(boxes, origin=(0.0, 0.0)), dtype=np.float64)
-    if anchor == "center":
-        return np.asarray(boxes[:, :2], dtype=np.float64).copy()
-    raise ValueError(f"unknown anchor {anchor!r}")
-
-
-def grid_cell_centres(grid: BevGrid) -> np.ndarray:
-    """Metric centres ``(H * W, 2)`` of every cell of ``grid``, row-major (``[iy, ix]``)."""
-    h, w = grid.shape
-    rows, cols = np.meshgrid(np.arange(h), np.arange(w), indexing="ij")
-    return cell_centres(grid, cols.reshape(-1), rows.reshape(-1))
-
-
-def cell_centres(grid: BevGrid, cols: np.ndarray, rows: np.ndarray) -> np.ndarray:
-    """Metric centres ``(..., 2)`` of integer cells ``(cols, rows)``: the reference of ``(dx, dy)``."""
-    colrow = np.stack([np.asarray(cols, np.float64) + 0.5, np.asarray(rows, np.float64) + 0.5], -1)
-    return grid.cell_to_xy(colrow)
 
 
 def _check_boxes(boxes: np.ndarray, classes: Sequence[str]) -> np.ndarray:

@@ -1,7 +1,7 @@
 """Pillar voxelisation and pillar feature nets for LiDAR and radar (section III-B, PointPillars).
 
 Each sensor's points (LiDAR frame) are binned into vertical pillars on the BEV grid of
-:mod:`model.nets.grid`; pillar ``(iy, ix)`` lands on the canvas at ``canvas[:, iy, ix]`` (row = y index,
+:mod:`model.core.grid`; pillar ``(iy, ix)`` lands on the canvas at ``canvas[:, iy, ix]`` (row = y index,
 column = x index). Per point the PFN sees
 
 - the raw features times a fixed per-feature scale (``PillarConfig.lidar_scale``/``radar_scale``;
@@ -42,8 +42,8 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from model.config import PillarConfig
+from model.core.grid import BevGrid
 from model.nets.folding import batchnorm_affine
-from model.nets.grid import BevGrid
 from model.nets.pillar_kernel import PillarWeights, encode_cloud
 
 

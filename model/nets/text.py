@@ -49,7 +49,7 @@ from torch.nn.utils.rnn import pack_padded_sequence, pad_packed_sequence
 from model.config import TextConfig
 from model.nets.numerals import token_numeric_features
 from model.nets.onednn import FrozenLinear
-from scenes.lru import LRUCache
+from scenes.utils.lru import LRUCache
 
 LOG = logging.getLogger(__name__)
 

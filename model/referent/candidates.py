@@ -31,10 +31,10 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from model.nets.grid import BevGrid
+from model.core.grid import BevGrid
 from model.referent.point_pairs import box_point_pairs
-from scenes.actors import CLASSES
-from scenes.boxes import bev_corners
+from scenes.geometry.actors import CLASSES
+from scenes.geometry.boxes import bev_corners
 
 GEOMETRY_FEATURES = 17
 LIDAR_EVIDENCE = 4
@@ -70,7 +70,7 @@ def geometry_features(boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray)
 
     Args:
         boxes: ``(K, 7)`` LiDAR frame.
-        labels: ``(K,)`` class indices into :data:`scenes.actors.CLASSES`.
+        labels: ``(K,)`` class indices into :data:`scenes.geometry.actors.CLASSES`.
         scores: ``(K,)`` detection scores in ``[0, 1]``.
 
     Returns:
@@ -210,7 +210,7 @@ def pool_bev(feature_map: Tensor, grid: BevGrid, xy: Tensor) -> Tensor:
     """Bilinear samples of a BEV map at metric positions.
 
     Args:
-        feature_map: ``(C, H, W)`` on ``grid`` (``[c, iy, ix]``, see :mod:`model.nets.grid`).
+        feature_map: ``(C, H, W)`` on ``grid`` (``[c, iy, ix]``, see :mod:`model.core.grid`).
         grid: The map's grid.
         xy: ``(K, 2)`` positions in the LiDAR frame (metres), on the map's device.
 

@@ -39,7 +39,7 @@ import numpy as np
 from numba import njit
 
 from model.referent.candidates import nearest_depth
-from scenes.actors import CLASSES
+from scenes.geometry.actors import CLASSES
 
 OBJECT_SCORE = 0.3
 OBJECT_WIDTH = 0.05
@@ -213,7 +213,7 @@ def context_features(boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray) 
 
     Args:
         boxes: ``(K, 7)`` LiDAR frame.
-        labels: ``(K,)`` class indices into :data:`scenes.actors.CLASSES`.
+        labels: ``(K,)`` class indices into :data:`scenes.geometry.actors.CLASSES`.
         scores: ``(K,)`` detection scores in ``[0, 1]``.
 
     Returns:

@@ -18,8 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from model.head.targets import anchor_points
-from model.nets.grid import BevGrid
+from model.core.anchors import anchor_points
+from model.core.grid import BevGrid
 
 _FLOAT32_ZERO = 151 * math.log(2.0)
 """``-ln`` of a value (``2**-151``) below half the smallest float32 subnormal: it rounds to 0."""

@@ -17,14 +17,14 @@ Maps (all on the head grid, ``(C, H, W)``, ``[c, iy, ix]``):
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 
 import numpy as np
 import torch
 from torch import Tensor
 
-from model.head.targets import anchor_points
-from model.nets.grid import BevGrid
+from model.core.anchors import anchor_points
+from model.core.candidates import SceneCandidates, SceneMaps
+from model.core.grid import BevGrid
 from model.referent.candidates import (
     geometry_features,
     lidar_evidence,
@@ -34,38 +34,6 @@ from model.referent.candidates import (
 from model.referent.context import context_features
 from model.referent.stage import CandidateBatch
 from model.referent.subsets import subset_features
-
-
-@dataclass(frozen=True)
-class SceneMaps:
-    """BEV maps of one scene, each ``(C, H, W)`` on the head grid (None for an unused sensor)."""
-
-    fused: Tensor
-    lidar: Tensor | None
-    radar: Tensor | None
-
-
-@dataclass(frozen=True)
-class SceneCandidates:
-    """The candidates of one scene.
-
-    Attributes:
-        boxes: ``(K, 7)`` float64, LiDAR frame.
-        labels: ``(K,)`` int64 class indices.
-        scores: ``(K,)`` float64 detection scores.
-        geometry, fused, lidar, radar: ``(K, F)`` tensors as in :class:`CandidateBatch`.
-    """
-
-    boxes: np.ndarray
-    labels: np.ndarray
-    scores: np.ndarray
-    geometry: Tensor
-    fused: Tensor
-    lidar: Tensor | None
-    radar: Tensor | None
-
-    def __len__(self) -> int:
-        return len(self.boxes)
 
 
 def _pooled(feature_map: Tensor, grid: BevGrid, centres: Tensor, anchors: Tensor) -> Tensor:
@@ -104,7 +72,7 @@ def describe_candidates(
             computed once per scene rather than per prompt; ``ReferentConfig.subset_ranks``).
 
     Returns:
-        :class:`SceneCandidates`; the pooled parts are differentiable in ``maps``.
+        :class:`model.core.candidates.SceneCandidates`; the pooled parts are differentiable in ``maps``.
     """
     boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
     labels = np.asarray(labels, dtype=np.int64).reshape(-1)
@@ -162,8 +130,6 @@ def stack_candidates(scenes: Sequence[SceneCandidates]) -> CandidateBatch:
 
 
 __all__ = [
-    "SceneCandidates",
-    "SceneMaps",
     "describe_candidates",
     "stack_candidates",
 ]

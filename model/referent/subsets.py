@@ -16,7 +16,7 @@ once, as a pure function of the stage's inputs (one compiled pass per scene, num
   subset: 1 for speed ranks (fastest, slowest; ``tau`` :data:`SPEED_TAU` m/s), the probability
   that ``i`` and ``j`` are on the same side (left / ahead / right of the ego corridor,
   :data:`LANE_HALF_WIDTH`) or in the same motion state (moving above
-  :data:`scenes.actors.MOVING_SPEED`) for depth ranks (nearest, farthest; ``tau``
+  :data:`scenes.geometry.actors.MOVING_SPEED`) for depth ranks (nearest, farthest; ``tau``
   :data:`DEPTH_TAU` m). Each rank is given as ``min(r, 6) / 4`` and bumps at ``0 .. 3``, as in
   :mod:`model.referent.context`; plus the candidate's own moving probability.
 - **Picked references** (:data:`PICKED`): for each class ``c``, its fastest, slowest, moving,
@@ -50,14 +50,14 @@ from model.referent.context import (
     rank_code_into,
     softmax_into,
 )
-from scenes.actors import CLASSES, MOVING_SPEED
-from scenes.prompts.atoms import AHEAD_MAX_BEARING_DEG, LANE_HALF_WIDTH
+from scenes.geometry.actors import CLASSES, MOVING_SPEED
+from scenes.language.prompts.atoms import AHEAD_MAX_BEARING_DEG, LANE_HALF_WIDTH
 
 SPEED_TAU = 0.5
 """Metres per second over which a speed rank's step goes from 0.27 to 0.73."""
 DEPTH_TAU = 0.5
 MOTION_WIDTH = 0.1
-"""m/s: the width of the soft step of 'moving' at :data:`scenes.actors.MOVING_SPEED`."""
+"""m/s: the width of the soft step of 'moving' at :data:`scenes.geometry.actors.MOVING_SPEED`."""
 SIDE_WIDTH = 0.3
 """Metres: the width of the soft steps of the sides at ``+-LANE_HALF_WIDTH``."""
 PICK_TAU = 0.5

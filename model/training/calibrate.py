@@ -111,8 +111,8 @@ def calibrate(
             referent (module docstring).
     """
     from model.evaluation.predict import decode_threshold
-    from scenes.layout import split_file
-    from scenes.root import Talk2RadarRoot
+    from scenes.talk2radar.layout import split_file
+    from scenes.talk2radar.root import Talk2RadarRoot
 
     root = Talk2RadarRoot(data)
     ids = root.ids(split)[: limit or None]
@@ -170,7 +170,7 @@ def calibrate_file(
 def calibrate_run(path: Path, data: str | Path, split: str) -> None:
     """Calibrate a finished training run's ``last.pt`` (``path``) on ``split`` of ``data``; a
     split that cannot measure a threshold leaves it at the uncalibrated 0.5, with a notice."""
-    from scenes.layout import RootError
+    from scenes.talk2radar.layout import RootError
 
     try:
         cal = calibrate_file(path, data, split)
@@ -205,7 +205,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     add_options(p, CalibrateConfig)
     a = from_args(CalibrateConfig, p.parse_args(argv))
     from model.checkpoint import CheckpointError
-    from scenes.root import RootError
+    from scenes.talk2radar.root import RootError
 
     try:
         cal = calibrate_file(

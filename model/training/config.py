@@ -24,16 +24,16 @@ from model.config import (
     TextFusionKind,
 )
 from model.training.data import DataSpecError, RootSpec, root_specs
-from scenes.prompts.sampling import FAMILIES, PromptConfig
+from scenes.language.prompts.sampling import FAMILIES, PromptConfig
 
 AmpKind = Literal["none", "bf16"]
 """``--amp``: no autocast, or bfloat16 autocast of the forward passes (CUDA only)."""
 
 LanguageKind = Literal["base", "extended"]
-"""``--language``: the generated prompts' families (``scenes.prompts.PromptConfig.language``)."""
+"""``--language``: the generated prompts' families (``scenes.language.prompts.PromptConfig.language``)."""
 
 PhrasingKind = Literal["train", "heldout", "all"]
-"""``--phrasing``: the generated prompts' wording variants (``scenes.prompts.phrasing``)."""
+"""``--phrasing``: the generated prompts' wording variants (``scenes.language.prompts.phrasing``)."""
 
 
 def default_device() -> str:
@@ -155,19 +155,19 @@ class TrainConfig:
     )
     language: LanguageKind = option(
         "base",
-        help="referent path: the generated prompts' families (scenes.prompts.PromptConfig."
+        help="referent path: the generated prompts' families (scenes.language.prompts.PromptConfig."
         "language): base, or extended with things outside the classes and unsatisfiable "
         "attributes (the empty answer), negation, exclusion, ordinals, relations and counting",
     )
     phrasing: PhrasingKind = option(
         "train",
-        help="referent path: the generated prompts' wording variants (scenes.prompts.phrasing): "
+        help="referent path: the generated prompts' wording variants (scenes.language.prompts.phrasing): "
         "train (default; the held-out variants stay unseen, so a root written with --phrasing "
         "heldout measures new wording), heldout, or all",
     )
     text_noise: float = option(
         0.0,
-        help="referent path: share of generated prompts reworded by scenes.prompts.perturb "
+        help="referent path: share of generated prompts reworded by scenes.language.prompts.perturb "
         "(filler-word dropout, synonyms, typos, casing; the meaning kept), default 0",
     )
     family_rates: tuple[float, ...] = option(
@@ -175,7 +175,7 @@ class TrainConfig:
         flag="--family-rate",
         help="--language extended: the share of prompts of each non-attribute family, given "
         f"{len(FAMILIES) - 1} times in the order {', '.join(FAMILIES[1:])} (the attribute "
-        "family gets the rest; default: scenes.prompts.sampling.EXTENDED_RATES)",
+        "family gets the rest; default: scenes.language.prompts.sampling.EXTENDED_RATES)",
     )
     labelled_views: float = option(
         0.5,

@@ -6,7 +6,7 @@ with the ``--data`` roots in order (give ``none`` for a root without scene label
 than roots leave the rest at weight 1 and without scene labels). A root given scene labels, or one
 without a ``meta/`` folder (a release as it comes), trains on its labels and given prompts and
 never reads a sidecar; a synthetic root with its sidecar trains on generated prompts
-(:class:`scenes.frame_dataset.FrameDataset`). So one command can pre-train on our world and
+(:class:`scenes.datasets.frames.FrameDataset`). So one command can pre-train on our world and
 fine-tune on a user's: ``--data data/synth --data T2R --scene-labels none --scene-labels VOD``.
 
 :class:`MixedFrames` is the epoch over several roots: the items of a root of weight ``w`` are seen
@@ -24,8 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from torch.utils.data import Dataset
 
-from scenes.frame_dataset import FrameDataset, FrameItem
-from scenes.scene_labels import SceneLabels
+from scenes.datasets.frames import FrameDataset, FrameItem
+from scenes.talk2radar.scene_labels import SceneLabels
 
 NO_SCENE_LABELS = "none"
 """The ``--scene-labels`` value of a root that has none."""

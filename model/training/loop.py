@@ -43,9 +43,9 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from model import build_model
 from model.checkpoint import checkpoint_payload, model_from_payload, write_payload
 from model.checkpoint_meta import CheckpointMeta
+from model.tpcnet import build_model
 from model.training import distributed
 from model.training.config import TrainConfig, TrainingError, parse_args
 from model.training.data import MixedFrames, RootSpec, frame_dataset
@@ -75,14 +75,14 @@ from model.training.steps import (
     freeze_scene,
 )
 from model.training.stop_signal import StopRequest, TrainingInterrupted
-from scenes.actors import CLASSES
-from scenes.dataset import AugmentConfig, GroundingDataset
-from scenes.durable import append_json_line
-from scenes.frame_dataset import FrameDataset, SensorAugment
-from scenes.kitti import read_label_file
-from scenes.layout import LABEL, sample_dir, sample_file, split_file
-from scenes.root import Talk2RadarRoot
-from scenes.scene_labels import SceneLabels, class_index
+from scenes.datasets.frames import FrameDataset, SensorAugment
+from scenes.datasets.grounding import AugmentConfig, GroundingDataset
+from scenes.geometry.actors import CLASSES
+from scenes.talk2radar.kitti import read_label_file
+from scenes.talk2radar.layout import LABEL, sample_dir, sample_file, split_file
+from scenes.talk2radar.root import Talk2RadarRoot
+from scenes.talk2radar.scene_labels import SceneLabels, class_index
+from scenes.utils.durable import append_json_line
 
 
 def cosine_lr(step: int, total: int, base: float, warmup: int) -> float:

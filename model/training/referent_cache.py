@@ -10,7 +10,7 @@ false detections included.
 Labelled views (issue 37): the same checkpoint also grounds over a frame's labelled boxes
 (``model.evaluate --candidates labels``, the app's "Labelled boxes", the Annotate tab's
 sentence-first flow), where a candidate's class is its label's and its score certain
-(:mod:`model.referent.labelled`). So each scene is also cached as that kind of candidate set
+(:mod:`model.core.labelled`). So each scene is also cached as that kind of candidate set
 (:attr:`CachedScene.labelled`: its actors' boxes as the labelled boxes, the detector's other
 proposals as context), and a step draws a scene's labelled view with
 ``TrainConfig.labelled_views``. Where the detector is wrong (a sensor it never saw, a person it
@@ -28,12 +28,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
+from model.core.candidates import SceneCandidates
+from model.core.labelled import LabelledBoxes
+from model.grounding.referent import referent_head
 from model.head.losses import LossTerms
 from model.nets.text import encode_minilm_batched, pad_features
 from model.referent.candidates import LIDAR_EVIDENCE, RADAR_EVIDENCE
-from model.referent.head import referent_head
-from model.referent.labelled import LabelledBoxes
-from model.referent.scene_candidates import SceneCandidates
 from model.tpcnet import TPCNet
 from model.training.referent_step import (
     ReferentLoss,
@@ -41,10 +41,10 @@ from model.training.referent_step import (
     _per_item,
     frame_prompts,
 )
-from scenes.actors import CLASSES, Actor
-from scenes.boxes import CENTRE_MATCH_DISTANCE, match_by_centre
-from scenes.frame_dataset import FrameDataset
-from scenes.prompts import PromptConfig
+from scenes.datasets.frames import FrameDataset
+from scenes.geometry.actors import CLASSES, Actor
+from scenes.geometry.boxes import CENTRE_MATCH_DISTANCE, match_by_centre
+from scenes.language.prompts import PromptConfig
 
 
 @dataclass(frozen=True)
@@ -72,8 +72,8 @@ class CachedScene:
 
 def match_detections(boxes: np.ndarray, labels: np.ndarray, actors: Sequence[Actor]) -> np.ndarray:
     """Actor id ``(K,)`` of each detection (-1: none): detections in the given (score) order take
-    the nearest free actor of their class within :data:`scenes.boxes.CENTRE_MATCH_DISTANCE` of
-    the BEV centre (:func:`scenes.boxes.match_by_centre`)."""
+    the nearest free actor of their class within :data:`scenes.geometry.boxes.CENTRE_MATCH_DISTANCE` of
+    the BEV centre (:func:`scenes.geometry.boxes.match_by_centre`)."""
     if not actors:
         return np.full(len(boxes), -1, dtype=np.int64)
     targets = np.stack([a.box for a in actors])
@@ -118,7 +118,7 @@ def scene_views(
 ) -> tuple[SceneCandidates, tuple[SceneCandidates, np.ndarray] | None]:
     """One scene's candidates as inference builds them from the detector's proposals and, with
     ``labelled``, over labelled boxes too, from one pass of the frozen encoder
-    (:meth:`model.referent.head.ReferentGrounding.encode_views`): the metric-class ``actors``
+    (:meth:`model.grounding.referent.ReferentGrounding.encode_views`): the metric-class ``actors``
     whose anchor lies in the head grid are the labelled boxes (their exact boxes, as a label gives
     them), the detector's other proposals the context. The labelled view comes with its
     candidates' actor ids ``(K,)`` (-1 for context); it is None without ``labelled`` or when no

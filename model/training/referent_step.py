@@ -1,14 +1,14 @@
 """One training step of the referent path: detection of every actor + referents of generated prompts.
 
-Per batch of ``B`` scenes (:class:`scenes.frame_dataset.FrameItem`):
+Per batch of ``B`` scenes (:class:`scenes.datasets.frames.FrameItem`):
 
-1. The text-agnostic detector (:meth:`model.nets.scene_encoder.SceneEncoder.detect`) runs once per scene and is
+1. The text-agnostic detector (:meth:`model.grounding.scene_encoder.SceneEncoder.detect`) runs once per scene and is
    trained on *every* actor in the head grid (focal heatmap + smooth-L1, eq. 18).
 2. Candidates per scene: every actor in the grid, its box slightly jittered (the detector's boxes
    are never exact) and its detection score read off the current heatmap at its anchor cell, plus
    the detector's own false detections (decoded boxes that match no actor: parked bicycles, poles,
    ghost objects), which are hard negatives the app will meet.
-3. ``prompts_per_scene`` prompts per scene from :func:`scenes.prompts.generate_prompts` over the
+3. ``prompts_per_scene`` prompts per scene from :func:`scenes.language.prompts.generate_prompts` over the
    scene's actors (the same rules that resolve referents exactly), in the training phrasing stream.
    One encoded scene thus serves many prompts, and same-class actors are the hard negatives. A prompt
    whose referents are not all candidates (outside the head grid) is skipped.
@@ -34,10 +34,12 @@ import numpy as np
 import torch
 from torch import Tensor
 
+from model.core.anchors import grid_cell_centres
+from model.core.grid import BevGrid
+from model.grounding.referent import referent_head
 from model.head.detector import HeadOutput
 from model.head.losses import LossTerms, grounding_loss
-from model.head.targets import BatchTargets, grid_cell_centres
-from model.nets.grid import BevGrid
+from model.head.targets import BatchTargets
 from model.nets.text import (
     MiniLMTextEncoder,
     TextFeatures,
@@ -45,13 +47,12 @@ from model.nets.text import (
     pad_features,
     validate_prompt,
 )
-from model.referent.head import referent_head
 from model.tpcnet import TPCNet
-from scenes.actors import CLASSES, Actor
-from scenes.boxes import CENTRE_MATCH_DISTANCE
-from scenes.calib import Calibration
-from scenes.frame_dataset import AnnotatedRegion, FrameItem
-from scenes.prompts import Prompt, PromptConfig, generate_prompts
+from scenes.datasets.frames import AnnotatedRegion, FrameItem
+from scenes.geometry.actors import CLASSES, Actor
+from scenes.geometry.boxes import CENTRE_MATCH_DISTANCE
+from scenes.geometry.calib import Calibration
+from scenes.language.prompts import Prompt, PromptConfig, generate_prompts
 
 
 @dataclass(frozen=True)
@@ -70,7 +71,7 @@ class ReferentTrainConfig:
         label_prompts: Labels-source frames with scene labels: prompts generated per frame from
             its labelled boxes, beside the given ones (:func:`frame_prompts`).
         language: Families of the generated prompts (``PromptConfig.language``).
-        text_noise: Share of generated prompts reworded by :func:`scenes.prompts.perturb`.
+        text_noise: Share of generated prompts reworded by :func:`scenes.language.prompts.perturb`.
         family_rates: ``language="extended"``: the non-attribute families' shares
             (``PromptConfig.family_rates``); empty: the generator's default.
     """

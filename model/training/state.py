@@ -1,7 +1,7 @@
 """The resumable state of a training run: one file, ``RUN/train_state.pt``, written atomically.
 
 One :func:`save_run` writes everything a resumed run needs to go on exactly as if it had never
-stopped, in one :func:`scenes.durable.atomic_file` replace:
+stopped, in one :func:`scenes.utils.durable.atomic_file` replace:
 
 - ``model``: the model checkpoint (:func:`model.checkpoint.checkpoint_payload`: config, weights,
   metadata);
@@ -54,7 +54,7 @@ from model.checkpoint import (
 from model.checkpoint_meta import CheckpointMeta
 from model.cli import resumable_fields
 from model.training.config import TrainConfig
-from scenes.durable import atomic_file, atomic_write_text, read_json_lines
+from scenes.utils.durable import atomic_file, atomic_write_text, read_json_lines
 
 STATE_FILE = "train_state.pt"
 """The run state in a run folder."""

@@ -34,8 +34,8 @@ from model.tpcnet import TPCNet
 from model.training.config import TrainConfig, TrainingError
 from model.training.referent_cache import CachedScene, TextBank, cache_scenes, shift_evidence
 from model.training.referent_step import ReferentTrainConfig, float32_output
-from scenes.dataset import AugmentConfig, GroundingDataset, collate
-from scenes.frame_dataset import FrameDataset
+from scenes.datasets.frames import FrameDataset
+from scenes.datasets.grounding import AugmentConfig, GroundingDataset, collate
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,184 @@
+"""What the model takes and gives: point-cloud checks, encoded scenes, answers and their timings.
+
+Input rules: points are numpy arrays or tensors ``(N, 4)`` (x, y, z, intensity) and ``(M, 7)``
+(x, y, z, rcs, v_r, v_r_compensated, time), radar already in the LiDAR frame. NaN or inf raise
+:class:`NonFiniteInputError` naming the sensor and row *before* anything reaches the network. An
+empty array (a sensor that returned nothing) is fine; a missing required sensor (``None``)
+raises :class:`MissingSensorError`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from model.core.candidates import SceneCandidates
+from model.core.grid import BevGrid
+
+PointsLike = np.ndarray | Tensor
+
+
+class NonFiniteInputError(ValueError):
+    """A point cloud holds NaN or inf values."""
+
+
+class MissingSensorError(ValueError):
+    """The model needs a sensor's points that were not given."""
+
+
+@dataclass(frozen=True)
+class SceneTimings:
+    """Milliseconds spent in :meth:`model.tpcnet.TPCNet.encode_scene`, per stage."""
+
+    pillars: float
+    backbone: float
+    fusion: float
+    detect: float = 0.0
+    """``grounding="referent"``: neck, head, decoding and candidate description."""
+
+    @property
+    def total(self) -> float:
+        return self.pillars + self.backbone + self.fusion + self.detect
+
+
+@dataclass(frozen=True)
+class GroundTimings:
+    """Milliseconds spent in :meth:`model.tpcnet.TPCNet.ground`, per stage."""
+
+    text: float
+    dggf: float
+    neck: float
+    head: float
+    decode: float
+    referent: float = 0.0
+    """``grounding="referent"``: the referent stage (then ``dggf``, ``neck``, ``head`` are 0)."""
+
+    @property
+    def total(self) -> float:
+        return self.text + self.dggf + self.neck + self.head + self.decode + self.referent
+
+
+@dataclass(frozen=True)
+class SceneFeatures:
+    """Text-independent features of one scene.
+
+    Attributes:
+        stages: ``(lr_1, lr_2, lr_3)``, each ``(1, C_i, H_i, W_i)`` on the model's device.
+        num_lidar: LiDAR points given (before range filtering); 0 when unused.
+        num_radar: Radar points given; 0 when unused.
+        timings: Time per stage of the encoding.
+        objects: ``grounding="referent"`` only: the text-agnostic detections of the scene as
+            referent-stage candidates, and the detector's ``(3, H, W)`` sigmoid heatmaps.
+        answerable: With labelled candidates (:mod:`model.core.labelled`): the first this many
+            candidates are the labelled boxes, the only possible answers (the rest is context).
+            None: every candidate may be an answer.
+    """
+
+    stages: tuple[Tensor, ...]
+    num_lidar: int
+    num_radar: int
+    timings: SceneTimings
+    objects: SceneCandidates | None = None
+    detection_heatmaps: np.ndarray | None = None
+    answerable: int | None = None
+
+
+@dataclass(frozen=True)
+class Answer:
+    """What a grounding head returns for one prompt (:class:`Predictions` less the prompt's
+    text, which :meth:`model.tpcnet.TPCNet.ground` adds with the text encoder's time)."""
+
+    boxes: np.ndarray
+    scores: np.ndarray
+    labels: np.ndarray
+    classes: tuple[str, ...]
+    heatmaps: np.ndarray
+    timings: GroundTimings
+
+
+@dataclass(frozen=True)
+class Predictions:
+    """The answer to one prompt.
+
+    Attributes:
+        boxes: ``(K, 7)`` float64 ``x, y, z, l, w, h, yaw``, LiDAR frame, sorted by score.
+        scores: ``(K,)`` float64 in ``[0, 1]``.
+        labels: ``(K,)`` int64 indices into ``scenes.geometry.actors.CLASSES``.
+        classes: ``K`` class names.
+        heatmaps: ``(3, H, W)`` float32 sigmoid heatmaps (Car, Pedestrian, Cyclist) on ``grid``,
+            ``heatmaps[c, iy, ix]``.
+        grid: The head's BEV grid.
+        prompt: The prompt as encoded (stripped).
+        truncated: Whether the prompt exceeded the text encoder's token limit.
+        timings: Time per stage of the grounding.
+    """
+
+    boxes: np.ndarray
+    scores: np.ndarray
+    labels: np.ndarray
+    classes: tuple[str, ...]
+    heatmaps: np.ndarray
+    grid: BevGrid
+    prompt: str
+    truncated: bool
+    timings: GroundTimings
+
+
+def as_points(points: PointsLike, num_features: int, name: str) -> Tensor:
+    """Validate one cloud and return it as a float32 CPU-or-device tensor ``(N, F)``.
+
+    Raises:
+        TypeError: not an array or tensor.
+        ValueError: wrong shape.
+        NonFiniteInputError: NaN or inf values (names the first bad row).
+    """
+    if isinstance(points, np.ndarray):
+        tensor = torch.from_numpy(np.ascontiguousarray(points, dtype=np.float32))
+    elif isinstance(points, Tensor):
+        tensor = points.detach().to(torch.float32)
+    else:
+        raise TypeError(f"{name} must be a numpy array or a torch tensor, got {type(points)}")
+    if tensor.numel() == 0:
+        return tensor.reshape(0, num_features)
+    if tensor.dim() != 2 or tensor.shape[1] != num_features:
+        raise ValueError(f"{name} must have shape (N, {num_features}), got {tuple(tensor.shape)}")
+    # One sum is finite exactly when every value is (or it overflowed: then look row by row).
+    if not bool(torch.isfinite(tensor.sum())) and not bool(torch.isfinite(tensor).all()):
+        finite = torch.isfinite(tensor).all(dim=1)
+        row = int(torch.nonzero(~finite)[0, 0])
+        raise NonFiniteInputError(
+            f"{name} has NaN or inf values (first at row {row}: {tensor[row].tolist()}); "
+            "remove or fix those points before running the model"
+        )
+    return tensor
+
+
+def _sync(device: torch.device) -> None:
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+class Clock:
+    """Wall-clock lap timer in milliseconds (synchronising CUDA before each reading).
+
+    Disabled (``enabled=False``, as in training) it returns 0 and never synchronises.
+    """
+
+    def __init__(self, device: torch.device, enabled: bool = True) -> None:
+        self.device = device
+        self.enabled = enabled
+        if enabled:
+            _sync(device)
+        self.last = time.perf_counter()
+
+    def lap(self) -> float:
+        if not self.enabled:
+            return 0.0
+        _sync(self.device)
+        now = time.perf_counter()
+        ms, self.last = (now - self.last) * 1000.0, now
+        return ms

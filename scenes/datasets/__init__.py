@@ -1,0 +1,4 @@
+"""The torch training datasets and their augmentations.
+
+The top room of ``scenes``.
+"""

@@ -1,0 +1,118 @@
+"""Prompts generated from a frame's actors, each with its exact referent set.
+
+Each attempt draws an anchor among the referable actors and attributes true of it, resolves the
+predicate over all actors (:mod:`scenes.language.prompts.predicate`) and renders a sentence from the size
+of the resolved set (:mod:`scenes.language.prompts.render`), so a stated count always equals the number of
+referents: count is not a filter, it is said from the resolved set.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from scenes.geometry.actors import Actor
+from scenes.language.prompts.extended import generate_extended
+from scenes.language.prompts.features import DEFAULT_REGION, ReferableRegion, actor_features
+from scenes.language.prompts.noise import perturb
+from scenes.language.prompts.predicate import Predicate, analyse_features
+from scenes.language.prompts.render import Prompt, render_with_variants
+from scenes.language.prompts.sampling import PromptConfig, sample_predicate
+
+__all__ = ["PromptConfig", "generate_prompts"]
+
+
+def generate_prompts(
+    actors: Sequence[Actor],
+    rng: np.random.Generator,
+    n: int,
+    *,
+    region: ReferableRegion = DEFAULT_REGION,
+    config: PromptConfig | None = None,
+) -> list[Prompt]:
+    """Up to ``n`` distinct prompts about the scene, each with its exact referent set.
+
+    Each attempt draws an anchor among the referable actors, attributes true of it (class, depth,
+    position, motion or heading, speed; 0-3 of them plus the class, sometimes a superlative),
+    resolves the predicate over all actors and keeps it when it refers to something, has no
+    conflicts, is crisp (unless ``config.require_crisp`` is False) and neither the predicate nor
+    the text was emitted before. Fewer than ``n`` prompts come back when the scene does not admit
+    ``n`` (none when no actor is referable). Deterministic for a given ``rng`` state.
+    ``config`` defaults to :class:`PromptConfig()`. ``config.p_perturb`` > 0 rewrites that share
+    of the texts with :func:`scenes.language.prompts.noise.perturb` (referents and tags kept). With ``config.language == "extended"`` the
+    prompts come from :func:`scenes.language.prompts.extended.generate_extended` (every family of
+    :data:`~scenes.language.prompts.sampling.FAMILIES`, some with an empty referent set).
+
+    Sentences are drawn from a generator seeded once from ``rng``, so the predicates drawn do
+    not depend on the wording: the ``train`` and ``heldout`` phrasings of one ``rng`` state say
+    the same predicates in other words (up to the rare prompt whose sentence in one wording
+    repeats an earlier one or runs past ``config.max_words`` and is skipped).
+
+    Raises:
+        ValueError: ``n < 0`` or duplicate actor ids.
+    """
+    if n < 0:
+        raise ValueError(f"generate_prompts: n must be >= 0, got {n}")
+    config = config if config is not None else PromptConfig()
+    if config.language == "extended":
+        out = generate_extended(actors, rng, n, region=region, config=config)
+    else:
+        out = _generate_base(actors, rng, n, region, config)
+    if config.p_perturb <= 0.0 or not out:
+        return out
+    noise = np.random.default_rng(int(rng.integers(2**63)))
+    return [
+        replace(p, text=perturb(p.text, noise)) if noise.random() < config.p_perturb else p
+        for p in out
+    ]
+
+
+def _generate_base(
+    actors: Sequence[Actor],
+    rng: np.random.Generator,
+    n: int,
+    region: ReferableRegion,
+    config: PromptConfig,
+) -> list[Prompt]:
+    """The base language's prompts (:func:`generate_prompts`)."""
+    feats = actor_features(actors)
+    inside = [f for f in feats if region.contains(f)]
+    out: list[Prompt] = []
+    if not inside or n == 0:
+        return out
+    words_rng = np.random.default_rng(int(rng.integers(2**63)))
+    seen_pred: set[Predicate] = set()
+    seen_text: set[str] = set()
+    for _ in range(n * config.tries_per_prompt):
+        if len(out) >= n:
+            break
+        anchor = inside[int(rng.integers(len(inside)))]
+        pred = sample_predicate(anchor, rng, config)
+        if pred is None or pred in seen_pred:
+            continue
+        res = analyse_features(pred, feats, region)
+        if not res.usable or (config.require_crisp and not res.crisp):
+            continue
+        if len(res.ids) == 1 and rng.random() < config.plural_bias:
+            continue
+        seen_pred.add(pred)
+        text, variants = render_with_variants(
+            pred,
+            len(res.ids),
+            words_rng,
+            phrasing=config.phrasing,
+            p_count_word=config.p_count_word,
+            p_adjective=config.p_adjective,
+            p_frame=config.p_frame,
+            p_restyle=config.p_restyle,
+            p_number_words=config.p_number_words,
+            max_words=config.max_words,
+        )
+        key = text.lower().rstrip(".!?")
+        if key in seen_text or len(text.split()) > config.max_words:
+            continue
+        seen_text.add(key)
+        out.append(Prompt(text, res.ids, pred.tags, pred, variants))
+    return out

@@ -1,0 +1,283 @@
+"""One synthetic frame: the generation settings, the per-world random streams, and a world built
+and sensed (LiDAR, accumulated radar, camera image) with its prompts drawn over the sensed actors.
+:mod:`scenes.synth` writes such frames as a Talk2Radar root (and re-exports these names).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from scenes.geometry.calib import Calibration, vod_lidar_calibration, vod_radar_calibration
+from scenes.geometry.projection import scale_calibration
+from scenes.language.prompts import LANGUAGES, PHRASINGS, Prompt, PromptConfig, generate_prompts
+from scenes.synth.camera import CameraConfig, render_image
+from scenes.synth.lidar import LidarConfig, LidarScan, simulate_lidar
+from scenes.synth.radar import RadarConfig, RadarScan, simulate_radar
+from scenes.synth.sequence import world_at
+from scenes.synth.weather import WEATHERS, Weather
+from scenes.synth.world import RayCaster, World, WorldConfig, generate_world
+from scenes.talk2radar.layout import RADAR_FOLDER_OF_SCANS
+from scenes.talk2radar.poses import FRAME_RATE
+
+RADAR_FOLDER = RADAR_FOLDER_OF_SCANS
+"""Radar tree per number of accumulated scans (:data:`scenes.talk2radar.layout.RADAR_FOLDER_OF_SCANS`)."""
+MIXED = "mixed"
+MIXED_WEATHER = (("clear", 0.6), ("rain", 0.2), ("fog", 0.2))
+
+
+MAX_SEQUENCE_LENGTH = 100
+"""Longest ``--sequence-length`` (10 s at 10 Hz: straight-line motion is meant for short runs)."""
+
+
+class SynthError(ValueError):
+    """Bad generation settings or an output folder that cannot be resumed."""
+
+
+GENERATOR_VERSION = 2
+"""Bumped whenever the same settings start to give other worlds or sensor data. Recorded in the
+manifest, so that an interrupted root is never finished with another generator's worlds (a root
+written before versions were recorded counts as version 1). 2: issue 14's second calibration
+(the HDL-64's 50 m range for a 10 % target, 0.08 degree azimuth step over the whole forward half
+instead of +-45 degrees, dark clothing, lead-car gaps, turning cyclists)."""
+
+
+@dataclass(frozen=True)
+class SynthSettings:
+    """What determines the generated content (``--frames`` and the splits do not).
+
+    Attributes:
+        seed: Base seed; world ``i`` uses ``SeedSequence([seed, i])``.
+        weather: ``clear``, ``rain``, ``fog`` or ``mixed``.
+        radar_scans: Accumulated radar scans, 1, 3 or 5.
+        prompts_per_world: Prompts (samples) drawn per world (fewer when the world has fewer).
+        min_lidar_points, min_radar_points: An actor can be a referent when it has at least this
+            many LiDAR points or radar points (see :func:`synthesize`).
+        phrasing: Prompt wording stream, ``train``, ``heldout`` or ``all``
+            (``scenes.language.prompts.PromptConfig.phrasing``).
+        camera: The camera image's settings, or None for no image (``--no-camera``).
+        sequence_length: Consecutive 10 Hz frames written per world (``--sequence-length``;
+            :func:`synthesize_sequence`); 1: one frame, as before sequences existed.
+        language: Prompt language, ``base`` or ``extended`` (``--language``;
+            ``scenes.language.prompts.PromptConfig.language``): extended adds out-of-class,
+            unsatisfiable, negation, exclusion, ordinal, relation and counting prompts, some of
+            whose samples have no referent (an empty ``label_2``).
+    """
+
+    seed: int = 0
+    weather: str = "clear"
+    radar_scans: int = 5
+    prompts_per_world: int = 2
+    min_lidar_points: int = 3
+    min_radar_points: int = 1
+    world: WorldConfig = field(default_factory=WorldConfig)
+    lidar: LidarConfig = field(default_factory=LidarConfig)
+    radar: RadarConfig = field(default_factory=RadarConfig)
+    phrasing: str = "train"
+    camera: CameraConfig | None = field(default_factory=CameraConfig)
+    sequence_length: int = 1
+    language: str = "base"
+
+    def __post_init__(self) -> None:
+        if self.phrasing not in PHRASINGS:
+            raise SynthError(f"phrasing must be one of {list(PHRASINGS)}, got {self.phrasing!r}")
+        if self.language not in LANGUAGES:
+            raise SynthError(f"language must be one of {list(LANGUAGES)}, got {self.language!r}")
+        if self.seed < 0:
+            raise SynthError(f"seed must be >= 0, got {self.seed}")
+        if self.weather != MIXED and self.weather not in WEATHERS:
+            raise SynthError(f"weather must be one of {[*WEATHERS, MIXED]}, got {self.weather!r}")
+        if self.radar_scans not in RADAR_FOLDER:
+            raise SynthError(f"radar_scans must be 1, 3 or 5, got {self.radar_scans}")
+        if self.prompts_per_world < 1:
+            raise SynthError(f"prompts_per_world must be >= 1, got {self.prompts_per_world}")
+        if not 1 <= self.sequence_length <= MAX_SEQUENCE_LENGTH:
+            raise SynthError(
+                f"sequence_length must be in [1, {MAX_SEQUENCE_LENGTH}], got {self.sequence_length}"
+            )
+
+    def key(self) -> dict:
+        """The settings recorded in (and compared with) the manifest."""
+        return {
+            "seed": self.seed,
+            "weather": self.weather,
+            "radar_scans": self.radar_scans,
+            "prompts_per_world": self.prompts_per_world,
+            "generator": GENERATOR_VERSION,
+            # Only when not the default, so roots written before the option resume as before.
+            **({"phrasing": self.phrasing} if self.phrasing != "train" else {}),
+            # Only with a camera: a root without images records what it did before cameras.
+            **({"camera": self.camera.key()} if self.camera is not None else {}),
+            **({"sequence_length": self.sequence_length} if self.sequence_length > 1 else {}),
+            **({"language": self.language} if self.language != "base" else {}),
+        }
+
+    def calibrations(self) -> tuple[Calibration, Calibration]:
+        """The LiDAR and radar calibrations written: VoD's, with ``P2`` scaled to the camera
+        image (:attr:`scenes.synth.camera.CameraConfig.image_scale`) where there is one."""
+        lidar, radar = vod_lidar_calibration(), vod_radar_calibration()
+        if self.camera is None or self.camera.image_scale == 1.0:
+            return lidar, radar
+        scale = self.camera.image_scale
+        return scale_calibration(lidar, scale), scale_calibration(radar, scale)
+
+
+@dataclass(frozen=True)
+class StageTimes:
+    """Seconds spent per stage on one world."""
+
+    world: float = 0.0
+    lidar: float = 0.0
+    radar: float = 0.0
+    prompts: float = 0.0
+    camera: float = 0.0
+
+
+@dataclass(frozen=True)
+class SynthFrame:
+    """One sensed world and its prompts.
+
+    Attributes:
+        world: The world (actors, meshes).
+        weather: Its weather.
+        lidar: ``points (N, 4)`` LiDAR frame, and the owner of each point.
+        radar: ``points (M, 7)`` LiDAR frame, and the owner of each point.
+        prompts: Up to ``prompts_per_world`` prompts.
+        sensed: Indices of the actors the prompts could refer to (seen by a sensor).
+        times: Stage timings.
+        image: ``(H, W, 3)`` uint8 camera image at ``t = 0`` (None without a camera, or when the
+            world yielded no prompt and so is not written).
+    """
+
+    world: World
+    weather: Weather
+    lidar: LidarScan
+    radar: RadarScan
+    prompts: tuple[Prompt, ...]
+    sensed: tuple[int, ...]
+    times: StageTimes
+    image: np.ndarray | None = None
+
+
+def world_streams(seed: int, world_index: int) -> dict[str, np.random.Generator]:
+    """The independent random streams of world ``world_index`` (a stream added later is spawned
+    last, so the earlier ones stay as they were)."""
+    children = np.random.SeedSequence([seed, world_index]).spawn(6)
+    names = ("world", "weather", "lidar", "radar", "prompts", "camera")
+    return {name: np.random.default_rng(s) for name, s in zip(names, children, strict=True)}
+
+
+def _pick_weather(settings: SynthSettings, rng: np.random.Generator) -> Weather:
+    if settings.weather != MIXED:
+        return WEATHERS[settings.weather]
+    names, probs = zip(*MIXED_WEATHER, strict=True)
+    return WEATHERS[names[int(rng.choice(len(names), p=probs))]]
+
+
+def sensed_actor_ids(
+    lidar: LidarScan, radar: RadarScan, min_lidar_points: int, min_radar_points: int
+) -> tuple[int, ...]:
+    """Indices of the actors with at least ``min_lidar_points`` LiDAR or ``min_radar_points``
+    radar points (any scan)."""
+    n = int(max(lidar.owner.max(initial=-1), radar.owner.max(initial=-1))) + 1
+    lidar_count = np.bincount(lidar.owner[lidar.owner >= 0], minlength=n)
+    radar_count = np.bincount(radar.owner[radar.owner >= 0], minlength=n)
+    seen = (lidar_count >= min_lidar_points) | (radar_count >= min_radar_points)
+    return tuple(int(i) for i in np.flatnonzero(seen))
+
+
+def synthesize(
+    settings: SynthSettings,
+    world_index: int,
+    radar_to_lidar: np.ndarray,
+    camera_calib: Calibration | None = None,
+) -> SynthFrame:
+    """Build and sense world ``world_index``, draw its prompts and, where it has some and the
+    settings have a camera, render its camera image.
+
+    Prompts are drawn over the *sensed* actors only (:func:`sensed_actor_ids`): an actor hidden
+    from both sensors (occluded, or beyond the LiDAR's reach in fog and missed by the radar) is
+    as invisible to the prompt as it would be to an annotator.
+
+    Args:
+        radar_to_lidar: ``(4, 4)`` radar -> LiDAR transform (``scenes.geometry.calib.sensor_to_lidar``).
+        camera_calib: The LiDAR calibration of the image (default ``settings.calibrations()``).
+    """
+    return synthesize_sequence(settings, world_index, radar_to_lidar, camera_calib, length=1)[0]
+
+
+def synthesize_sequence(
+    settings: SynthSettings,
+    world_index: int,
+    radar_to_lidar: np.ndarray,
+    camera_calib: Calibration | None = None,
+    length: int = 1,
+) -> list[SynthFrame]:
+    """``length`` consecutive frames of world ``world_index`` at :data:`scenes.talk2radar.poses.FRAME_RATE`
+    (:func:`scenes.synth.sequence.world_at`: actors moved by their velocities, the ego by its speed),
+    each sensed and prompted as :func:`synthesize` does one; frame 0 is exactly
+    :func:`synthesize`'s frame. Frame ``k > 0`` draws its sensors, prompts and image from
+    ``SeedSequence([seed, world_index, k])``; the weather stays frame 0's.
+    """
+    rngs = world_streams(settings.seed, world_index)
+    t0 = time.perf_counter()
+    first = generate_world(rngs["world"], world_index, settings.world)
+    weather = _pick_weather(settings, rngs["weather"])
+    built = time.perf_counter() - t0
+    frames = []
+    for k in range(length):
+        world = first if k == 0 else world_at(first, k / FRAME_RATE)
+        streams = rngs if k == 0 else frame_streams(settings.seed, world_index, k)
+        frame = _sense(settings, world, weather, streams, radar_to_lidar, camera_calib)
+        if k == 0:
+            frame = replace(frame, times=replace(frame.times, world=built))
+        frames.append(frame)
+    return frames
+
+
+def frame_streams(seed: int, world_index: int, frame: int) -> dict[str, np.random.Generator]:
+    """The random streams of frame ``frame >= 1`` of a sequence (named as :func:`world_streams`;
+    the world and weather streams go unused: a sequence keeps its first frame's)."""
+    children = np.random.SeedSequence([seed, world_index, frame]).spawn(6)
+    names = ("world", "weather", "lidar", "radar", "prompts", "camera")
+    return {name: np.random.default_rng(s) for name, s in zip(names, children, strict=True)}
+
+
+def _sense(
+    settings: SynthSettings,
+    world: World,
+    weather: Weather,
+    rngs: dict[str, np.random.Generator],
+    radar_to_lidar: np.ndarray,
+    camera_calib: Calibration | None,
+) -> SynthFrame:
+    """Sense one world (LiDAR, radar, prompts over the sensed actors, the camera image)."""
+    t1 = time.perf_counter()
+    caster = RayCaster(world)
+    lidar = simulate_lidar(caster, rngs["lidar"], settings.lidar, weather)
+    t2 = time.perf_counter()
+    radar = simulate_radar(
+        caster, radar_to_lidar, rngs["radar"], settings.radar, weather, settings.radar_scans
+    )
+    t3 = time.perf_counter()
+    sensed = sensed_actor_ids(lidar, radar, settings.min_lidar_points, settings.min_radar_points)
+    candidates = [world.actors[i] for i in sensed]
+    prompts = tuple(
+        generate_prompts(
+            candidates,
+            rngs["prompts"],
+            settings.prompts_per_world,
+            config=PromptConfig(phrasing=settings.phrasing, language=settings.language),
+        )
+    )
+    t4 = time.perf_counter()
+    image = None
+    if settings.camera is not None and prompts:
+        calib = camera_calib if camera_calib is not None else settings.calibrations()[0]
+        size = settings.camera.image_size
+        image = render_image(world, calib, size, weather, rngs["camera"], settings.camera)
+    t5 = time.perf_counter()
+    times = StageTimes(lidar=t2 - t1, radar=t3 - t2, prompts=t4 - t3, camera=t5 - t4)
+    return SynthFrame(world, weather, lidar, radar, prompts, sensed, times, image)

@@ -1,0 +1,30 @@
+"""The ranges a random world is drawn from (:class:`WorldConfig`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from scenes.geometry.calib import LIDAR_HEIGHT
+
+
+@dataclass(frozen=True)
+class WorldConfig:
+    """Ranges of the random world.
+
+    Attributes:
+        cars, pedestrians, cyclists: Inclusive ranges of actor counts (placement may drop a few).
+        ego_speed: Range of the ego speed along +x (m/s); ``ego_stopped`` is the chance it is 0.
+        near_u: Abscissa range where most actors are placed (the annotated area and the camera
+            view); ``far_fraction`` of them go to ``far_u`` instead.
+        lidar_height: Ground plane at ``z = -lidar_height``.
+    """
+
+    cars: tuple[int, int] = (1, 5)
+    pedestrians: tuple[int, int] = (3, 9)
+    cyclists: tuple[int, int] = (3, 9)
+    ego_speed: tuple[float, float] = (0.0, 12.0)
+    ego_stopped: float = 0.1
+    near_u: tuple[float, float] = (4.0, 50.0)
+    far_u: tuple[float, float] = (50.0, 85.0)
+    far_fraction: float = 0.15
+    lidar_height: float = LIDAR_HEIGHT
