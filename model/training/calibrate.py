@@ -28,9 +28,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from model.cli import add_options, from_args, option
 from model.evaluation.grounding import PromptBoxes, prompt_outcome
 from model.evaluation.predict import iterate_predictions
+from scenes.cli import add_options, from_args, option
 
 if TYPE_CHECKING:
     from model.tpcnet import TPCNet

@@ -13,7 +13,6 @@ from typing import Literal, get_args
 
 import torch
 
-from model.cli import add_options, from_args, option
 from model.config import (
     AnchorKind,
     FusionKind,
@@ -24,6 +23,7 @@ from model.config import (
     TextFusionKind,
 )
 from model.training.data import DataSpecError, RootSpec, root_specs
+from scenes.cli import add_options, from_args, option
 from scenes.prompts.sampling import FAMILIES, PromptConfig
 
 AmpKind = Literal["none", "bf16"]
@@ -62,7 +62,7 @@ class TrainingError(RuntimeError):
 @dataclass(frozen=True, kw_only=True)
 class TrainConfig:
     """Everything that defines a training run (stored in the checkpoints). Each field is one flag
-    of ``python -m model.train`` (:mod:`model.cli`); ``on_resume`` marks the settings a resumed
+    of ``python -m model.train`` (:mod:`scenes.cli`); ``on_resume`` marks the settings a resumed
     run may change (:data:`model.training.state.FREE_ON_RESUME`)."""
 
     data: tuple[str, ...] = option(
