@@ -7,7 +7,7 @@ how they combine. :class:`TrainConfig` is stored in every checkpoint and run sta
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal, get_args
 
@@ -57,6 +57,25 @@ GENERATED_PROMPTS_PER_SCENE = 8
 
 class TrainingError(RuntimeError):
     """Training cannot go on (bad data, non-finite loss); the message says why."""
+
+
+@dataclass(frozen=True)
+class PromptDraw:
+    """The prompts the referent path generates per scene and step: what
+    :meth:`TrainConfig.prompt_draw` makes of the run's flags (their one home is
+    :class:`TrainConfig`; :class:`model.training.referent_step.ReferentTrainConfig` holds this).
+
+    Attributes:
+        per_scene: Prompts generated per scene and step (``--prompts-per-scene``).
+        label_prompts: Labels-source frames with scene labels: prompts generated per frame from
+            its labelled boxes, beside the given ones (``--label-prompts``).
+        config: The generator's settings: ``--phrasing``, ``--language``, ``--text-noise`` (its
+            ``p_perturb``) and ``--family-rate`` (:class:`scenes.prompts.PromptConfig`).
+    """
+
+    per_scene: int
+    label_prompts: int = 0
+    config: PromptConfig = field(default_factory=PromptConfig)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -244,6 +263,15 @@ class TrainConfig:
         """The training roots (:func:`model.training.data.root_specs`)."""
         return root_specs(self.data, self.data_weights, self.scene_labels)
 
+    def prompt_draw(self) -> PromptDraw:
+        """The referent path's prompts of these settings (the one place the flags are mapped to
+        the generator's)."""
+        rates = {"family_rates": self.family_rates} if self.family_rates else {}
+        config = PromptConfig(
+            phrasing=self.phrasing, language=self.language, p_perturb=self.text_noise, **rates
+        )
+        return PromptDraw(self.prompts_per_scene, self.label_prompts, config)
+
     def model_overrides(self) -> dict[str, str]:
         """The ``build_model`` overrides given on the command line."""
         names = ("modalities", "fusion", "text_fusion", "anchor", "text_encoder", "grounding")
@@ -271,6 +299,7 @@ __all__ = [
     "GENERATED_PROMPTS_PER_SCENE",
     "LABELLED_PROMPTS_PER_SCENE",
     "LABEL_PROMPTS",
+    "PromptDraw",
     "TrainConfig",
     "TrainingError",
     "parse_args",

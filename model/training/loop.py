@@ -271,14 +271,7 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
         )
     else:
         dataset = GroundingDataset(root, cfg.train_split, augment=augment, seed=cfg.seed)
-    referent_cfg = ReferentTrainConfig(
-        prompts_per_scene=cfg.prompts_per_scene,
-        label_prompts=cfg.label_prompts,
-        language=cfg.language,
-        text_noise=cfg.text_noise,
-        phrasing=cfg.phrasing,
-        family_rates=cfg.family_rates,
-    )
+    referent_cfg = ReferentTrainConfig(cfg.prompt_draw())
 
     state = TrainState()
     run: RunState | None = None

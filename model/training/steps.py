@@ -203,7 +203,7 @@ def freeze_scene(
                 progress=progress,
                 label_prompts=cfg.label_prompts,
                 known=bank,
-                prompt_config=referent_cfg.prompt_config(),
+                prompt_config=referent_cfg.prompts.config,
             )
             into += part
             bank.entries.update(part_bank.entries)
