@@ -148,7 +148,7 @@ def calibrate_file(
         CalibrationError: the split cannot measure a threshold (the checkpoint is untouched).
     """
     from model.checkpoint import load_checkpoint, save_checkpoint
-    from model.checkpoint_meta import CheckpointMeta
+    from model.checkpoint_meta import CheckpointMeta, portable_path
 
     model = load_checkpoint(path)
     cal = calibrate(model, data, split, limit, min_prompts)
@@ -156,7 +156,7 @@ def calibrate_file(
         meta = CheckpointMeta.of(model).replace(
             operating_threshold=cal.threshold,
             operating_threshold_source={
-                "root": str(Path(data).resolve()),
+                "root": portable_path(data),
                 "split": split,
                 "prompts": cal.prompts,
                 "set_f1": round(cal.set_f1, 2),

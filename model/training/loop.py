@@ -323,11 +323,11 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
     metadata = CheckpointMeta(
         train_config=asdict(cfg),
         data={
-            "root": str(Path(specs[0].path).resolve()),
-            "roots": [str(Path(spec.path).resolve()) for spec in specs],
+            "root": specs[0].path,
+            "roots": [spec.path for spec in specs],
             "train_samples": len(dataset),
         },
-    )
+    ).with_portable_paths()
 
     def checkpoint(best: bool) -> None:
         """Every rank's RNG state to rank 0, which writes the run state and ``last.pt``; the
