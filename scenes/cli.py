@@ -173,9 +173,12 @@ def _add_option(
         else:
             kw.update(action="append", required=required)
         if not required:
-            kw["default"] = list(_default(f))
+            default = _default(f)
+            kw["default"] = None if default is None else list(default)
         if item is not str:
             kw["type"] = item
+        if f.metadata.get("choices") is not None:
+            kw["choices"] = list(f.metadata["choices"])
         if f.metadata.get("flag"):
             kw["metavar"] = name.lstrip("-").replace("-", "_").upper()
     else:

@@ -198,12 +198,17 @@ class CalibrateConfig:
     )
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """``python -m model.calibrate``'s parser (:class:`CalibrateConfig`'s flags)."""
     p = argparse.ArgumentParser(
         prog="python -m model.calibrate", description=__doc__.split("\n")[0]
     )
     add_options(p, CalibrateConfig)
-    a = from_args(CalibrateConfig, p.parse_args(argv))
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    a = from_args(CalibrateConfig, build_parser().parse_args(argv))
     from model.checkpoint import CheckpointError
     from scenes.root import RootError
 

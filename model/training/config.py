@@ -278,21 +278,37 @@ class TrainConfig:
         return {n: getattr(self, n) for n in names if getattr(self, n) is not None}
 
 
-def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
-    """Parse the command line into a :class:`TrainConfig` and the resume flag."""
+@dataclass(frozen=True, kw_only=True)
+class TrainCommand:
+    """The flags of ``python -m model.train`` that are not a run's settings (:class:`TrainConfig`).
+
+    Attributes:
+        resume: Continue the run in ``--out``.
+        threads: torch's CPU threads (0: torch's default).
+    """
+
+    resume: bool = option(False, help="continue the run in --out")
+    threads: int = option(
+        0, help="torch CPU threads (0: torch's default); use 1 when other jobs share the cores"
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``python -m model.train``'s parser: :class:`TrainConfig`'s flags, then
+    :class:`TrainCommand`'s."""
     p = argparse.ArgumentParser(prog="python -m model.train", description=__doc__.split("\n")[0])
     add_options(p, TrainConfig)
-    p.add_argument("--resume", action="store_true", help="continue the run in --out")
-    p.add_argument(
-        "--threads",
-        type=int,
-        default=0,
-        help="torch CPU threads (0: torch's default); use 1 when other jobs share the cores",
-    )
-    a = p.parse_args(argv)
-    if a.threads:
-        torch.set_num_threads(a.threads)
-    return from_args(TrainConfig, a), a.resume
+    add_options(p, TrainCommand)
+    return p
+
+
+def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
+    """Parse the command line into a :class:`TrainConfig` and the resume flag."""
+    a = build_parser().parse_args(argv)
+    command = from_args(TrainCommand, a)
+    if command.threads:
+        torch.set_num_threads(command.threads)
+    return from_args(TrainConfig, a), command.resume
 
 
 __all__ = [
