@@ -36,8 +36,11 @@ import subprocess
 import sys
 import threading
 from collections.abc import Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Literal
+
+from scenes.utils.cli import add_options, from_args, option
 
 if TYPE_CHECKING:
     from model import TPCNet
@@ -59,56 +62,58 @@ class LaunchError(Exception):
     """A user error: bad flags, a missing or invalid file. Exit code 2."""
 
 
-def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
-    from model import DEFAULT_CHECKPOINT
+@dataclass(frozen=True, kw_only=True)
+class LaunchConfig:
+    """The flags of ``python launch.py`` that are not the app's (``--host``, ``--port``,
+    ``--pairs`` and ``--scene-labels`` are :class:`app.server.AppConfig`'s fields).
+
+    Attributes:
+        data: The served root (None: the default synthetic set, :func:`ensure_default_data`).
+        checkpoint: The served checkpoint (None: ``model.DEFAULT_CHECKPOINT``).
+        device: The model's device.
+        split: The ImageSets split served (None: :func:`choose_split`'s choice).
+        threads: torch's CPU threads per model call.
+    """
+
+    data: Path | None = option(
+        None, help=f"a Talk2Radar root (default: synthetic scenes generated into {DEFAULT_DATA})"
+    )
+    checkpoint: Path | None = option(
+        None, help="a TPCNet checkpoint (default: the bundled one, model.DEFAULT_CHECKPOINT)"
+    )
+    device: Literal["cpu", "cuda"] = option("cpu", help="model device")
+    split: str | None = option(
+        None,
+        help="ImageSets split to browse (default: the first of test, val, train whose frames "
+        "all have their files)",
+    )
+    threads: int = option(
+        1,
+        help="CPU threads per model call (default %(default)s: on a small shared machine, torch's "
+        "multi-threaded kernels slow down badly once the cores are busy)",
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The parser of ``python launch.py``: :class:`LaunchConfig`'s and the command-line fields of
+    :class:`app.server.AppConfig` (imports the app)."""
+    from app.server import AppConfig
 
     p = argparse.ArgumentParser(
         prog="python launch.py",
         description="Serve the Talk2PC viser app: type a sentence, see the referred objects boxed.",
     )
-    p.add_argument(
-        "--data",
-        type=Path,
-        default=None,
-        help=f"a Talk2Radar root (default: synthetic scenes generated into {DEFAULT_DATA})",
-    )
-    p.add_argument(
-        "--checkpoint",
-        type=Path,
-        default=None,
-        help=f"a TPCNet checkpoint (default: {DEFAULT_CHECKPOINT.relative_to(REPO)})",
-    )
-    p.add_argument("--host", default="127.0.0.1", help="interface to bind (default 127.0.0.1)")
-    p.add_argument("--port", type=int, default=8080, help="port (default 8080; 0 = any free)")
-    p.add_argument("--device", default="cpu", choices=("cpu", "cuda"), help="model device")
-    p.add_argument(
-        "--split",
-        default=None,
-        help="ImageSets split to browse (default: the first of test, val, train whose frames "
-        "all have their files)",
-    )
-    p.add_argument(
-        "--pairs",
-        type=Path,
-        default=None,
-        help="where annotation saves prompt-to-box pairs, a Talk2Radar root (default: the "
-        "served root when it has prompts, else <ROOT>-talk2radar beside it)",
-    )
-    p.add_argument(
-        "--scene-labels",
-        type=Path,
-        default=None,
-        help="the View-of-Delft root whose label_2 lists every object of the served frames: the "
-        "Query tab then offers Candidates: Labelled boxes (a VoD root opened directly is its own)",
-    )
-    p.add_argument(
-        "--threads",
-        type=int,
-        default=1,
-        help="CPU threads per model call (default 1: on a small shared machine, torch's "
-        "multi-threaded kernels slow down badly once the cores are busy)",
-    )
-    return p.parse_args(argv)
+    add_options(p, LaunchConfig, only=("data", "checkpoint"))
+    add_options(p, AppConfig, only=("host", "port"))
+    add_options(p, LaunchConfig, only=("device", "split"))
+    add_options(p, AppConfig, only=("pairs_root", "scene_labels"))
+    add_options(p, LaunchConfig, only=("threads",))
+    return p
+
+
+def parse_args(argv: Sequence[str] | None = None) -> argparse.Namespace:
+    """The flags of both dataclasses (:func:`build_parser`); usage errors exit 2."""
+    return build_parser().parse_args(argv)
 
 
 def ensure_default_data(
@@ -274,7 +279,8 @@ def load_model(checkpoint: Path | None, device: str, threads: int = 1) -> tuple[
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = parse_args(argv)
+    flags = parse_args(argv)
+    args = from_args(LaunchConfig, flags)
     logging.basicConfig(
         level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
     )
@@ -284,7 +290,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     from scenes.talk2radar.root import RootError
 
     try:
-        check_listen_address(args.host, args.port)
+        app_flags = from_args(AppConfig, flags)
+        check_listen_address(app_flags.host, app_flags.port)
         data = args.data if args.data is not None else ensure_default_data()
         root = open_root(data, args.split)
         split = choose_split(root, args.split)
@@ -296,13 +303,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("Interrupted.", file=sys.stderr)
         return 130
 
-    config = AppConfig(
-        host=args.host,
-        port=args.port,
+    config = replace(
+        app_flags,
         split=split,
         model_note=note,
-        pairs_root=args.pairs,
-        scene_labels=args.scene_labels,
         freeze_startup=True,  # this process only serves: cheap collections after disconnects
     )
     try:
@@ -312,7 +316,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:
-        print(f"error: cannot serve on {args.host}:{args.port}: {exc}", file=sys.stderr)
+        print(f"error: cannot serve on {config.host}:{config.port}: {exc}", file=sys.stderr)
         return 2
     stop = threading.Event()
     # Explicit handlers: Ctrl-C works even where SIGINT was inherited as ignored (a background

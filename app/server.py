@@ -61,6 +61,7 @@ from app.navigation import (
 from app.scene_view import chase_pose
 from app.session import ClientSession, ExtraTab, SessionOptions
 from scenes.talk2radar.root import Talk2RadarRoot
+from scenes.utils.cli import option
 
 log = logging.getLogger(__name__)
 
@@ -150,8 +151,8 @@ class AppConfig:
             "Candidates: Labelled boxes".
     """
 
-    host: str = "127.0.0.1"
-    port: int = 8080
+    host: str = option("127.0.0.1", help="interface to bind (default %(default)s)")
+    port: int = option(8080, help="port (default %(default)s; 0 = any free)")
     split: str = "test"
     title: str = "Talk2PC"
     model_note: str | None = None
@@ -161,9 +162,19 @@ class AppConfig:
     warm_up: bool = True
     dark_mode: bool = True
     start_timeout: float = 20.0
-    pairs_root: Path | None = None
+    pairs_root: Path | None = option(
+        None,
+        flag="--pairs",
+        metavar="PAIRS",
+        help="where annotation saves prompt-to-box pairs, a Talk2Radar root (default: the "
+        "served root when it has prompts, else <ROOT>-talk2radar beside it)",
+    )
     freeze_startup: bool = False
-    scene_labels: Path | None = None
+    scene_labels: Path | None = option(
+        None,
+        help="the View-of-Delft root whose label_2 lists every object of the served frames: the "
+        "Query tab then offers Candidates: Labelled boxes (a VoD root opened directly is its own)",
+    )
 
 
 PAIRS_SUFFIX = "-talk2radar"

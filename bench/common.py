@@ -23,6 +23,7 @@ import argparse
 import shlex
 import sys
 from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import torch
@@ -61,6 +62,7 @@ from bench.report import (
     write_result,
 )
 from bench.workloads import WARM_UP_PROMPTS, SceneWorkload, synthetic_scenes, warm_up
+from scenes.utils.cli import add_options, from_args, option
 
 DEFAULT_THREADS = 1
 """Torch intra-op threads of the benchmarks unless ``--threads`` says otherwise: the app's default
@@ -75,6 +77,7 @@ __all__ = [
     "RESULTS_DIR",
     "SCHEMA",
     "WARM_UP_PROMPTS",
+    "BenchOptions",
     "BenchResult",
     "BenchResultError",
     "FlopCount",
@@ -85,6 +88,7 @@ __all__ = [
     "Table",
     "Target",
     "bench_main",
+    "bench_parser",
     "command_line",
     "count_flops",
     "count_params",
@@ -116,42 +120,63 @@ def command_line(module: str, argv: Sequence[str]) -> str:
     return shlex.join(["python", "-m", module, *argv])
 
 
+@dataclass(frozen=True, kw_only=True)
+class BenchOptions:
+    """The flags every benchmark shares (:func:`bench_main`).
+
+    Attributes:
+        quick: Fewer repetitions and sizes (a smoke run).
+        threads: torch's intra-op CPU threads (None: the benchmark's default, ``default_threads``
+            of :func:`bench_main`).
+        out_dir: Where the JSON goes.
+    """
+
+    quick: bool = option(False, help="fewer repetitions and sizes (a smoke run)")
+    threads: int | None = option(
+        None,
+        help=f"torch intra-op CPU threads (default: the benchmark's, {DEFAULT_THREADS} as the "
+        "app's launch.py unless its docstring says otherwise)",
+    )
+    out_dir: Path = option(RESULTS_DIR, help="where the JSON goes")
+
+
+def bench_parser(
+    module: str, description: str = "", options: type | None = None
+) -> argparse.ArgumentParser:
+    """The parser of ``python -m <module>``: :class:`BenchOptions`' flags, then those of the
+    benchmark's own ``options`` dataclass (its fields are ``run``'s keyword arguments)."""
+    parser = argparse.ArgumentParser(prog=f"python -m {module}", description=description)
+    add_options(parser, BenchOptions)
+    if options is not None:
+        add_options(parser, options)
+    return parser
+
+
 def bench_main(
     module: str,
     run: Callable[..., BenchResult],
     argv: Sequence[str] | None = None,
     description: str = "",
     default_threads: int = DEFAULT_THREADS,
-    options: Callable[[argparse.ArgumentParser], None] | None = None,
+    options: type | None = None,
 ) -> int:
     """Command line shared by the benchmarks: ``[--quick] [--threads N] [--out-dir DIR]``.
 
     Sets torch's intra-op threads (default ``default_threads``), runs ``run(quick=...,
-    command=..., **own)``, prints the Markdown and writes the JSON; ``options`` adds a
-    benchmark's own arguments to the parser, passed to ``run`` by their ``dest`` names.
+    command=..., **own)``, prints the Markdown and writes the JSON; ``options``: the benchmark's
+    own flags, a frozen dataclass whose fields are passed to ``run`` by name.
     """
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = argparse.ArgumentParser(prog=f"python -m {module}", description=description)
-    parser.add_argument(
-        "--quick", action="store_true", help="fewer repetitions and sizes (a smoke run)"
-    )
-    parser.add_argument(
-        "--threads",
-        type=int,
-        default=default_threads,
-        help=f"torch intra-op CPU threads (default {default_threads}"
-        + (", as the app's launch.py)" if default_threads == DEFAULT_THREADS else ")"),
-    )
-    parser.add_argument("--out-dir", type=Path, default=RESULTS_DIR, help="where the JSON goes")
-    if options is not None:
-        options(parser)
+    parser = bench_parser(module, description, options)
     args = parser.parse_args(argv)
-    if args.threads < 1:
-        parser.error(f"--threads must be >= 1, got {args.threads}")
-    torch.set_num_threads(args.threads)
-    own = {k: v for k, v in vars(args).items() if k not in ("quick", "threads", "out_dir")}
-    result = run(quick=args.quick, command=command_line(module, argv), **own)
+    shared = from_args(BenchOptions, args)
+    threads = default_threads if shared.threads is None else shared.threads
+    if threads < 1:
+        parser.error(f"--threads must be >= 1, got {threads}")
+    torch.set_num_threads(threads)
+    own = {} if options is None else asdict(from_args(options, args))
+    result = run(quick=shared.quick, command=command_line(module, argv), **own)
     print(result.to_markdown())
-    path = write_result(result, args.out_dir)
+    path = write_result(result, shared.out_dir)
     print(f"wrote {path}")
     return 0

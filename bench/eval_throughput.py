@@ -26,12 +26,14 @@ import subprocess
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
-from bench.common import bench_main
+from bench.common import bench_main, bench_parser
 from bench.measure import summarize
 from bench.report import REPO, BenchResult, Table, Target, fmt_ratio, machine_info
 from scenes.talk2radar.root import Talk2RadarRoot, Talk2RadarWriter
+from scenes.utils.cli import option
 
 PROMPTS = 300
 SEED = 5
@@ -149,21 +151,27 @@ def run(
     )
 
 
-def options(parser: argparse.ArgumentParser) -> None:
-    """This benchmark's own options (see the module docstring)."""
-    parser.add_argument("--root", type=Path, default=Path("/tmp/talk2pc-eval-300"))
-    parser.add_argument("--repeats", type=int, default=None, help="runs of each (default 3)")
-    parser.add_argument("--baseline-code", type=Path, default=None, help="an older checkout")
-    parser.add_argument(
-        "--eval-threads",
-        type=int,
-        default=None,
-        help="torch threads of the timed commands (OMP_NUM_THREADS; default: torch's own)",
+@dataclass(frozen=True, kw_only=True)
+class EvalThroughputOptions:
+    """This benchmark's own flags (see the module docstring; :func:`run`'s keyword arguments)."""
+
+    root: Path = option(Path("/tmp/talk2pc-eval-300"))
+    repeats: int | None = option(None, help="runs of each (default 3)")
+    baseline_code: Path | None = option(None, help="an older checkout")
+    eval_threads: int | None = option(
+        None, help="torch threads of the timed commands (OMP_NUM_THREADS; default: torch's own)"
     )
 
 
+def build_parser() -> argparse.ArgumentParser:
+    """``python -m bench.eval_throughput``'s parser."""
+    return bench_parser("bench.eval_throughput", __doc__.splitlines()[0], EvalThroughputOptions)
+
+
 def main(argv: list[str] | None = None) -> int:
-    return bench_main("bench.eval_throughput", run, argv, __doc__.splitlines()[0], options=options)
+    return bench_main(
+        "bench.eval_throughput", run, argv, __doc__.splitlines()[0], options=EvalThroughputOptions
+    )
 
 
 if __name__ == "__main__":

@@ -17,9 +17,12 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from scenes.utils.cli import add_options, from_args, option
 
 _REPO = Path(__file__).resolve().parents[1]
 if str(_REPO) not in sys.path:
@@ -70,11 +73,25 @@ def errors(lidar: np.ndarray, cls: str, truth: np.ndarray, use_cls: bool, cfg: F
     )
 
 
+@dataclass(frozen=True, kw_only=True)
+class FitAccuracyOptions:
+    """The flags of ``python -m bench.fit_accuracy``."""
+
+    data: Path = option(_REPO / "data" / "default")
+    samples: int = option(120)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``python -m bench.fit_accuracy``'s parser."""
+    p = argparse.ArgumentParser(
+        prog="python -m bench.fit_accuracy", description=__doc__.splitlines()[0]
+    )
+    add_options(p, FitAccuracyOptions)
+    return p
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--data", type=Path, default=_REPO / "data" / "default")
-    p.add_argument("--samples", type=int, default=120)
-    args = p.parse_args(argv)
+    args = from_args(FitAccuracyOptions, build_parser().parse_args(argv))
     objects = cases(Talk2RadarRoot(args.data), args.samples)
     print(f"{len(objects)} objects of {args.data} (first {args.samples} samples), 3-35 m ahead")
     print(

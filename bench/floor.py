@@ -32,9 +32,10 @@ import math
 import sys
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
-from bench.common import bench_main
+from bench.common import bench_main, bench_parser
 from bench.floor_measure import (
     ENCODE_STAGES,
     GROUND_STAGES,
@@ -58,6 +59,7 @@ from bench.report import (
 from bench.vod_frames import LIDAR_POINTS, RADAR_POINTS, vod_frames
 from bench.workloads import warm_up
 from model import TPCNet
+from scenes.utils.cli import option
 
 ENCODE_TARGET = 2.0
 GROUND_TARGET = 4.0
@@ -361,42 +363,50 @@ def _call_data(c: TimedCall) -> dict:
     }
 
 
-def options(parser: argparse.ArgumentParser) -> None:
-    """This benchmark's own options (see the module docstring)."""
-    parser.add_argument("--frames", type=int, default=None, help="frames (default 6, quick 2)")
-    parser.add_argument("--repeats", type=int, default=None, help="rounds (default 5, quick 2)")
-    parser.add_argument("--prompts", type=int, default=3, help="prompts per frame (default 3)")
-    parser.add_argument("--name", default="floor", help="results file stem (default floor)")
-    parser.add_argument(
-        "--baseline-package",
-        type=Path,
-        default=None,
+@dataclass(frozen=True, kw_only=True)
+class FloorOptions:
+    """This benchmark's own flags (see the module docstring; :func:`run`'s keyword arguments)."""
+
+    frames: int | None = option(None, help="frames (default 6, quick 2)")
+    repeats: int | None = option(None, help="rounds (default 5, quick 2)")
+    prompts: int = option(3, help="prompts per frame (default %(default)s)")
+    name: str = option("floor", help="results file stem (default %(default)s)")
+    baseline_package: Path | None = option(
+        None,
         help="a folder holding an older copy of model/ as package model_base: measured in the "
         "same run, call by call beside this checkout",
     )
-    parser.add_argument(
-        "--baseline-checkpoint",
-        type=Path,
-        default=None,
+    baseline_checkpoint: Path | None = option(
+        None,
         help="with --baseline-package: the checkpoint the older code runs (default: the shipped "
         "one; an older copy of model/ may not read a newer checkpoint's config)",
     )
-    parser.add_argument(
-        "--baseline-commit",
-        default=None,
-        help="with --baseline-package: the commit it was made from, for the report's note",
+    baseline_commit: str | None = option(
+        None, help="with --baseline-package: the commit it was made from, for the report's note"
     )
-    parser.add_argument(
-        "--baseline",
-        type=Path,
-        default=None,
+    baseline: Path | None = option(
+        None,
         help="a previous result to show beside (default bench/results/<name>_baseline.json)",
     )
 
 
+FLOOR_THREADS = 2
+"""``--threads``' default here: the floor is measured at two threads."""
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``python -m bench.floor``'s parser."""
+    return bench_parser("bench.floor", __doc__.splitlines()[0], FloorOptions)
+
+
 def main(argv: list[str] | None = None) -> int:
     return bench_main(
-        "bench.floor", run, argv, __doc__.splitlines()[0], default_threads=2, options=options
+        "bench.floor",
+        run,
+        argv,
+        __doc__.splitlines()[0],
+        default_threads=FLOOR_THREADS,
+        options=FloorOptions,
     )
 
 

@@ -25,6 +25,7 @@ measured on the GPU.
 
 from __future__ import annotations
 
+import argparse
 import math
 import time
 from dataclasses import asdict, dataclass
@@ -37,6 +38,7 @@ from bench.common import (
     Table,
     Target,
     bench_main,
+    bench_parser,
     count_flops,
     count_params,
     fmt_bytes,
@@ -406,6 +408,11 @@ def run(quick: bool = False, command: str = "python -m bench.fusion_cost") -> Be
         data=data,
         seconds=time.perf_counter() - start,
     )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``python -m bench.fusion_cost``'s parser (the shared flags only)."""
+    return bench_parser("bench.fusion_cost", __doc__.splitlines()[0])
 
 
 def main(argv: list[str] | None = None) -> int:

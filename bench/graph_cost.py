@@ -22,6 +22,7 @@ the node-pair distances the method evaluates per map.
 
 from __future__ import annotations
 
+import argparse
 import math
 import time
 from collections.abc import Callable
@@ -35,6 +36,7 @@ from bench.common import (
     Table,
     Target,
     bench_main,
+    bench_parser,
     fmt_bytes,
     fmt_count,
     fmt_ms,
@@ -283,6 +285,11 @@ def run(quick: bool = False, command: str = "python -m bench.graph_cost") -> Ben
         data=data,
         seconds=time.perf_counter() - start,
     )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``python -m bench.graph_cost``'s parser (the shared flags only)."""
+    return bench_parser("bench.graph_cost", __doc__.splitlines()[0])
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -57,6 +57,7 @@ from bench.language_score import (
 from model import class_noun_prompt
 from scenes.language.resolve import referable
 from scenes.talk2radar.root import Talk2RadarRoot
+from scenes.utils.cli import add_options, from_args, option
 from scenes.utils.durable import atomic_write_text
 from scenes.utils.text_policy import PROMPT, clean_text
 
@@ -170,27 +171,33 @@ def run_suite(
     return SuiteReport(threshold, columns, pairs, per_sentence, time.perf_counter() - start)
 
 
+@dataclass(frozen=True, kw_only=True)
+class LanguageSuiteOptions:
+    """The flags of ``python -m bench.language_suite``."""
+
+    checkpoint: Path = option(Path("checkpoints/tpcnet-small.pt"))
+    scenes: Path = option(DEFAULT_SCENES, help="the suite's scenes folder")
+    suite: Path = option(SUITE_FILE, help="the suite file")
+    json: Path | None = option(None, help="write the figures here")
+    threshold: float | None = option(None, help="default: the checkpoint's")
+    device: str = option("cpu")
+    write_fingerprint: bool = option(
+        False,
+        help="record the scenes under --scenes as the suite's (after a deliberate generator change)",
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m bench.language_suite",
         description="Ground the hand-written language suite with a checkpoint; per-family figures.",
     )
-    p.add_argument("--checkpoint", type=Path, default=Path("checkpoints/tpcnet-small.pt"))
-    p.add_argument("--scenes", type=Path, default=DEFAULT_SCENES, help="the suite's scenes folder")
-    p.add_argument("--suite", type=Path, default=SUITE_FILE, help="the suite file")
-    p.add_argument("--json", type=Path, default=None, help="write the figures here")
-    p.add_argument("--threshold", type=float, default=None, help="default: the checkpoint's")
-    p.add_argument("--device", default="cpu")
-    p.add_argument(
-        "--write-fingerprint",
-        action="store_true",
-        help="record the scenes under --scenes as the suite's (after a deliberate generator change)",
-    )
+    add_options(p, LanguageSuiteOptions)
     return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    args = from_args(LanguageSuiteOptions, build_parser().parse_args(argv))
     try:
         suite = load_suite(args.suite)
         root = ensure_scenes(suite, args.scenes)

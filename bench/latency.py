@@ -38,12 +38,13 @@ workload from :func:`bench.workloads.synthetic_scenes`.
 
 from __future__ import annotations
 
+import argparse
 import time
 from dataclasses import asdict
 
 import torch
 
-from bench.common import bench_main
+from bench.common import bench_main, bench_parser
 from bench.latency_measure import (
     DETECT_NAMES,
     PATHS,
@@ -337,6 +338,11 @@ def run(quick: bool = False, command: str = "python -m bench.latency") -> BenchR
         data=data,
         seconds=time.perf_counter() - start,
     )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``python -m bench.latency``'s parser (the shared flags only)."""
+    return bench_parser("bench.latency", __doc__.splitlines()[0])
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -13,6 +13,7 @@ are those of the benchmark prompt and grow with the prompt's length.
 
 from __future__ import annotations
 
+import argparse
 import time
 
 import torch
@@ -24,6 +25,7 @@ from bench.common import (
     SceneWorkload,
     Table,
     bench_main,
+    bench_parser,
     count_flops,
     count_params,
     fmt_count,
@@ -161,6 +163,11 @@ def run(quick: bool = False, command: str = "python -m bench.model_size") -> Ben
         data=data,
         seconds=time.perf_counter() - start,
     )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``python -m bench.model_size``'s parser (the shared flags only)."""
+    return bench_parser("bench.model_size", __doc__.splitlines()[0])
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -23,6 +23,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 from bench.common import (
@@ -36,6 +37,7 @@ from bench.common import (
     machine_info,
     read_result,
 )
+from scenes.utils.cli import add_options, from_args, option
 from scenes.utils.durable import atomic_write_text
 
 BENCHMARKS = (
@@ -320,26 +322,36 @@ def load_results(directory: Path = RESULTS_DIR) -> dict[str, BenchResult]:
     return out
 
 
-def main(argv: list[str] | None = None) -> int:
-    argv = list(sys.argv[1:] if argv is None else argv)
+@dataclass(frozen=True, kw_only=True)
+class RunAllOptions:
+    """The flags of ``python -m bench.run_all``."""
+
+    quick: bool = option(False, help="smoke run (fewer repetitions)")
+    only: tuple[str, ...] | None = option(
+        None,
+        nargs="+",
+        choices=(*BENCHMARKS, SYNTH),
+        help="run only these; the document keeps the others' previous results",
+    )
+    threads: int | None = option(
+        None, help="torch threads of every benchmark (default: theirs: 1, floor 2)"
+    )
+    no_run: bool = option(False, help="only rebuild docs/PERFORMANCE.md from the results")
+    doc: Path = option(PERFORMANCE_DOC, help="document to write")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``python -m bench.run_all``'s parser."""
     parser = argparse.ArgumentParser(
         prog="python -m bench.run_all", description=__doc__.splitlines()[0]
     )
-    parser.add_argument("--quick", action="store_true", help="smoke run (fewer repetitions)")
-    parser.add_argument(
-        "--only",
-        nargs="+",
-        choices=[*BENCHMARKS, SYNTH],
-        help="run only these; the document keeps the others' previous results",
-    )
-    parser.add_argument(
-        "--threads", type=int, help="torch threads of every benchmark (default: theirs: 1, floor 2)"
-    )
-    parser.add_argument(
-        "--no-run", action="store_true", help="only rebuild docs/PERFORMANCE.md from the results"
-    )
-    parser.add_argument("--doc", type=Path, default=PERFORMANCE_DOC, help="document to write")
-    args = parser.parse_args(argv)
+    add_options(parser, RunAllOptions)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = from_args(RunAllOptions, build_parser().parse_args(argv))
     start = time.perf_counter()
     failures: dict[str, str] = {}
     if not args.no_run:

@@ -30,6 +30,8 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from scenes.utils.cli import add_options, from_args, option
+
 _REPO = Path(__file__).resolve().parents[1]
 if str(_REPO) not in sys.path:
     sys.path.insert(0, str(_REPO))
@@ -348,12 +350,26 @@ def collect(worlds: int, seed: int) -> list[FrameStats]:
     ]
 
 
+@dataclass(frozen=True, kw_only=True)
+class SensorStatsOptions:
+    """The flags of ``python -m bench.sensor_stats`` (``--out -``: print only)."""
+
+    worlds: int = option(120)
+    seed: int = option(0)
+    out: Path = option(_REPO / "docs" / "SENSOR_STATS.md")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``python -m bench.sensor_stats``' parser."""
+    p = argparse.ArgumentParser(
+        prog="python -m bench.sensor_stats", description=__doc__.splitlines()[0]
+    )
+    add_options(p, SensorStatsOptions)
+    return p
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--worlds", type=int, default=120)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", type=Path, default=_REPO / "docs" / "SENSOR_STATS.md")
-    args = p.parse_args(argv)
+    args = from_args(SensorStatsOptions, build_parser().parse_args(argv))
     t0 = time.perf_counter()
     stats = collect(args.worlds, args.seed)
     text = markdown(summary_rows(stats), args.worlds, args.seed, time.perf_counter() - t0)

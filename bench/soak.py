@@ -30,7 +30,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Sequence
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import msgspec
@@ -41,6 +41,7 @@ from websockets.sync.client import connect
 
 from bench.common import REPO, RESULTS_DIR, BenchResult, Table, Target, machine_info, write_result
 from scenes.synth.generate import SynthSettings, generate_root
+from scenes.utils.cli import add_options, option
 
 PROMPT = "the car ahead"
 SPLIT = "train"
@@ -293,18 +294,31 @@ def run(args: argparse.Namespace, command: str) -> BenchResult:
     )
 
 
+@dataclass(frozen=True, kw_only=True)
+class SoakOptions:
+    """The flags of ``python -m bench.soak`` (None: the quick or full run's value)."""
+
+    quick: bool = option(False, help="60 visits, warm-up 20 (a smoke run)")
+    cycles: int | None = option(None, help="visits (default 300)")
+    warm_up: int | None = option(None, help="visits before the target (50)")
+    every: int | None = option(None, help="visits between readings (25)")
+    bound: float = option(50.0, help="allowed growth, MB (default %(default)s)")
+    frames: int = option(8, help="frames of the synthetic root")
+    baseline: Path | None = option(None, help="another checkout's launch.py")
+    threads: int = option(1, help="ignored (the server uses 1)")
+    out_dir: Path = option(RESULTS_DIR, help="where the JSON goes")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``python -m bench.soak``'s parser."""
+    p = argparse.ArgumentParser(prog="python -m bench.soak", description=__doc__.splitlines()[0])
+    add_options(p, SoakOptions)
+    return p
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    p = argparse.ArgumentParser(prog="python -m bench.soak", description=__doc__.splitlines()[0])
-    p.add_argument("--quick", action="store_true", help="60 visits, warm-up 20 (a smoke run)")
-    p.add_argument("--cycles", type=int, default=None, help="visits (default 300)")
-    p.add_argument("--warm-up", type=int, default=None, help="visits before the target (50)")
-    p.add_argument("--every", type=int, default=None, help="visits between readings (25)")
-    p.add_argument("--bound", type=float, default=50.0, help="allowed growth, MB (default 50)")
-    p.add_argument("--frames", type=int, default=8, help="frames of the synthetic root")
-    p.add_argument("--baseline", type=Path, default=None, help="another checkout's launch.py")
-    p.add_argument("--threads", type=int, default=1, help="ignored (the server uses 1)")
-    p.add_argument("--out-dir", type=Path, default=RESULTS_DIR, help="where the JSON goes")
+    p = build_parser()
     args = p.parse_args(argv)
     quick = {"cycles": 60, "warm_up": 20, "every": 10}
     full = {"cycles": 300, "warm_up": 50, "every": 25}

@@ -16,6 +16,7 @@ uses); with CUDA also ``small`` and ``paper`` on the GPU under bfloat16 autocast
 
 from __future__ import annotations
 
+import argparse
 import os
 import time
 from dataclasses import asdict, dataclass
@@ -27,6 +28,7 @@ from bench.common import (
     SceneWorkload,
     Table,
     bench_main,
+    bench_parser,
     fmt_ms,
     machine_info,
     summarize,
@@ -201,6 +203,11 @@ def run(quick: bool = False, command: str = "python -m bench.train_throughput") 
         data=data,
         seconds=time.perf_counter() - start,
     )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``python -m bench.train_throughput``'s parser (the shared flags only)."""
+    return bench_parser("bench.train_throughput", __doc__.splitlines()[0])
 
 
 def main(argv: list[str] | None = None) -> int:

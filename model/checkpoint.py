@@ -27,6 +27,7 @@ from typing import Any
 
 import torch
 
+from model.checkpoint_meta import CheckpointMeta
 from model.config import ConfigError, ModelConfig
 from model.tpcnet import TPCNet
 from scenes.utils.durable import atomic_file
@@ -118,7 +119,8 @@ def load_metadata(path: str | os.PathLike[str]) -> dict[str, Any]:
 def load_checkpoint(path: str | os.PathLike[str], device: str | torch.device = "cpu") -> TPCNet:
     """Rebuild the model stored at ``path`` on ``device``, in eval mode.
 
-    The metadata is available as ``model.checkpoint_metadata`` (a dict).
+    The metadata is available as ``model.checkpoint_metadata`` (a
+    :class:`model.checkpoint_meta.CheckpointMeta`).
     """
     return model_from_payload(read_checkpoint(path), path, device)
 
@@ -154,5 +156,5 @@ def model_from_payload(
                 f"this code expects {tuple(value.shape)}"
             )
     model.load_state_dict(state)
-    model.checkpoint_metadata = dict(payload["metadata"])
+    model.checkpoint_metadata = CheckpointMeta.from_dict(payload["metadata"])
     return model.to(device).eval()

@@ -37,9 +37,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
 from model.checkpoint import DEFAULT_CHECKPOINT
-from model.cli import add_options, from_args, option
 from model.evaluation.grounding import CandidateSource
 from model.evaluation.metrics import VodResult, evaluate_frames
+from scenes.utils.cli import add_options, from_args, option
 
 if TYPE_CHECKING:
     from model.evaluation.report import GroundingReport
@@ -219,7 +219,7 @@ MODEL_MODE = "ground a split with a checkpoint, then score it"
 @dataclass(frozen=True, kw_only=True)
 class EvaluateConfig:
     """The settings of ``python -m model.evaluate`` (each field is one of its flags,
-    :mod:`model.cli`): files mode (``labels`` and ``preds``) or model mode (``data``)."""
+    :mod:`scenes.utils.cli`): files mode (``labels`` and ``preds``) or model mode (``data``)."""
 
     labels: Path | None = option(
         None, group=FILES_MODE, help="folder of ground-truth label_2 files"

@@ -30,6 +30,7 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
+from model.checkpoint_meta import CheckpointMeta
 from model.config import ModelConfig, build_config
 from model.core.candidates import SceneMaps
 from model.core.features import (
@@ -122,7 +123,7 @@ class TPCNet(nn.Module):
         )
         self.register_state_dict_post_hook(_save_checkpoint_names)
         self.register_load_state_dict_pre_hook(_load_checkpoint_names)
-        self.checkpoint_metadata: dict = {}
+        self.checkpoint_metadata = CheckpointMeta()
         """Metadata of the checkpoint this model was loaded from (see :mod:`model.checkpoint`)."""
 
     @property

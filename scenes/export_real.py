@@ -73,6 +73,7 @@ from scenes.talk2radar.pointcloud import RADAR_FEATURES, read_points, write_poin
 from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.talk2radar.vod_writer import VodWriter
 from scenes.talk2radar.writer import LABEL_DECIMALS, SampleText, SensorFiles, Talk2RadarWriter
+from scenes.utils.cli import add_options, from_args, option
 
 __all__ = ["RADAR_CHOICES", "SPLITS", "ExportReport", "export", "main", "source_frames"]
 
@@ -334,6 +335,27 @@ class _Outputs:
         return replace(files, radar_bin=path)
 
 
+@dataclass(frozen=True, kw_only=True)
+class ExportCommand:
+    """The flags of ``python -m scenes.export_real`` (the arguments of :func:`export`)."""
+
+    source: Path = option(help="a root written by scenes.synth")
+    t2r: Path | None = option(None, help="output folder of the Talk2Radar tree")
+    vod: Path | None = option(None, help="output folder of the View-of-Delft tree")
+    splits: tuple[str, ...] = option(
+        SPLITS,
+        nargs="+",
+        metavar="SPLIT",
+        help="source lists to export (default: %(default)s)",
+    )
+    radar: str | None = option(
+        None,
+        choices=sorted(RADAR_CHOICES),
+        help="radar trees to write (default: the source's; both = radar and radar_5frames)",
+    )
+    quiet: bool = option(False, help="no progress bar")
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m scenes.export_real",
@@ -341,27 +363,12 @@ def _parser() -> argparse.ArgumentParser:
         "Talk2Radar tree (one prompt per frame, label_2 = its referents, no sidecar) and a "
         "View-of-Delft tree (label_2 = every annotated object of the frame, VoD class names).",
     )
-    p.add_argument("--source", required=True, type=Path, help="a root written by scenes.synth")
-    p.add_argument("--t2r", type=Path, help="output folder of the Talk2Radar tree")
-    p.add_argument("--vod", type=Path, help="output folder of the View-of-Delft tree")
-    p.add_argument(
-        "--splits",
-        nargs="+",
-        default=list(SPLITS),
-        metavar="SPLIT",
-        help="source lists to export (default: train val test)",
-    )
-    p.add_argument(
-        "--radar",
-        choices=sorted(RADAR_CHOICES),
-        help="radar trees to write (default: the source's; both = radar and radar_5frames)",
-    )
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_options(p, ExportCommand)
     return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args = _parser().parse_args(argv)
+    args = from_args(ExportCommand, _parser().parse_args(argv))
     try:
         report = export(
             args.source, args.t2r, args.vod, args.splits, args.radar, progress=not args.quiet

@@ -45,6 +45,7 @@ import viser
 import zstandard
 from websockets.sync.client import connect
 
+from model.checkpoint_meta import CheckpointMeta
 from scenes.geometry.calib import vod_lidar_calibration, vod_radar_calibration
 from scenes.talk2radar.root import Talk2RadarWriter
 from tests.browser_helpers import CHROMIUM_ARGS, find_chromium
@@ -166,7 +167,7 @@ def untrained_model(
         torch.manual_seed(seed)
         model = build_model("small", grounding=grounding, **overrides).eval()
     if operating_threshold is not None:
-        model.checkpoint_metadata = {"operating_threshold": operating_threshold}
+        model.checkpoint_metadata = CheckpointMeta(operating_threshold=operating_threshold)
     return model
 
 

@@ -75,7 +75,7 @@ def main(root: str, init: str, out: str) -> None:
                 "world": run.world,
                 "rng_differ": not torch.equal(run.rng[0]["torch"], run.rng[1]["torch"]),
                 "equal": [k for k in a if not torch.equal(a[k], b[k])] == [],
-                "loads": load_checkpoint(cut / "last.pt").checkpoint_metadata["step"],
+                "loads": load_checkpoint(cut / "last.pt").checkpoint_metadata.step,
             }
         else:
             report[stage] = {"codes": codes}

@@ -59,6 +59,7 @@ from app.scene_view import (
     estimate_ground_z,
     ring_segments,
 )
+from model.checkpoint_meta import CheckpointMeta
 from scenes.talk2radar.layout import VELODYNE, sample_file
 from scenes.talk2radar.root import RootError, Talk2RadarRoot
 from scenes.utils.text_policy import collapse_spaces
@@ -326,7 +327,7 @@ def test_initial_threshold_operating_then_decoder_then_default() -> None:
     head = types.SimpleNamespace(score_threshold=0.2)
     decoder_only = types.SimpleNamespace(cfg=types.SimpleNamespace(head=head))
     calibrated = types.SimpleNamespace(
-        cfg=decoder_only.cfg, checkpoint_metadata={"operating_threshold": 0.35}
+        cfg=decoder_only.cfg, checkpoint_metadata=CheckpointMeta(operating_threshold=0.35)
     )
     assert initial_threshold(calibrated, 0.3) == 0.35
     assert initial_threshold(decoder_only, 0.3) == 0.2

@@ -55,10 +55,10 @@ def test_command_writes_the_threshold_into_the_checkpoint(tmp_path: Path, write_
     args = ["--data", str(root), "--checkpoint", str(path), "--split", "test"]
     assert main([*args, "--min-prompts", "2"]) == 0
     meta = load_checkpoint(path).checkpoint_metadata
-    assert meta["step"] == 3  # the rest of the metadata is kept
-    source = meta["operating_threshold_source"]
+    assert meta.step == 3  # the rest of the metadata is kept
+    source = meta.operating_threshold_source
     assert source["split"] == "test" and source["prompts"] == 2
-    assert operating_threshold(load_checkpoint(path)) == meta["operating_threshold"]
+    assert operating_threshold(load_checkpoint(path)) == meta.operating_threshold
     assert main(["--data", str(root / "nowhere"), "--checkpoint", str(path)]) == 2
 
 

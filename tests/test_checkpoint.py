@@ -17,6 +17,7 @@ from model.checkpoint import (
     load_metadata,
     save_checkpoint,
 )
+from model.checkpoint_meta import CheckpointMeta, is_machine_path, portable_path
 from model.core.grid import BevGrid
 from model.tpcnet import TPCNet
 
@@ -55,7 +56,8 @@ def test_round_trip(trained: TPCNet, tmp_path: Path) -> None:
     assert [p.name for p in path.parent.iterdir()] == ["model.pt"]  # no temp file left behind
     loaded = load_checkpoint(path)
     assert loaded.cfg == trained.cfg and not loaded.training
-    assert loaded.checkpoint_metadata == META and load_metadata(path) == META
+    assert loaded.checkpoint_metadata == CheckpointMeta.from_dict(META)
+    assert load_metadata(path) == META
     with torch.no_grad():
         a, b = trained(*_inputs()), loaded(*_inputs())
     torch.testing.assert_close(a.heatmap, b.heatmap)
@@ -157,11 +159,11 @@ def test_numpy_scalars_in_metadata_load_back_with_weights_only(tmp_path):
         tmp_path / "m.pt", build_model("small"), operating_threshold=np.float64(0.45)
     )
     meta = load_checkpoint(path).checkpoint_metadata
-    assert meta["operating_threshold"] == 0.45 and type(meta["operating_threshold"]) is float
+    assert meta.operating_threshold == 0.45 and type(meta.operating_threshold) is float
 
 
 def test_checkpoint_meta_reads_and_writes_the_files_dict() -> None:
-    from model import DEFAULT_CHECKPOINT, CheckpointMeta, read_checkpoint
+    from model import DEFAULT_CHECKPOINT, read_checkpoint
 
     shipped = read_checkpoint(DEFAULT_CHECKPOINT)["metadata"]
     meta = CheckpointMeta.from_dict(shipped)
@@ -172,3 +174,62 @@ def test_checkpoint_meta_reads_and_writes_the_files_dict() -> None:
     assert other.epoch == 4 and other.step is None and other.extra == {"note": "kept"}
     assert other.to_dict() == {"epoch": 4, "note": "kept"}
     assert CheckpointMeta.of(object()) == CheckpointMeta()
+
+
+SHIPPED = sorted((Path(__file__).resolve().parents[1] / "checkpoints").glob("*.pt"))
+
+
+def _strings(value: Any) -> list[str]:
+    """Every string in plain data (keys and values)."""
+    if isinstance(value, str):
+        return [value]
+    if isinstance(value, dict):
+        return [s for k, v in value.items() for s in (*_strings(k), *_strings(v))]
+    if isinstance(value, (list, tuple)):
+        return [s for v in value for s in _strings(v)]
+    return []
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=[p.name for p in SHIPPED])
+def test_shipped_checkpoints_hold_no_machine_paths(path: Path) -> None:
+    """No string of a shipped checkpoint's metadata is an absolute path of the machine it was
+    made on (``/work/...``, ``~...``, ``C:\\...``); it loads as a CheckpointMeta."""
+    from model import read_checkpoint
+
+    assert len(SHIPPED) >= 2
+    metadata = read_checkpoint(path)["metadata"]
+    found = [s for s in _strings(metadata) if is_machine_path(s)]
+    assert not found, f"{path.name}: {found}"
+    assert load_checkpoint(path).checkpoint_metadata == CheckpointMeta.from_dict(metadata)
+
+
+def test_portable_paths_are_relative_to_the_working_folder_or_as_given(tmp_path: Path) -> None:
+    base = tmp_path / "repo"
+    (base / "data" / "x").mkdir(parents=True)
+    assert portable_path(base / "data" / "x", base) == "data/x"
+    assert portable_path("data/x", base) == "data/x"  # as the user gave it
+    assert portable_path("/elsewhere/y", base) == "/elsewhere/y"  # outside: as given
+    assert all(map(is_machine_path, ["/a", "~/a", "C:\\a", "D:/a", "\\\\host\\share\\a"]))
+    assert not any(map(is_machine_path, ["data/a", "a:b", "runs/x", "small"]))
+    meta = CheckpointMeta(
+        data={"root": str(base / "data" / "x"), "roots": [str(base / "data" / "x")]},
+        operating_threshold_source={"root": str(base / "data"), "split": "val"},
+        train_config={"data": ["data/x"], "out": str(base / "runs" / "r"), "lr": 0.1},
+        step=3,
+    ).with_portable_paths(base)
+    assert meta.data == {"root": "data/x", "roots": ["data/x"]}
+    assert meta.operating_threshold_source == {"root": "data", "split": "val"}
+    assert meta.train_config == {"data": ["data/x"], "out": "runs/r", "lr": 0.1}
+    assert meta.step == 3
+
+
+def test_an_old_checkpoint_with_absolute_paths_and_a_dict_still_loads(
+    trained: TPCNet, tmp_path: Path
+) -> None:
+    """A checkpoint written before (metadata a dict with this machine's absolute paths) loads;
+    the model holds its metadata as a CheckpointMeta, paths as they were."""
+    old = {"data": {"root": "/work/main/data/train", "train_samples": 4}, "step": 9}
+    path = save_checkpoint(tmp_path / "old.pt", trained, **old)
+    meta = load_checkpoint(path).checkpoint_metadata
+    assert isinstance(meta, CheckpointMeta) and meta.step == 9
+    assert meta.data == old["data"] and meta.to_dict() == old

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 import model.checkpoint
+from model.checkpoint_meta import CheckpointMeta
 from model.evaluation.class_prompt_counts import (
     CLASS_PROMPTS,
     ClassSummary,
@@ -81,7 +82,7 @@ class FakeModel:
     """``encode_scene`` / ``ground`` returning :data:`ANSWERS`; records its calls."""
 
     def __init__(self, threshold: float = 0.5) -> None:
-        self.checkpoint_metadata = {"operating_threshold": threshold, "step": 7, "epoch": 1}
+        self.checkpoint_metadata = CheckpointMeta(operating_threshold=threshold, step=7, epoch=1)
         self.encoded = 0
         self.grounded: list[tuple[str, float | None]] = []
 

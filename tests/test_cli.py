@@ -1,4 +1,4 @@
-"""``model/cli.py``: a command line made from a frozen dataclass's fields."""
+"""``scenes/utils/cli.py``: a command line made from a frozen dataclass's fields."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from typing import Literal
 
 import pytest
 
-from model.cli import add_options, from_args, option
+from scenes.utils.cli import add_options, from_args, option
 
 Colour = Literal["red", "green"]
 

@@ -6,6 +6,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from model.checkpoint_meta import CheckpointMeta
 from model.evaluation.predict import (
     iterate_predictions,
     operating_threshold,
@@ -48,7 +49,7 @@ class _FakeModel:
     def __init__(self, metadata: dict | None = None, threshold: float = 0.1) -> None:
         self.cfg = SimpleNamespace(head=SimpleNamespace(score_threshold=threshold))
         if metadata is not None:
-            self.checkpoint_metadata = metadata
+            self.checkpoint_metadata = CheckpointMeta.from_dict(metadata)
         self.encoded = 0
         self.grounded: list[str] = []
 

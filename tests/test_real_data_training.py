@@ -220,7 +220,7 @@ def test_a_finished_run_is_calibrated_on_the_validation_split(monkeypatch, tmp_p
     assert seen == {"split": "val"}
     assert "operating threshold 0.350" in capsys.readouterr().out
     meta = load_checkpoint(out / "last.pt").checkpoint_metadata
-    assert meta["operating_threshold"] == 0.35
-    assert meta["operating_threshold_source"]["split"] == "val"
+    assert meta.operating_threshold == 0.35
+    assert meta.operating_threshold_source["split"] == "val"
     # A resume of the finished run still loads (the state and last.pt agree on the step).
     assert main([*args, "--resume"]) == 0

@@ -20,6 +20,7 @@ from model.referent.candidates import (
     radar_evidence,
 )
 from model.referent.stage import CandidateBatch, ReferentStage, geometry_width, referent_loss
+from model.training.config import PromptDraw
 from model.training.referent_step import ReferentTrainConfig, referent_step
 from scenes.datasets.augment import mirror_actor
 from scenes.datasets.frames import FrameDataset, SensorAugment, scene_ids
@@ -178,7 +179,7 @@ def test_referent_step_learns_on_a_fixed_batch(tiny_root):
     ds = FrameDataset(Talk2RadarRoot(tiny_root), "train")
     frames = [ds[i] for i in range(min(2, len(ds)))]
     opt = torch.optim.AdamW(model.parameters(), lr=2e-3)
-    cfg = ReferentTrainConfig(prompts_per_scene=4)
+    cfg = ReferentTrainConfig(PromptDraw(4))
     losses = []
     for _ in range(12):
         # The same prompts every step (same generator seed): the loss must fall.
@@ -226,7 +227,7 @@ def test_cached_stage_banks_prompts_and_learns(tiny_root):
     for p in model.grounding.parameters():
         p.requires_grad_(True)
     opt = torch.optim.AdamW(model.grounding.parameters(), lr=3e-3)
-    cfg = ReferentTrainConfig(prompts_per_scene=6)
+    cfg = ReferentTrainConfig(PromptDraw(6))
     usable = [s for s in scenes if s.prompts]
     assert usable, "the (seeded, untrained) detector should propose some actor of these scenes"
     losses = []
@@ -474,15 +475,15 @@ def test_extended_language_banks_empty_answers_and_reworded_prompts(tiny_root):
     assert (cfg.language, cfg.text_noise, cfg.phrasing) == ("extended", 0.5, "all")
     with pytest.raises(TrainingError, match="--text-noise"):
         TrainConfig(data=str(tiny_root), out="/tmp/x", text_noise=1.5)
-    rcfg = ReferentTrainConfig(language="extended", text_noise=1.0)
-    assert rcfg.prompt_config().p_perturb == 1.0
+    draw = TrainConfig(
+        data=str(tiny_root), out="/tmp/x", language="extended", text_noise=1.0
+    ).prompt_draw()
+    assert draw.config.p_perturb == 1.0 and draw.config.language == "extended"
     torch.manual_seed(0)
     model = build_model("small", grounding="referent")
     frames = FrameDataset(Talk2RadarRoot(tiny_root), "train")
     base, _ = cache_scenes(model, frames, 12, progress=False)
-    extended, _ = cache_scenes(
-        model, frames, 12, progress=False, prompt_config=rcfg.prompt_config()
-    )
+    extended, _ = cache_scenes(model, frames, 12, progress=False, prompt_config=draw.config)
     empty = [t for s in extended for t in s.targets if not t.any()]
     assert empty, "extended prompts include answers with no box"
     assert not any(not t.any() for s in base for t in s.targets)
@@ -500,9 +501,9 @@ def test_family_rates_reach_the_generator_and_bad_ones_are_one_line_errors(tiny_
     base = ["--data", str(tiny_root), "--out", "/tmp/x"]
     cfg, _ = parse_args([*base, "--language", "extended", *flags])
     assert cfg.family_rates == tuple(float(r) for r in rates)
-    rcfg = ReferentTrainConfig(language="extended", family_rates=cfg.family_rates)
-    assert rcfg.prompt_config().family_rates == cfg.family_rates
-    assert ReferentTrainConfig(language="extended").prompt_config().family_rates != cfg.family_rates
+    assert cfg.prompt_draw().config.family_rates == cfg.family_rates
+    default = parse_args([*base, "--language", "extended"])[0].prompt_draw()
+    assert default.config.family_rates != cfg.family_rates
     for bad in (flags[:4], [*flags[:-1], "-0.1"], [*flags[:-1], "0.9"]):
         with pytest.raises(TrainingError, match="--family-rate") as err:
             parse_args([*base, "--language", "extended", *bad])

@@ -74,7 +74,7 @@ def test_loss_falls_and_resume_continues(tiny_root, tmp_path):
     assert resumed.step == 10
     assert len(_losses(out)) == 10
     model = load_checkpoint(out / "last.pt")
-    assert model.checkpoint_metadata["step"] == 10
+    assert model.checkpoint_metadata.step == 10
     with pytest.raises(RunStateError, match=r"different settings.*lr"):
         train(_config(tiny_root, out, max_steps=12, lr=5e-3), resume=True)
 
@@ -105,7 +105,7 @@ def test_torchrun_two_gloo_processes(tiny_root, tmp_path, torchrun):
     code = torchrun([*args, "--device", "cpu"], log, timeout=300)
     assert code == 0, log.read_text()[-3000:]
     assert (out / "last.pt").is_file()
-    assert load_checkpoint(out / "last.pt").checkpoint_metadata["step"] == 2
+    assert load_checkpoint(out / "last.pt").checkpoint_metadata.step == 2
     assert log.read_text().count("done: 2 steps") == 1  # only rank 0 reports
 
 

@@ -68,6 +68,7 @@ def test_every_stage_steps_under_bfloat16_autocast(tmp_path: Path, write_tiny_ro
     from model import build_model
     from model.head.losses import grounding_loss
     from model.head.targets import collate_targets, draw_targets
+    from model.training.config import PromptDraw
     from model.training.loop import init_from
     from model.training.referent_cache import cache_scenes, cached_referent_step
     from model.training.referent_step import ReferentTrainConfig, float32_output, referent_step
@@ -76,7 +77,7 @@ def test_every_stage_steps_under_bfloat16_autocast(tmp_path: Path, write_tiny_ro
 
     root = tmp_path / "root"
     generate_root(root, 4, SynthSettings(seed=3, prompts_per_world=1), (0.5, 0.25, 0.25))
-    cfg = ReferentTrainConfig(prompts_per_scene=4)
+    cfg = ReferentTrainConfig(PromptDraw(4))
     model = build_model("small", grounding="referent")
     init_from(model, str(REPO / "checkpoints" / "tpcnet-small.pt"))
     scenes = FrameDataset(root, "train")

@@ -40,7 +40,7 @@ import json
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -67,6 +67,7 @@ from scenes.geometry.calib import IMAGE_SIZE
 from scenes.geometry.projection import in_camera_view
 from scenes.talk2radar.layout import ID_WIDTH, LABEL, is_frame_id, sample_dir
 from scenes.talk2radar.root import LIDAR_FOLDER, RADAR_FOLDERS, RootError, Sample, Talk2RadarRoot
+from scenes.utils.cli import add_options, from_args, option
 from scenes.utils.durable import atomic_write_text
 
 FOVS = ("camera", "all")
@@ -79,10 +80,12 @@ CANDIDATE_KINDS = ("detector", "labels")
 
 @dataclass(frozen=True)
 class ScoringConfig:
-    """How answers are counted.
+    """How answers are counted (also ``python -m model.class_prompts``' flags of these settings).
 
     Attributes:
-        threshold: Operating threshold: answer boxes with ``score >= threshold`` count.
+        threshold: Operating threshold: answer boxes with ``score >= threshold`` count; None
+            (the command without ``--threshold``): the checkpoint's, which the command sets
+            before scoring (:func:`score_root` refuses None).
         max_range: Counted region radius (m), BEV distance of the box centre from the LiDAR.
         fov: ``camera`` (also inside the camera image) or ``all``.
         sweep: Further thresholds to count at (pooled figures only; the model is asked once, at
@@ -92,24 +95,81 @@ class ScoringConfig:
             another class or one not asked for).
     """
 
-    threshold: float
-    max_range: float = 30.0
-    fov: str = "camera"
-    sweep: tuple[float, ...] = ()
-    candidates: str = "detector"
+    threshold: float | None = option(None, help="default: the checkpoint's")
+    max_range: float = option(30.0, help="metres, BEV (default %(default)s)")
+    fov: str = option("camera", choices=FOVS, help="count only the camera's view (default)")
+    sweep: tuple[float, ...] = option(
+        (),
+        nargs="+",
+        metavar="T",
+        help="also count at these thresholds (pooled table; one model pass)",
+    )
+    candidates: str = option(
+        "detector",
+        choices=CANDIDATE_KINDS,
+        help="detector: the detector's proposals (default); labels: the frame's labelled boxes",
+    )
 
     def __post_init__(self) -> None:
-        for name, value in [("threshold", self.threshold)] + [("sweep", t) for t in self.sweep]:
-            if not 0.0 <= value < 1.0:
-                raise ValueError(f"{name} values must be in [0, 1), got {value}")
+        for flag, values in (("--threshold", [self.threshold]), ("--sweep", self.sweep)):
+            for value in values:
+                if value is not None and not 0.0 <= value < 1.0:
+                    raise ValueError(f"{flag} must be in [0, 1), got {value}")
         if not self.max_range > 0.0:
-            raise ValueError(f"max_range must be positive, got {self.max_range}")
+            raise ValueError(f"--max-range must be positive, got {self.max_range}")
         if self.fov not in FOVS:
-            raise ValueError(f"fov must be one of {FOVS}, got {self.fov!r}")
+            raise ValueError(f"--fov must be one of {FOVS}, got {self.fov!r}")
         if self.candidates not in CANDIDATE_KINDS:
             raise ValueError(
-                f"candidates must be one of {CANDIDATE_KINDS}, got {self.candidates!r}"
+                f"--candidates must be one of {CANDIDATE_KINDS}, got {self.candidates!r}"
             )
+
+    def resolved(self) -> tuple[float, ...]:
+        """The thresholds counted at: the operating one, then :attr:`sweep`."""
+        if self.threshold is None:
+            raise ValueError("no operating threshold: give --threshold or a calibrated checkpoint")
+        return (self.threshold, *self.sweep)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ClassPromptsCommand:
+    """The flags of ``python -m model.class_prompts`` beside :class:`ScoringConfig`'s.
+
+    Attributes:
+        data: The root (``lidar/`` and a radar tree), best a View-of-Delft root with full labels.
+        checkpoint: The model.
+        split: ``all`` (every frame with a ``label_2`` file) or an ImageSets list name.
+        radar_folder: The radar tree (``auto``: the root's; ``none``: LiDAR only).
+        limit: The first N frames only (0: all).
+        device: ``cpu`` or ``cuda``.
+        json: Where the figures go as JSON (None: not written).
+        quiet: No progress bar.
+    """
+
+    data: Path = option(help="root folder (lidar/ + a radar tree)")
+    checkpoint: Path = option(DEFAULT_CHECKPOINT)
+    split: str = option(
+        "all", help="all (every frame with a label_2 file; default) or an ImageSets list name"
+    )
+    radar_folder: str = option("auto", choices=("auto", *RADAR_FOLDERS, "none"), help="radar tree")
+    limit: int = option(0, help="first N frames only (0: all)")
+    device: str = option("cpu", help="cpu or cuda")
+    json: Path | None = option(None, help="write the figures as JSON here")
+    quiet: bool = option(False, help="no progress bar")
+
+    def __post_init__(self) -> None:
+        if self.limit < 0:
+            raise ValueError(f"--limit must be >= 0, got {self.limit}")
+
+
+_FLAG_ORDER: tuple[tuple[type, tuple[str, ...]], ...] = (
+    (ClassPromptsCommand, ("data", "checkpoint", "split")),
+    (ScoringConfig, ("max_range", "threshold")),
+    (ClassPromptsCommand, ("radar_folder",)),
+    (ScoringConfig, ("fov", "sweep", "candidates")),
+    (ClassPromptsCommand, ("limit", "device", "json", "quiet")),
+)
+"""Which dataclass each flag comes from, in ``--help``'s order."""
 
 
 @dataclass(frozen=True)
@@ -240,7 +300,7 @@ def score_frame(model: GroundingModel, sample: Sample, config: ScoringConfig) ->
             mask &= in_camera_view(boxes, sample.calib, fov_size)
         return mask
 
-    thresholds = (config.threshold, *config.sweep)
+    thresholds = config.resolved()
     gt_boxes = np.asarray(sample.boxes, dtype=np.float64).reshape(-1, 7)
     gt_counted = counted(gt_boxes)
     other_boxes = other_label_boxes(sample.labels, sample.calib)
@@ -249,7 +309,10 @@ def score_frame(model: GroundingModel, sample: Sample, config: ScoringConfig) ->
         from model.core.labelled import LabelledBoxes
 
         labelled = LabelledBoxes(gt_boxes, [CLASSES.index(c) for c in sample.classes])
-    features = model.encode_scene(sample.lidar, sample.radar, candidates=labelled)
+    if labelled is None:
+        features = model.encode_scene(sample.lidar, sample.radar)
+    else:  # a referent-path model (TPCNet.encode_scene); the protocol has no candidates
+        features = model.encode_scene(sample.lidar, sample.radar, candidates=labelled)  # type: ignore[call-arg]
     per_threshold: list[list[PromptCount]] = [[] for _ in thresholds]
     for cls, prompt in CLASS_PROMPTS.items():
         pred = model.ground(features, prompt, score_threshold=min(thresholds))
@@ -365,42 +428,8 @@ def _parser() -> argparse.ArgumentParser:
         description="Ask 'the cyclists', 'the pedestrians', 'the cars' on every frame of a root "
         "with full labels (a View-of-Delft root) and count found objects and false boxes.",
     )
-    p.add_argument("--data", required=True, type=Path, help="root folder (lidar/ + a radar tree)")
-    p.add_argument("--checkpoint", type=Path, default=DEFAULT_CHECKPOINT)
-    p.add_argument(
-        "--split",
-        default="all",
-        help="all (every frame with a label_2 file; default) or an ImageSets list name",
-    )
-    p.add_argument("--max-range", type=float, default=30.0, help="metres, BEV (default 30)")
-    p.add_argument("--threshold", type=float, default=None, help="default: the checkpoint's")
-    p.add_argument(
-        "--radar-folder",
-        default="auto",
-        choices=["auto", *RADAR_FOLDERS, "none"],
-        help="radar tree",
-    )
-    p.add_argument(
-        "--fov", default="camera", choices=FOVS, help="count only the camera's view (default)"
-    )
-    p.add_argument(
-        "--sweep",
-        type=float,
-        nargs="+",
-        default=(),
-        metavar="T",
-        help="also count at these thresholds (pooled table; one model pass)",
-    )
-    p.add_argument(
-        "--candidates",
-        default="detector",
-        choices=CANDIDATE_KINDS,
-        help="detector: the detector's proposals (default); labels: the frame's labelled boxes",
-    )
-    p.add_argument("--limit", type=int, default=0, help="first N frames only (0: all)")
-    p.add_argument("--device", default="cpu", help="cpu or cuda")
-    p.add_argument("--json", type=Path, default=None, help="write the figures as JSON here")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    for cls, names in _FLAG_ORDER:
+        add_options(p, cls, only=names)
     return p
 
 
@@ -417,70 +446,62 @@ def run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from model.checkpoint import load_checkpoint
     from model.evaluation.predict import operating_threshold
 
-    if args.limit < 0:
-        raise ValueError(f"--limit must be >= 0, got {args.limit}")
-    for flag, values in (("--threshold", [args.threshold]), ("--sweep", args.sweep)):
-        for value in values:
-            if value is not None and not 0.0 <= value < 1.0:
-                raise ValueError(f"{flag} must be in [0, 1), got {value}")
-    if not args.max_range > 0.0:
-        raise ValueError(f"--max-range must be positive, got {args.max_range}")
-    if not args.data.is_dir():
-        raise RootError(f"{args.data}: not a folder")
-    if not (args.data / LIDAR_FOLDER).is_dir():
-        raise RootError(f"{args.data / LIDAR_FOLDER}: missing (a VoD root has lidar/training/...)")
+    command = from_args(ClassPromptsCommand, args)
+    given = from_args(ScoringConfig, args)
+    if not command.data.is_dir():
+        raise RootError(f"{command.data}: not a folder")
+    if not (command.data / LIDAR_FOLDER).is_dir():
+        raise RootError(
+            f"{command.data / LIDAR_FOLDER}: missing (a VoD root has lidar/training/...)"
+        )
     root = Talk2RadarRoot(
-        args.data, radar=None if args.radar_folder == "none" else args.radar_folder
+        command.data, radar=None if command.radar_folder == "none" else command.radar_folder
     )
     talk2radar = root.has_prompts
-    ids = distinct_scenes(root, root_frame_ids(root, args.split))
-    if args.limit:
-        ids = ids[: args.limit]
+    ids = distinct_scenes(root, root_frame_ids(root, command.split))
+    if command.limit:
+        ids = ids[: command.limit]
     if not ids:
-        raise RootError(f"{args.data}: split {args.split!r} has no frames")
-    model = load_checkpoint(args.checkpoint, device=args.device)
-    threshold = operating_threshold(model) if args.threshold is None else args.threshold
-    config = ScoringConfig(
-        float(threshold),
-        args.max_range,
-        args.fov,
-        tuple(float(t) for t in args.sweep),
-        args.candidates,
-    )
+        raise RootError(f"{command.data}: split {command.split!r} has no frames")
+    model = load_checkpoint(command.checkpoint, device=command.device)
+    config = given
+    if given.threshold is None:
+        config = replace(given, threshold=float(operating_threshold(model)))
+    threshold = config.threshold
     meta = CheckpointMeta.of(model)
     print(
-        f"data: {args.data} ({len(ids)} frames, split {args.split}, radar "
-        f"{root.radar_folder or 'none'}); checkpoint {args.checkpoint} (step {meta.step}, "
+        f"data: {command.data} ({len(ids)} frames, split {command.split}, radar "
+        f"{root.radar_folder or 'none'}); checkpoint {command.checkpoint} (step {meta.step}, "
         f"epoch {meta.epoch}); threshold {threshold:g} "
-        f"({'--threshold' if args.threshold is not None else 'checkpoint'}); candidates "
-        f"{args.candidates}"
+        f"({'--threshold' if given.threshold is not None else 'checkpoint'}); candidates "
+        f"{given.candidates}"
     )
     if talk2radar:
         print(
-            f"note: {args.data} is a Talk2Radar root (lidar/training/prompt/): its label_2 holds "
+            f"note: {command.data} is a Talk2Radar root (lidar/training/prompt/): its label_2 holds "
             "only each prompt's referents, not every object, so found objects are undercounted "
             "and real objects count as false boxes; use a View-of-Delft root with full labels",
             file=sys.stderr,
         )
-    report = score_root(model, root, ids, config, progress=not args.quiet)
+    report = score_root(model, root, ids, config, progress=not command.quiet)
     print(report.format_table(), end="")
-    if args.json is not None:
+    if command.json is not None:
         data = {
-            "root": str(args.data),
+            "root": str(command.data),
             "root_kind": "talk2radar (referent labels only)" if talk2radar else "full labels",
-            "split": args.split,
+            "split": command.split,
             "radar_folder": root.radar_folder,
-            "checkpoint": str(args.checkpoint),
-            "checkpoint_sha256": _sha256(args.checkpoint),
+            "checkpoint": str(command.checkpoint),
+            "checkpoint_sha256": _sha256(command.checkpoint),
             "checkpoint_step": meta.step,
             "checkpoint_epoch": meta.epoch,
-            "threshold_source": "--threshold" if args.threshold is not None else "checkpoint",
+            "threshold_source": "--threshold" if given.threshold is not None else "checkpoint",
             "command": " ".join(["python -m model.class_prompts", *argv]),
             **report.to_dict(),
         }
-        args.json.parent.mkdir(parents=True, exist_ok=True)
-        atomic_write_text(args.json, json.dumps(data, indent=1) + "\n")
-        print(f"wrote {args.json}")
+        command.json.parent.mkdir(parents=True, exist_ok=True)
+        atomic_write_text(command.json, json.dumps(data, indent=1) + "\n")
+        print(f"wrote {command.json}")
     return 0
 
 

@@ -107,8 +107,9 @@ class ModelSource:
     def of(cls, model: TPCNet, folder: Path) -> ModelSource:
         """Write ``model`` (weights, config, metadata) to ``folder/model.pt``."""
         from model.checkpoint import save_checkpoint
+        from model.checkpoint_meta import CheckpointMeta
 
-        meta = dict(getattr(model, "checkpoint_metadata", None) or {})
+        meta = CheckpointMeta.of(model).to_dict()
         return cls(save_checkpoint(folder / "model.pt", model, **meta))
 
     def build(self) -> TPCNet:

@@ -185,7 +185,9 @@ def grounding_splits_table(rows: Sequence[Row]) -> str:
     return _markdown(["Acc@0.25 / set F1 / exact", *SPLIT_NAMES], body)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """``python -m model.results_table``'s parser: positional rows and one table choice (a
+    mutually exclusive group, which no dataclass field describes)."""
     parser = argparse.ArgumentParser(prog="python -m model.results_table", description=__doc__)
     parser.add_argument("rows", nargs="+", metavar="NAME=PATH.json")
     table = parser.add_mutually_exclusive_group()
@@ -201,6 +203,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         action="store_true",
         help="Acc@0.25 / set F1 / exact per prompt group and type, model and baselines",
     )
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
     args = parser.parse_args(argv)
     try:
         rows = [load_row(spec) for spec in args.rows]

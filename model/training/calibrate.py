@@ -28,9 +28,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from model.cli import add_options, from_args, option
 from model.evaluation.grounding import PromptBoxes, prompt_outcome
 from model.evaluation.predict import iterate_predictions
+from scenes.utils.cli import add_options, from_args, option
 
 if TYPE_CHECKING:
     from model.tpcnet import TPCNet
@@ -148,7 +148,7 @@ def calibrate_file(
         CalibrationError: the split cannot measure a threshold (the checkpoint is untouched).
     """
     from model.checkpoint import load_checkpoint, save_checkpoint
-    from model.checkpoint_meta import CheckpointMeta
+    from model.checkpoint_meta import CheckpointMeta, portable_path
 
     model = load_checkpoint(path)
     cal = calibrate(model, data, split, limit, min_prompts)
@@ -156,7 +156,7 @@ def calibrate_file(
         meta = CheckpointMeta.of(model).replace(
             operating_threshold=cal.threshold,
             operating_threshold_source={
-                "root": str(Path(data).resolve()),
+                "root": portable_path(data),
                 "split": split,
                 "prompts": cal.prompts,
                 "set_f1": round(cal.set_f1, 2),
@@ -198,12 +198,17 @@ class CalibrateConfig:
     )
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """``python -m model.calibrate``'s parser (:class:`CalibrateConfig`'s flags)."""
     p = argparse.ArgumentParser(
         prog="python -m model.calibrate", description=__doc__.split("\n")[0]
     )
     add_options(p, CalibrateConfig)
-    a = from_args(CalibrateConfig, p.parse_args(argv))
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    a = from_args(CalibrateConfig, build_parser().parse_args(argv))
     from model.checkpoint import CheckpointError
     from scenes.talk2radar.root import RootError
 

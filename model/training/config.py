@@ -7,13 +7,12 @@ how they combine. :class:`TrainConfig` is stored in every checkpoint and run sta
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal, get_args
 
 import torch
 
-from model.cli import add_options, from_args, option
 from model.config import (
     AnchorKind,
     FusionKind,
@@ -25,6 +24,7 @@ from model.config import (
 )
 from model.training.data import DataSpecError, RootSpec, root_specs
 from scenes.language.prompts.sampling import FAMILIES, PromptConfig
+from scenes.utils.cli import add_options, from_args, option
 
 AmpKind = Literal["none", "bf16"]
 """``--amp``: no autocast, or bfloat16 autocast of the forward passes (CUDA only)."""
@@ -59,10 +59,29 @@ class TrainingError(RuntimeError):
     """Training cannot go on (bad data, non-finite loss); the message says why."""
 
 
+@dataclass(frozen=True)
+class PromptDraw:
+    """The prompts the referent path generates per scene and step: what
+    :meth:`TrainConfig.prompt_draw` makes of the run's flags (their one home is
+    :class:`TrainConfig`; :class:`model.training.referent_step.ReferentTrainConfig` holds this).
+
+    Attributes:
+        per_scene: Prompts generated per scene and step (``--prompts-per-scene``).
+        label_prompts: Labels-source frames with scene labels: prompts generated per frame from
+            its labelled boxes, beside the given ones (``--label-prompts``).
+        config: The generator's settings: ``--phrasing``, ``--language``, ``--text-noise`` (its
+            ``p_perturb``) and ``--family-rate`` (:class:`scenes.language.prompts.PromptConfig`).
+    """
+
+    per_scene: int
+    label_prompts: int = 0
+    config: PromptConfig = field(default_factory=PromptConfig)
+
+
 @dataclass(frozen=True, kw_only=True)
 class TrainConfig:
     """Everything that defines a training run (stored in the checkpoints). Each field is one flag
-    of ``python -m model.train`` (:mod:`model.cli`); ``on_resume`` marks the settings a resumed
+    of ``python -m model.train`` (:mod:`scenes.utils.cli`); ``on_resume`` marks the settings a resumed
     run may change (:data:`model.training.state.FREE_ON_RESUME`)."""
 
     data: tuple[str, ...] = option(
@@ -259,33 +278,59 @@ class TrainConfig:
         """The training roots (:func:`model.training.data.root_specs`)."""
         return root_specs(self.data, self.data_weights, self.scene_labels)
 
+    def prompt_draw(self) -> PromptDraw:
+        """The referent path's prompts of these settings (the one place the flags are mapped to
+        the generator's)."""
+        rates = {"family_rates": self.family_rates} if self.family_rates else {}
+        config = PromptConfig(
+            phrasing=self.phrasing, language=self.language, p_perturb=self.text_noise, **rates
+        )
+        return PromptDraw(self.prompts_per_scene, self.label_prompts, config)
+
     def model_overrides(self) -> dict[str, str]:
         """The ``build_model`` overrides given on the command line."""
         names = ("modalities", "fusion", "text_fusion", "anchor", "text_encoder", "grounding")
         return {n: getattr(self, n) for n in names if getattr(self, n) is not None}
 
 
-def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
-    """Parse the command line into a :class:`TrainConfig` and the resume flag."""
+@dataclass(frozen=True, kw_only=True)
+class TrainCommand:
+    """The flags of ``python -m model.train`` that are not a run's settings (:class:`TrainConfig`).
+
+    Attributes:
+        resume: Continue the run in ``--out``.
+        threads: torch's CPU threads (0: torch's default).
+    """
+
+    resume: bool = option(False, help="continue the run in --out")
+    threads: int = option(
+        0, help="torch CPU threads (0: torch's default); use 1 when other jobs share the cores"
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``python -m model.train``'s parser: :class:`TrainConfig`'s flags, then
+    :class:`TrainCommand`'s."""
     p = argparse.ArgumentParser(prog="python -m model.train", description=__doc__.split("\n")[0])
     add_options(p, TrainConfig)
-    p.add_argument("--resume", action="store_true", help="continue the run in --out")
-    p.add_argument(
-        "--threads",
-        type=int,
-        default=0,
-        help="torch CPU threads (0: torch's default); use 1 when other jobs share the cores",
-    )
-    a = p.parse_args(argv)
-    if a.threads:
-        torch.set_num_threads(a.threads)
-    return from_args(TrainConfig, a), a.resume
+    add_options(p, TrainCommand)
+    return p
+
+
+def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
+    """Parse the command line into a :class:`TrainConfig` and the resume flag."""
+    a = build_parser().parse_args(argv)
+    command = from_args(TrainCommand, a)
+    if command.threads:
+        torch.set_num_threads(command.threads)
+    return from_args(TrainConfig, a), command.resume
 
 
 __all__ = [
     "GENERATED_PROMPTS_PER_SCENE",
     "LABELLED_PROMPTS_PER_SCENE",
     "LABEL_PROMPTS",
+    "PromptDraw",
     "TrainConfig",
     "TrainingError",
     "parse_args",

@@ -271,14 +271,7 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
         )
     else:
         dataset = GroundingDataset(root, cfg.train_split, augment=augment, seed=cfg.seed)
-    referent_cfg = ReferentTrainConfig(
-        prompts_per_scene=cfg.prompts_per_scene,
-        label_prompts=cfg.label_prompts,
-        language=cfg.language,
-        text_noise=cfg.text_noise,
-        phrasing=cfg.phrasing,
-        family_rates=cfg.family_rates,
-    )
+    referent_cfg = ReferentTrainConfig(cfg.prompt_draw())
 
     state = TrainState()
     run: RunState | None = None
@@ -330,11 +323,11 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
     metadata = CheckpointMeta(
         train_config=asdict(cfg),
         data={
-            "root": str(Path(specs[0].path).resolve()),
-            "roots": [str(Path(spec.path).resolve()) for spec in specs],
+            "root": specs[0].path,
+            "roots": [spec.path for spec in specs],
             "train_samples": len(dataset),
         },
-    )
+    ).with_portable_paths()
 
     def checkpoint(best: bool) -> None:
         """Every rank's RNG state to rank 0, which writes the run state and ``last.pt``; the

@@ -211,9 +211,9 @@ def cache_scenes(
     docstring). A ``dataset`` that flips every frame gives the mirrored views of the scenes.
     Prompts already in ``known`` (e.g. the other view's bank) are not encoded again; the bank
     returned holds only the new ones. ``prompt_config``: the generator's settings
-    (:meth:`model.training.referent_step.ReferentTrainConfig.prompt_config`; default: the base
+    (:attr:`model.training.config.PromptDraw.config`; default: the base
     prompts in the training phrasings). ``labelled``: also cache each scene's labelled view
-    (:attr:`CachedScene.labelled`, :func:`labelled_view`), with the same prompts."""
+    (:attr:`CachedScene.labelled`, :func:`scene_views`), with the same prompts."""
     from tqdm import tqdm
 
     model.eval()
@@ -252,7 +252,7 @@ def cached_referent_step(
     rng: np.random.Generator | Sequence[np.random.Generator],
     cfg: ReferentTrainConfig,
 ) -> ReferentLoss:
-    """Referent loss on cached scenes, ``cfg.prompts_per_scene`` banked prompts drawn per scene
+    """Referent loss on cached scenes, ``cfg.prompts.per_scene`` banked prompts drawn per scene
     (only the referent stage learns; ``rng`` as in :func:`referent_step`). Undetected referents
     cannot be answered and are not in a prompt's target."""
     device = model.device
@@ -260,7 +260,7 @@ def cached_referent_step(
     for scene, scene_rng in zip(scenes, _per_item(rng, len(scenes)), strict=True):
         if not len(scene.candidates) or not scene.prompts:
             continue
-        k = min(cfg.prompts_per_scene, len(scene.prompts))
+        k = min(cfg.prompts.per_scene, len(scene.prompts))
         picks = scene_rng.choice(len(scene.prompts), size=k, replace=False)
         index = len(chosen)
         chosen.append(scene.candidates)

@@ -48,6 +48,7 @@ from model.nets.text import (
     validate_prompt,
 )
 from model.tpcnet import TPCNet
+from model.training.config import PromptDraw
 from scenes.datasets.frames import AnnotatedRegion, FrameItem
 from scenes.geometry.actors import CLASSES, Actor
 from scenes.geometry.boxes import CENTRE_MATCH_DISTANCE
@@ -60,41 +61,24 @@ class ReferentTrainConfig:
     """Settings of :func:`referent_step`.
 
     Attributes:
-        prompts_per_scene: Prompts generated per scene and step.
+        prompts: The prompts generated per scene (:meth:`model.training.config.TrainConfig.
+            prompt_draw`: the run's ``--prompts-per-scene``, ``--label-prompts``, ``--language``,
+            ``--phrasing``, ``--text-noise`` and ``--family-rate``).
         jitter_xy: Std (m) of the noise added to an actor candidate's centre.
         jitter_size: Relative std of the noise on its size.
         jitter_yaw: Std (rad) of the noise on its heading.
         max_false: False detections kept per scene as negative candidates.
         referent_weight: Weight of the referent BCE in the total loss.
         listwise_weight: Weight of the listwise term.
-        phrasing: Phrasing stream of the generated prompts (``PromptConfig.phrasing``).
-        label_prompts: Labels-source frames with scene labels: prompts generated per frame from
-            its labelled boxes, beside the given ones (:func:`frame_prompts`).
-        language: Families of the generated prompts (``PromptConfig.language``).
-        text_noise: Share of generated prompts reworded by :func:`scenes.language.prompts.perturb`.
-        family_rates: ``language="extended"``: the non-attribute families' shares
-            (``PromptConfig.family_rates``); empty: the generator's default.
     """
 
-    prompts_per_scene: int = 8
+    prompts: PromptDraw
     jitter_xy: float = 0.15
     jitter_size: float = 0.05
     jitter_yaw: float = 0.05
     max_false: int = 12
     referent_weight: float = 1.0
     listwise_weight: float = 0.5
-    phrasing: str = "train"
-    label_prompts: int = 0
-    language: str = "base"
-    text_noise: float = 0.0
-    family_rates: tuple[float, ...] = ()
-
-    def prompt_config(self) -> PromptConfig:
-        """The generator's settings of these prompts."""
-        rates = {"family_rates": self.family_rates} if self.family_rates else {}
-        return PromptConfig(
-            phrasing=self.phrasing, language=self.language, p_perturb=self.text_noise, **rates
-        )
 
 
 @dataclass(frozen=True)
@@ -212,7 +196,7 @@ def referent_step(
     with torch.no_grad():
         dets = head.proposals(model.scene, out, limit=None)
         heat = torch.sigmoid(out.heatmap.detach()).cpu().numpy()
-    pcfg = prompt_config or cfg.prompt_config()
+    pcfg = prompt_config or cfg.prompts.config
     scenes, texts, rows, target_rows = [], [], [], []
     for b, frame in enumerate(frames):
         if not actors[b]:
@@ -232,7 +216,7 @@ def referent_step(
         usable = [
             (text, refs)
             for text, refs in frame_prompts(
-                frame, rngs[b], cfg.prompts_per_scene, pcfg, cfg.label_prompts
+                frame, rngs[b], cfg.prompts.per_scene, pcfg, cfg.prompts.label_prompts
             )
             if set(refs) <= set(ids.tolist())
         ]

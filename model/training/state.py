@@ -52,8 +52,8 @@ from model.checkpoint import (
     write_payload,
 )
 from model.checkpoint_meta import CheckpointMeta
-from model.cli import resumable_fields
 from model.training.config import TrainConfig
+from scenes.utils.cli import resumable_fields
 from scenes.utils.durable import atomic_file, atomic_write_text, read_json_lines
 
 STATE_FILE = "train_state.pt"

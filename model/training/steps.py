@@ -212,7 +212,7 @@ def freeze_scene(
                 progress=progress,
                 label_prompts=cfg.label_prompts,
                 known=bank,
-                prompt_config=referent_cfg.prompt_config(),
+                prompt_config=referent_cfg.prompts.config,
                 labelled=cfg.labelled_views > 0,
             )
             into += part

@@ -37,6 +37,12 @@ from scenes.geometry.calib import Calibration
 from scenes.geometry.projection import image_size_at, scale_calibration
 from scenes.synth.weather import Weather
 from scenes.synth.world import Mat, TaggedMesh, World
+from scenes.utils.cli import option
+
+CAMERA_SCALES = (1.0, 0.5, 0.25, 0.125)
+"""``--camera-scale`` values: the image sizes that divide VoD's exactly."""
+CAMERA_RAY_STEPS = (1, 2, 4)
+"""``--camera-ray-step`` values."""
 
 
 @dataclass(frozen=True)
@@ -55,11 +61,23 @@ class CameraConfig:
             extinction is used where larger.
     """
 
-    image_scale: float = 1.0
-    ray_step: int = 2
-    jpeg_quality: int = 90
-    sun_elevation_deg: tuple[float, float] = (20.0, 60.0)
-    haze: float = 0.003
+    image_scale: float = option(
+        1.0,
+        flag="--camera-scale",
+        choices=CAMERA_SCALES,
+        help="camera image size relative to VoD's 1936 x 1216 (P2 scaled to match; default "
+        "%(default)s)",
+    )
+    ray_step: int = option(
+        2,
+        flag="--camera-ray-step",
+        choices=CAMERA_RAY_STEPS,
+        help="one camera ray per N x N pixels, upsampled (default %(default)s; 4 is about twice "
+        "as fast)",
+    )
+    jpeg_quality: int = option(90, cli=False)
+    sun_elevation_deg: tuple[float, float] = option((20.0, 60.0), cli=False)
+    haze: float = option(0.003, cli=False)
 
     def __post_init__(self) -> None:
         width, height = image_size_at(self.image_scale)  # raises for a scale that is not exact

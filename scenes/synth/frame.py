@@ -6,7 +6,7 @@ and sensed (LiDAR, accumulated radar, camera image) with its prompts drawn over 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -21,6 +21,7 @@ from scenes.synth.weather import WEATHERS, Weather
 from scenes.synth.world import RayCaster, World, WorldConfig, generate_world
 from scenes.talk2radar.layout import RADAR_FOLDER_OF_SCANS
 from scenes.talk2radar.poses import FRAME_RATE
+from scenes.utils.cli import option
 
 RADAR_FOLDER = RADAR_FOLDER_OF_SCANS
 """Radar tree per number of accumulated scans (:data:`scenes.talk2radar.layout.RADAR_FOLDER_OF_SCANS`)."""
@@ -66,19 +67,45 @@ class SynthSettings:
             whose samples have no referent (an empty ``label_2``).
     """
 
-    seed: int = 0
-    weather: str = "clear"
-    radar_scans: int = 5
-    prompts_per_world: int = 2
-    min_lidar_points: int = 3
-    min_radar_points: int = 1
-    world: WorldConfig = field(default_factory=WorldConfig)
-    lidar: LidarConfig = field(default_factory=LidarConfig)
-    radar: RadarConfig = field(default_factory=RadarConfig)
-    phrasing: str = "train"
-    camera: CameraConfig | None = field(default_factory=CameraConfig)
-    sequence_length: int = 1
-    language: str = "base"
+    seed: int = option(0, help="base seed (default %(default)s)")
+    weather: str = option(
+        "clear",
+        choices=(*WEATHERS, MIXED),
+        help="weather of every world, or mixed (60/20/20 %% clear/rain/fog); default %(default)s",
+    )
+    radar_scans: int = option(
+        5,
+        choices=sorted(RADAR_FOLDER),
+        help="accumulated radar scans: tree radar, radar_3frames or radar_5frames (default "
+        "%(default)s)",
+    )
+    prompts_per_world: int = option(2, help="samples per world (default %(default)s)")
+    min_lidar_points: int = option(3, cli=False)
+    min_radar_points: int = option(1, cli=False)
+    world: WorldConfig = option(default_factory=WorldConfig, cli=False)
+    lidar: LidarConfig = option(default_factory=LidarConfig, cli=False)
+    radar: RadarConfig = option(default_factory=RadarConfig, cli=False)
+    phrasing: str = option(
+        "train",
+        choices=PHRASINGS,
+        help="prompt wording: train phrasings, held-out phrasings (for measuring generalisation "
+        "to other wording) or all (default %(default)s)",
+    )
+    camera: CameraConfig | None = option(default_factory=CameraConfig, cli=False)
+    sequence_length: int = option(
+        1,
+        metavar="N",
+        help="consecutive 10 Hz frames per world: actors move with their velocities, the ego "
+        "with its speed, each frame gets a View-of-Delft pose file (default %(default)s: single "
+        "frames)",
+    )
+    language: str = option(
+        "base",
+        choices=LANGUAGES,
+        help="prompt language: base (attribute prompts) or extended (also out-of-class, "
+        "unsatisfiable, negation, exclusion, ordinal, relation and counting prompts; some "
+        "samples then have no referent: an empty label_2); default %(default)s",
+    )
 
     def __post_init__(self) -> None:
         if self.phrasing not in PHRASINGS:

@@ -58,8 +58,7 @@ import numpy as np
 from tqdm import tqdm
 
 from scenes.geometry.calib import Calibration, sensor_to_lidar
-from scenes.language.prompts import LANGUAGES, PHRASINGS
-from scenes.synth.camera import CameraConfig
+from scenes.synth.camera import CAMERA_SCALES, CameraConfig
 from scenes.synth.frame import (
     MIXED,
     MIXED_WEATHER,
@@ -74,16 +73,17 @@ from scenes.synth.frame import (
     world_streams,
 )
 from scenes.synth.sequence import sequence_pose
-from scenes.synth.weather import WEATHERS
 from scenes.talk2radar.layout import LABEL, LIDAR_FOLDER, sample_file
 from scenes.talk2radar.poses import FRAME_RATE, write_pose
 from scenes.talk2radar.sample_meta import SampleMeta
 from scenes.talk2radar.writer import Talk2RadarWriter
+from scenes.utils.cli import add_options, from_args, option
 from scenes.utils.durable import append_json_line, drop_torn_tail, read_json_lines
 
 __all__ = [  # with the settings and one frame from scenes.synth.frame, re-exported
     "CAMERA_SCALES",
     "DEFAULT_SETTINGS",
+    "DEFAULT_SPLIT_FRACTIONS",
     "MANIFEST",
     "MAX_SAMPLES",
     "MIXED",
@@ -92,6 +92,7 @@ __all__ = [  # with the settings and one frame from scenes.synth.frame, re-expor
     "SPLITS",
     "GenerationReport",
     "StageTimes",
+    "SynthCommand",
     "SynthError",
     "SynthFrame",
     "SynthSettings",
@@ -108,10 +109,10 @@ __all__ = [  # with the settings and one frame from scenes.synth.frame, re-expor
 MANIFEST = "synth_manifest.jsonl"
 SPLITS = ("train", "val", "test")
 MAX_SAMPLES = 100_000  # 5-digit ids
-CAMERA_SCALES = (1.0, 0.5, 0.25, 0.125)
-"""``--camera-scale`` values: the image sizes that divide VoD's exactly."""
 DEFAULT_SETTINGS = SynthSettings()
 """The settings of ``python -m scenes.synth`` without options."""
+DEFAULT_SPLIT_FRACTIONS = (0.7, 0.1, 0.2)
+"""Share of worlds per split, train / val / test (``--split-fractions``' default)."""
 
 
 def assign_splits(n_worlds: int, fractions: Sequence[float]) -> list[str]:
@@ -283,7 +284,7 @@ def generate_root(
     out: str | Path,
     frames: int,
     settings: SynthSettings = DEFAULT_SETTINGS,
-    split_fractions: Sequence[float] = (0.7, 0.1, 0.2),
+    split_fractions: Sequence[float] = DEFAULT_SPLIT_FRACTIONS,
     progress: bool = False,
     max_empty_worlds: int = 200,
 ) -> GenerationReport:
@@ -377,75 +378,50 @@ def generate_root(
     )
 
 
+@dataclass(frozen=True, kw_only=True)
+class SynthCommand:
+    """The flags of ``python -m scenes.synth`` that are not generation settings (those are
+    :class:`SynthSettings`' and the camera's :class:`scenes.synth.camera.CameraConfig`'s fields).
+
+    Attributes:
+        out: Output root folder.
+        frames: Number of samples (prompts) to write.
+        split_fractions: Share of worlds per split, train / val / test.
+        no_camera: Write no camera images (``SynthSettings.camera`` None).
+        quiet: No progress bar.
+    """
+
+    out: Path = option(help="output root folder")
+    frames: int = option(help="number of samples (prompts) to write")
+    split_fractions: tuple[float, float, float] = option(
+        (0.7, 0.1, 0.2),
+        metavar=("TRAIN", "VAL", "TEST"),
+        help="share of worlds per split (default %(default)s)",
+    )
+    no_camera: bool = option(False, help="write no camera images (image_2)")
+    quiet: bool = option(False, help="no progress bar")
+
+
+_FLAG_ORDER: tuple[tuple[type, tuple[str, ...]], ...] = (
+    (SynthCommand, ("out", "frames")),
+    (SynthSettings, ("seed", "weather", "radar_scans", "prompts_per_world")),
+    (SynthCommand, ("split_fractions",)),
+    (SynthSettings, ("phrasing", "language")),
+    (SynthCommand, ("no_camera",)),
+    (CameraConfig, ("image_scale", "ray_step")),
+    (SynthSettings, ("sequence_length",)),
+    (SynthCommand, ("quiet",)),
+)
+"""Which dataclass each flag comes from, in ``--help``'s order."""
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m scenes.synth",
         description="Generate a synthetic Talk2Radar root (LiDAR + 4D radar + grounded prompts).",
     )
-    p.add_argument("--out", required=True, type=Path, help="output root folder")
-    p.add_argument("--frames", required=True, type=int, help="number of samples (prompts) to write")
-    p.add_argument("--seed", type=int, default=0, help="base seed (default 0)")
-    p.add_argument(
-        "--weather",
-        default="clear",
-        choices=[*WEATHERS, MIXED],
-        help="weather of every world, or mixed (60/20/20 %% clear/rain/fog); default clear",
-    )
-    p.add_argument(
-        "--radar-scans",
-        type=int,
-        default=5,
-        choices=sorted(RADAR_FOLDER),
-        help="accumulated radar scans: tree radar, radar_3frames or radar_5frames (default 5)",
-    )
-    p.add_argument("--prompts-per-world", type=int, default=2, help="samples per world (default 2)")
-    p.add_argument(
-        "--split-fractions",
-        type=float,
-        nargs=3,
-        default=(0.7, 0.1, 0.2),
-        metavar=("TRAIN", "VAL", "TEST"),
-        help="share of worlds per split (default 0.7 0.1 0.2)",
-    )
-    p.add_argument(
-        "--phrasing",
-        default="train",
-        choices=PHRASINGS,
-        help="prompt wording: train phrasings, held-out phrasings (for measuring generalisation "
-        "to other wording) or all (default train)",
-    )
-    p.add_argument(
-        "--language",
-        default="base",
-        choices=LANGUAGES,
-        help="prompt language: base (attribute prompts) or extended (also out-of-class, "
-        "unsatisfiable, negation, exclusion, ordinal, relation and counting prompts; some "
-        "samples then have no referent: an empty label_2); default base",
-    )
-    p.add_argument("--no-camera", action="store_true", help="write no camera images (image_2)")
-    p.add_argument(
-        "--camera-scale",
-        type=float,
-        default=1.0,
-        choices=CAMERA_SCALES,
-        help="camera image size relative to VoD's 1936 x 1216 (P2 scaled to match; default 1)",
-    )
-    p.add_argument(
-        "--camera-ray-step",
-        type=int,
-        default=2,
-        choices=(1, 2, 4),
-        help="one camera ray per N x N pixels, upsampled (default 2; 4 is about twice as fast)",
-    )
-    p.add_argument(
-        "--sequence-length",
-        type=int,
-        default=1,
-        metavar="N",
-        help="consecutive 10 Hz frames per world: actors move with their velocities, the ego "
-        "with its speed, each frame gets a View-of-Delft pose file (default 1: single frames)",
-    )
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    for cls, names in _FLAG_ORDER:
+        add_options(p, cls, only=names)
     return p
 
 
@@ -454,26 +430,22 @@ def _camera_config(args: argparse.Namespace) -> CameraConfig | None:
     if args.no_camera:
         return None
     try:
-        return CameraConfig(image_scale=args.camera_scale, ray_step=args.camera_ray_step)
+        return from_args(CameraConfig, args)
     except ValueError as exc:
         raise SynthError(f"camera: {exc}") from exc
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    command = from_args(SynthCommand, args)
     try:
-        settings = SynthSettings(
-            seed=args.seed,
-            weather=args.weather,
-            radar_scans=args.radar_scans,
-            prompts_per_world=args.prompts_per_world,
-            phrasing=args.phrasing,
-            language=args.language,
-            camera=_camera_config(args),
-            sequence_length=args.sequence_length,
-        )
+        settings = from_args(SynthSettings, args, camera=_camera_config(args))
         report = generate_root(
-            args.out, args.frames, settings, args.split_fractions, progress=not args.quiet
+            command.out,
+            command.frames,
+            settings,
+            command.split_fractions,
+            progress=not command.quiet,
         )
     except SynthError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -1,0 +1,216 @@
+"""Command lines made from frozen dataclass configs: each field is one flag, and its type, default
+and help are the only source of that flag (every command: ``python -m scenes.synth``,
+``scenes.export_real``, ``model.train``, ``model.evaluate``, ``model.calibrate``,
+``model.class_prompts``, the ``bench.*`` entry points and ``python launch.py``). Here, in the bottom
+package, so that every package may use it.
+
+A field becomes ``--field-name`` (underscores to hyphens) unless :func:`option` names another
+flag; ``Literal[...]`` (or ``Literal[...] | None``) gives the choices, ``int`` / ``float`` /
+``str`` the type, a ``tuple[X, ...]`` a flag given once per value (``action="append"``), a
+``Path`` (or ``Path | None``) a path, a ``bool`` a switch (``--name`` for a default of False,
+``--no-name`` for True, or both forms with ``negatable=True``), a fixed-length ``tuple[X, X, X]`` a
+flag taking that many values at once (``nargs``). ``choices`` (for a field typed ``int``, ``float``
+or ``str`` whose values a constant lists) and ``metavar`` pass to argparse as they are; help may
+name the default as ``%(default)s``, so that no help text restates it. A field without a default
+is a required flag. Fields with ``cli=False`` metadata have no flag; fields with a ``group`` title are
+listed under that argument group in ``--help`` (groups in the order their first field comes).
+
+Why not ``tyro``: the commands' flags, help text and errors are relied on by scripts and docs
+(docs/DESIGN.md); tyro renames and re-formats them (``--flag/--no-flag`` pairs, its own help
+layout and error messages, ``nargs`` lists instead of repeated flags), and keeping every existing
+spelling would take a marker on nearly every field. Generating the argparse parser from the
+fields keeps the command lines exactly and still has one source for each setting.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import types
+import typing
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any, Literal
+
+
+def option(
+    default: Any = dataclasses.MISSING,
+    *,
+    help: str | None = None,
+    flag: str | None = None,
+    negatable: bool = False,
+    on_resume: bool = False,
+    default_factory: Callable[[], Any] | Any = dataclasses.MISSING,
+    cli: bool = True,
+    group: str | None = None,
+    choices: Sequence[Any] | None = None,
+    metavar: str | tuple[str, ...] | None = None,
+    nargs: str | None = None,
+) -> Any:
+    """A dataclass field with its command-line flag's settings.
+
+    Args:
+        default: The field's default (none: a required flag).
+        help: The flag's help text.
+        flag: The flag's spelling when it is not ``--field-name``.
+        negatable: A bool given as ``--name`` / ``--no-name`` (``BooleanOptionalAction``).
+        on_resume: The setting may change when a run is resumed (:func:`resumable_fields`).
+        default_factory: As :func:`dataclasses.field`'s (also the flag's default).
+        cli: False: a field with no flag.
+        group: The title of the argument group the flag is listed under (None: the parser's).
+        choices: The values the flag takes (default: a ``Literal`` type's, else any).
+        metavar: The flag's value name(s) in ``--help`` (a tuple for a fixed-length tuple).
+        nargs: For a ``tuple[X, ...]``: the values given after one flag (``"+"``), instead of
+            the flag repeated once per value.
+    """
+    meta = {
+        "help": help,
+        "flag": flag,
+        "negatable": negatable,
+        "on_resume": on_resume,
+        "cli": cli,
+        "group": group,
+        "choices": None if choices is None else tuple(choices),
+        "metavar": metavar,
+        "nargs": nargs,
+    }
+    if default_factory is not dataclasses.MISSING:
+        return dataclasses.field(default_factory=default_factory, metadata=meta)
+    return dataclasses.field(default=default, metadata=meta)
+
+
+def choices_of(tp: Any) -> tuple[Any, ...] | None:
+    """The values of a ``Literal`` type (also inside ``X | None``); None for another type."""
+    if typing.get_origin(tp) is Literal:
+        return typing.get_args(tp)
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        for arg in typing.get_args(tp):
+            found = choices_of(arg)
+            if found is not None:
+                return found
+    return None
+
+
+def _base(tp: Any) -> Any:
+    """``X`` of ``X | None``."""
+    if typing.get_origin(tp) in (typing.Union, types.UnionType):
+        args = [a for a in typing.get_args(tp) if a is not type(None)]
+        return args[0] if len(args) == 1 else str
+    return tp
+
+
+def flag_name(field: dataclasses.Field) -> str:
+    """The flag of a field: ``--field-name``, ``--no-field-name`` for a switch that is on by
+    default, or the one :func:`option` names."""
+    if field.metadata.get("flag"):
+        return field.metadata["flag"]
+    switch_off = field.default is True and not field.metadata.get("negatable")
+    return ("--no-" if switch_off else "--") + field.name.replace("_", "-")
+
+
+def _default(field: dataclasses.Field) -> Any:
+    if field.default_factory is not dataclasses.MISSING:
+        return field.default_factory()
+    return field.default
+
+
+def _shown(value: Any) -> str:
+    """A default as ``--help`` names it: a sequence as its values separated by spaces (as they
+    are typed), anything else as ``str``."""
+    if isinstance(value, (tuple, list)):
+        return " ".join(str(v) for v in value)
+    return str(value)
+
+
+def add_options(parser: argparse.ArgumentParser, cls: type, only: tuple[str, ...] = ()) -> None:
+    """One flag per field of ``cls`` (in field order; ``only``: just these fields)."""
+    hints = typing.get_type_hints(cls, include_extras=True)
+    groups: dict[str, argparse._ArgumentGroup] = {}
+    for f in dataclasses.fields(cls):
+        if not f.metadata.get("cli", True) or (only and f.name not in only):
+            continue
+        _add_option(_group(parser, groups, f.metadata.get("group")), f, hints[f.name])
+
+
+def _group(
+    parser: argparse.ArgumentParser,
+    groups: dict[str, argparse._ArgumentGroup],
+    title: str | None,
+) -> argparse.ArgumentParser | argparse._ArgumentGroup:
+    """The parser itself (``title`` None) or its argument group ``title`` (made on first use)."""
+    if title is None:
+        return parser
+    if title not in groups:
+        groups[title] = parser.add_argument_group(title)
+    return groups[title]
+
+
+def _add_option(
+    parser: argparse.ArgumentParser | argparse._ArgumentGroup, f: dataclasses.Field, tp: Any
+) -> None:
+    """The flag of field ``f`` (type ``tp``) on ``parser`` (module docstring)."""
+    name = flag_name(f)
+    kw: dict[str, Any] = {"dest": f.name}
+    required = f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+    if f.metadata.get("help") is not None:
+        shown = "" if required else _shown(_default(f))
+        kw["help"] = f.metadata["help"].replace("%(default)s", shown.replace("%", "%%"))
+    base = _base(tp)
+    if base is bool:
+        if f.metadata.get("negatable"):
+            kw.update(action=argparse.BooleanOptionalAction, default=_default(f))
+        else:
+            kw.update(action="store_false" if _default(f) else "store_true")
+    elif typing.get_origin(base) is tuple and Ellipsis not in typing.get_args(base):
+        items = typing.get_args(base)
+        kw.update(nargs=len(items), type=items[0], required=required)
+        if not required:
+            kw["default"] = _default(f)
+    elif typing.get_origin(base) is tuple:
+        item = typing.get_args(base)[0]
+        if f.metadata.get("nargs"):
+            kw.update(nargs=f.metadata["nargs"], required=required)
+        else:
+            kw.update(action="append", required=required)
+        if not required:
+            default = _default(f)
+            kw["default"] = None if default is None else list(default)
+        if item is not str:
+            kw["type"] = item
+        if f.metadata.get("choices") is not None:
+            kw["choices"] = list(f.metadata["choices"])
+        if f.metadata.get("flag"):
+            kw["metavar"] = name.lstrip("-").replace("-", "_").upper()
+    else:
+        listed = f.metadata.get("choices")
+        choices = listed if listed is not None else choices_of(tp)
+        if base in (int, float, Path):
+            kw["type"] = base
+        if choices is not None:
+            kw["choices"] = list(choices)
+        if required:
+            kw["required"] = True
+        else:
+            kw["default"] = _default(f)
+    if f.metadata.get("metavar") is not None:
+        kw["metavar"] = f.metadata["metavar"]
+    parser.add_argument(name, **kw)
+
+
+def from_args(cls: type, args: argparse.Namespace, **extra: Any) -> Any:
+    """``cls`` built from the parsed flags of its fields (tuples from repeated flags) and
+    ``extra``."""
+    given: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        if hasattr(args, f.name):
+            value = getattr(args, f.name)
+            given[f.name] = tuple(value) if isinstance(value, list) else value
+    return cls(**{**given, **extra})
+
+
+def resumable_fields(cls: type) -> frozenset[str]:
+    """The fields of ``cls`` marked ``on_resume`` (settings a resumed run may change)."""
+    return frozenset(f.name for f in dataclasses.fields(cls) if f.metadata.get("on_resume"))
+
+
+__all__ = ["add_options", "choices_of", "flag_name", "from_args", "option", "resumable_fields"]
