@@ -26,6 +26,10 @@ writes (the prompt file, the sidecar, the manifest's prompt and annotator), and
    words, 200 characters at most), :data:`ANNOTATOR` 64, :data:`NOTE` 500. Longer text is refused, not cut, so
    nothing is saved that the person did not see.
 
+The files the project reads share this classification (:func:`forbidden_at`, with the line feed
+allowed: :mod:`scenes.textfile`, the one reading policy), and a prompt file is read under
+:data:`PROMPT` there.
+
 Decision: refuse rather than silently drop forbidden characters. A NUL or a line separator in a
 prompt is a paste or a forged message, never meant; dropping it could join two words
 (``the car\\x00ahead``) into a sentence nobody typed.
