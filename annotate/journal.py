@@ -19,7 +19,7 @@ from pathlib import Path
 
 from annotate.errors import StoreError, one_line, operation_error
 from scenes.utils.durable import atomic_write_text, fsync_dir
-from scenes.utils.textfile import read_text_file
+from scenes.utils.textfile import read_json_file
 
 log = logging.getLogger(__name__)
 
@@ -72,7 +72,7 @@ class Journals:
     @staticmethod
     def read(path: Path) -> dict:
         """A journal's content (errors: :class:`StoreError` naming the file, JSON errors)."""
-        journal = json.loads(read_text_file(path, "journal", StoreError))
+        journal = read_json_file(path, "journal", StoreError)
         if not isinstance(journal, dict):
             raise StoreError(f"{path}: the journal is not a JSON object")
         return journal
@@ -82,8 +82,8 @@ class Journals:
         best = -1
         for folder in (self.pending_dir, self.unresolved_dir):
             for path in folder.glob("*.json"):
-                with contextlib.suppress(OSError, ValueError, KeyError, TypeError):
-                    best = max(best, int(json.loads(path.read_text())["sample_id"]))
+                with contextlib.suppress(StoreError, ValueError, KeyError, TypeError):
+                    best = max(best, int(self.read(path)["sample_id"]))
         return best
 
     def set_aside(self, path: Path, exc: BaseException) -> str:

@@ -34,6 +34,7 @@ from scenes.language.query import Query, QueryError, parse_query
 from scenes.language.resolve import resolve
 from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.utils.durable import atomic_write_text
+from scenes.utils.textfile import read_json_file
 
 SUITE_FILE = Path(__file__).resolve().parent.parent / "tests" / "data" / "language_suite.json"
 DEFAULT_SCENES = Path("runs/language-suite-scenes")
@@ -125,16 +126,15 @@ def parse_suite(data: object, source: str) -> Suite:
 
 def load_suite(path: str | Path = SUITE_FILE) -> Suite:
     """Read and check the suite file."""
-    try:
-        data = json.loads(Path(path).read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as exc:
-        raise SuiteError(f"{path}: cannot read the suite: {exc}") from exc
+    data = read_json_file(path, "language suite", SuiteError)
     return parse_suite(data, str(path))
 
 
 def write_fingerprint(path: str | Path, fingerprint: Sequence[dict]) -> None:
     """Replace the suite file's ``scenes.fingerprint`` (atomic), keeping everything else."""
-    data = json.loads(Path(path).read_text(encoding="utf-8"))
+    data = read_json_file(path, "language suite", SuiteError)
+    if not isinstance(data, dict):
+        raise SuiteError(f"{path}: expected an object with a 'sentences' list")
     data.setdefault("scenes", {})["fingerprint"] = list(fingerprint)
     atomic_write_text(path, dump_suite(data))
 

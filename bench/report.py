@@ -21,6 +21,7 @@ from typing import Any
 import torch
 
 from scenes.utils.durable import atomic_write_text
+from scenes.utils.textfile import read_text_file
 
 REPO = Path(__file__).resolve().parents[1]
 RESULTS_DIR = REPO / "bench" / "results"
@@ -296,7 +297,7 @@ def write_result(result: BenchResult, directory: Path = RESULTS_DIR) -> Path:
 def read_result(path: Path) -> BenchResult:
     """Read a file written by :func:`write_result`."""
     try:
-        data = json.loads(Path(path).read_text())
+        data = json.loads(read_text_file(path, "bench result", BenchResultError))
     except json.JSONDecodeError as exc:
         raise BenchResultError(f"{path}: not valid JSON (line {exc.lineno}: {exc.msg})") from exc
     return result_from_json(data, str(path))

@@ -39,6 +39,7 @@ from bench.common import (
 )
 from scenes.utils.cli import add_options, from_args, option
 from scenes.utils.durable import atomic_write_text
+from scenes.utils.textfile import read_text_file
 
 BENCHMARKS = (
     "latency",
@@ -201,10 +202,10 @@ def _synth_section(path: Path, failure: str | None) -> str:
             ]
         )
     try:
-        data = json.loads(path.read_text())
+        data = json.loads(read_text_file(path, "results file", ValueError))
         command, table = data["command"], data["markdown"]
         machine = data.get("machine", {})
-    except (json.JSONDecodeError, KeyError, TypeError) as exc:
+    except (ValueError, KeyError, TypeError) as exc:  # JSONDecodeError is a ValueError
         return "\n".join([*lines, f"*Unreadable results* `{_rel(path)}`: {exc}.", ""])
     here = machine_info(command)
     load = machine.get("load_average_before")

@@ -45,7 +45,7 @@ def tiny_root(tmp_path_factory) -> Path:
         ("at two and a half m/s", [("two and a half", 2.5)]),
         ("10m away at 20km/h", [("10", 10.0), ("20", 20.0)]),
         ("twenty-five kph", [("twenty-five", 25.0)]),
-        ("one hundred and five", [("one hundred and five", 105.0)]),
+        ("one hundred and five km/h", [("one hundred and five", 105.0)]),  # a count: bounded
         ("a car and a bike", []),
         ("2,5 m/s", [("2,5", 2.5)]),
         ("two point five metres per second", [("two point five", 2.5)]),

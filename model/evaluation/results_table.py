@@ -37,6 +37,7 @@ from model.evaluation.report_file import (
     ReportFileError,
     SubsetFigures,
 )
+from scenes.utils.textfile import read_text_file
 
 CLASSES: tuple[str, ...] = tuple(MIN_OVERLAPS)
 """The classes the mAP averages, in the official order."""
@@ -63,10 +64,10 @@ def load_row(spec: str) -> Row:
     name, sep, path = spec.partition("=")
     if not sep or not name or not path:
         raise ResultsTableError(f"{spec!r}: expected NAME=PATH.json")
+    if not Path(path).exists():
+        raise ResultsTableError(f"{path}: no such results file")
     try:
-        data = json.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise ResultsTableError(f"{path}: no such results file") from None
+        data = json.loads(read_text_file(path, "results file", ResultsTableError))
     except json.JSONDecodeError as exc:
         raise ResultsTableError(f"{path}: not JSON (line {exc.lineno}: {exc.msg})") from None
     return Row(name, ReportFile.read(data, path, name, ROW_NAMES))

@@ -47,7 +47,7 @@ from torch import Tensor, nn
 from torch.nn.utils.rnn import pack_padded_sequence, pad_packed_sequence
 
 from model.config import TextConfig
-from model.nets.numerals import token_numeric_features
+from model.nets.numerals import bound_numbers, token_numeric_features
 from model.nets.onednn import FrozenLinear
 from scenes.utils.lru import LRUCache
 
@@ -279,7 +279,10 @@ def tokenize(prompt: str, max_tokens: int) -> tuple[list[int], bool]:
 
 def tokenize_with_numbers(prompt: str, max_tokens: int) -> tuple[list[int], np.ndarray, bool]:
     """:func:`tokenize` plus the ``(len(ids), NUMERIC_FEATURES)`` numeric features of each token
-    (:func:`model.nets.numerals.token_numeric_features`; zero for [CLS] and [SEP])."""
+    (:func:`model.nets.numerals.token_numeric_features`; zero for [CLS] and [SEP]). Numbers past
+    their bounds are read as the bounds, in the tokens too
+    (:func:`model.nets.numerals.bound_numbers`)."""
+    prompt = bound_numbers(prompt)
     enc = load_tokenizer().encode(prompt, add_special_tokens=True)
     ids = list(enc.ids)
     offsets = [tuple(o) for o in enc.offsets]

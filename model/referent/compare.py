@@ -17,7 +17,9 @@ than 50 km/h" boxed as many cyclists as "cyclists" on validation scenes). So, as
 - whether the number exists.
 
 Which of these a sentence means (a distance or a speed, which unit, above or below) is left to the
-stage: its text gate and layers read the words around the number. Pure torch functions of the
+stage: its text gate and layers read the words around the number. The numbers are bounded where
+they are read (:mod:`model.nets.numerals`: a distance beyond the sensors' range reads as "beyond
+range", a count beyond the candidates as the candidates) and again here, so no comparison is NaN. Pure torch functions of the
 stage's inputs, for all candidates and prompts at once; no text parsing beyond the numerals'.
 """
 
@@ -27,6 +29,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
+from model.nets.numerals import MAX_NUMBER
 from model.referent.candidates import (
     DEPTH_COLUMN,
     DEPTH_SCALE,
@@ -54,12 +57,16 @@ def prompt_numbers(numbers: Tensor, padding: Tensor) -> tuple[Tensor, Tensor]:
         padding: ``(N, T)`` bool, True at padding.
 
     Returns:
-        ``values`` ``(N, COMPARE_NUMBERS)`` (0 where absent) and ``present`` ``(N,
-        COMPARE_NUMBERS)`` float (1 where the prompt has that many numbers). A number is a run
+        ``values`` ``(N, COMPARE_NUMBERS)`` in ``[0, MAX_NUMBER]`` (0 where absent; a value
+        that is not finite or is larger reads as :data:`model.nets.numerals.MAX_NUMBER`) and
+        ``present`` ``(N, COMPARE_NUMBERS)`` float (1 where the prompt has that many numbers). A number is a run
         of number tokens of one value ("twenty five" is two tokens of 25).
     """
     flag = (numbers[..., 0] > 0.5) & ~padding
-    value = numbers[..., 1] * 10.0
+    # Bounded again where read back (the numerals bound what they write: MAX_NUMBER): features
+    # made elsewhere (a cache, a caller) can never make a comparison NaN or infinite.
+    value = torch.nan_to_num(numbers[..., 1] * 10.0, nan=MAX_NUMBER, posinf=MAX_NUMBER)
+    value = value.clamp(0.0, MAX_NUMBER)
     prev_flag = F.pad(flag[:, :-1], (1, 0), value=False)
     prev_value = F.pad(value[:, :-1], (1, 0))
     start = flag & ~(prev_flag & (value == prev_value))

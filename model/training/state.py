@@ -287,7 +287,7 @@ def trim_log(out: str | os.PathLike[str], step: int) -> int:
     log = read_json_lines(path)
     if not log.entries and not log.unreadable:
         return 0
-    lines = path.read_text(encoding="utf-8", errors="replace").split("\n")
+    lines = path.read_text(encoding="utf-8", errors="replace").removeprefix("\ufeff").split("\n")
     keep = [
         lines[n - 1]
         for n, record in log.entries

@@ -31,6 +31,7 @@ that must pick exactly one actor.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -147,8 +148,8 @@ def _keys(data: object, allowed: set[str], at: str) -> Mapping[str, object]:
 
 
 def _number(value: object, at: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or value != value:
-        raise QueryError(f"{at}: expected a number, got {value!r}")
+    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+        raise QueryError(f"{at}: expected a finite number, got {value!r}")
     return float(value)
 
 

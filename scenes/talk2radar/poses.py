@@ -29,6 +29,7 @@ import numpy as np
 from scenes.geometry.calib import Calibration
 from scenes.talk2radar.layout import POSE, RootError, format_id, sample_file
 from scenes.utils.durable import atomic_write_text
+from scenes.utils.textfile import read_text_file
 
 FRAME_RATE = 10.0
 """View-of-Delft's frame rate (Hz): consecutive frames are ``1 / FRAME_RATE`` s apart."""
@@ -101,13 +102,9 @@ def pose_path(tree: Path, sample_id: str | int) -> Path:
 def read_pose(tree: Path, sample_id: str | int) -> Pose | None:
     """The pose of a sample of ``tree`` (a root's LiDAR tree), or None when it has no pose file."""
     path = pose_path(tree, sample_id)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
+    if not path.exists() and not path.is_symlink():
         return None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise RootError(f"{path}: cannot read the pose file: {exc}") from exc
-    return parse_pose(text, str(path))
+    return parse_pose(read_text_file(path, "pose file", RootError), str(path))
 
 
 def write_pose(tree: Path, sample_id: str | int, pose: Pose) -> Path:

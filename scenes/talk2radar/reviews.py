@@ -29,6 +29,7 @@ from scenes.talk2radar.layout import (
     split_file,
 )
 from scenes.utils.durable import read_json_lines
+from scenes.utils.textfile import read_text_file
 
 REVIEW = "review"
 """The manifest ``action`` of a review line."""
@@ -116,10 +117,7 @@ def approved_ids(root: str | Path, split: str) -> tuple[str, ...]:
         RootError: the root has no list of ``split``, or it is malformed (the line named).
     """
     path = split_file(Path(root) / LIDAR_FOLDER, split)
-    try:
-        listed = parse_split_list(path.read_text(encoding="utf-8"), path)
-    except OSError as exc:
-        raise RootError(f"{path}: cannot read the list of split {split!r}: {exc}") from exc
+    listed = parse_split_list(read_text_file(path, f"list of split {split!r}", RootError), path)
     states = read_pair_states(root)
     out = []
     for sid in listed:

@@ -11,7 +11,6 @@ access, and the 2D boxes of ``label_2`` are clipped to its size (:attr:`Sample.i
 
 from __future__ import annotations
 
-import json
 import warnings
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -52,7 +51,7 @@ from scenes.talk2radar.writer import (
     Talk2RadarWriter,
     sample_text,
 )
-from scenes.utils.textfile import read_text_file
+from scenes.utils.textfile import read_json_file, read_prompt_file, read_text_file
 
 __all__ = [  # with the writer, the sidecar and the layout names readers use, re-exported
     "ALL_FRAMES",
@@ -234,16 +233,19 @@ class Talk2RadarRoot:
         return path  # something is there: its reader says what is wrong with it, if anything
 
     def load_prompt(self, sample_id: str | int) -> str | None:
-        """The prompt of a sample (whole file, stripped), or None where the root has no prompts.
+        """The prompt of a sample, or None where the root has no prompts: the file's one
+        sentence as :func:`scenes.utils.textfile.read_prompt_file` reads it (a byte-order mark removed,
+        NFKC, spaces collapsed: the text the app would run).
 
         Raises:
-            RootError: the file is missing, unreadable, not UTF-8 text, or holds no sentence.
+            RootError: the file is missing, unreadable, not UTF-8 text, holds a character or a
+                line break the prompt rule refuses, is too long, or holds no sentence.
         """
         sid = format_id(sample_id)
         if not self._has_prompts:
             return None
         path = self._file(self.lidar_dir, PROMPT, sid)
-        prompt = read_text_file(path, "prompt file", RootError).strip()
+        prompt = read_prompt_file(path, RootError)
         if not prompt:
             raise RootError(f"{path}: the prompt file of sample {sid} is empty")
         return prompt
@@ -252,18 +254,15 @@ class Talk2RadarRoot:
         """The sidecar of a sample, or None where it has none.
 
         Raises:
-            RootError: the sidecar is unreadable, not UTF-8, not JSON or not a sidecar object.
+            RootError: the sidecar is unreadable, not text (:mod:`scenes.utils.textfile`), not JSON or
+                not a sidecar object.
         """
         if not self.sidecar:
             return None
         path = meta_file(self.path, format_id(sample_id))
         if not path.exists() and not path.is_symlink():
             return None
-        text = read_text_file(path, "sidecar", RootError)
-        try:
-            data = json.loads(text)
-        except (json.JSONDecodeError, RecursionError) as exc:
-            raise RootError(f"{path}: invalid JSON: {exc}") from exc
+        data = read_json_file(path, "sidecar", RootError)
         return SampleMeta.from_json(data, source=str(path))
 
     def frame_key(self, sample_id: str | int) -> tuple[object, ...]:

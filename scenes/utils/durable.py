@@ -37,6 +37,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any, Generic, TypeVar
 
+from scenes.utils.textfile import BOM, note_bom
+
 T = TypeVar("T")
 
 TEMP_SUFFIX = ".tmp"
@@ -242,18 +244,23 @@ def read_json_lines(
             the line unreadable.
 
     Never fails on a line's content (an undecodable byte is replaced, then fails to parse):
-    unreadable lines are reported in :attr:`JsonLines.unreadable`.
+    unreadable lines are reported in :attr:`JsonLines.unreadable`. A leading UTF-8 byte-order
+    mark is no part of the first line (and is said once per root:
+    :func:`scenes.utils.textfile.note_bom`); a CRLF line end is JSON whitespace.
     """
     path = Path(path)
     if not path.is_file():
         return JsonLines(path, (), ())
     raw = path.read_bytes()
+    skip = len(BOM) if raw.startswith(BOM) else 0
+    if skip:
+        note_bom(path, "log")
     entries: list[tuple[int, T]] = []
     unreadable: list[tuple[int, str]] = []
     last_line = last_offset = offset = 0
     for lineno, chunk in enumerate(raw.split(b"\n"), start=1):
         start, offset = offset, offset + len(chunk) + 1
-        line = chunk.decode("utf-8", errors="replace")
+        line = chunk[skip if lineno == 1 else 0 :].decode("utf-8", errors="replace")
         if not line.strip():
             continue
         last_line, last_offset = lineno, start

@@ -26,6 +26,10 @@ writes (the prompt file, the sidecar, the manifest's prompt and annotator), and
    words, 200 characters at most), :data:`ANNOTATOR` 64, :data:`NOTE` 500. Longer text is refused, not cut, so
    nothing is saved that the person did not see.
 
+The files the project reads share this classification (:func:`forbidden_at`, with the line feed
+allowed: :mod:`scenes.utils.textfile`, the one reading policy), and a prompt file is read under
+:data:`PROMPT` there.
+
 Decision: refuse rather than silently drop forbidden characters. A NUL or a line separator in a
 prompt is a paste or a forged message, never meant; dropping it could join two words
 (``the car\\x00ahead``) into a sentence nobody typed.
@@ -121,6 +125,29 @@ def forbidden_characters(text: str) -> tuple[str, ...]:
     return tuple(seen)
 
 
+_ASCII_FORBIDDEN = re.compile(r"[\x00-\x1f\x7f]")
+"""The ASCII characters of a forbidden category (C0 controls and DEL)."""
+_NON_ASCII = re.compile(r"[^\x00-\x7f]")
+
+
+def forbidden_at(text: str, allowed: str = "\t") -> int | None:
+    """The index of the first character of ``text`` that the policy refuses, the characters of
+    ``allowed`` excepted (files allow the line feed too: :mod:`scenes.utils.textfile`); None when there
+    is none. The same classification as :func:`forbidden_characters`, quick on ASCII text."""
+    first = None
+    for match in _ASCII_FORBIDDEN.finditer(text):
+        if match.group() not in allowed:
+            first = match.start()
+            break
+    if text.isascii():
+        return first
+    for match in _NON_ASCII.finditer(text, 0, len(text) if first is None else first):
+        char = match.group()
+        if char not in allowed and unicodedata.category(char) in _FORBIDDEN_CATEGORIES:
+            return match.start()
+    return first
+
+
 def collapse_spaces(text: str) -> str:
     """``text`` with each run of spaces and tabs made one space and the ends stripped (no other
     character is touched: :func:`clean_text` refuses line breaks and controls)."""
@@ -172,5 +199,6 @@ __all__ = [
     "character_name",
     "clean_text",
     "collapse_spaces",
+    "forbidden_at",
     "forbidden_characters",
 ]
