@@ -34,7 +34,8 @@ from model.tpcnet import TPCNet
 from model.training.config import TrainConfig, TrainingError
 from model.training.referent_cache import CachedScene, TextBank, cache_scenes
 from model.training.referent_step import ReferentTrainConfig, float32_output
-from scenes.dataset import AugmentConfig, GroundingDataset, collate
+from scenes.augment import AugmentConfig, draw_flip
+from scenes.dataset import GroundingDataset, collate
 from scenes.frame_dataset import FrameDataset
 
 
@@ -138,7 +139,7 @@ def pick_view(
     if not mirrored:
         return cached[index]
     rng = np.random.default_rng((cfg.seed, 13, epoch, index))
-    return mirrored[index] if rng.random() < cfg.flip_probability else cached[index]
+    return mirrored[index] if draw_flip(rng, cfg.flip_probability) else cached[index]
 
 
 @dataclass(frozen=True)
