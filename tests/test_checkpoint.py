@@ -14,7 +14,7 @@ from model.checkpoint import (
     FORMAT_VERSION,
     CheckpointError,
     load_checkpoint,
-    load_metadata,
+    read_checkpoint,
     save_checkpoint,
 )
 from model.nets.grid import BevGrid
@@ -55,14 +55,14 @@ def test_round_trip(trained: TPCNet, tmp_path: Path) -> None:
     assert [p.name for p in path.parent.iterdir()] == ["model.pt"]  # no temp file left behind
     loaded = load_checkpoint(path)
     assert loaded.cfg == trained.cfg and not loaded.training
-    assert loaded.checkpoint_metadata == META and load_metadata(path) == META
+    assert loaded.checkpoint_metadata == META and read_checkpoint(path)["metadata"] == META
     with torch.no_grad():
         a, b = trained(*_inputs()), loaded(*_inputs())
     torch.testing.assert_close(a.heatmap, b.heatmap)
     torch.testing.assert_close(a.regression, b.regression)
     # Overwriting keeps one file.
     save_checkpoint(path, loaded, **{**META, "epoch": 4})
-    assert load_metadata(path)["epoch"] == 4
+    assert read_checkpoint(path)["metadata"]["epoch"] == 4
     assert [p.name for p in path.parent.iterdir()] == ["model.pt"]
 
 
