@@ -37,7 +37,7 @@ from app.engine import (
     model_modalities,
     sensor_inputs,
 )
-from app.heatmap_view import GridLike, ground_placement, heatmap_rgba
+from app.heatmap_view import ground_placement, heatmap_rgba
 from app.navigation import (
     FrameLoadError,
     FrameStore,
@@ -175,7 +175,8 @@ def test_heatmap_rgba_colour_of_best_class_and_alpha() -> None:
 
 
 def test_ground_placement_centres_the_grid() -> None:
-    place = ground_placement(GridLike(0.0, 40.0, -10.0, 10.0), ground_z=-1.7, lift=0.05)
+    grid = types.SimpleNamespace(x_min=0.0, x_max=40.0, y_min=-10.0, y_max=10.0)  # a GridExtent
+    place = ground_placement(grid, ground_z=-1.7, lift=0.05)
     assert place.position == pytest.approx((20.0, 0.0, -1.65))
     assert (place.render_width, place.render_height) == (40.0, 20.0)
 
