@@ -323,14 +323,14 @@ def test_model_modalities() -> None:
     assert model_modalities(types.SimpleNamespace()) == ("both", "lidar", "radar")  # no config
 
 
-def test_initial_threshold_operating_then_decoder_then_default() -> None:
-    head = types.SimpleNamespace(score_threshold=0.2)
-    decoder_only = types.SimpleNamespace(cfg=types.SimpleNamespace(head=head))
+def test_initial_threshold_operating_then_the_heads_then_default() -> None:
+    head = types.SimpleNamespace(uncalibrated_threshold=0.2)  # the grounding head's own
+    uncalibrated = types.SimpleNamespace(cfg=types.SimpleNamespace(), grounding=head)
     calibrated = types.SimpleNamespace(
-        cfg=decoder_only.cfg, checkpoint_metadata={"operating_threshold": 0.35}
+        cfg=uncalibrated.cfg, grounding=head, checkpoint_metadata={"operating_threshold": 0.35}
     )
     assert initial_threshold(calibrated, 0.3) == 0.35
-    assert initial_threshold(decoder_only, 0.3) == 0.2
+    assert initial_threshold(uncalibrated, 0.3) == 0.2
     assert initial_threshold(types.SimpleNamespace(), 0.3) == 0.3  # a model without a config
 
 
