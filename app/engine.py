@@ -55,9 +55,7 @@ def initial_threshold(model: GroundingModel, default: float) -> float:
     """The score threshold the query panel starts at: the checkpoint's operating threshold
     (:func:`model.evaluation.predict.operating_threshold`, chosen on a validation split by
     ``python -m model.calibrate``) so that the app shows the model's answer set, else the
-    grounding head's uncalibrated threshold (``model.UNCALIBRATED_REFERENT``, a referent
-    probability, on the referent path; the decoder's ``cfg.head.score_threshold`` on the paper's),
-    else ``default`` (a model without a config)."""
+    grounding head's ``uncalibrated_threshold``, else ``default`` (a model without a config)."""
     if _config(model) is None:
         return float(default)
     from model import operating_threshold

@@ -1,6 +1,7 @@
 """The C3D-RECHead heatmap as a translucent RGBA image lying on the ground.
 
-The head's heatmaps are ``(3, H, W)`` sigmoid scores on its BEV grid (:class:`model.core.grid.BevGrid`:
+The head's heatmaps are ``(3, H, W)`` sigmoid scores on its BEV grid (:class:`model.GridExtent`,
+the grid type the app reads; the model's ``BevGrid`` has it:
 ``heatmaps[c, iy, ix]``, row ``iy`` along +y, column ``ix`` along +x, LiDAR frame). One image
 shows all three classes: each cell takes the colour of its highest-scoring class
 (:data:`app.colors.CLASS_COLORS`) and an alpha of ``opacity * score``, so empty cells are clear.
@@ -26,16 +27,6 @@ from scenes.geometry.actors import CLASSES
 
 GROUND_LIFT = 0.05
 """Metres between the ground estimate and the heatmap plane."""
-
-
-@dataclass(frozen=True)
-class GridLike:
-    """A plain :class:`app.engine.GridExtent` (any object with these fields works: ``BevGrid``)."""
-
-    x_min: float
-    x_max: float
-    y_min: float
-    y_max: float
 
 
 @dataclass(frozen=True)

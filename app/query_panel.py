@@ -22,7 +22,9 @@ never touches the box: the new frame's own prompt is shown under the frame numbe
 
 Text policy: a prompt runs only once :func:`scenes.utils.text_policy.clean_text` accepts it (control
 and line-separator characters refused with a message naming them, at most 500 characters); the
-session applies it, after :func:`one_line` has turned Enter's line breaks into spaces.
+session applies it once, in :meth:`app.session.ClientSession.run_prompt` (the one path from every
+control of this tab to the model: :func:`prompt_to_run`), after :func:`one_line` has turned Enter's
+line breaks into spaces; the model only checks that what it gets is not empty.
 """
 
 from __future__ import annotations
@@ -115,6 +117,11 @@ def prompt_to_run(prompt: str | None) -> tuple[str, tuple[str, str] | None]:
     return text, None
 
 
+def entered(value: str) -> bool:
+    """Whether the prompt box's value holds a line break: Enter was pressed (or a line pasted)."""
+    return "\n" in value or "\r" in value
+
+
 def submitted_prompt(value: str) -> str | None:
     """The prompt to run when the prompt box's value holds a line break (Enter), else None.
 
@@ -123,7 +130,7 @@ def submitted_prompt(value: str) -> str | None:
     gives ``""`` (an empty prompt, reported to the user). Other control characters are left for
     the text policy to refuse by name.
     """
-    if "\n" not in value and "\r" not in value:
+    if not entered(value):
         return None
     return collapse_spaces(one_line(value))
 

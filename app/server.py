@@ -229,8 +229,8 @@ class Talk2PCApp:
         self.score_threshold = initial_threshold(model, DEFAULT_SCORE_THRESHOLD)
         self.model_note = self.config.model_note
         self.labelled = LabelledFrames(root, self.config.scene_labels)
-        referent = getattr(getattr(model, "cfg", None), "grounding", None) == "referent"
-        self.labelled_boxes = self.labelled.boxes if self.labelled.available and referent else None
+        chooses = bool(getattr(model, "takes_labelled_candidates", False))
+        self.labelled_boxes = self.labelled.boxes if self.labelled.available and chooses else None
         pairs = self.config.pairs_root
         self.annotations = AnnotationHub(
             Path(pairs) if pairs is not None else default_pairs_root(root),

@@ -71,13 +71,15 @@ from app.query_panel import (
     QueryRequest,
     answer_labels,
     build_query_panel,
+    entered,
+    one_line,
     prompt_to_run,
     results_markdown,
-    submitted_prompt,
 )
 from app.scene_view import SceneView, ViewPanel, build_view_panel
 from app.text import md_text
 from scenes.talk2radar.root import Sample
+from scenes.utils.text_policy import collapse_spaces
 
 log = logging.getLogger(__name__)
 
@@ -247,13 +249,9 @@ class ClientSession:
     def _wire_query(self, q: QueryPanel) -> None:
         @q.prompt.on_update
         def _(event: viser.GuiEvent) -> None:
-            if event.client is None:
-                return
-            prompt = submitted_prompt(q.prompt.value)
-            if prompt is None:
-                return
-            self.write_prompt(prompt)  # Drop the line break (fires this callback without client).
-            self.run_prompt(prompt)
+            if event.client is not None and entered(q.prompt.value):
+                # The box is rewritten without the line break (fires this without client).
+                self.run_prompt(q.prompt.value, write=True)
 
         @q.run.on_click
         def _(_: viser.GuiEvent) -> None:
@@ -268,8 +266,7 @@ class ClientSession:
         @q.rerun.on_click
         def _(_: viser.GuiEvent) -> None:
             if q.history.value != NO_HISTORY:
-                self.write_prompt(q.history.value)
-                self.run_prompt(q.history.value)
+                self.run_prompt(q.history.value, write=True)
 
         @q.history.on_update
         def _(event: viser.GuiEvent) -> None:
@@ -397,12 +394,16 @@ class ClientSession:
             if self.prompt_field is not None and not self.closed:
                 self.prompt_field.write(text)
 
-    def run_prompt(self, prompt: str | None) -> Future | None:
-        """Answer ``prompt`` on the frame on screen, in the engine's worker pool; one the text
-        policy refuses, or an empty one, gets a notification (:func:`prompt_to_run`). Returns the
-        job's future (None when nothing was started)."""
+    def run_prompt(self, prompt: str | None, write: bool = False) -> Future | None:
+        """Answer ``prompt`` on the frame on screen, in the engine's worker pool: the one way the
+        Query tab runs a prompt (Enter, *Run*, *Re-run*, a changed setting), cleaned here, once
+        (:func:`prompt_to_run`: the text policy); one it refuses, or an empty one, gets a
+        notification. ``write``: the prompt box shows the prompt as run (when refused: as typed,
+        line breaks and runs of spaces made one). Returns the job's future (or None)."""
         received = time.perf_counter()
         text, problem = prompt_to_run(prompt)
+        if write:
+            self.write_prompt(text if problem is None else collapse_spaces(one_line(prompt or "")))
         if problem is not None:
             self.notify(*problem, color="yellow")
             return None

@@ -1,14 +1,13 @@
-"""The parts of a TPCNet that the benchmarks time or count one by one, for this repository's
-model (a scene encoder and a grounding head: ``model.scene``, ``model.grounding``) and for an
-older copy of ``model`` loaded beside it by :mod:`bench.floor` (``--baseline-package``: its
-parts were attributes of the model itself). The stages run are the model's own pipeline
+"""The parts of a TPCNet that the benchmarks time or count one by one (a scene encoder and a
+grounding head: ``model.scene``, ``model.grounding``), for this repository's model and for an older
+copy of ``model`` loaded beside it by :mod:`bench.floor` (``--baseline-package``; a copy of commit
+094cf30 or later: the flat layout before it, whose parts were attributes of the model itself, is
+refused with a message). The stages run are the model's own pipeline
 (:meth:`model.grounding.scene_encoder.SceneEncoder.sensors`, the FPN, the head, the referent head's
-``proposals`` and ``describe``) wherever the model has it."""
+``proposals`` and ``describe``)."""
 
 from __future__ import annotations
 
-import importlib
-import inspect
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -48,68 +47,39 @@ class ModelParts:
 
 
 def model_parts(model: nn.Module) -> ModelParts:
-    """The parts of ``model`` (this code's or an older copy's, module docstring)."""
-    package = type(model).__module__.rsplit(".", 1)[0]
+    """The parts of ``model`` (this code's or an older copy's, module docstring).
+
+    Raises:
+        ValueError: a model of the flat layout (before commit 094cf30).
+    """
     cfg = model.cfg
-    if hasattr(model, "scene"):
-        maps_type = SceneMaps
-        scene, head = model.scene, model.grounding
-
-        def sensors(lidar: Tensor, radar: Tensor):
-            lid = [lidar] if scene.lidar is not None else None
-            s = scene.sensors(lid, [radar] if scene.radar is not None else None)
-            first_l = None if s.lidar is None else s.lidar[0]
-            return list(s.fused), first_l, None if s.radar is None else s.radar[0]
-
-        def describe(*args: object) -> object:
-            return head.describe(scene, *args)
-
-        return ModelParts(
-            scene.lidar,
-            scene.radar,
-            scene.fusion,
-            scene.neck,
-            scene.head,
-            sensors,
-            lambda out: head.proposals(scene, out, cfg.referent.max_candidates)[0],
-            lambda neck, lid, rad: maps_type(neck[0], _item(lid), _item(rad)),
-            describe,
-            getattr(head, "refer", None),
+    if not hasattr(model, "scene"):
+        raise ValueError(
+            f"{type(model).__module__}: a model of the flat layout (before commit 094cf30, no "
+            "scene encoder): make the baseline package from a later commit"
         )
-    maps_type = importlib.import_module(f"{package}.grounder").SceneMaps
-    decode_fn = importlib.import_module(f"{package}.decode").decode
-    limit = (
-        {"limit": cfg.referent.max_candidates}
-        if "limit" in inspect.signature(decode_fn).parameters
-        else {}
-    )
+    scene, head = model.scene, model.grounding
 
-    def old_sensors(lidar: Tensor, radar: Tensor):
-        own: dict[str, tuple[Tensor, ...]] = {}
-        for name, branch, cloud in (("l", model.lidar, lidar), ("r", model.radar, radar)):
-            if branch is not None:
-                own[name] = tuple(branch.backbone(branch.pillars([cloud])))
-        if model.fusion is not None:
-            stages = [f(a, b) for f, a, b in zip(model.fusion, own["l"], own["r"], strict=True)]
-        else:
-            stages = list(own["l"] if "l" in own else own["r"])
-        return stages, own["l"][0] if "l" in own else None, own["r"][0] if "r" in own else None
+    def sensors(lidar: Tensor, radar: Tensor):
+        lid = [lidar] if scene.lidar is not None else None
+        s = scene.sensors(lid, [radar] if scene.radar is not None else None)
+        first_l = None if s.lidar is None else s.lidar[0]
+        return list(s.fused), first_l, None if s.radar is None else s.radar[0]
 
-    def old_proposals(out: object) -> object:
-        dets = decode_fn(out, model.head_grid, cfg.head, cfg.referent.candidate_threshold, **limit)
-        return dets[0]
+    def describe(*args: object) -> object:
+        return head.describe(scene, *args)
 
     return ModelParts(
-        model.lidar,
-        model.radar,
-        model.fusion,
-        model.neck,
-        model.head,
-        old_sensors,
-        old_proposals,
-        lambda neck, lid, rad: maps_type(neck[0], _item(lid), _item(rad)),
-        model.candidates,
-        getattr(model, "refer", None),
+        scene.lidar,
+        scene.radar,
+        scene.fusion,
+        scene.neck,
+        scene.head,
+        sensors,
+        lambda out: head.proposals(scene, out, cfg.referent.max_candidates)[0],
+        lambda neck, lid, rad: SceneMaps(neck[0], _item(lid), _item(rad)),
+        describe,
+        getattr(head, "refer", None),
     )
 
 

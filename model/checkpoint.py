@@ -111,11 +111,6 @@ def check_payload(payload: object, source: str | os.PathLike[str]) -> None:
             raise CheckpointError(f"checkpoint {source} has no {key!r} entry")
 
 
-def load_metadata(path: str | os.PathLike[str]) -> dict[str, Any]:
-    """Only the metadata of a checkpoint (still validates the file)."""
-    return dict(read_checkpoint(path)["metadata"])
-
-
 def load_checkpoint(path: str | os.PathLike[str], device: str | torch.device = "cpu") -> TPCNet:
     """Rebuild the model stored at ``path`` on ``device``, in eval mode.
 

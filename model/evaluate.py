@@ -401,7 +401,7 @@ def _run_model_mode(cfg: EvaluateConfig) -> int:
         raise EvaluationInputError(f"{cfg.data}: split {cfg.split!r} has no samples")
     model = load_checkpoint(cfg.checkpoint, device=cfg.device)
     operating = operating_threshold(model) if cfg.threshold is None else cfg.threshold
-    if cfg.candidates == "labels" and model.cfg.grounding != "referent":
+    if cfg.candidates == "labels" and not model.takes_labelled_candidates:
         raise EvaluationInputError(
             f"{cfg.checkpoint}: --candidates labels needs a referent-path checkpoint"
         )

@@ -76,7 +76,9 @@ class GroundingModel(Protocol[Features]):
     scene, ``ground`` once per prompt.
 
     A model without ``cfg`` (or with None) counts as a two-sensor model with no threshold of its
-    own (the app's :func:`app.engine.initial_threshold` and ``model_modalities`` read it).
+    own (the app's :func:`app.engine.initial_threshold` and ``model_modalities`` read it). A
+    model may also say ``takes_labelled_candidates`` (``encode_scene(..., candidates=...)``: the
+    frame's labelled boxes as the only possible answers); one that does not, does not take them.
     """
 
     @property

@@ -25,13 +25,14 @@ Checkpoint names: the state dict keeps the names checkpoints have always had (``
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import replace
 from typing import Any
 
 import torch
 from torch import Tensor, nn
 
 from model.checkpoint_meta import CheckpointMeta
-from model.config import ModelConfig, build_config
+from model.config import GroundingKind, ModelConfig, build_config
 from model.core.candidates import SceneMaps
 from model.core.features import (
     Clock,
@@ -105,6 +106,14 @@ def _load_checkpoint_names(
             state[new] = state.pop(key)
 
 
+def head_class(grounding: GroundingKind) -> type[GroundingHead]:
+    """The grounding head of ``grounding`` (``ModelConfig.grounding``): the one place the kinds
+    are told apart. What differs between them (thresholds, candidates, how they train) is asked
+    of the head (:class:`model.grounding.interface.GroundingHead`) or, for training, of the strategy
+    kept for its class (:mod:`model.training.kinds`)."""
+    return ReferentGrounding if grounding == "referent" else PaperGrounding
+
+
 class TPCNet(nn.Module):
     """The TPCNet model. Build it with :func:`model.build_model` or ``TPCNet(ModelConfig(...))``."""
 
@@ -116,10 +125,8 @@ class TPCNet(nn.Module):
         self.head_grid = self.scene.head_grid
         self.text_encoder = build_text_encoder(cfg.text)
         text_dim = self.text_encoder.out_dim
-        self.grounding: GroundingHead = (
-            ReferentGrounding(cfg, text_dim, self.scene.neck.out_channels)
-            if cfg.grounding == "referent"
-            else PaperGrounding(cfg, text_dim)
+        self.grounding: GroundingHead = head_class(cfg.grounding).build(
+            cfg, text_dim, self.scene.neck.out_channels
         )
         self.register_state_dict_post_hook(_save_checkpoint_names)
         self.register_load_state_dict_pre_hook(_load_checkpoint_names)
@@ -129,6 +136,12 @@ class TPCNet(nn.Module):
     @property
     def device(self) -> torch.device:
         return next(self.parameters()).device
+
+    @property
+    def takes_labelled_candidates(self) -> bool:
+        """Whether :meth:`encode_scene` accepts labelled boxes as the only possible answers
+        (the head's :attr:`GroundingHead.takes_labelled_candidates`)."""
+        return self.grounding.takes_labelled_candidates
 
     def parameters_in_checkpoint_order(self) -> list[nn.Parameter]:
         """The parameters in the order of their checkpoint names (:data:`CHECKPOINT_NAMES`):
@@ -165,7 +178,7 @@ class TPCNet(nn.Module):
         Returns:
             :class:`SceneFeatures` with ``lr_i`` of shape ``(1, C_i, H_i, W_i)``.
         """
-        if candidates is not None and not self.grounding.takes_labelled_candidates:
+        if candidates is not None and not self.takes_labelled_candidates:
             raise ValueError(
                 "labelled candidates need a referent-path model; the paper's path ranks "
                 "its own heatmap peaks"
@@ -199,19 +212,8 @@ class TPCNet(nn.Module):
         with torch.no_grad():
             text = self.text_encoder([text_prompt])
             t_text = clock.lap()
-            answer = self.grounding.answer(self.scene, features, text, score_threshold)
-        t = answer.timings
-        return Predictions(
-            boxes=answer.boxes,
-            scores=answer.scores,
-            labels=answer.labels,
-            classes=answer.classes,
-            heatmaps=answer.heatmaps,
-            grid=self.head_grid,
-            prompt=text_prompt,
-            truncated=text.truncated[0],
-            timings=GroundTimings(t_text, t.dggf, t.neck, t.head, t.decode, t.referent),
-        )
+            answer = self.grounding.answer(self.scene, features, text, text_prompt, score_threshold)
+        return replace(answer, timings=replace(answer.timings, text=t_text))
 
     def forward(
         self,
@@ -245,6 +247,7 @@ __all__ = [
     "SceneTimings",
     "TPCNet",
     "as_points",
+    "head_class",
 ]
 
 

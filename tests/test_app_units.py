@@ -37,7 +37,7 @@ from app.engine import (
     model_modalities,
     sensor_inputs,
 )
-from app.heatmap_view import GridLike, ground_placement, heatmap_rgba
+from app.heatmap_view import ground_placement, heatmap_rgba
 from app.navigation import (
     FrameLoadError,
     FrameStore,
@@ -176,7 +176,8 @@ def test_heatmap_rgba_colour_of_best_class_and_alpha() -> None:
 
 
 def test_ground_placement_centres_the_grid() -> None:
-    place = ground_placement(GridLike(0.0, 40.0, -10.0, 10.0), ground_z=-1.7, lift=0.05)
+    grid = types.SimpleNamespace(x_min=0.0, x_max=40.0, y_min=-10.0, y_max=10.0)  # a GridExtent
+    place = ground_placement(grid, ground_z=-1.7, lift=0.05)
     assert place.position == pytest.approx((20.0, 0.0, -1.65))
     assert (place.render_width, place.render_height) == (40.0, 20.0)
 
@@ -323,14 +324,16 @@ def test_model_modalities() -> None:
     assert model_modalities(types.SimpleNamespace()) == ("both", "lidar", "radar")  # no config
 
 
-def test_initial_threshold_operating_then_decoder_then_default() -> None:
-    head = types.SimpleNamespace(score_threshold=0.2)
-    decoder_only = types.SimpleNamespace(cfg=types.SimpleNamespace(head=head))
+def test_initial_threshold_operating_then_the_heads_then_default() -> None:
+    head = types.SimpleNamespace(uncalibrated_threshold=0.2)  # the grounding head's own
+    uncalibrated = types.SimpleNamespace(cfg=types.SimpleNamespace(), grounding=head)
     calibrated = types.SimpleNamespace(
-        cfg=decoder_only.cfg, checkpoint_metadata=CheckpointMeta(operating_threshold=0.35)
+        cfg=uncalibrated.cfg,
+        grounding=head,
+        checkpoint_metadata=CheckpointMeta(operating_threshold=0.35),
     )
     assert initial_threshold(calibrated, 0.3) == 0.35
-    assert initial_threshold(decoder_only, 0.3) == 0.2
+    assert initial_threshold(uncalibrated, 0.3) == 0.2
     assert initial_threshold(types.SimpleNamespace(), 0.3) == 0.3  # a model without a config
 
 

@@ -14,7 +14,7 @@ from model.checkpoint import (
     FORMAT_VERSION,
     CheckpointError,
     load_checkpoint,
-    load_metadata,
+    read_checkpoint,
     save_checkpoint,
 )
 from model.checkpoint_meta import CheckpointMeta, is_machine_path, portable_path
@@ -57,14 +57,14 @@ def test_round_trip(trained: TPCNet, tmp_path: Path) -> None:
     loaded = load_checkpoint(path)
     assert loaded.cfg == trained.cfg and not loaded.training
     assert loaded.checkpoint_metadata == CheckpointMeta.from_dict(META)
-    assert load_metadata(path) == META
+    assert read_checkpoint(path)["metadata"] == META
     with torch.no_grad():
         a, b = trained(*_inputs()), loaded(*_inputs())
     torch.testing.assert_close(a.heatmap, b.heatmap)
     torch.testing.assert_close(a.regression, b.regression)
     # Overwriting keeps one file.
     save_checkpoint(path, loaded, **{**META, "epoch": 4})
-    assert load_metadata(path)["epoch"] == 4
+    assert read_checkpoint(path)["metadata"]["epoch"] == 4
     assert [p.name for p in path.parent.iterdir()] == ["model.pt"]
 
 

@@ -48,6 +48,7 @@ class _FakeModel:
 
     def __init__(self, metadata: dict | None = None, threshold: float = 0.1) -> None:
         self.cfg = SimpleNamespace(head=SimpleNamespace(score_threshold=threshold))
+        self.grounding = SimpleNamespace(uncalibrated_threshold=threshold)  # as the paper's head
         if metadata is not None:
             self.checkpoint_metadata = CheckpointMeta.from_dict(metadata)
         self.encoded = 0

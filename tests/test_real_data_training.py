@@ -12,7 +12,8 @@ import torch
 
 from model.checkpoint import load_checkpoint
 from model.training.data import DataSpecError, MixedFrames, root_specs
-from model.training.loop import SCENE_MODULES, main
+from model.training.loop import main
+from model.training.start import SCENE_MODULES
 from scenes.datasets.frames import FrameDataset
 from scenes.synth.generate import SynthSettings, generate_root
 from scenes.talk2radar.layout import meta_dir

@@ -22,7 +22,7 @@ from model.referent.context import (
     rank_columns,
     relation_columns,
 )
-from model.training.loop import widened
+from model.training.start import widened
 from scenes.geometry.actors import CLASSES
 
 CAR, PED, CYC = (CLASSES.index(c) for c in ("Car", "Pedestrian", "Cyclist"))
@@ -162,7 +162,7 @@ def test_init_from_a_checkpoint_without_context_keeps_its_answers(
     tmp_path, untrained_model, random_scene
 ):
     from model.checkpoint import save_checkpoint
-    from model.training.loop import init_from
+    from model.training.start import init_from
 
     old = untrained_model(
         "referent",

@@ -40,7 +40,6 @@ from model.referent.subsets import (
     SPEED_TAU,
     SUBSET_FEATURES,
     SUBSET_ORDERS,
-    side_probabilities,
     subset_features,
 )
 from scenes.geometry.actors import CLASSES, MOVING_SPEED
@@ -139,9 +138,8 @@ def test_padding_is_no_rival_and_each_row_is_its_own_scene() -> None:
 
 
 def test_sides_follow_the_ego_corridor() -> None:
-    p = side_probabilities(
-        torch.tensor([20.0, 20.0, 20.0, 3.0]), torch.tensor([5.0, 0.0, -5.0, 1.4])
-    )
+    # The definition the compiled pass is held to (test_compiled_subset_features_equal_the_torch_form).
+    p = _reference_sides(torch.tensor([20.0, 20.0, 20.0, 3.0]), torch.tensor([5.0, 0.0, -5.0, 1.4]))
     assert p[0, 0] > 0.98 and p[1, 1] > 0.98 and p[2, 2] > 0.98
     assert p[3].max() < 0.7  # beside the bumper, far off the ahead bearing: on no side for sure
 

@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 import torch
 
-import model.training.loop as train_module
+import model.training.kinds as kinds_module
 from model.checkpoint import load_checkpoint, read_checkpoint, save_checkpoint
 from model.training.loop import TrainConfig, main, train
 from model.training.state import LAST_FILE, STATE_FILE, RunState, load_run
@@ -41,7 +41,7 @@ STEP_FUNCTION = {
     "freeze": "cached_referent_step",
     "tpcnet": "_forward_step",
 }
-"""The function of ``model.training.loop`` that runs one step of each stage."""
+"""The function of ``model.training.kinds`` that runs one step of each stage."""
 
 
 @pytest.fixture(scope="module")
@@ -72,7 +72,7 @@ def _config(root: Path, out: Path, stage: str, **kw: object) -> TrainConfig:
 def _signal_during_step(monkeypatch: pytest.MonkeyPatch, stage: str, call: int, signum: int):
     """Send ``signum`` to this process from inside the ``call``-th step of ``stage``."""
     name = STEP_FUNCTION[stage]
-    real = getattr(train_module, name)
+    real = getattr(kinds_module, name)
     calls = [0]
 
     def step(*args):
@@ -81,7 +81,7 @@ def _signal_during_step(monkeypatch: pytest.MonkeyPatch, stage: str, call: int, 
             os.kill(os.getpid(), signum)
         return real(*args)
 
-    monkeypatch.setattr(train_module, name, step)
+    monkeypatch.setattr(kinds_module, name, step)
 
 
 def _weights(run: Path) -> dict[str, torch.Tensor]:

@@ -69,9 +69,9 @@ def test_every_stage_steps_under_bfloat16_autocast(tmp_path: Path, write_tiny_ro
     from model.head.losses import grounding_loss
     from model.head.targets import collate_targets, draw_targets
     from model.training.config import PromptDraw
-    from model.training.loop import init_from
     from model.training.referent_cache import cache_scenes, cached_referent_step
     from model.training.referent_step import ReferentTrainConfig, float32_output, referent_step
+    from model.training.start import init_from
     from scenes.datasets.frames import FrameDataset
     from scenes.datasets.grounding import GroundingDataset, collate
 

@@ -1,4 +1,5 @@
-"""What the model takes and gives: point-cloud checks, encoded scenes, answers and their timings.
+"""What the model takes and gives: point-cloud checks, encoded scenes, answers (:class:`Predictions`)
+and their timings.
 
 Input rules: points are numpy arrays or tensors ``(N, 4)`` (x, y, z, intensity) and ``(M, 7)``
 (x, y, z, rcs, v_r, v_r_compensated, time), radar already in the LiDAR frame. NaN or inf raise
@@ -88,21 +89,11 @@ class SceneFeatures:
 
 
 @dataclass(frozen=True)
-class Answer:
-    """What a grounding head returns for one prompt (:class:`Predictions` less the prompt's
-    text, which :meth:`model.tpcnet.TPCNet.ground` adds with the text encoder's time)."""
-
-    boxes: np.ndarray
-    scores: np.ndarray
-    labels: np.ndarray
-    classes: tuple[str, ...]
-    heatmaps: np.ndarray
-    timings: GroundTimings
-
-
-@dataclass(frozen=True)
 class Predictions:
-    """The answer to one prompt.
+    """The answer to one prompt: what a grounding head returns
+    (:meth:`model.grounding.interface.GroundingHead.answer`, the text encoder's time still 0) and
+    :meth:`model.tpcnet.TPCNet.ground` gives (its time added); the one answer type from the model
+    to the evaluation and the app (which read it as :class:`model.protocol.PredictionsView`).
 
     Attributes:
         boxes: ``(K, 7)`` float64 ``x, y, z, l, w, h, yaw``, LiDAR frame, sorted by score.

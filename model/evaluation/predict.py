@@ -29,14 +29,14 @@ from tqdm import tqdm
 
 from model.checkpoint_meta import CheckpointMeta
 from model.core.labelled import LabelledBoxes
-from model.grounding.referent import UNCALIBRATED_REFERENT
+from model.evaluation.grounding import PromptBoxes
 from scenes.geometry.calib import IMAGE_SIZE, Calibration, bottom_centres
 from scenes.talk2radar.kitti import ObjectLabel, boxes_to_labels, write_label_file
 from scenes.talk2radar.root import Sample, Talk2RadarRoot
 from scenes.utils.lru import LRUCache
 
 if TYPE_CHECKING:
-    from model.core.features import SceneFeatures
+    from model.core.features import Predictions, SceneFeatures
     from model.tpcnet import TPCNet
 
 T = TypeVar("T")
@@ -91,18 +91,17 @@ def operating_threshold(model: TPCNet) -> float:
     """The score above which the model's boxes are its answer (the set metrics, the app).
 
     ``model.checkpoint_metadata["operating_threshold"]`` where the checkpoint stores one (set by
-    ``python -m model.calibrate``); else, on the referent path, :data:`UNCALIBRATED_REFERENT` (a
-    referent probability: the decision boundary its BCE training draws), and on the paper's path
-    the decoder's ``model.cfg.head.score_threshold``.
+    ``python -m model.calibrate``); else its grounding head's ``uncalibrated_threshold`` (the
+    referent head's ``model.grounding.referent.UNCALIBRATED_REFERENT``, a referent probability: the
+    decision boundary its BCE training draws; the paper's head's decoder threshold
+    ``model.cfg.head.score_threshold``).
 
     Raises:
         ValueError: the stored value is not a number in ``[0, 1)`` (the message names the field).
     """
     value = CheckpointMeta.of(model).operating_threshold
     if value is None:
-        if getattr(model.cfg, "grounding", "tpcnet") == "referent":
-            return UNCALIBRATED_REFERENT
-        return float(model.cfg.head.score_threshold)
+        return float(model.grounding.uncalibrated_threshold)
     if isinstance(value, bool) or not isinstance(value, int | float) or not 0.0 <= value < 1.0:
         raise ValueError(
             f"checkpoint metadata field 'operating_threshold' must be a number in [0, 1), "
@@ -125,21 +124,6 @@ SceneKey = tuple[object, ...]
 def scene_key(root: Talk2RadarRoot, sample_id: str) -> SceneKey:
     """The identity of a sample's frame: :meth:`scenes.talk2radar.root.Talk2RadarRoot.frame_key`."""
     return root.frame_key(sample_id)
-
-
-@dataclass(frozen=True)
-class Answer:
-    """The model's answer to one prompt on one scene (what ``model.ground`` returned).
-
-    Attributes:
-        boxes: ``(K, 7)`` float64 LiDAR frame, sorted by score.
-        scores: ``(K,)`` float64.
-        classes: ``K`` class names.
-    """
-
-    boxes: np.ndarray
-    scores: np.ndarray
-    classes: tuple[str, ...]
 
 
 @dataclass(frozen=True)
@@ -169,7 +153,7 @@ class FramePrediction:
     seconds: float
     features: SceneFeatures | None = field(default=None, repr=False, compare=False)
     scene_key: SceneKey = ()
-    extra: Mapping[str, Answer] = field(default_factory=dict, repr=False)
+    extra: Mapping[str, PromptBoxes] = field(default_factory=dict, repr=False)
 
 
 @dataclass(frozen=True)
@@ -212,15 +196,12 @@ class _Scene:
 
     features: SceneFeatures
     seconds: float
-    answers: dict[str, Answer] = field(default_factory=dict)
+    answers: dict[str, PromptBoxes] = field(default_factory=dict)
 
 
-def _answer(pred: object) -> Answer:
-    return Answer(
-        np.asarray(pred.boxes, dtype=np.float64).reshape(-1, 7),  # type: ignore[attr-defined]
-        np.asarray(pred.scores, dtype=np.float64),  # type: ignore[attr-defined]
-        tuple(pred.classes),  # type: ignore[attr-defined]
-    )
+def _boxes(pred: Predictions, source: str) -> PromptBoxes:
+    """The boxes, classes and scores of ``model.ground``'s answer (float64), checked."""
+    return PromptBoxes.make(pred.boxes, pred.classes, pred.scores, source=source)
 
 
 class FramePredictor:
@@ -271,13 +252,13 @@ class FramePredictor:
             extra = {}
             for prompt in () if settings.extra_prompts is None else settings.extra_prompts(sample):
                 if prompt not in scene.answers:
-                    scene.answers[prompt] = _answer(
-                        model.ground(
-                            scene.features, prompt, score_threshold=settings.score_threshold
-                        )
+                    extra_pred = model.ground(
+                        scene.features, prompt, score_threshold=settings.score_threshold
                     )
+                    where = f"{self.root.path}: sample {sample.sample_id}, prompt {prompt!r}"
+                    scene.answers[prompt] = _boxes(extra_pred, where)
                 extra[prompt] = scene.answers[prompt]
-        answer = _answer(pred)
+        answer = _boxes(pred, f"{self.root.path}: sample {sample.sample_id}")
         keep = answer.scores >= settings.min_label_score
         labels = prediction_labels(
             answer.boxes[keep],

@@ -347,10 +347,7 @@ def evaluate_predictions(
             if not baselines:
                 continue
             cls = named_class(tags[sid], sample.classes)
-            noun = pred.extra[class_noun_prompt(cls)]
-            noun_boxes = PromptBoxes.make(
-                noun.boxes, noun.classes, noun.scores, source=f"{where} class noun"
-            )
+            noun_boxes = pred.extra[class_noun_prompt(cls)]
             base["class_noun"].labels[sid] = _labels(noun_boxes, decode, sample)
             base["class_noun"].outcomes.append(
                 prompt_outcome(sid, tags[sid], noun_boxes, referents, op)

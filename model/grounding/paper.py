@@ -11,7 +11,7 @@ import torch
 from torch import Tensor, nn
 
 from model.config import ModelConfig
-from model.core.features import Answer, Clock, GroundTimings, PointsLike, SceneFeatures
+from model.core.features import Clock, GroundTimings, PointsLike, Predictions, SceneFeatures
 from model.core.labelled import LabelledBoxes
 from model.grounding.interface import GroundingHead
 from model.grounding.scene_encoder import SceneEncoder
@@ -40,6 +40,10 @@ class PaperGrounding(GroundingHead):
             self.text_fusion = nn.ModuleList(
                 GatedGraphFusion(c, text_dim, tf.ggf_k) for c in channels
             )
+
+    @classmethod
+    def build(cls, cfg: ModelConfig, text_dim: int, neck_channels: int) -> PaperGrounding:
+        return cls(cfg, text_dim)
 
     @property
     def min_score(self) -> float:
@@ -87,19 +91,23 @@ class PaperGrounding(GroundingHead):
         scene: SceneEncoder,
         features: SceneFeatures,
         text: TextFeatures,
+        prompt: str,
         score_threshold: float | None,
-    ) -> Answer:
+    ) -> Predictions:
         out, (t_dggf, t_neck, t_head) = self.condition(scene, features.stages, text, timed=True)
         clock = Clock(scene.device)
         detections = decode(out, scene.head_grid, self.cfg.head, score_threshold)[0]
         heatmaps = torch.sigmoid(out.heatmap[0]).float().cpu().numpy()
         t_decode = clock.lap()
-        return Answer(
+        return Predictions(
             boxes=detections.boxes,
             scores=detections.scores,
             labels=detections.labels,
             classes=detections.classes,
             heatmaps=heatmaps,
+            grid=scene.head_grid,
+            prompt=prompt,
+            truncated=text.truncated[0],
             timings=GroundTimings(0.0, t_dggf, t_neck, t_head, t_decode),
         )
 

@@ -18,10 +18,10 @@ from torch import Tensor, nn
 from model.config import ModelConfig
 from model.core.candidates import SceneCandidates, SceneMaps
 from model.core.features import (
-    Answer,
     Clock,
     GroundTimings,
     PointsLike,
+    Predictions,
     SceneFeatures,
 )
 from model.core.labelled import LabelledBoxes, with_context
@@ -61,6 +61,10 @@ class ReferentGrounding(GroundingHead):
             tuple[weakref.ref[SceneCandidates], tuple, CandidateBatch, SceneEmbeddings] | None
         ) = None
         self._kept_canvas: tuple[weakref.ref, weakref.ref, ReferentCanvas] | None = None
+
+    @classmethod
+    def build(cls, cfg: ModelConfig, text_dim: int, neck_channels: int) -> ReferentGrounding:
+        return cls(cfg, text_dim, neck_channels)
 
     @property
     def min_score(self) -> float:
@@ -241,8 +245,9 @@ class ReferentGrounding(GroundingHead):
         scene: SceneEncoder,
         features: SceneFeatures,
         text: TextFeatures,
+        prompt: str,
         score_threshold: float | None,
-    ) -> Answer:
+    ) -> Predictions:
         objects, heat = features.objects, features.detection_heatmaps
         assert objects is not None and heat is not None  # check()
         threshold = self.min_score if score_threshold is None else score_threshold
@@ -262,12 +267,15 @@ class ReferentGrounding(GroundingHead):
             order = order[order < features.answerable]
         heatmaps = self._canvas(scene, objects, heat).draw(probs)
         labels = objects.labels[order]
-        return Answer(
+        return Predictions(
             boxes=objects.boxes[order],
             scores=probs[order],
             labels=labels,
             classes=tuple(CLASSES[i] for i in labels),
             heatmaps=heatmaps,
+            grid=scene.head_grid,
+            prompt=prompt,
+            truncated=text.truncated[0],
             timings=GroundTimings(0.0, 0.0, 0.0, 0.0, clock.lap(), referent=t_ref),
         )
 

@@ -17,7 +17,11 @@ Conventions:
 - A prompt is tokenised with [CLS] and [SEP] to at most ``max_tokens`` ids (30, as Talk2Radar);
   a longer prompt is truncated (keeping [SEP]), the truncation is logged as a warning and reported
   in :attr:`TextFeatures.truncated`.
-- An empty or whitespace-only prompt (or a non-string) raises :class:`EmptyPromptError`.
+- The encoders take prompts already validated: :func:`validate_prompt` (the rule: a non-empty
+  string, surrounding whitespace stripped; else :class:`EmptyPromptError`) runs once per prompt,
+  where a prompt enters the model (``TPCNet.ground``, the paper's ``forward``, the referent
+  training step's text), never again here. The app cleans what a person typed before that
+  (``scenes.utils.text_policy``).
 - Token features include the [CLS] and [SEP] positions; ``padding_mask`` is True at padding.
 - MiniLM is run one prompt at a time (no padding inside the transformer), so a prompt's features
   never depend on the other prompts of its batch; they are cached per distinct prompt in an LRU of
@@ -411,17 +415,17 @@ class MiniLMTextEncoder(nn.Module):
     def prefetch(self, prompts: Sequence[str], chunk: int = 64) -> None:
         """Encode the uncached ``prompts`` with :func:`encode_minilm_batched` (about 4x less time
         than one at a time, e.g. in training, where every prompt is new) and cache them."""
-        todo = list(dict.fromkeys(validate_prompt(p) for p in prompts if p not in self._cache))
+        todo = list(dict.fromkeys(p for p in prompts if p not in self._cache))
         for prompt, entry in zip(
             todo, encode_minilm_batched(todo, self.max_tokens, chunk), strict=True
         ):
             self._remember(prompt, entry)
 
     def forward(self, prompts: Sequence[str]) -> TextFeatures:
-        """Encode ``B`` prompts -> :class:`TextFeatures` with ``D = 384``."""
+        """Encode ``B`` validated prompts -> :class:`TextFeatures` with ``D = 384``."""
         if len(prompts) == 0:
             raise ValueError("no prompts to encode")
-        entries = [self._encode_one(validate_prompt(p)) for p in prompts]
+        entries = [self._encode_one(p) for p in prompts]
         return pad_features(entries, self._device_probe.device)
 
 
@@ -442,10 +446,10 @@ class BiGRUTextEncoder(nn.Module):
         self.gru = nn.GRU(embed_dim, hidden, batch_first=True, bidirectional=True)
 
     def forward(self, prompts: Sequence[str]) -> TextFeatures:
-        """Encode ``B`` prompts -> :class:`TextFeatures` with ``D = 2 * hidden``."""
+        """Encode ``B`` validated prompts -> :class:`TextFeatures` with ``D = 2 * hidden``."""
         if len(prompts) == 0:
             raise ValueError("no prompts to encode")
-        encoded = [tokenize_with_numbers(validate_prompt(p), self.max_tokens) for p in prompts]
+        encoded = [tokenize_with_numbers(p, self.max_tokens) for p in prompts]
         device = self.embed.weight.device
         lengths = torch.tensor([len(ids) for ids, _, _ in encoded])
         ids = torch.zeros(len(encoded), int(lengths.max()), dtype=torch.long)

@@ -33,7 +33,6 @@ from torch import Tensor
 
 from model.core.grid import BevGrid
 from model.referent.point_pairs import box_point_pairs
-from scenes.geometry.actors import CLASSES
 from scenes.geometry.boxes import bev_corners
 
 GEOMETRY_FEATURES = 17
@@ -228,16 +227,10 @@ def pool_bev(feature_map: Tensor, grid: BevGrid, xy: Tensor) -> Tensor:
     return out[0, :, 0].T
 
 
-def class_indices(names: tuple[str, ...] | list[str]) -> np.ndarray:
-    """Class indices ``(K,)`` of class names (each must be one of ``CLASSES``)."""
-    return np.array([CLASSES.index(n) for n in names], dtype=np.int64)
-
-
 __all__ = [
     "GEOMETRY_FEATURES",
     "LIDAR_EVIDENCE",
     "RADAR_EVIDENCE",
-    "class_indices",
     "geometry_features",
     "lidar_evidence",
     "nearest_depth",

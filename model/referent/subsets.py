@@ -97,25 +97,6 @@ def _side(x: float, y: float) -> tuple[float, float, float]:  # pragma: no cover
 
 
 @njit(nogil=True, cache=True)
-def _sides(x, y):  # pragma: no cover - compiled
-    out = np.empty((x.shape[0], 3))
-    for i in range(x.shape[0]):
-        out[i, 0], out[i, 1], out[i, 2] = _side(x[i], y[i])
-    return out
-
-
-def side_probabilities(x: Tensor, y: Tensor) -> Tensor:
-    """``(..., 3)`` soft left / ahead / right of candidates at ``x``, ``y`` (metres, LiDAR
-    frame): left of the ego corridor (``y > LANE_HALF_WIDTH``), right of it, or in it within the
-    bearing the prompts call ahead; the rest (beside the bumper) is on no side. The definition
-    :func:`subset_features` uses (no gradient)."""
-    xs = x.detach().cpu().double().reshape(-1).numpy()
-    ys = y.detach().cpu().double().reshape(-1).numpy()
-    out = torch.from_numpy(_sides(xs, ys)).reshape(*x.shape, 3)
-    return out.to(device=x.device, dtype=x.dtype)
-
-
-@njit(nogil=True, cache=True)
 def _one_scene(  # pragma: no cover - compiled; its Python body is what numba compiles
     onehot, x, y, depth, score, speed, out,
 ):  # fmt: skip
@@ -253,4 +234,4 @@ def subset_features(geometry: Tensor, radar: Tensor | None, padding: Tensor) -> 
     return torch.from_numpy(out).to(device=geometry.device, dtype=geometry.dtype)
 
 
-__all__ = ["PICKED", "SUBSET_FEATURES", "SUBSET_ORDERS", "side_probabilities", "subset_features"]
+__all__ = ["PICKED", "SUBSET_FEATURES", "SUBSET_ORDERS", "subset_features"]

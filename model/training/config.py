@@ -242,11 +242,6 @@ class TrainConfig:
             raise TrainingError(f"--label-prompts must be >= 0, got {self.label_prompts}")
         if self.init and self.init_detector:
             raise TrainingError("give --init or --init-detector, not both")
-        if self.grounding != "referent" and (len(self.data) > 1 or self.scene_labels):
-            raise TrainingError(
-                "several --data roots and --scene-labels are the referent path's; the paper's "
-                "path trains on one root's label_2 boxes"
-            )
         for name in ("epochs", "batch_size", "prompts_per_scene"):
             if getattr(self, name) < 1:
                 flag = "--" + name.replace("_", "-")
@@ -269,8 +264,9 @@ class TrainConfig:
                 ) from exc
         if not 0.0 <= self.text_noise <= 1.0:
             raise TrainingError(f"--text-noise must be in [0, 1], got {self.text_noise}")
-        if self.grounding not in ("referent", "tpcnet"):
-            raise TrainingError(f"--grounding must be referent or tpcnet, got {self.grounding!r}")
+        if self.grounding not in get_args(GroundingKind):
+            kinds = " or ".join(get_args(GroundingKind))
+            raise TrainingError(f"--grounding must be {kinds}, got {self.grounding!r}")
         if Path(self.out).exists() and not Path(self.out).is_dir():
             raise TrainingError(f"--out {self.out} is a file; give a run folder")
 

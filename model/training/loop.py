@@ -20,9 +20,9 @@ uninterrupted one bit for bit (on the CPU): the data order of epoch ``e`` is a p
 by ``(seed, e)``, augmentations and generated prompts are seeded per item, a resumed epoch skips
 the batches already done, and the RNG states are restored.
 
-One loop trains every stage; the step of the run's stage (the paper's path, the referent path's
-joint stage or its ``--freeze-scene`` stage) is chosen once (:func:`choose_step`,
-:mod:`model.training.steps`).
+One loop trains every stage: :func:`set_up` (the dataset, the frozen scenes and the step of
+the run's grounding kind, chosen once: :mod:`model.training.kinds`, :mod:`model.training.steps`),
+:func:`train_epochs` (:func:`train_step`, :func:`end_epoch`) and :func:`finish`.
 
 SIGINT or SIGTERM (:mod:`model.training.stop_signal`) let the current step finish, save the run state and
 exit with 130 or 143 and one line. A non-finite loss or gradient stops training with a message
@@ -32,51 +32,38 @@ the three classes.
 
 from __future__ import annotations
 
-import functools
 import math
 import sys
 import time
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 from tqdm import tqdm
 
-from model.checkpoint import checkpoint_payload, model_from_payload, write_payload
+from model.checkpoint import checkpoint_payload, write_payload
 from model.checkpoint_meta import CheckpointMeta
-from model.tpcnet import build_model
+from model.tpcnet import TPCNet
 from model.training import distributed
 from model.training.config import TrainConfig, TrainingError, parse_args
-from model.training.data import MixedFrames, RootSpec, frame_dataset
-from model.training.referent_cache import cached_referent_step
-from model.training.referent_step import ReferentTrainConfig, referent_step
+from model.training.data import RootSpec
+from model.training.kinds import TrainingData, TrainingKind, training_kind
+from model.training.referent_step import ReferentTrainConfig
+from model.training.start import start_model
 from model.training.state import (
     BEST_FILE,
     LAST_FILE,
     LOG_FILE,
-    RunState,
     RunStateError,
     TrainState,
-    check_resumable,
-    load_run,
     rng_state,
     save_run,
     set_rng_state,
     state_path,
-    trim_log,
 )
-from model.training.steps import (
-    FrozenScenes,
-    FrozenSceneStep,
-    JointReferentStep,
-    PaperStep,
-    TrainStep,
-    freeze_scene,
-)
+from model.training.steps import TrainStep
 from model.training.stop_signal import StopRequest, TrainingInterrupted
-from scenes.datasets.frames import FrameDataset, SensorAugment
-from scenes.datasets.grounding import AugmentConfig, GroundingDataset
 from scenes.geometry.actors import CLASSES
 from scenes.talk2radar.kitti import read_label_file
 from scenes.talk2radar.layout import LABEL, sample_dir, sample_file, split_file
@@ -106,61 +93,6 @@ def epoch_batches(n: int, batch_size: int, epoch: int, seed: int, rank: int, wor
     order = np.resize(order, usable)  # repeats items only when n < one global batch
     mine = order[rank::world]
     return [mine[i : i + batch_size].tolist() for i in range(0, len(mine), batch_size)]
-
-
-SCENE_MODULES = ("lidar.", "radar.", "fusion.", "neck.", "head.")
-"""Parameter-name prefixes of the scene encoder and detector (what ``--init-detector`` copies)."""
-
-
-def widened(own: torch.Tensor, given: torch.Tensor, axis: int = 1) -> torch.Tensor | None:
-    """``given`` as a tensor of ``own``'s shape that is larger along ``axis`` only: ``given``
-    first along that axis, the new entries zero; or None when the shapes are not so related.
-    For a linear weight ``(O, I)`` whose input grew (``axis=1``) the layer computes what it did
-    before; for a gate whose outputs grew (``axis=0``, weight and bias) the new outputs are
-    ``2 sigmoid(0) = 1``."""
-    if own.dim() != given.dim() or not 0 <= axis < own.dim():
-        return None
-    others = [d for d in range(own.dim()) if d != axis]
-    if any(own.shape[d] != given.shape[d] for d in others) or own.shape[axis] <= given.shape[axis]:
-        return None
-    out = torch.zeros_like(own)
-    out.narrow(axis, 0, given.shape[axis]).copy_(given)
-    return out
-
-
-WIDENABLE = {
-    "referent.geometry.0.weight": 1,
-    "referent.geometry_gate.weight": 0,
-    "referent.geometry_gate.bias": 0,
-}
-"""Checkpoint names of the weights that may have grown since, and along which axis: the referent
-stage's geometry input (wider with ``ReferentConfig.context`` and ``numeric_compare``) and its
-text gate's outputs (as many as those inputs); any other shape mismatch is not copied."""
-
-
-def init_from(model: torch.nn.Module, path: str, prefixes: tuple[str, ...] = ()) -> int:
-    """Copy every weight of the checkpoint at ``path`` whose name and shape match ``model``'s
-    (e.g. the sensor branches, fusion, neck and head of a paper-path checkpoint into a referent
-    model), only names starting with one of ``prefixes`` when given; a weight of
-    :data:`WIDENABLE` that grew (the referent stage's geometry input with
-    ``ReferentConfig.context`` or ``numeric_compare`` switched on, and its text gate) is copied
-    into its first entries, the new ones zero (:func:`widened`). Returns how many tensors were copied."""
-    from model.checkpoint import read_checkpoint
-
-    state = read_checkpoint(path)["state_dict"]
-    own = model.state_dict()
-    same = {}
-    for k, v in state.items():
-        if k not in own or (prefixes and not k.startswith(prefixes)):
-            continue
-        if own[k].shape == v.shape:
-            same[k] = v
-        elif k in WIDENABLE and (grown := widened(own[k], v, WIDENABLE[k])) is not None:
-            same[k] = grown
-    if not same:
-        raise TrainingError(f"{path}: no weight matches this model's names and shapes")
-    model.load_state_dict(same, strict=False)
-    return len(same)
 
 
 def _log(out: Path, record: dict) -> None:
@@ -202,31 +134,6 @@ def check_labels(spec: RootSpec, split: str) -> None:
     )
 
 
-def _forward_step(model: torch.nn.Module, lidar: list, radar: list, prompts: list):
-    return model(lidar, radar, prompts)
-
-
-def choose_step(
-    model: torch.nn.Module,
-    cfg: TrainConfig,
-    dataset: GroundingDataset | MixedFrames,
-    referent_cfg: ReferentTrainConfig,
-    frozen: FrozenScenes | None,
-    device: torch.device,
-) -> TrainStep:
-    """The step of this run's stage (:mod:`model.training.steps`), its step function bound to
-    ``model`` (looked up here when called, so that tests can wrap it)."""
-    amp = cfg.amp == "bf16"
-    if frozen is not None:
-        step = distributed.wrap_step(model, cached_referent_step)
-        return FrozenSceneStep(step, dataset, frozen, referent_cfg, cfg, device, amp)
-    if cfg.grounding == "referent":
-        step = distributed.wrap_step(model, referent_step)
-        return JointReferentStep(step, dataset, referent_cfg, cfg.seed, device, amp)
-    forward = distributed.wrap_step(model, _forward_step, find_unused=False)
-    return PaperStep(forward, model, dataset, device, amp)
-
-
 def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
     """Run (or resume) a training run; returns the final state.
 
@@ -240,80 +147,126 @@ def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
 
 
 def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
+    """Set up (:func:`set_up`), train epoch by epoch (:func:`train_epochs`), finish
+    (:func:`finish`); a signal waits for the step under way (``stop.deferred``)."""
+    run = set_up(cfg, resume, stop)
+    with stop.deferred():
+        train_epochs(run)
+        return finish(run)
+
+
+@dataclass
+class Run:
+    """A run under way: what :func:`set_up` made, which :func:`train_epochs` and :func:`finish`
+    use; ``state`` and ``bar`` change as it goes.
+
+    Attributes:
+        cfg: The run's settings.
+        kind: How its grounding kind trains (:mod:`model.training.kinds`).
+        rank, world: This process's rank and the number of processes.
+        root: The first training root (validated on).
+        dataset: The training items.
+        model: The model, on its device.
+        params: The parameters trained, in checkpoint order.
+        optimizer: AdamW over ``params``.
+        step: The step of the run's stage.
+        total_steps: Steps of the whole run (``--epochs``, ``--max-steps``).
+        metadata: The checkpoints' metadata less the progress.
+        state: Progress (step, epoch, validation figures).
+        stop: The signal handler.
+        bar: The progress bar (rank 0 shows it).
+    """
+
+    cfg: TrainConfig
+    kind: TrainingKind
+    rank: int
+    world: int
+    root: Talk2RadarRoot
+    dataset: TrainingData
+    model: TPCNet
+    params: list[torch.nn.Parameter]
+    optimizer: torch.optim.Optimizer
+    step: TrainStep
+    total_steps: int
+    metadata: CheckpointMeta
+    state: TrainState
+    stop: StopRequest
+    bar: tqdm
+
+    @property
+    def out(self) -> Path:
+        return Path(self.cfg.out)
+
+    def checkpoint(self, best: bool) -> None:
+        """Every rank's RNG state to rank 0, which writes the run state and ``last.pt``; the
+        other ranks wait until it is written."""
+        state = self.state
+        if not distributed.same_on_every_rank(self.params):
+            raise TrainingError(
+                f"the {self.world} ranks hold different weights at step {state.step}"
+            )
+        rngs = distributed.gather(rng_state())
+        if self.rank == 0:
+            meta = self.metadata.replace(
+                step=state.step, epoch=state.epoch, val_mAP_3d=state.last_map
+            )
+            payload = checkpoint_payload(self.model, **meta.to_dict())
+            schedule = {
+                "total_steps": self.total_steps,
+                "warmup": self.cfg.warmup_steps,
+                "lr": self.cfg.lr,
+            }
+            config = asdict(self.cfg)
+            save_run(self.out, payload, self.optimizer.state_dict(), config, state, rngs, schedule)
+            if best:
+                write_payload(self.out / BEST_FILE, payload)
+        distributed.barrier()
+
+    def halt_if_asked(self) -> None:
+        """At a step boundary: on a signal seen by any rank, save and stop (all ranks)."""
+        signum = distributed.agree_max(self.stop.signum or 0)
+        if signum:
+            self.checkpoint(best=False)
+            self.bar.close()
+            state = self.state
+            raise TrainingInterrupted(
+                signum,
+                f"stopped after step {state.step} (epoch {state.epoch + 1}, batch "
+                f"{state.step_in_epoch}); resumable state in {state_path(self.out)} (--resume)",
+            )
+
+
+def set_up(cfg: TrainConfig, resume: bool, stop: StopRequest) -> Run:
+    """Everything before the first step: the device, the roots checked, the dataset of the run's
+    grounding kind, the model (resumed or new), the frozen scenes, the optimiser, the step, the
+    schedule's length, the metadata, the RNG states of a resumed run and the progress bar.
+
+    Raises:
+        TrainingError: bad data or settings.
+    """
     out = Path(cfg.out)
     rank, world = distributed.rank(), distributed.world()
     device = distributed.local_device(torch.device(cfg.device))
-    use_amp = cfg.amp == "bf16"
-    if use_amp and device.type != "cuda":
+    if cfg.amp == "bf16" and device.type != "cuda":
         raise TrainingError("--amp bf16 runs on CUDA only (give --device cuda)")
+    kind = training_kind(cfg)
+    kind.check(cfg)
     torch.manual_seed(cfg.seed + rank)
     radar_folder = None if cfg.radar_folder == "none" else cfg.radar_folder
     specs = cfg.roots()
     root = Talk2RadarRoot(specs[0].path, radar=radar_folder, sidecar=specs[0].scene_labels is None)
     for spec in specs:
         check_labels(spec, cfg.train_split)
-    augment = AugmentConfig(flip_probability=cfg.flip_probability)
-    referent = cfg.grounding == "referent"
-    dataset: GroundingDataset | MixedFrames
-
-    def frames_of(spec: RootSpec, **kwargs: object) -> FrameDataset:
-        frames = frame_dataset(spec, cfg.train_split, **kwargs)
-        if cfg.freeze_scene and cfg.scene_limit:
-            frames.limit(cfg.scene_limit)  # the cached scenes (see below)
-        return frames
-
-    if referent:
-        sensors = SensorAugment() if cfg.sensor_augment else None
-        dataset = MixedFrames(
-            [frames_of(spec, augment=augment, sensors=sensors, seed=cfg.seed) for spec in specs],
-            [spec.weight for spec in specs],
-            seed=cfg.seed,
-        )
-    else:
-        dataset = GroundingDataset(root, cfg.train_split, augment=augment, seed=cfg.seed)
+    dataset = kind.dataset(cfg, specs, root)
     referent_cfg = ReferentTrainConfig(cfg.prompt_draw())
-
-    state = TrainState()
-    run: RunState | None = None
-    if resume and (state_path(out).is_file() or (out / LAST_FILE).is_file()):
-        run = load_run(out, repair=rank == 0)
-        check_resumable(asdict(cfg), run, world)
-        model = model_from_payload(run.model, state_path(out), device)
-        state = replace(run.progress)
-        if rank == 0:
-            trim_log(out, state.step)
-        if not run.rng and rank == 0:
-            print(
-                f"{state_path(out)}: a run state of the older layout, without RNG states: the "
-                "resumed run will not repeat an uninterrupted one bit for bit",
-                file=sys.stderr,
-            )
-    else:
-        if resume:
-            print(f"{out}: nothing to resume, starting a new run", file=sys.stderr)
-        model = build_model(cfg.preset, **cfg.model_overrides())
-        if cfg.init:
-            copied = init_from(model, cfg.init)
-            print(f"initialised {copied} weight tensors from {cfg.init}", file=sys.stderr)
-        if cfg.init_detector:
-            copied = init_from(model, cfg.init_detector, SCENE_MODULES)
-            print(
-                f"initialised the scene encoder and detector ({copied} tensors) from "
-                f"{cfg.init_detector}; the referent stage starts from scratch",
-                file=sys.stderr,
-            )
+    model, saved, state = start_model(cfg, resume, rank, world, device)
     model.to(device)
-    frozen = None
-    if referent and cfg.freeze_scene:
-        # Only the referent stage learns; every scene is encoded once by the frozen detector.
-        roots = [functools.partial(frames_of, spec) for spec in specs]
-        frozen = freeze_scene(model, cfg, roots, referent_cfg, progress=rank == 0)
+    frozen = kind.frozen(model, cfg, specs, referent_cfg, progress=rank == 0)
     params = [p for p in model.parameters_in_checkpoint_order() if p.requires_grad]
     optimizer = torch.optim.AdamW(params, lr=cfg.lr, weight_decay=cfg.weight_decay, foreach=True)
-    if run is not None:
-        optimizer.load_state_dict(run.optimizer)
-    step = choose_step(model, cfg, dataset, referent_cfg, frozen, device)
-
+    if saved is not None:
+        optimizer.load_state_dict(saved.optimizer)
+    step = kind.step(model, cfg, dataset, referent_cfg, frozen, device)
     steps_per_epoch = len(epoch_batches(len(dataset), cfg.batch_size, 0, cfg.seed, rank, world))
     total_steps = cfg.epochs * steps_per_epoch
     if cfg.max_steps:
@@ -328,36 +281,8 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
             "train_samples": len(dataset),
         },
     ).with_portable_paths()
-
-    def checkpoint(best: bool) -> None:
-        """Every rank's RNG state to rank 0, which writes the run state and ``last.pt``; the
-        other ranks wait until it is written."""
-        if not distributed.same_on_every_rank(params):
-            raise TrainingError(f"the {world} ranks hold different weights at step {state.step}")
-        rngs = distributed.gather(rng_state())
-        if rank == 0:
-            meta = metadata.replace(step=state.step, epoch=state.epoch, val_mAP_3d=state.last_map)
-            payload = checkpoint_payload(model, **meta.to_dict())
-            schedule = {"total_steps": total_steps, "warmup": cfg.warmup_steps, "lr": cfg.lr}
-            save_run(out, payload, optimizer.state_dict(), asdict(cfg), state, rngs, schedule)
-            if best:
-                write_payload(out / BEST_FILE, payload)
-        distributed.barrier()
-
-    def halt_if_asked() -> None:
-        """At a step boundary: on a signal seen by any rank, save and stop (all ranks)."""
-        signum = distributed.agree_max(stop.signum or 0)
-        if signum:
-            checkpoint(best=False)
-            bar.close()
-            raise TrainingInterrupted(
-                signum,
-                f"stopped after step {state.step} (epoch {state.epoch + 1}, batch "
-                f"{state.step_in_epoch}); resumable state in {state_path(out)} (--resume)",
-            )
-
-    if run is not None and run.rng:
-        set_rng_state(run.rng[rank])
+    if saved is not None and saved.rng:
+        set_rng_state(saved.rng[rank])
     bar = tqdm(
         total=total_steps,
         initial=state.step,
@@ -366,67 +291,114 @@ def _train(cfg: TrainConfig, resume: bool, stop: StopRequest) -> TrainState:
         disable=rank != 0,
         dynamic_ncols=True,
     )
-    start_time, seen = time.perf_counter(), 0
+    return Run(
+        cfg=cfg,
+        kind=kind,
+        rank=rank,
+        world=world,
+        root=root,
+        dataset=dataset,
+        model=model,
+        params=params,
+        optimizer=optimizer,
+        step=step,
+        total_steps=total_steps,
+        metadata=metadata,
+        state=state,
+        stop=stop,
+        bar=bar,
+    )
+
+
+def train_epochs(run: Run) -> None:
+    """The loop: epochs from the saved position (a resumed epoch skips its batches already done)
+    until ``total_steps`` or the last epoch (``--stop-epoch``); each step as
+    :func:`train_step`, each finished epoch as :func:`end_epoch`."""
+    cfg, state = run.cfg, run.state
     last_epoch = min(cfg.epochs, cfg.stop_epoch) if cfg.stop_epoch else cfg.epochs
-    with stop.deferred():
-        while state.step < total_steps and state.epoch < last_epoch:
-            dataset.set_epoch(state.epoch)
-            batches = epoch_batches(
-                len(dataset), cfg.batch_size, state.epoch, cfg.seed, rank, world
-            )
-            model.train()
-            for indices in batches[state.step_in_epoch :]:
-                if state.step >= total_steps:
-                    break
-                halt_if_asked()
-                for group in optimizer.param_groups:
-                    group["lr"] = cosine_lr(state.step, total_steps, cfg.lr, cfg.warmup_steps)
-                loss = step(indices, state.epoch)
-                terms, total, extra = loss.detection, loss.total, loss.extra
-                if not total.requires_grad:  # no prompt in this shard: a zero-gradient step
-                    total = total + sum(p.sum() * 0.0 for p in params)
-                optimizer.zero_grad(set_to_none=True)
-                total.backward()
-                norm = torch.nn.utils.clip_grad_norm_(params, cfg.grad_clip)
-                if not (torch.isfinite(total) and torch.isfinite(norm)):
-                    raise TrainingError(
-                        f"non-finite loss or gradient at step {state.step} (heatmap "
-                        f"{terms.heatmap.item()}, regression {terms.regression.item()}, {extra}); "
-                        f"the last good checkpoint in {out} is kept"
-                    )
-                optimizer.step()
-                state.step += 1
-                state.step_in_epoch += 1
-                seen += len(indices) * world
-                rate = seen / max(time.perf_counter() - start_time, 1e-9)
-                bar.update(1)
-                bar.set_postfix(loss=f"{total.item():.3f}", samples_s=f"{rate:.1f}", ep=state.epoch)
-                if state.step % cfg.log_every == 0:
-                    terms_logged = {"loss": total.item(), "heatmap": terms.heatmap.item()}
-                    terms_logged.update(regression=terms.regression.item(), **extra)
-                    means = distributed.mean(list(terms_logged.values()))
-                    if rank == 0:
-                        record = {"step": state.step, "epoch": state.epoch}
-                        record.update(zip(terms_logged, means, strict=True))
-                        lr = optimizer.param_groups[0]["lr"]
-                        _log(out, {**record, "lr": lr, "samples_per_s": rate})
-            else:
-                state.epoch += 1
-                state.step_in_epoch = 0
-                best = False
-                if rank == 0 and cfg.val_every and state.epoch % cfg.val_every == 0:
-                    metrics = validate(model, cfg, root)
-                    state.last_map = metrics["mAP_3d"]
-                    best = state.last_map > state.best_map
-                    state.best_map = max(state.best_map, state.last_map)
-                    _log(out, {"step": state.step, "epoch": state.epoch, "val": metrics})
-                    bar.write(f"epoch {state.epoch}: val 3D mAP {metrics['mAP_3d']:.2f}")
-                checkpoint(best=best)
-                continue
-            break  # max_steps reached inside an epoch
-        checkpoint(best=state.best_map < 0)
-    bar.close()
-    return state
+    clock = _Throughput(time.perf_counter(), 0)
+    while state.step < run.total_steps and state.epoch < last_epoch:
+        run.dataset.set_epoch(state.epoch)
+        batches = epoch_batches(
+            len(run.dataset), cfg.batch_size, state.epoch, cfg.seed, run.rank, run.world
+        )
+        run.model.train()
+        for indices in batches[state.step_in_epoch :]:
+            if state.step >= run.total_steps:
+                return  # max_steps reached inside an epoch
+            run.halt_if_asked()
+            train_step(run, indices, clock)
+        end_epoch(run)
+
+
+@dataclass
+class _Throughput:
+    """Samples trained since the run (re)started and when it did: the bar's samples per second."""
+
+    start: float
+    seen: int
+
+
+def train_step(run: Run, indices: list[int], clock: _Throughput) -> None:
+    """One optimiser step on this rank's batch ``indices``: the learning rate of the schedule,
+    the stage's losses, backward, clipping (a non-finite loss or gradient stops the run), the bar
+    and, every ``--log-every`` steps, the log line (terms averaged over the ranks)."""
+    cfg, state, optimizer = run.cfg, run.state, run.optimizer
+    for group in optimizer.param_groups:
+        group["lr"] = cosine_lr(state.step, run.total_steps, cfg.lr, cfg.warmup_steps)
+    loss = run.step(indices, state.epoch)
+    terms, total, extra = loss.detection, loss.total, loss.extra
+    if not total.requires_grad:  # no prompt in this shard: a zero-gradient step
+        total = total + sum(p.sum() * 0.0 for p in run.params)
+    optimizer.zero_grad(set_to_none=True)
+    total.backward()
+    norm = torch.nn.utils.clip_grad_norm_(run.params, cfg.grad_clip)
+    if not (torch.isfinite(total) and torch.isfinite(norm)):
+        raise TrainingError(
+            f"non-finite loss or gradient at step {state.step} (heatmap "
+            f"{terms.heatmap.item()}, regression {terms.regression.item()}, {extra}); "
+            f"the last good checkpoint in {run.out} is kept"
+        )
+    optimizer.step()
+    state.step += 1
+    state.step_in_epoch += 1
+    clock.seen += len(indices) * run.world
+    rate = clock.seen / max(time.perf_counter() - clock.start, 1e-9)
+    run.bar.update(1)
+    run.bar.set_postfix(loss=f"{total.item():.3f}", samples_s=f"{rate:.1f}", ep=state.epoch)
+    if state.step % cfg.log_every == 0:
+        terms_logged = {"loss": total.item(), "heatmap": terms.heatmap.item()}
+        terms_logged.update(regression=terms.regression.item(), **extra)
+        means = distributed.mean(list(terms_logged.values()))
+        if run.rank == 0:
+            record = {"step": state.step, "epoch": state.epoch}
+            record.update(zip(terms_logged, means, strict=True))
+            lr = optimizer.param_groups[0]["lr"]
+            _log(run.out, {**record, "lr": lr, "samples_per_s": rate})
+
+
+def end_epoch(run: Run) -> None:
+    """After an epoch's last batch: the next epoch's position, validation every ``--val-every``
+    epochs (rank 0), the checkpoint (``best.pt`` too when the validation improved)."""
+    cfg, state = run.cfg, run.state
+    state.epoch += 1
+    state.step_in_epoch = 0
+    best = False
+    if run.rank == 0 and cfg.val_every and state.epoch % cfg.val_every == 0:
+        metrics = validate(run.model, cfg, run.root)
+        state.last_map = metrics["mAP_3d"]
+        best = state.last_map > state.best_map
+        state.best_map = max(state.best_map, state.last_map)
+        _log(run.out, {"step": state.step, "epoch": state.epoch, "val": metrics})
+        run.bar.write(f"epoch {state.epoch}: val 3D mAP {metrics['mAP_3d']:.2f}")
+    run.checkpoint(best=best)
+
+
+def finish(run: Run) -> TrainState:
+    """The last checkpoint (``best.pt`` too when the run never validated) and the final state."""
+    run.checkpoint(best=run.state.best_map < 0)
+    run.bar.close()
+    return run.state
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -457,7 +429,7 @@ def main(argv: list[str] | None = None) -> int:
         print(
             f"done: {state.step} steps, {state.epoch} epochs, best val 3D mAP {state.best_map:.2f}"
         )
-        if cfg.grounding == "referent" and cfg.calibrate and state.epoch >= cfg.epochs:
+        if training_kind(cfg).calibrates and cfg.calibrate and state.epoch >= cfg.epochs:
             from model.training.calibrate import calibrate_run
 
             calibrate_run(Path(cfg.out) / LAST_FILE, cfg.roots()[0].path, cfg.val_split)

@@ -163,14 +163,14 @@ def step_text(model: TPCNet, texts: Sequence[str]) -> TextFeatures:
     one-at-a-time ones only to float rounding, so a cache filled by earlier steps would make a
     step's features depend on them, and a resumed run would not repeat an uninterrupted one."""
     encoder = model.text_encoder
+    valid = [validate_prompt(t) for t in texts]
     if isinstance(encoder, MiniLMTextEncoder):
-        valid = [validate_prompt(t) for t in texts]
         distinct = list(dict.fromkeys(valid))
         entries = dict(
             zip(distinct, encode_minilm_batched(distinct, encoder.max_tokens), strict=True)
         )
         return pad_features([entries[t] for t in valid], model.device)
-    return encoder(texts)
+    return encoder(valid)
 
 
 def referent_step(

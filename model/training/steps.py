@@ -34,8 +34,9 @@ from model.tpcnet import TPCNet
 from model.training.config import TrainConfig, TrainingError
 from model.training.referent_cache import CachedScene, TextBank, cache_scenes, shift_evidence
 from model.training.referent_step import ReferentTrainConfig, float32_output
+from scenes.datasets.augment import AugmentConfig, draw_flip
 from scenes.datasets.frames import FrameDataset
-from scenes.datasets.grounding import AugmentConfig, GroundingDataset, collate
+from scenes.datasets.grounding import GroundingDataset, collate
 
 
 @dataclass(frozen=True)
@@ -140,7 +141,7 @@ def pick_view(
     (:func:`model.training.referent_cache.shift_evidence`); all drawn from ``(seed, epoch,
     index)``."""
     rng = np.random.default_rng((cfg.seed, 13, epoch, index))
-    flip = rng.random() < cfg.flip_probability
+    flip = draw_flip(rng, cfg.flip_probability)
     scene = mirrored[index] if mirrored and flip else cached[index]
     if scene.labelled is None:
         return scene

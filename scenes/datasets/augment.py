@@ -1,8 +1,10 @@
 """Training augmentations: the left-right flip, and sensor augmentations (issue 14, sim-to-real).
 
-The flip (the one home of it: :func:`flip_sample` for :class:`scenes.datasets.grounding.GroundingDataset`,
-:func:`mirror_points` and :func:`mirror_actor` for :class:`scenes.datasets.frames.FrameDataset`)
-mirrors a scene about the LiDAR's x-z plane: ``y -> -y``, ``yaw -> -yaw``, a ground velocity's
+The flip, the one home of it: whether an item is flipped (:meth:`AugmentConfig.draws_flip`,
+:func:`draw_flip`: the first draw of the item's stream, :func:`item_rng`) and how
+(:func:`flip_sample` for :class:`scenes.datasets.grounding.GroundingDataset`, :func:`flip_frame` for
+:class:`scenes.datasets.frames.FrameDataset`; the ``--freeze-scene`` training draws its mirrored
+views with :func:`draw_flip` too). It mirrors a scene about the LiDAR's x-z plane: ``y -> -y``, ``yaw -> -yaw``, a ground velocity's
 ``vy -> -vy``, and "left" and "right" swapped in the prompt
 (:func:`scenes.language.prompts.flip_left_right`). Radar radial velocities are unchanged: the radar sits on
 the LiDAR's x axis, so the mirror keeps every range and line of sight.
@@ -21,6 +23,9 @@ Conventions
 """
 
 from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -48,6 +53,57 @@ def _check_range(bounds: tuple[float, float], name: str, lo: float, hi: float) -
     a, b = bounds
     if not lo <= a <= b <= hi:
         raise ValueError(f"{name}: expected {lo} <= low <= high <= {hi}, got {bounds}")
+
+
+def item_rng(seed: int, epoch: int, index: int) -> np.random.Generator:
+    """The augmentation stream of item ``index`` at ``epoch``, seeded by ``(seed, epoch, index)``
+    (runs and resumed runs repeat exactly)."""
+    return np.random.default_rng((seed, epoch, index))
+
+
+def draw_flip(rng: np.random.Generator, probability: float) -> bool:
+    """Whether to flip: one uniform draw of ``rng`` below ``probability`` (drawn whatever the
+    probability, so the draws after it do not depend on it)."""
+    return bool(rng.random() < probability)
+
+
+@dataclass(frozen=True)
+class AugmentConfig:
+    """Train-time augmentations.
+
+    Attributes:
+        flip_probability: Probability of the left-right flip.
+        lidar_keep_min: Each item keeps a uniform fraction in ``[lidar_keep_min, 1]`` of its LiDAR
+            points (1.0 disables the dropout).
+        shuffle_points: Shuffle the point order.
+    """
+
+    flip_probability: float = 0.5
+    lidar_keep_min: float = 0.8
+    shuffle_points: bool = True
+
+    def draws_flip(self, rng: np.random.Generator) -> bool:
+        """Whether an item is flipped left-right: :func:`draw_flip` with
+        :attr:`flip_probability` (the first draw of the item's stream)."""
+        return draw_flip(rng, self.flip_probability)
+
+    def thin_and_shuffle(
+        self, lidar: np.ndarray, radar: np.ndarray, rng: np.random.Generator
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The LiDAR dropout and the point shuffling (after the flip): ``(N, 4)``, ``(M, 7)``."""
+        if self.lidar_keep_min < 1.0 and len(lidar):
+            keep = rng.uniform(self.lidar_keep_min, 1.0)
+            lidar = lidar[rng.random(len(lidar)) < keep]
+        if self.shuffle_points:
+            lidar = lidar[rng.permutation(len(lidar))]
+            radar = radar[rng.permutation(len(radar))]
+        return lidar, radar
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.flip_probability <= 1.0:
+            raise ValueError(f"flip_probability must be in [0, 1], got {self.flip_probability}")
+        if not 0.0 < self.lidar_keep_min <= 1.0:
+            raise ValueError(f"lidar_keep_min must be in (0, 1], got {self.lidar_keep_min}")
 
 
 def mirror_points(points: np.ndarray) -> np.ndarray:
@@ -86,6 +142,22 @@ def flip_sample(
         The mirrored copies (boxes ``(K, 7)`` float64) and the rewritten prompt.
     """
     return mirror_points(lidar), mirror_points(radar), mirror_boxes(boxes), flip_left_right(prompt)
+
+
+def flip_frame(
+    lidar: np.ndarray, radar: np.ndarray, actors: Sequence[Actor], texts: Sequence[str]
+) -> tuple[np.ndarray, np.ndarray, tuple[Actor, ...], tuple[str, ...]]:
+    """Mirror a frame about the LiDAR's x-z plane and swap left/right in its sentences.
+
+    Args:
+        lidar: ``(N, 4)``; radar: ``(M, 7)``; actors: LiDAR frame; texts: sentences about it.
+
+    Returns:
+        The mirrored points, the mirrored actors (:func:`mirror_actor`) and the rewritten texts.
+    """
+    mirrored = tuple(mirror_actor(a) for a in actors)
+    flipped = tuple(flip_left_right(t) for t in texts)
+    return mirror_points(lidar), mirror_points(radar), mirrored, flipped
 
 
 def jitter_intensity(

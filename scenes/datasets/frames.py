@@ -9,7 +9,8 @@ and the first sample of each group stands for it.
 
 Augmentations keep every statement about the scene true, because the prompts are generated from
 the augmented actors: the left-right flip mirrors points and actors (``y -> -y``, ``yaw -> -yaw``,
-``vy -> -vy``; radar radial velocities unchanged: :mod:`scenes.datasets.augment`, the flip's home). The
+``vy -> -vy``; radar radial velocities unchanged: :func:`scenes.datasets.augment.flip_frame`, drawn by
+:meth:`scenes.datasets.augment.AugmentConfig.draws_flip`: the flip's home). The
 sensor augmentations of :class:`SensorAugment` (:mod:`scenes.datasets.augment`) make the model robust to what
 still differs between the synthetic and the real sensors: intensity gain and offset, random and
 beam-wise LiDAR dropout, radar point count, RCS offset, and single-scan radar (real roots often come
@@ -45,11 +46,10 @@ import numpy as np
 from torch.utils.data import Dataset
 
 from scenes.datasets import augment as aug
-from scenes.datasets.grounding import AugmentConfig
+from scenes.datasets.augment import AugmentConfig
 from scenes.geometry.actors import CLASSES, Actor
 from scenes.geometry.boxes import match_by_centre
 from scenes.geometry.calib import IMAGE_SIZE, Calibration
-from scenes.language.prompts import flip_left_right
 from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.talk2radar.scene_labels import SceneLabels, fov_mask
 
@@ -348,12 +348,13 @@ class FrameDataset(Dataset):
         radar = np.asarray(sample.radar, dtype=np.float32)
         flipped = False
         if self.augment is not None:
-            rng = np.random.default_rng((self.seed, self.epoch, index))
-            if rng.random() < self.augment.flip_probability:
-                lidar, radar = aug.mirror_points(lidar), aug.mirror_points(radar)
-                actors = tuple(aug.mirror_actor(a) for a in actors)
+            rng = aug.item_rng(self.seed, self.epoch, index)
+            if self.augment.draws_flip(rng):
+                texts = tuple(g.text for g in given)
+                lidar, radar, actors, texts = aug.flip_frame(lidar, radar, actors, texts)
                 given = tuple(
-                    GivenPrompt(g.sample_id, flip_left_right(g.text), g.referent_ids) for g in given
+                    GivenPrompt(g.sample_id, text, g.referent_ids)
+                    for g, text in zip(given, texts, strict=True)
                 )
                 if region is not None:
                     region = AnnotatedRegion(region.calib, region.image_size, mirrored=True)

@@ -1,7 +1,8 @@
 """A torch ``Dataset`` over any Talk2Radar root, with augmentations that keep the prompt true.
 
 Each item is one sample: the frame's LiDAR and radar points (LiDAR frame), its prompt and the boxes
-that prompt refers to. Train-time augmentations (all optional, see :class:`AugmentConfig`):
+that prompt refers to. Train-time augmentations (all optional, see
+:class:`scenes.datasets.augment.AugmentConfig`, re-exported here):
 
 - left-right flip (``y -> -y``, ``yaw -> -yaw``) with the words "left" and "right" swapped in the
   prompt (:func:`scenes.datasets.augment.flip_sample`, where the flip lives);
@@ -20,42 +21,8 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from scenes.datasets.augment import flip_sample
+from scenes.datasets.augment import AugmentConfig, flip_sample, item_rng
 from scenes.talk2radar.root import Talk2RadarRoot
-
-
-@dataclass(frozen=True)
-class AugmentConfig:
-    """Train-time augmentations.
-
-    Attributes:
-        flip_probability: Probability of the left-right flip.
-        lidar_keep_min: Each item keeps a uniform fraction in ``[lidar_keep_min, 1]`` of its LiDAR
-            points (1.0 disables the dropout).
-        shuffle_points: Shuffle the point order.
-    """
-
-    flip_probability: float = 0.5
-    lidar_keep_min: float = 0.8
-    shuffle_points: bool = True
-
-    def thin_and_shuffle(
-        self, lidar: np.ndarray, radar: np.ndarray, rng: np.random.Generator
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """The LiDAR dropout and the point shuffling (after the flip): ``(N, 4)``, ``(M, 7)``."""
-        if self.lidar_keep_min < 1.0 and len(lidar):
-            keep = rng.uniform(self.lidar_keep_min, 1.0)
-            lidar = lidar[rng.random(len(lidar)) < keep]
-        if self.shuffle_points:
-            lidar = lidar[rng.permutation(len(lidar))]
-            radar = radar[rng.permutation(len(radar))]
-        return lidar, radar
-
-    def __post_init__(self) -> None:
-        if not 0.0 <= self.flip_probability <= 1.0:
-            raise ValueError(f"flip_probability must be in [0, 1], got {self.flip_probability}")
-        if not 0.0 < self.lidar_keep_min <= 1.0:
-            raise ValueError(f"lidar_keep_min must be in (0, 1], got {self.lidar_keep_min}")
 
 
 @dataclass(frozen=True)
@@ -137,8 +104,8 @@ class GroundingDataset(Dataset):
         lidar, radar, boxes, prompt = sample.lidar, sample.radar, sample.boxes, sample.prompt
         flipped = False
         if self.augment is not None:
-            rng = np.random.default_rng((self.seed, self.epoch, index))
-            if rng.random() < self.augment.flip_probability:
+            rng = item_rng(self.seed, self.epoch, index)
+            if self.augment.draws_flip(rng):
                 lidar, radar, boxes, prompt = flip_sample(lidar, radar, boxes, prompt)
                 flipped = True
             lidar, radar = self.augment.thin_and_shuffle(lidar, radar, rng)
@@ -163,3 +130,6 @@ def collate(items: Sequence[GroundingItem]) -> GroundingBatch:
         classes=tuple(it.classes for it in items),
         prompts=tuple(it.prompt for it in items),
     )
+
+
+__all__ = ["AugmentConfig", "GroundingBatch", "GroundingDataset", "GroundingItem", "collate"]

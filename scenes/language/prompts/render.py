@@ -71,11 +71,6 @@ class Prompt:
     family: str = field(default="attribute", repr=False, compare=False)
     expression: object = field(default=None, repr=False, compare=False)
 
-    @property
-    def is_count(self) -> bool:
-        """A counting question ("how many cars are parked?"): the referents are the counted set."""
-        return self.family == "count"
-
     @staticmethod
     def from_text(text: str, referent_ids: Sequence[int] = ()) -> Prompt:
         """A prompt from free text (real Talk2Radar, typed), tags from :func:`infer_tags`."""
