@@ -19,8 +19,10 @@ Per class and pooled: the labelled objects of the class within ``--max-range`` (
 origin) and in the camera's view found by the answer (:func:`model.evaluation.class_prompt_counts.
 count_prompt`: 3D IoU above the official minimum; a labelled box found is the box itself), and the
 false boxes per prompt (answer boxes of the region that are not a labelled object of the class).
-It runs on any commit whose ``encode_scene`` takes ``candidates=`` (issue 24 on), so the code
-before a change can be measured with the same file (copy it into that tree).
+The code before issue 37 (commit c1d0ef7, the flat ``scenes/`` layout) is measured with this
+file as first written (commit ae2aa4f), which imports that layout:
+``git worktree add B c1d0ef7; git show ae2aa4f:bench/labelled_shift.py > B/bench/labelled_shift.py``,
+then the same command in ``B`` (docs/RESULTS.md, "Labelled boxes").
 """
 
 from __future__ import annotations
@@ -146,7 +148,7 @@ def run(
     from tqdm import tqdm
 
     from model.checkpoint import load_checkpoint
-    from model.evaluation.class_prompts import root_frame_ids
+    from model.evaluation.class_prompt_frames import root_frame_ids
     from model.evaluation.predict import operating_threshold
     from scenes.talk2radar.root import Talk2RadarRoot
 

@@ -110,7 +110,7 @@ def test_file_names_follow_the_same_rule(
     """``model.evaluate --labels/--preds`` and ``model.evaluation.class_prompts`` (split ``all``) read ids
     from file names: a 6-digit or non-ASCII stem is refused by both, naming the file."""
     from model import evaluate
-    from model.evaluation.class_prompts import root_frame_ids
+    from model.evaluation.class_prompt_frames import root_frame_ids
 
     labels, preds = tmp_path / "labels", tmp_path / "preds"
     labels.mkdir()
