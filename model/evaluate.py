@@ -23,7 +23,10 @@ Decisions (the devkit behaves differently, see the spec §2.2):
   errors naming the file, and class names that are neither scored nor known (a typo such as
   ``Cyclst``) stay out of the metric, as the protocol says, but are counted and reported (the
   table's last line and a warning on stderr).
-- Every error is one line on stderr, ``error: ...``, and exit code 2.
+- Every error is one line on stderr, ``error: ...``, and exit code 2; a prediction worker
+  (``--workers``) that dies or stops answering too (:mod:`model.evaluation.worker_watch`: within
+  ``--worker-timeout`` and the measured time per frame; which worker, which frame, what to do),
+  and then no prediction file or JSON is written.
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ from typing import TYPE_CHECKING, Literal
 from model.checkpoint import DEFAULT_CHECKPOINT
 from model.evaluation.grounding import CandidateSource
 from model.evaluation.metrics import VodResult, evaluate_frames
+from model.evaluation.worker_watch import PredictionWorkerError
 from scenes.utils.cli import add_options, from_args, option
 
 if TYPE_CHECKING:
@@ -281,6 +285,13 @@ class EvaluateConfig:
         "(default 0: the usable cores, one per 40 distinct frames at most, 1 on cuda; 1: this "
         "process alone, torch's threads as set)",
     )
+    worker_timeout: float = option(
+        20.0,
+        group=MODEL_MODE,
+        help="seconds a prediction worker may take for a frame at least (default 20; more when "
+        "this process measures frames slower: 20x its time per frame; a worker's start may take "
+        "3x this); a worker past it, or one that dies, ends the run with one line",
+    )
     limit: int = option(0, group=MODEL_MODE, help="first N frames only (0: all)")
     json: Path | None = option(None, help="write the results as JSON here")
     exact_overlaps: bool = option(
@@ -370,6 +381,7 @@ def _run_model_mode(cfg: EvaluateConfig) -> int:
     from model.evaluation.predict import operating_threshold, write_predictions
     from model.evaluation.predict_pool import auto_workers, frame_groups
     from model.evaluation.report import evaluate_predictions
+    from model.evaluation.worker_watch import Liveness
     from scenes.talk2radar.root import Talk2RadarRoot
 
     json_path, out_dir = cfg.json, cfg.out
@@ -383,6 +395,8 @@ def _run_model_mode(cfg: EvaluateConfig) -> int:
         raise EvaluationInputError(f"--workers must be 0 (automatic) or more, got {cfg.workers}")
     if cfg.workers > 1 and cfg.device != "cpu":
         raise EvaluationInputError(f"--workers {cfg.workers} runs on the CPU, not {cfg.device}")
+    if not cfg.worker_timeout > 0:
+        raise EvaluationInputError(f"--worker-timeout must be > 0 s, got {cfg.worker_timeout}")
 
     from scenes.talk2radar.scene_labels import SceneLabels
 
@@ -415,6 +429,7 @@ def _run_model_mode(cfg: EvaluateConfig) -> int:
         scene_labels=scene_labels,
         candidates=cfg.candidates,
         workers=workers,
+        liveness=Liveness.with_floor(cfg.worker_timeout),
     )
     out = write_predictions(report.predictions, out_dir)
     # Score the files as written (4 decimals), as the official devkit reads them.
@@ -441,7 +456,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     runner = _run_model_mode if cfg.mode() == "model" else _run_files_mode
     try:
         return runner(cfg)
-    except (EvaluationInputError, LabelError, ValueError) as exc:
+    except (EvaluationInputError, LabelError, ValueError, PredictionWorkerError) as exc:
         print(f"error: {_one_line(str(exc))}", file=sys.stderr)
         return 2
     except OSError as exc:  # e.g. --json or --out in a folder that cannot be written

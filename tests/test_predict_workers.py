@@ -1,9 +1,17 @@
 """Prediction by worker processes (model/evaluation/predict_pool.py): the same predictions and
-report as in-process, errors raised as in-process with the pool shut down, the automatic count."""
+report as in-process, errors raised as in-process with the pool shut down, the automatic count;
+a worker that dies or stops answering ends the run in bounded time with one line (issue 39)."""
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
+import os
+import re
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +28,7 @@ from model.evaluation.predict_pool import (
 )
 from model.evaluation.report import class_noun_of, evaluate_predictions
 from model.evaluation.report_file import SECONDS
+from model.evaluation.worker_watch import Liveness, PredictionWorkerError
 from scenes.talk2radar.root import Talk2RadarRoot
 
 
@@ -124,3 +133,105 @@ def test_labelled_candidates_in_workers(real_format_roots, trained):
     two = evaluate_predictions(trained, root, ids, workers=2, **kw)
     assert _report_numbers(two) == _report_numbers(one)
     assert one.grounding is not None and one.grounding.overall.prompts == len(ids)
+
+
+# ------------------------------------------------------------------ workers that die or freeze
+
+
+@contextlib.contextmanager
+def _no_worker_left() -> Iterator[None]:
+    """Whatever a test leaves: no worker stays (a stopped one is killed)."""
+    try:
+        yield
+    finally:
+        for child in multiprocessing.active_children():
+            child.kill()
+            child.join()
+
+
+def _on_first_worker(action: Callable[[int], None]) -> threading.Thread:
+    """A thread that calls ``action(pid)`` on the first worker process as soon as it exists."""
+
+    def watch() -> None:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            children = multiprocessing.active_children()
+            if children:
+                action(children[0].pid)
+                return
+            time.sleep(0.01)
+
+    thread = threading.Thread(target=watch, daemon=True)
+    thread.start()
+    return thread
+
+
+def _worker_stream(trained, root: Talk2RadarRoot, liveness: Liveness) -> Iterator:
+    settings = PredictSettings(score_threshold=0.05, min_label_score=0.1)
+    return predictions(trained, root, root.ids("test"), settings, 2, False, liveness)
+
+
+@pytest.mark.parametrize("signum", [signal.SIGKILL, signal.SIGSTOP], ids=["killed", "stopped"])
+def test_a_worker_that_dies_or_stops_mid_run_is_named_in_one_line(
+    tmp_path, write_tiny_root, trained, signum
+):
+    """After the first result, the worker is killed (or stopped): the run ends with one line
+    naming it (pid, state, its frame) and what to do, within the limit, and no worker stays.
+    Before the liveness check a stopped worker was waited on forever, a killed one was a
+    BrokenProcessPool traceback."""
+    root = Talk2RadarRoot(write_tiny_root(tmp_path / "root", frames=8))
+    liveness = Liveness(floor_s=2.0, start_s=600.0, factor=1.0, poll_s=0.05)
+    with _no_worker_left():
+        stream = _worker_stream(trained, root, liveness)
+        first = next(stream)
+        assert first.sample.sample_id == root.ids("test")[0]  # the worker's: it has started
+        (worker,) = multiprocessing.active_children()
+        os.kill(worker.pid, signum)
+        start = time.monotonic()
+        with pytest.raises(PredictionWorkerError) as caught:
+            list(stream)
+        took = time.monotonic() - start
+        assert multiprocessing.active_children() == []
+    line = str(caught.value)
+    assert "\n" not in line and f"prediction worker 1 of 1 (pid {worker.pid})" in line, line
+    assert "run the command again, or with --workers 1" in line
+    if signum == signal.SIGKILL:
+        assert "killed by SIGKILL" in line and "out-of-memory" in line
+        assert took < 30
+    else:
+        assert "stopped (SIGSTOP" in line and re.search(r"samples? \d{5}", line), line
+        assert took < 2.0 + 30  # the limit (the floor here), then the look and the kill
+
+
+@pytest.mark.parametrize("signum", [signal.SIGKILL, signal.SIGSTOP], ids=["killed", "stopped"])
+def test_evaluate_with_a_dead_or_stopped_worker_is_one_line_and_writes_nothing(
+    tmp_path, write_tiny_root, capsys, signum
+):
+    """``model.evaluate --workers 2``, its worker killed (or stopped) as soon as it exists: exit
+    2, one ``error:`` line naming the worker, no prediction folder, no JSON."""
+    root = write_tiny_root(tmp_path / "root", frames=6)
+    out, report = tmp_path / "preds", tmp_path / "report.json"
+    args = ["--data", str(root), "--out", str(out), "--json", str(report), "--workers", "2"]
+    with _no_worker_left():
+        pids: list[int] = []
+        _on_first_worker(lambda pid: (pids.append(pid), os.kill(pid, signum)))
+        start = time.monotonic()
+        code = main([*args, "--worker-timeout", "2", "--no-baselines"])
+        took = time.monotonic() - start
+        assert multiprocessing.active_children() == []
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.startswith("error:")]
+    assert code == 2 and len(lines) == 1 and "Traceback" not in err, err[-3000:]
+    assert f"(pid {pids[0]})" in lines[0] and "--workers 1" in lines[0], lines
+    assert not out.exists() and not report.exists()
+    assert took < 90  # the start allowance (3 x 2 s) and this process's own frames
+
+
+def test_liveness_limits_follow_the_measured_frame_time():
+    liveness = Liveness(factor=20.0, floor_s=20.0, start_s=60.0)
+    assert liveness.task_limit(None, 3) == 20.0
+    assert liveness.task_limit(0.1, 3) == 20.0  # 6 s of work: the floor
+    assert liveness.task_limit(0.5, 4) == pytest.approx(40.0)
+    assert Liveness.with_floor(2.0) == Liveness(floor_s=2.0, start_s=6.0)
+    with pytest.raises(ValueError, match="floor_s must be > 0"):
+        Liveness(floor_s=0.0)

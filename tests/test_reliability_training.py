@@ -10,10 +10,12 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -239,3 +241,23 @@ def test_resume_drops_log_records_of_steps_it_did_not_save(root: Path, tmp_path:
     lines = (out / "log.jsonl").read_text().splitlines()
     assert [json.loads(line)["step"] for line in lines] == [1, 2, 3]
     assert json.loads(lines[-1])["loss"] != 1.0
+
+
+def test_resume_knows_the_run_folder_however_it_is_spelled(
+    root: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A run started with relative paths resumes with them spelled absolute, or through a
+    symbolic link (issue 39: "--resume with different settings: ['out']"); another folder's
+    run, or another root, is still refused."""
+    from model.training.state import RunStateError
+
+    monkeypatch.chdir(tmp_path)
+    os.symlink(root, tmp_path / "root-link")
+    relative = _config(Path(os.path.relpath(root)), Path("run"), "tpcnet", text_encoder="gru")
+    train(replace(relative, max_steps=1))
+    absolute = replace(relative, data=(str(tmp_path / "root-link"),), out=str(tmp_path / "run"))
+    assert train(replace(absolute, max_steps=2), resume=True).step == 2
+    other = tmp_path / "other-root"  # the same files, another root
+    shutil.copytree(root, other)
+    with pytest.raises(RunStateError, match=r"different settings: \['data'\]"):
+        train(replace(absolute, data=(str(other),), max_steps=3), resume=True)

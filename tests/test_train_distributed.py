@@ -12,6 +12,7 @@ torchrun: tests/test_train.py.
 from __future__ import annotations
 
 import json
+import os
 from pathlib import Path
 
 import pytest
@@ -106,3 +107,61 @@ def test_every_stage_steps_under_bfloat16_autocast(tmp_path: Path, write_tiny_ro
     for m in (model, paper):
         grads = [p.grad for p in m.parameters() if p.grad is not None]
         assert grads and all(torch.isfinite(g).all() for g in grads)
+
+
+def test_a_stopped_rank_ends_the_run_with_one_line(tmp_path: Path, torchrun, monkeypatch) -> None:
+    """Rank 1 stopped (SIGSTOP) while rank 0 waits in a collective: within the rank timeout rank
+    0 names it, kills it and exits 1; torchrun ends (it waited 150 s and more, silently)."""
+    import time
+
+    monkeypatch.setenv("TALK2PC_RANK_TIMEOUT", "3")
+    log = tmp_path / "torchrun.log"
+    start = time.monotonic()
+    code = torchrun([str(REPO / "tests" / "rank_stop_check.py")], log, timeout=120)
+    took = time.monotonic() - start
+    text = log.read_text()
+    lines = [line for line in text.splitlines() if line.startswith("error: rank")]
+    assert code != 0 and len(lines) == 1, text[-3000:]
+    assert lines[0].startswith("error: rank 1 (pid ") and "it was killed" in lines[0]
+    assert "--resume" in lines[0] and "TALK2PC_RANK_TIMEOUT" in lines[0]
+    assert took < 90, took
+
+
+def test_the_rank_watch_names_a_rank_whose_heartbeat_stops() -> None:
+    """Two ranks' watches over one store: while both beat, none is stopped; once rank 1 stops
+    beating, rank 0 finds it after the limit; a rank that left (its beat 'done') is not."""
+    import time
+
+    from model.training.rank_watch import RankLiveness, RankWatch
+
+    class Store:
+        def __init__(self) -> None:
+            self.data: dict[str, bytes] = {}
+
+        def set(self, key: str, value: str) -> None:
+            self.data[key] = value.encode()
+
+        def get(self, key: str) -> bytes:
+            return self.data[key]
+
+        def check(self, keys: list[str]) -> bool:
+            return all(k in self.data for k in keys)
+
+    store, live = Store(), RankLiveness(0.2)
+    zero, one = RankWatch(store, 0, 2, live), RankWatch(store, 1, 2, live)
+    one._beat()
+    assert zero.stopped_rank() is None
+    time.sleep(0.1)
+    one._beat()
+    assert zero.stopped_rank() is None  # beating
+    time.sleep(0.3)
+    found = zero.stopped_rank()
+    assert found is not None and found[0] == 1 and f":{os.getpid()}:" in found[1]
+    one.stop()  # left normally: 'done'
+    assert zero.stopped_rank() is None
+    with pytest.raises(ValueError, match="TALK2PC_RANK_TIMEOUT='x'"):
+        os.environ["TALK2PC_RANK_TIMEOUT"] = "x"
+        try:
+            RankLiveness.from_env()
+        finally:
+            del os.environ["TALK2PC_RANK_TIMEOUT"]

@@ -19,8 +19,14 @@ predictions.
   (the caller needs only labels, calibration and sidecar).
 - An error (a malformed file, a checkpoint a worker cannot rebuild) is raised as the same
   exception with the same message when its sample's turn comes; the pool then stops: tasks not
-  started are cancelled, running ones finish (one frame each) and the workers exit. Workers ignore
-  SIGINT, so Ctrl-C interrupts this process only, which stops the pool the same way.
+  started are cancelled, running ones finish (one frame each, within the liveness limit, else
+  the worker is killed) and the workers exit. Workers ignore SIGINT, so Ctrl-C interrupts this
+  process only, which stops the pool the same way.
+- A worker that dies (killed, crashed) or stops answering (SIGSTOP, a hang) ends the run within a
+  bounded time with a :class:`model.evaluation.worker_watch.PredictionWorkerError`: one line
+  naming the worker, its frame and what to do (:mod:`model.evaluation.worker_watch`: the limits
+  are set from this process's own measured seconds per sample, :class:`Liveness`). Results are
+  yielded only as they come in whole; the caller writes its files after the last one.
 - :func:`auto_workers`: the usable cores (``os.sched_getaffinity``), but at most one process per
   :data:`MIN_FRAMES_PER_WORKER` frames: about the frames this process predicts while a worker
   starts, so a shorter split would not win its start back; 1 is the in-process path
@@ -29,13 +35,18 @@ predictions.
 
 from __future__ import annotations
 
+import functools
 import multiprocessing
 import os
 import signal
 import tempfile
-from collections.abc import Iterator, Sequence
+import time
+from collections.abc import Iterator, Mapping, Sequence
 from concurrent.futures import Future, ProcessPoolExecutor
+from concurrent.futures import wait as wait_futures
+from concurrent.futures.process import BrokenProcessPool
 from dataclasses import dataclass, fields, replace
+from multiprocessing.process import BaseProcess
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -48,6 +59,13 @@ from model.evaluation.predict import (
     PredictSettings,
     iterate_predictions,
     scene_key,
+)
+from model.evaluation.worker_watch import (
+    DEFAULT_LIVENESS,
+    Liveness,
+    PredictionWorkerError,
+    StartQueue,
+    WorkerWatch,
 )
 from scenes.talk2radar.root import Sample, Talk2RadarRoot
 
@@ -122,20 +140,29 @@ _WORKER: FramePredictor | BaseException | None = None
 """This worker process's predictor, or the error that rebuilding it raised (re-raised by each
 task, so that it reaches the main process as a task's error)."""
 
+_STARTS: StartQueue | None = None
+"""This worker process's queue of task starts (:mod:`model.evaluation.worker_watch`)."""
 
-def _start_worker(source: ModelSource, root: Talk2RadarRoot, settings: PredictSettings) -> None:
+
+def _start_worker(
+    source: ModelSource, root: Talk2RadarRoot, settings: PredictSettings, starts: StartQueue
+) -> None:
     """Worker initializer: one torch thread, SIGINT left to the main process, the model built."""
-    global _WORKER
+    global _WORKER, _STARTS
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     torch.set_num_threads(1)
+    _STARTS = starts
     try:
         _WORKER = FramePredictor(source.build(), root, settings)
     except Exception as exc:  # raised again by the first task
         _WORKER = exc
 
 
-def _predict_frame(ids: tuple[str, ...]) -> list[FramePrediction]:
-    """Worker task: :func:`_predict_group` with this worker's predictor."""
+def _predict_frame(task: int, ids: tuple[str, ...]) -> list[FramePrediction]:
+    """Worker task ``task``: :func:`_predict_group` with this worker's predictor (its start said
+    on the start queue first)."""
+    if _STARTS is not None:
+        _STARTS.put((task, os.getpid(), time.time()))
     if isinstance(_WORKER, BaseException):
         raise _WORKER
     assert _WORKER is not None, "worker not started"
@@ -162,6 +189,51 @@ def _shallow(obj: Any) -> dict[str, Any]:
     return {f.name: getattr(obj, f.name) for f in fields(obj)}
 
 
+def _result(
+    future: Future[list[FramePrediction]], task: int, watch: WorkerWatch, starts: StartQueue
+) -> list[FramePrediction]:
+    """Task ``task``'s result, looking at the workers every :attr:`Liveness.poll_s` while it is
+    not back.
+
+    Raises:
+        PredictionWorkerError: its worker died, or it is past its limit (module docstring).
+    """
+    while True:
+        wait_futures([future], timeout=watch.liveness.poll_s)
+        watch.heard(starts)
+        if future.done():
+            break
+        error = watch.overdue(task)
+        if error is not None:
+            raise error
+    try:
+        return future.result()
+    except BrokenProcessPool as exc:
+        raise watch.died(starts) from exc
+
+
+def _stop_pool(
+    pool: ProcessPoolExecutor,
+    processes: Mapping[int, BaseProcess],
+    watch: WorkerWatch,
+    kill: bool,
+) -> None:
+    """Shut the pool down: tasks not started cancelled, running ones given their limit (none with
+    ``kill``), then every worker still alive killed, so that this never waits on a worker that
+    cannot finish (a stopped one)."""
+    manager = getattr(pool, "_executor_manager_thread", None)
+    if kill:
+        watch.end(processes)
+    pool.shutdown(wait=False, cancel_futures=True)
+    longest = max((len(g) for g in watch.groups), default=1)
+    deadline = time.monotonic() + watch.liveness.task_limit(watch.seconds_per_sample, longest)
+    for p in list(processes.values()):
+        p.join(timeout=max(0.0, deadline - time.monotonic()))
+    watch.end(processes)
+    if manager is not None:
+        manager.join()
+
+
 def predictions(
     model: TPCNet,
     root: Talk2RadarRoot,
@@ -169,12 +241,17 @@ def predictions(
     settings: PredictSettings,
     workers: int = 1,
     progress: bool = True,
+    liveness: Liveness = DEFAULT_LIVENESS,
 ) -> Iterator[FramePrediction]:
     """Each sample's :class:`model.evaluation.predict.FramePrediction`, in the order of ``ids``:
     in this process (``workers <= 1``: :func:`model.evaluation.predict.iterate_predictions`) or
     by ``workers`` processes, this one and ``workers - 1`` spawned ones (module docstring; the
     model must be on the CPU and ``settings`` picklable; the predictions carry no features and
-    their samples no points)."""
+    their samples no points).
+
+    Raises:
+        PredictionWorkerError: a worker died or went past ``liveness``'s limits (one line).
+    """
     groups = frame_groups(root, ids) if workers > 1 else []
     if len(groups) < 2:
         yield from iterate_predictions(model, root, ids, progress=progress, **_shallow(settings))
@@ -185,12 +262,18 @@ def predictions(
     spawned = min(workers, len(groups)) - 1
     here = FramePredictor(model, root, settings)
     folder = tempfile.TemporaryDirectory(prefix="talk2pc-predict-")
+    context = multiprocessing.get_context("spawn")
+    starts = context.SimpleQueue()
     pool = ProcessPoolExecutor(
         max_workers=spawned,
-        mp_context=multiprocessing.get_context("spawn"),
+        mp_context=context,
         initializer=_start_worker,
-        initargs=(ModelSource.of(model, Path(folder.name)), root, settings),
+        initargs=(ModelSource.of(model, Path(folder.name)), root, settings, starts),
     )
+    processes: Mapping[int, BaseProcess] = pool._processes  # type: ignore[attr-defined]
+    # (the pool's own pid -> process map, filled as it starts workers: their exit status)
+    watch = WorkerWatch(liveness, groups, processes)
+    ended_by_watch = False
     threads = torch.get_num_threads()
     torch.set_num_threads(1)  # this process is one of the workers
     bar = tqdm(total=len(ids), desc="predict", unit="frame", disable=not progress)
@@ -202,25 +285,48 @@ def predictions(
                 while True:
                     queued = sum(isinstance(v, Future) and not v.done() for v in slots.values())
                     while sent < len(groups) and queued < spawned * IN_FLIGHT_PER_WORKER:
-                        slots[sent] = pool.submit(_predict_frame, groups[sent])
+                        try:
+                            future = pool.submit(_predict_frame, sent, groups[sent])
+                        except BrokenProcessPool as exc:  # a worker died since the last look
+                            ended_by_watch = True
+                            raise watch.died(starts) from exc
+                        future.add_done_callback(functools.partial(_finished, watch, sent))
+                        slots[sent] = future
                         sent, queued = sent + 1, queued + 1
                     head = slots[index]
                     waiting = isinstance(head, Future) and not head.done()
                     failed = any(isinstance(v, Exception) for v in slots.values())
                     if not (waiting and sent < len(groups) and not failed):
                         break
+                    start = time.perf_counter()
                     try:  # the next group here, while the workers' are not back
                         slots[sent] = _predict_group(here, groups[sent])
+                        watch.measured(time.perf_counter() - start, len(groups[sent]))
                     except Exception as exc:  # raised when its turn comes
                         slots[sent] = exc
                     sent += 1
                 done = slots.pop(index)
                 if isinstance(done, Exception):
                     raise done
-                for pred in done.result() if isinstance(done, Future) else done:
+                if isinstance(done, Future):
+                    try:
+                        done = _result(done, index, watch, starts)
+                    except PredictionWorkerError:
+                        ended_by_watch = True
+                        raise
+                for pred in done:
                     bar.update(1)
                     yield pred
     finally:
         torch.set_num_threads(threads)
-        pool.shutdown(wait=True, cancel_futures=True)
+        _stop_pool(pool, processes, watch, kill=ended_by_watch)
+        starts.close()
         folder.cleanup()
+
+
+def _finished(watch: WorkerWatch, task: int, future: Future[list[FramePrediction]]) -> None:
+    """A worker task's done callback (the pool's thread): a sign of life, unless the pool broke
+    (then the task's start still says which worker held it)."""
+    if future.cancelled() or isinstance(future.exception(), BrokenProcessPool):
+        return
+    watch.finished(task)

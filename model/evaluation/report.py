@@ -66,6 +66,7 @@ from model.evaluation.report_file import (
     SECONDS,
     BaselineName,
 )
+from model.evaluation.worker_watch import DEFAULT_LIVENESS, Liveness
 from scenes.geometry.actors import CLASSES, Actor
 from scenes.language.prompts import infer_tags
 from scenes.talk2radar.kitti import ObjectLabel, format_label_line, parse_label_line
@@ -278,6 +279,7 @@ def evaluate_predictions(
     scene_labels: SceneLabels | None = None,
     candidates: CandidateSource = "detector",
     workers: int = 1,
+    liveness: Liveness = DEFAULT_LIVENESS,
 ) -> GroundingReport:
     """Ground every sample of ``ids`` and score the answers.
 
@@ -296,6 +298,8 @@ def evaluate_predictions(
             ``scene_labels``).
         workers: Processes that predict (:func:`model.evaluation.predict_pool.predictions`;
             1: this process, the model as given; more: CPU only, the same predictions).
+        liveness: How long workers may go without a result
+            (:class:`model.evaluation.worker_watch.Liveness`).
     """
     if not ids:
         raise ValueError(f"{root.path}: no samples to evaluate")
@@ -329,7 +333,9 @@ def evaluate_predictions(
         else SceneLabelCandidates(scene_labels),
         extra_prompts=class_noun_of if baselines else None,
     )
-    stream = predictions(model, root, ids, settings, workers=workers, progress=progress)
+    stream = predictions(
+        model, root, ids, settings, workers=workers, progress=progress, liveness=liveness
+    )
     with contextlib.closing(stream):  # an error or Ctrl-C here stops the workers at once
         for pred in stream:
             sample = pred.sample

@@ -376,7 +376,13 @@ class MiniLMTextEncoder(nn.Module):
     def warm_up(self) -> threading.Thread:
         """Load the tokenizer and the weights in a background thread (returned, started), so
         that the first prompt does not wait for them; a prompt that comes first waits for the
-        same load instead of starting another."""
+        same load instead of starting another.
+
+        The thread is not a daemon: a process that ends while it loads (a command that stops at
+        a malformed file a moment after starting) waits for the load, at most its ~1 s, before
+        the interpreter finalises. A daemon thread still inside torch's or safetensors' C++ code
+        at finalisation aborts the process ("terminate called without an active exception",
+        SIGABRT instead of the command's exit code; issue 39 item 2)."""
 
         def load() -> None:
             try:
@@ -385,7 +391,7 @@ class MiniLMTextEncoder(nn.Module):
             except TextEncoderUnavailableError:
                 pass  # the first prompt raises it again, where someone can see it
 
-        thread = threading.Thread(target=load, name="minilm-warm-up", daemon=True)
+        thread = threading.Thread(target=load, name="minilm-warm-up", daemon=False)
         thread.start()
         return thread
 

@@ -15,12 +15,20 @@ same way, so their set metrics compare fairly.
 A split that cannot measure a threshold is refused (exit 2, one line, the checkpoint untouched):
 one whose prompts refer to nothing (every threshold that returns nothing would score a perfect set
 F1 there) or with fewer than :data:`MIN_REFERRED_PROMPTS` prompts that refer to something.
+Every bad input (a malformed label, prompt or calibration file of the split, a checkpoint that
+cannot be read) is one line too, ``error: ...``, exit 2.
+
+At the end of a referent-path training run (:func:`calibrate_run`) a calibration that fails is a
+warning, never the run's failure: the checkpoint is written, ``python -m model.train`` exits 0,
+and the warning says why and which command calibrates the run later.
 """
 
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
+import traceback
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,7 +38,7 @@ import numpy as np
 
 from model.evaluation.grounding import PromptBoxes, prompt_outcome
 from model.evaluation.predict import iterate_predictions
-from scenes.utils.cli import add_options, from_args, option
+from scenes.utils.cli import add_options, error_line, from_args, option
 
 if TYPE_CHECKING:
     from model.tpcnet import TPCNet
@@ -167,20 +175,49 @@ def calibrate_file(
     return cal
 
 
-def calibrate_run(path: Path, data: str | Path, split: str) -> None:
-    """Calibrate a finished training run's ``last.pt`` (``path``) on ``split`` of ``data``; a
-    split that cannot measure a threshold leaves it at the uncalibrated 0.5, with a notice."""
-    from scenes.talk2radar.layout import RootError
+def calibrate_run(path: Path, data: str | Path, split: str) -> bool:
+    """Calibrate a finished training run's ``last.pt`` (``path``) on ``split`` of ``data``;
+    whether the threshold was stored.
 
+    The run is finished and its checkpoint written whatever happens here, so nothing here fails
+    it: a split that cannot measure a threshold, a malformed file of the split (a label, a
+    prompt, a calibration file), a missing package or a fault of the code leave the checkpoint
+    at the uncalibrated threshold, with one ``warning:`` line on stderr saying why and the
+    command that calibrates it later (a fault of the code also prints its traceback above);
+    ``python -m model.train`` exits 0.
+    """
     try:
         cal = calibrate_file(path, data, split)
-    except (CalibrationError, RootError) as exc:
-        print(f"not calibrated: {exc}", file=sys.stderr)
-        return
-    print(
-        f"operating threshold {cal.threshold:.3f} (set F1 {cal.set_f1:.1f} on {cal.prompts} "
-        f"{split} prompts) stored in {path}"
+    except (ValueError, OSError, ImportError) as exc:  # bad input: one line, as everywhere
+        reason = error_line(exc)
+    except Exception as exc:  # a bug, not the data: its traceback, and still a warning
+        traceback.print_exc()
+        reason = f"{type(exc).__name__}: {error_line(exc)}"
+    else:
+        print(
+            f"operating threshold {cal.threshold:.3f} (set F1 {cal.set_f1:.1f} on {cal.prompts} "
+            f"{split} prompts) stored in {path}"
+        )
+        return True
+    later = shlex.join(
+        [
+            "python",
+            "-m",
+            "model.calibrate",
+            "--data",
+            str(data),
+            "--checkpoint",
+            str(path),
+            "--split",
+            split,
+        ]
     )
+    print(
+        f"warning: training finished and {path} is written, but not calibrated (its operating "
+        f"threshold stays the uncalibrated one): {reason}; calibrate it later: {later}",
+        file=sys.stderr,
+    )
+    return False
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -225,8 +262,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
         if not a.dry_run:
             print(f"wrote operating_threshold into {a.checkpoint}")
-    except (CheckpointError, RootError, ValueError, OSError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+    except (CheckpointError, RootError, ValueError, OSError, ImportError) as exc:
+        print(f"error: {error_line(exc)}", file=sys.stderr)
         return 2
     return 0
 

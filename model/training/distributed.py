@@ -12,6 +12,11 @@ candidate description, the text encoder, the referent stage), not its ``forward`
 :class:`~torch.nn.parallel.DistributedDataParallel` averages the gradients of every parameter the
 step used over the ranks (unused ones, e.g. the referent stage of a rank whose scenes yielded no
 prompt, count as zero: ``find_unused_parameters``).
+
+A rank that stops answering (SIGSTOP, a hang) would hold the others in their next collective for
+the process group's 30 minutes: every joined rank runs a heartbeat and a watch over the others
+(:mod:`model.training.rank_watch`), which ends the run with one line naming the rank within
+``TALK2PC_RANK_TIMEOUT`` seconds (default 60).
 """
 
 from __future__ import annotations
@@ -24,7 +29,10 @@ from typing import Any
 import torch
 import torch.distributed as dist
 from torch import nn
+from torch.distributed import distributed_c10d
 from torch.nn.parallel import DistributedDataParallel
+
+from model.training.rank_watch import RankLiveness, RankWatch
 
 
 def launched() -> bool:
@@ -44,15 +52,28 @@ def init_from_env(device: str) -> bool:
     caller that joined closes it)."""
     if not launched() or active():
         return False
+    global _WATCH
+    liveness = RankLiveness.from_env()
     cuda = device.startswith("cuda")
     if cuda:
         torch.cuda.set_device(int(os.environ.get("LOCAL_RANK", "0")))
     dist.init_process_group("nccl" if cuda else "gloo")
+    store = distributed_c10d._get_default_store()
+    _WATCH = RankWatch(store, dist.get_rank(), dist.get_world_size(), liveness).start()
     return True
 
 
+_WATCH: RankWatch | None = None
+"""This rank's heartbeat and watch over the others while a process group is joined
+(:mod:`model.training.rank_watch`)."""
+
+
 def close() -> None:
-    """Leave the process group, if one was joined."""
+    """Leave the process group, if one was joined (the rank watch stopped first)."""
+    global _WATCH
+    if _WATCH is not None:
+        _WATCH.stop()
+        _WATCH = None
     if dist.is_available() and dist.is_initialized():
         dist.destroy_process_group()
 

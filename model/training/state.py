@@ -118,12 +118,42 @@ FREE_ON_RESUME = resumable_fields(TrainConfig)
 :class:`model.training.config.TrainConfig` marked ``on_resume``."""
 
 
+PATH_SETTINGS = frozenset({"out", "data", "scene_labels"})
+"""Settings that name folders (one, or one per root): a resume compares them by what they are
+(the same folder), not by how they are spelled (``runs/a`` and ``/home/me/runs/a``)."""
+
+
+def same_folder(a: object, b: object) -> bool:
+    """Whether two spellings name the same file or folder: equal strings, the same inode
+    (``os.path.samefile``, where both exist) or, where either does not exist, the same resolved
+    path (relative to the working directory)."""
+    if a == b:
+        return True
+    if not isinstance(a, str) or not isinstance(b, str):
+        return False
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return Path(a).resolve() == Path(b).resolve()
+
+
+def _same_setting(key: str, ours: object, theirs: object) -> bool:
+    if key not in PATH_SETTINGS or ours == theirs:
+        return ours == theirs
+    if isinstance(ours, list | tuple) and isinstance(theirs, list | tuple):
+        return len(ours) == len(theirs) and all(map(same_folder, ours, theirs))
+    return same_folder(ours, theirs)
+
+
 def check_resumable(config: dict[str, Any], run: RunState, world: int) -> None:
-    """Refuse to resume ``run`` with another ``config`` (but :data:`FREE_ON_RESUME`) or another
-    number of processes (the sampler's shards and the per-rank RNG states depend on it)."""
+    """Refuse to resume ``run`` with another ``config`` (but :data:`FREE_ON_RESUME`; folders
+    compared by :func:`same_folder`) or another number of processes (the sampler's shards and the
+    per-rank RNG states depend on it)."""
     out = config.get("out")
     changed = sorted(
-        k for k, v in run.config.items() if k not in FREE_ON_RESUME and config.get(k) != v
+        k
+        for k, v in run.config.items()
+        if k not in FREE_ON_RESUME and not _same_setting(k, config.get(k), v)
     )
     if changed:
         raise RunStateError(f"{out}: --resume with different settings: {changed}")
@@ -307,6 +337,7 @@ __all__ = [
     "FREE_ON_RESUME",
     "LAST_FILE",
     "LOG_FILE",
+    "PATH_SETTINGS",
     "STATE_FILE",
     "RunState",
     "RunStateError",
@@ -314,6 +345,7 @@ __all__ = [
     "check_resumable",
     "load_run",
     "rng_state",
+    "same_folder",
     "save_run",
     "set_rng_state",
     "state_path",

@@ -213,4 +213,23 @@ def resumable_fields(cls: type) -> frozenset[str]:
     return frozenset(f.name for f in dataclasses.fields(cls) if f.metadata.get("on_resume"))
 
 
-__all__ = ["add_options", "choices_of", "flag_name", "from_args", "option", "resumable_fields"]
+def error_line(exc: BaseException) -> str:
+    """``exc`` as the one line a command prints after ``error:`` or ``warning:``: an
+    ``OSError`` as ``FILE: reason`` (its ``filename`` and ``strerror``), anything else its
+    message; whitespace (newlines included) collapsed to single spaces."""
+    if isinstance(exc, OSError) and exc.strerror:
+        text = f"{exc.filename}: {exc.strerror}" if exc.filename else exc.strerror
+    else:
+        text = str(exc)
+    return " ".join(text.split()) or type(exc).__name__
+
+
+__all__ = [
+    "add_options",
+    "choices_of",
+    "error_line",
+    "flag_name",
+    "from_args",
+    "option",
+    "resumable_fields",
+]
