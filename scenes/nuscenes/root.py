@@ -227,6 +227,58 @@ class NuScenesRoot:
             token = sd["prev"]
         return out
 
+    def model_from_global(self, sample_token: str) -> np.ndarray:
+        """``(4, 4)`` global -> the sample's model frame (its key LIDAR_TOP, turned)."""
+        data = self.key_data(sample_token)
+        if LIDAR_TOP not in data:
+            raise NuScenesError(
+                f"{self.tables.folder / 'sample_data.json'}: sample {sample_token} has no "
+                f"{LIDAR_TOP} key frame"
+            )
+        return LIDAR_TO_MODEL @ np.linalg.inv(self.sensor_to_global(data[LIDAR_TOP]))
+
+    def to_camera(self, sample_token: str) -> np.ndarray:
+        """``(4, 4)`` the sample's model frame -> its CAM_FRONT camera frame (x right, y down,
+        z forward) at the camera's own timestamp, through global with both ego poses."""
+        data = self.key_data(sample_token)
+        if CAM_FRONT not in data:
+            raise NuScenesError(
+                f"{self.tables.folder / 'sample_data.json'}: sample {sample_token} has no "
+                f"{CAM_FRONT} key frame"
+            )
+        return np.linalg.inv(self.sensor_to_global(data[CAM_FRONT])) @ np.linalg.inv(
+            self.model_from_global(sample_token)
+        )
+
+    def annotation_boxes(
+        self, sample_token: str
+    ) -> tuple[np.ndarray, tuple[str, ...], tuple[tuple[str, ...], ...]]:
+        """The sample's annotations without its sensor files: ``(K, 7)`` float64 boxes in the
+        model frame, the ``K`` category names and attribute names, in :meth:`annotations` order."""
+        t = self.tables
+        tokens = self.annotations(sample_token)
+        anns = [t.get("sample_annotation", a) for a in tokens]
+        boxes = boxes_from_poses(
+            np.array([a["translation"] for a in anns]).reshape(-1, 3),
+            np.array([a["size"] for a in anns]).reshape(-1, 3),
+            np.array([a["rotation"] for a in anns]).reshape(-1, 4),
+            self.model_from_global(sample_token),
+        )
+        categories, attributes = [], []
+        for token, a in zip(tokens, anns, strict=True):
+            instance = t.get("instance", a["instance_token"], f"sample_annotation {token}")
+            category = t.get(
+                "category", instance["category_token"], f"instance {a['instance_token']}"
+            )
+            categories.append(str(category["name"]))
+            attributes.append(
+                tuple(
+                    str(t.get("attribute", at, f"sample_annotation {token}")["name"])
+                    for at in a["attribute_tokens"]
+                )
+            )
+        return boxes, tuple(categories), tuple(attributes)
+
     def frame(self, sample_token: str) -> NuScenesFrame:
         """The sample's sensors and annotations in the model frame (:class:`NuScenesFrame`).
 
@@ -244,9 +296,8 @@ class NuScenesRoot:
                     f"{channel} key frame"
                 )
         t = self.tables
-        ref_sd = t.get("sample_data", data[LIDAR_TOP])
-        ref_time = ref_sd["timestamp"]
-        model_from_global = LIDAR_TO_MODEL @ np.linalg.inv(self.sensor_to_global(data[LIDAR_TOP]))
+        ref_time = t.get("sample_data", data[LIDAR_TOP])["timestamp"]
+        model_from_global = self.model_from_global(sample_token)
 
         clouds, times = [], []
         for _, sd, token in self._sweeps(data[LIDAR_TOP], self.lidar_sweeps):
@@ -273,26 +324,7 @@ class NuScenesRoot:
         radar = np.concatenate(radars).astype(np.float32)
         radar_time = np.concatenate(radar_times).astype(np.float32)
 
-        anns = [t.get("sample_annotation", a) for a in self._anns[sample_token]]
-        boxes = boxes_from_poses(
-            np.array([a["translation"] for a in anns]).reshape(-1, 3),
-            np.array([a["size"] for a in anns]).reshape(-1, 3),
-            np.array([a["rotation"] for a in anns]).reshape(-1, 4),
-            model_from_global,
-        )
-        categories, attributes = [], []
-        for token, a in zip(self._anns[sample_token], anns, strict=True):
-            instance = t.get("instance", a["instance_token"], f"sample_annotation {token}")
-            category = t.get(
-                "category", instance["category_token"], f"instance {a['instance_token']}"
-            )
-            categories.append(str(category["name"]))
-            attributes.append(
-                tuple(
-                    str(t.get("attribute", at, f"sample_annotation {token}")["name"])
-                    for at in a["attribute_tokens"]
-                )
-            )
+        boxes, categories, attributes = self.annotation_boxes(sample_token)
 
         cam_token = data[CAM_FRONT]
         cam_sd = t.get("sample_data", cam_token)
@@ -303,9 +335,7 @@ class NuScenesRoot:
                 f"{t.folder / 'calibrated_sensor.json'}: record {cam_sd['calibrated_sensor_token']}: "
                 "field 'camera_intrinsic': CAM_FRONT needs a 3 x 3 matrix"
             )
-        to_camera = np.linalg.inv(self.sensor_to_global(cam_token)) @ np.linalg.inv(
-            model_from_global
-        )
+        to_camera = self.to_camera(sample_token)
         calib = Calibration(
             P2=np.c_[intrinsic, np.zeros(3)], R0_rect=np.eye(3), Tr_velo_to_cam=to_camera[:3]
         )
