@@ -207,7 +207,9 @@ def test_malformed_files_name_file_record_and_field(exported: Path, tmp_path: Pa
         NuScenesRoot(root_dir)
     _edit(poses, lambda d: d[2].update(rotation=[1, 0, 0, 0]))
     (root_dir / "v1.0-mini").mkdir()
-    with pytest.raises(NuScenesError, match=r"2 \(v1.0-mini, v1.0-trainval\) nuScenes version folders"):
+    with pytest.raises(
+        NuScenesError, match=r"2 \(v1.0-mini, v1.0-trainval\) nuScenes version folders"
+    ):
         NuScenesRoot(root_dir)
     root = NuScenesRoot(root_dir, version="v1.0-trainval")
     cmd_file = root_dir / "all" / "all_commands.json"
