@@ -21,6 +21,7 @@ PARSERS: dict[str, tuple[str, str]] = {
     "python launch.py": ("launch", "build_parser"),
     "python -m scenes.synth": ("scenes.synth.generate", "_parser"),
     "python -m scenes.export_real": ("scenes.export_real", "_parser"),
+    "python -m scenes.export_nuscenes": ("scenes.export_nuscenes", "_parser"),
     "python -m model.train": ("model.training.config", "build_parser"),
     "python -m model.evaluate": ("model.evaluate", "build_parser"),
     "python -m model.calibrate": ("model.training.calibrate", "build_parser"),

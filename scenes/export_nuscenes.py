@@ -1,0 +1,154 @@
+"""A synthetic root as nuScenes and Talk2Car come: ``python -m scenes.export_nuscenes --source
+SYNTH --out NUSC [--splits train val test] [--seed N] [--version v1.0-trainval]``.
+
+``SYNTH`` is a root written by ``python -m scenes.synth`` (with its ``meta/`` sidecars: every
+actor of a frame, each sample's prompt and referents). Its samples are grouped into frames (the
+samples sharing sensor files) and worlds; each frame becomes one nuScenes sample, each world one
+scene, and each single-referent prompt one Talk2Car command in ``NUSC/commands/{split}_commands.json``
+(the split the source's list names). What the files hold, frames and poses:
+:mod:`scenes.nuscenes.export`. The command's sentence is the prompt as the generator wrote it
+(a command phrasing of the generator is issue 40's item 4; until it lands, the prompt text as is).
+Errors are one line, ``error: ...``, exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from scenes.nuscenes.export import ExportReport, SourceFrame, SourcePrompt, export_frames
+from scenes.synth.radar import RadarConfig
+from scenes.talk2radar.layout import RootError, meta_file
+from scenes.talk2radar.root import Talk2RadarRoot
+from scenes.utils.cli import add_options, from_args, option
+
+__all__ = ["SPLITS", "ExportNuScenesCommand", "export", "main", "source_frames"]
+
+SPLITS = ("train", "val", "test")
+"""The source lists exported by default."""
+
+
+def source_frames(root: Talk2RadarRoot, splits: Sequence[str]) -> list[SourceFrame]:
+    """The frames of a synthetic root's lists ``splits``, grouped by world (first seen first),
+    each with every prompt made on it.
+
+    Raises:
+        RootError: a missing list or sidecar (the export needs scenes.synth's sidecars).
+    """
+    frames: dict[tuple, dict] = {}
+    for split in splits:
+        for sid in root.ids(split):
+            meta = root.load_meta(sid)
+            if meta is None:
+                raise RootError(
+                    f"{meta_file(root.path, sid)}: missing sidecar; the export needs a root "
+                    "written by scenes.synth (its sidecars list every object of the frame)"
+                )
+            key = root.frame_key(sid)
+            prompt = SourcePrompt(sid, split, root.load_prompt(sid) or "", meta.referent_ids)
+            if key in frames:
+                frames[key]["prompts"].append(prompt)
+                continue
+            sample = root.load(sid)
+            frames[key] = {
+                "world": meta.world_id if meta.world_id >= 0 else len(frames),
+                "lidar": sample.lidar,
+                "radar": sample.radar,
+                "actors": meta.actors,
+                "calib": sample.calib,
+                "image_path": sample.image_path,
+                "image_size": sample.image_size,
+                "weather": meta.weather,
+                "ego_speed": meta.ego_velocity,
+                "prompts": [prompt],
+            }
+    order = {}
+    for f in frames.values():
+        order.setdefault(f["world"], len(order))
+    out = [SourceFrame(**{**f, "prompts": tuple(f["prompts"])}) for f in frames.values()]
+    return sorted(out, key=lambda f: order[f.world])
+
+
+def export(
+    source: str | Path,
+    out: str | Path,
+    splits: Sequence[str] = SPLITS,
+    seed: int = 0,
+    version: str = "v1.0-trainval",
+) -> ExportReport:
+    """Write the synthetic root ``source`` as a nuScenes root with Talk2Car commands at ``out``
+    (replaced where it is an earlier export: it must hold a ``v1.0-*`` folder, or be empty).
+
+    Raises:
+        RootError: a bad source or output folder.
+        ValueError: a malformed file of the source (named).
+    """
+    source, out = Path(source), Path(out)
+    if out.resolve() == source.resolve():
+        raise RootError(f"{out}: is the source root; choose another output folder")
+    if out.exists():
+        names = {p.name for p in out.iterdir()} if out.is_dir() else {"?"}
+        if names and not any(n.startswith("v1.0-") for n in names):
+            raise RootError(f"{out}: exists and is neither empty nor an earlier nuScenes export")
+        shutil.rmtree(out)
+    root = Talk2RadarRoot(source, radar="auto")
+    frames = source_frames(root, splits)
+    return export_frames(
+        frames, out, seed=seed, version=version, scan_period=RadarConfig().scan_period
+    )
+
+
+@dataclass(frozen=True)
+class ExportNuScenesCommand:
+    """The flags of ``python -m scenes.export_nuscenes`` (the arguments of :func:`export`)."""
+
+    source: Path = option(help="a root written by scenes.synth")
+    out: Path = option(help="output folder of the nuScenes root (commands/ inside)")
+    splits: tuple[str, ...] = option(
+        SPLITS, nargs="+", metavar="SPLIT", help="source lists to export (default: %(default)s)"
+    )
+    seed: int = option(0, help="seed of the random global poses (default %(default)s)")
+    version: str = option("v1.0-trainval", help="version folder name (default %(default)s)")
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m scenes.export_nuscenes",
+        description="Write a synthetic root (scenes.synth) as nuScenes and Talk2Car come: the 13 "
+        "tables, LIDAR_TOP and five radar files in their own frames, CAM_FRONT images and "
+        "commands/{split}_commands.json from the single-referent prompts.",
+    )
+    add_options(p, ExportNuScenesCommand)
+    return p
+
+
+build_parser = _parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = from_args(ExportNuScenesCommand, _parser().parse_args(argv))
+    start = time.perf_counter()
+    try:
+        report = export(args.source, args.out, args.splits, args.seed, args.version)
+    except ValueError as exc:
+        print(f"error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"error: {exc.filename or args.source}: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+    commands = ", ".join(f"{k} {v}" for k, v in report.commands.items())
+    skipped = ", ".join(f"{v} {k}" for k, v in report.skipped.items()) or "none"
+    print(
+        f"{args.out}: {report.scenes} scenes, {report.samples} samples in "
+        f"{time.perf_counter() - start:.1f} s; commands: {commands}; prompts left out: {skipped}"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,192 @@
+"""nuScenes sensor files, written and read: LIDAR_TOP ``.pcd.bin`` and the radars' PCD v0.7.
+
+LiDAR (``samples/LIDAR_TOP/*.pcd.bin``): float32 x 5 per point, ``x, y, z, intensity, ring
+index``, in the LIDAR_TOP frame (x right, y forward, z up). A file whose size is not a multiple
+of 20 bytes, or with a non-finite coordinate, is refused naming the file.
+
+Radar (``samples/RADAR_*/*.pcd``): PCD v0.7, ``DATA binary``, the 18 fields of
+:data:`RADAR_FIELDS` with the sizes and types of :data:`RADAR_SIZES` / :data:`RADAR_TYPES`
+(little-endian, packed), each radar in its own frame (x forward of that radar). An empty sweep is
+one point whose float fields are NaN (the devkit reads it as no point). The official devkit's
+reader (1.2.0) asserts that bytes remain after every field it reads, so :func:`write_radar` ends
+the file with one byte after the last point (:data:`TRAILER`), as the release's files do; the
+reader here accepts a file with or without it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from scenes.utils.durable import atomic_write_bytes
+
+__all__ = [
+    "LIDAR_COLUMNS",
+    "RADAR_FIELDS",
+    "RADAR_SIZES",
+    "RADAR_TYPES",
+    "TRAILER",
+    "SensorFileError",
+    "empty_radar",
+    "radar_dtype",
+    "read_lidar",
+    "read_radar",
+    "write_lidar",
+    "write_radar",
+]
+
+LIDAR_COLUMNS = 5
+"""float32 values per LiDAR point: x, y, z, intensity, ring index."""
+RADAR_FIELDS: tuple[str, ...] = (
+    "x", "y", "z", "dyn_prop", "id", "rcs", "vx", "vy", "vx_comp", "vy_comp",
+    "is_quality_valid", "ambig_state", "x_rms", "y_rms", "invalid_state", "pdh0", "vx_rms",
+    "vy_rms",
+)  # fmt: skip
+"""The 18 fields of a nuScenes radar PCD, in file order."""
+RADAR_SIZES: tuple[int, ...] = (4, 4, 4, 1, 2, 4, 4, 4, 4, 4, 1, 1, 1, 1, 1, 1, 1, 1)
+"""Bytes per field."""
+RADAR_TYPES: tuple[str, ...] = ("F", "F", "F", "I", "I", "F", "F", "F", "F", "F") + ("I",) * 8
+"""PCD type per field: F float, I signed integer."""
+TRAILER = b"\x00"
+"""The byte :func:`write_radar` puts after the last point (see the module docstring)."""
+_HEADER_KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT")
+
+
+class SensorFileError(ValueError):
+    """A sensor file is malformed; the message names the file."""
+
+
+def radar_dtype() -> np.dtype:
+    """The packed little-endian record of one radar point (:data:`RADAR_FIELDS`)."""
+    kinds = {("F", 4): "<f4", ("I", 1): "i1", ("I", 2): "<i2", ("I", 4): "<i4"}
+    return np.dtype(
+        [(n, kinds[(t, s)]) for n, t, s in zip(RADAR_FIELDS, RADAR_TYPES, RADAR_SIZES, strict=True)]
+    )
+
+
+def read_lidar(path: str | Path) -> np.ndarray:
+    """A LIDAR_TOP file as ``(N, 5)`` float32 ``x, y, z, intensity, ring`` (LIDAR_TOP frame).
+
+    Raises:
+        SensorFileError: missing, a size not a multiple of 20 bytes, or a non-finite x, y or z.
+    """
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise SensorFileError(f"{path}: cannot read the LiDAR file ({exc.strerror})") from exc
+    if len(raw) % (4 * LIDAR_COLUMNS):
+        raise SensorFileError(
+            f"{path}: {len(raw)} bytes is not a whole number of {LIDAR_COLUMNS}-float32 points"
+        )
+    points = np.frombuffer(raw, dtype="<f4").reshape(-1, LIDAR_COLUMNS).astype(np.float32)
+    bad = ~np.isfinite(points[:, :3]).all(axis=1)
+    if bad.any():
+        raise SensorFileError(f"{path}: point {int(np.argmax(bad))} has a non-finite coordinate")
+    return points
+
+
+def write_lidar(path: str | Path, points: np.ndarray) -> None:
+    """Write ``(N, 5)`` ``x, y, z, intensity, ring`` (LIDAR_TOP frame) as float32, atomically."""
+    arr = np.asarray(points, dtype="<f4")
+    if arr.ndim != 2 or arr.shape[1] != LIDAR_COLUMNS:
+        raise ValueError(f"{path}: LiDAR points must be (N, {LIDAR_COLUMNS}), got {arr.shape}")
+    atomic_write_bytes(Path(path), np.ascontiguousarray(arr).tobytes())
+
+
+def empty_radar() -> np.ndarray:
+    """The one-point record array of an empty sweep: float fields NaN, integer fields 0."""
+    rec = np.zeros(1, dtype=radar_dtype())
+    for name, kind in zip(RADAR_FIELDS, RADAR_TYPES, strict=True):
+        if kind == "F":
+            rec[name] = np.nan
+    return rec
+
+
+def _header(count: int) -> bytes:
+    lines = [
+        "# .PCD v0.7 - Point Cloud Data file format",
+        "VERSION 0.7",
+        "FIELDS " + " ".join(RADAR_FIELDS),
+        "SIZE " + " ".join(str(s) for s in RADAR_SIZES),
+        "TYPE " + " ".join(RADAR_TYPES),
+        "COUNT " + " ".join("1" for _ in RADAR_FIELDS),
+        f"WIDTH {count}",
+        "HEIGHT 1",
+        "VIEWPOINT 0 0 0 1 0 0 0",
+        f"POINTS {count}",
+        "DATA binary",
+    ]
+    return ("\n".join(lines) + "\n").encode("ascii")
+
+
+def write_radar(path: str | Path, points: np.ndarray) -> None:
+    """Write a radar sweep (a record array of :func:`radar_dtype`, the radar's own frame) as PCD
+    v0.7 binary, atomically; no point = one NaN point (:func:`empty_radar`)."""
+    rec = np.asarray(points)
+    if rec.dtype != radar_dtype():
+        raise ValueError(f"{path}: radar points must be a record array of radar_dtype()")
+    if len(rec) == 0:
+        rec = empty_radar()
+    atomic_write_bytes(Path(path), _header(len(rec)) + rec.tobytes() + TRAILER)
+
+
+def read_radar(path: str | Path) -> np.ndarray:
+    """A radar PCD as a record array of :func:`radar_dtype` (the radar's frame, every point: no
+    filter); an empty sweep (a first point with NaN) gives no point.
+
+    Raises:
+        SensorFileError: missing, a header other than the 18-field binary layout (names the
+            line), or fewer bytes than its points need.
+    """
+    path = Path(path)
+    try:
+        raw = path.read_bytes()
+    except OSError as exc:
+        raise SensorFileError(f"{path}: cannot read the radar file ({exc.strerror})") from exc
+    offset, header = 0, {}
+    for lineno in range(1, 13):
+        end = raw.find(b"\n", offset)
+        if end < 0:
+            raise SensorFileError(f"{path}: the PCD header ends before its DATA line")
+        try:
+            line = raw[offset:end].decode("ascii").strip()
+        except UnicodeDecodeError as exc:
+            raise SensorFileError(f"{path}:{lineno}: the PCD header is not ASCII") from exc
+        offset = end + 1
+        if lineno == 1 and not line.startswith("#"):
+            raise SensorFileError(f"{path}:1: expected the PCD comment line, got {line[:40]!r}")
+        key, _, value = line.partition(" ")
+        header[key] = value.split()
+        if key == "DATA":
+            break
+    else:
+        raise SensorFileError(f"{path}: no DATA line in the PCD header")
+    expected = {
+        "FIELDS": list(RADAR_FIELDS),
+        "SIZE": [str(s) for s in RADAR_SIZES],
+        "TYPE": list(RADAR_TYPES),
+        "DATA": ["binary"],
+        "HEIGHT": ["1"],
+    }
+    for key, want in expected.items():
+        if header.get(key) != want:
+            raise SensorFileError(
+                f"{path}: PCD {key} is {' '.join(header.get(key, ['(missing)']))!r}, "
+                f"expected {' '.join(want)!r}"
+            )
+    try:
+        count = int(header.get("WIDTH", ["?"])[0])
+    except ValueError as exc:
+        raise SensorFileError(f"{path}: PCD WIDTH is not a whole number") from exc
+    dtype = radar_dtype()
+    if len(raw) - offset < count * dtype.itemsize:
+        raise SensorFileError(
+            f"{path}: {count} points need {count * dtype.itemsize} bytes, the file has "
+            f"{len(raw) - offset}"
+        )
+    rec = np.frombuffer(raw, dtype=dtype, count=count, offset=offset).copy()
+    if count and np.isnan([rec[0][n] for n in RADAR_FIELDS[:3]]).any():
+        return rec[:0]
+    return rec
