@@ -18,7 +18,8 @@ def labelled_app(tmp_path_factory, write_vod_root, torch_threads, serve_app):
     root = write_vod_root(tmp_path_factory.mktemp("sentence") / "vod", frames=2)
     with torch_threads(1):
         model = load_checkpoint("checkpoints/tpcnet-small.pt")
-        with serve_app(root, model, split="val", warm_up=False) as app:
+        pairs = root.with_name("vod-talk2radar")  # named: a release is never written beside
+        with serve_app(root, model, split="val", warm_up=False, pairs_root=pairs) as app:
             yield app
 
 

@@ -110,7 +110,8 @@ def vod_app(tmp_path_factory, write_vod_root, torch_threads, serve_app, untraine
     root = write_vod_root(tmp_path_factory.mktemp("vod-app") / "vod", frames=2)
     with torch_threads(1):
         model = untrained_model(grounding, text_encoder="gru", head__score_threshold=0.0)
-        with serve_app(root, model, split="val", warm_up=False) as app:
+        pairs = root.with_name("vod-talk2radar")  # named: a release is never written beside
+        with serve_app(root, model, split="val", warm_up=False, pairs_root=pairs) as app:
             yield app
 
 
