@@ -172,8 +172,7 @@ def _register_keys(
         "carry": sequence.carry,
         "review_next": lambda: review.step(1),
         "review_previous": lambda: review.step(-1),
-        "approve": lambda: review.verdict("approved"),
-        "reject": lambda: review.verdict("rejected"),
+        # approve, reject: the review panel's, bound to each pair shown (ReviewPanel.open)
         "fix": review.save_fix,
     }
     for i, cls in enumerate(CLASSES):
