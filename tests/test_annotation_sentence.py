@@ -126,3 +126,54 @@ def test_use_predictions_picks_among_the_labelled_boxes(labelled_app, ws_client)
         assert all(panel.labelled().index_of(b.box) is not None for b in panel.draft.boxes)
     finally:
         client.close()
+
+
+def _shift_click_ground(client, x: float, y: float, ground_z: float) -> None:
+    """A Shift+click on the ground point ``(x, y)`` seen from 10 m above the sensor."""
+    origin = np.array([0.0, 0.0, 10.0])
+    direction = np.array([x, y, ground_z]) - origin
+    direction /= np.linalg.norm(direction)
+    client._send(
+        {
+            "type": "ScenePointerMessage",
+            "event_type": "click",
+            "ray_origin": origin.tolist(),
+            "ray_direction": direction.tolist(),
+            "screen_pos": [[0.5, 0.5]],
+            "modifier": "shift",
+        }
+    )
+
+
+@pytest.mark.parametrize("offset", [(0.0, -1.0), (1.2, 0.0), (-0.9, 0.9)])
+def test_a_near_miss_places_nothing_and_shift_click_places_a_box(labelled_app, ws_client, offset):
+    """Issue 39.6: a click close to but not on a labelled box changes nothing and says so (the
+    status still tells the truth); placing a box there is Shift+click, and then the boxes are
+    the annotator's."""
+    client, panel = _connect(labelled_app, ws_client)
+    try:
+        labelled = panel.labelled()
+        client.set("Pair prompt", "the pedestrian")
+        client.pump_until(lambda: panel.referents_for() == "the pedestrian", 90, "the pick")
+        boxes = panel.draft.box_array.copy()
+        assert "picked by the model" in panel.w.status.content
+        pedestrian = labelled.boxes[labelled.classes.index("Pedestrian")]
+        x, y = float(pedestrian[0] + offset[0]), float(pedestrian[1] + offset[1])
+        client.click_ground(x, y, GROUND_Z)  # beside the pedestrian, on no box
+        client.pump_until(
+            lambda: any(t == "Nothing to pick there" for t, _ in client.notifications), 10, ""
+        )
+        body = next(b for t, b in client.notifications if t == "Nothing to pick there")
+        assert "Shift+click" in body
+        client.drain(0.5)
+        np.testing.assert_array_equal(panel.draft.box_array, boxes)  # no silent new box
+        assert "picked by the model" in panel.w.status.content
+
+        _shift_click_ground(client, x, y, GROUND_Z)  # the explicit act
+        client.pump_until(lambda: len(panel.draft.boxes) == len(boxes) + 1, 10, "the new box")
+        placed = panel.draft.boxes[-1]
+        assert placed.cls == panel.w.cls.value
+        np.testing.assert_allclose(placed.box[:2], [x, y], atol=0.05)  # on the ground estimate
+        client.pump_until(lambda: "chosen by hand" in panel.w.status.content, 10, "the status")
+    finally:
+        client.close()

@@ -66,6 +66,10 @@ def _wire(
     def _(event: viser.SceneClickEvent) -> None:
         panel.guarded(lambda: edits.click_ground(event.ray_origin, event.ray_direction))
 
+    @scene.on_click(modifier="shift")
+    def _(event: viser.SceneClickEvent) -> None:
+        panel.guarded(lambda: edits.place_box(event.ray_origin, event.ray_direction))
+
     panel.view.gizmo.on_update(edits.on_gizmo)
 
     def on_user(handle: viser.GuiInputHandle, fn: Callable[[], None]) -> None:
