@@ -14,10 +14,11 @@ from app.annotate_tab.hub import AnnotationHub
 from app.annotate_tab.keys import (
     MOVE_FAR,
     MOVE_STEP,
+    HelpWindow,
     add_help_folder,
+    add_key_owner,
     add_prompt_key,
     register_keys,
-    show_help,
 )
 from app.annotate_tab.pairs import PairActions
 from app.annotate_tab.panel import AnnotationPanel
@@ -169,7 +170,7 @@ def _register_keys(
         "undo": edits.undo,
         "redo": edits.redo,
         "new_pair": edits.new_pair,
-        "help": lambda: show_help(gui),
+        "help": HelpWindow(gui).toggle,
         "play": sequence.toggle_play,
         "drive_previous": lambda: sequence.step(-1),
         "drive_next": lambda: sequence.step(1),
@@ -183,4 +184,5 @@ def _register_keys(
         actions[f"new_class_{i}"] = lambda cls=cls: edits.set_new_class(cls)
     register_keys(gui, actions, panel.guarded)
     add_prompt_key(gui)
+    add_key_owner(gui)
     add_help_folder(gui)
