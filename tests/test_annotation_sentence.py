@@ -128,23 +128,6 @@ def test_use_predictions_picks_among_the_labelled_boxes(labelled_app, ws_client)
         client.close()
 
 
-def _shift_click_ground(client, x: float, y: float, ground_z: float) -> None:
-    """A Shift+click on the ground point ``(x, y)`` seen from 10 m above the sensor."""
-    origin = np.array([0.0, 0.0, 10.0])
-    direction = np.array([x, y, ground_z]) - origin
-    direction /= np.linalg.norm(direction)
-    client._send(
-        {
-            "type": "ScenePointerMessage",
-            "event_type": "click",
-            "ray_origin": origin.tolist(),
-            "ray_direction": direction.tolist(),
-            "screen_pos": [[0.5, 0.5]],
-            "modifier": "shift",
-        }
-    )
-
-
 @pytest.mark.parametrize("offset", [(0.0, -1.0), (1.2, 0.0), (-0.9, 0.9)])
 def test_a_near_miss_places_nothing_and_shift_click_places_a_box(labelled_app, ws_client, offset):
     """Issue 39.6: a click close to but not on a labelled box changes nothing and says so (the
@@ -169,7 +152,7 @@ def test_a_near_miss_places_nothing_and_shift_click_places_a_box(labelled_app, w
         np.testing.assert_array_equal(panel.draft.box_array, boxes)  # no silent new box
         assert "picked by the model" in panel.w.status.content
 
-        _shift_click_ground(client, x, y, GROUND_Z)  # the explicit act
+        client.click_ground(x, y, GROUND_Z, modifier="shift")  # the explicit act
         client.pump_until(lambda: len(panel.draft.boxes) == len(boxes) + 1, 10, "the new box")
         placed = panel.draft.boxes[-1]
         assert placed.cls == panel.w.cls.value
