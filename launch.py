@@ -11,10 +11,11 @@
   ``radar/``, ``radar_3frames/`` or ``radar_5frames/``, no ``prompt/`` folder, ImageSets in the
   LiDAR tree). Without ``--split`` the first of ``test``, ``val``, ``train`` (then the others) whose
   frames all have their files is served (VoD's ``test`` frames are not in ``training/``).
-- Annotation saves pairs into ``--pairs DIR``; by default into the served root when it has
-  prompts (a Talk2Radar root), else into the sibling folder ``<ROOT>-talk2radar`` (created when
-  the first pair is saved), so a release's own files are never touched
-  (:func:`app.server.default_pairs_root`).
+- Annotation saves pairs into ``--pairs DIR`` (created by the first save); by default into the
+  served root when it has prompts (a Talk2Radar root). A root without prompts (a release as it
+  comes) is never written into or beside: without ``--pairs`` the Annotate tab does not save and
+  suggests ``--pairs <ROOT>-talk2radar`` (:func:`app.server.default_pairs_root`). Serving writes
+  nothing until the first save.
 - A root without an ``ImageSets`` folder (the View-of-Delft devkit's example set) serves every
   frame of ``lidar/training/velodyne/`` (split ``all``, with a notice).
 - A ``--checkpoint`` or ``--data`` that is missing or invalid, an unknown split, an ImageSets

@@ -117,7 +117,9 @@ class AnnotationStore:
     """Saved prompt-to-box pairs of one Talk2Radar root (module docstring for the guarantees).
 
     Args:
-        root: The root folder; created (``lidar/`` and a radar tree) when missing.
+        root: The root folder. Opening writes nothing (a missing root has no pairs; only an
+            interrupted operation is resolved): the first save creates it, its split lists and
+            ``annotations/`` (lock, journals, manifest).
         radar_folder: Radar tree to write; default the one the root has, else ``radar_5frames``.
             A root that already has another radar tree is refused (readers would pick the other).
         validation: Rules checked before every save.
@@ -174,17 +176,12 @@ class AnnotationStore:
             self.lock_timeout,
         )
         with fs_errors(f"opening the annotation store {self.path}"):
-            for folder in (
-                split_dir(self.lidar_dir),
-                split_dir(self.radar_dir),
-                self.journal_dir,
-            ):
-                folder.mkdir(parents=True, exist_ok=True)
-            with self.transactions.locked():
-                try:
-                    self.transactions.recover_all()
-                except DiskFullError as exc:  # the next operation retries, once there is space
-                    log.warning("%s", exc)
+            if self.journals.pending():  # an interrupted operation: resolve it now
+                with self.transactions.locked():
+                    try:
+                        self.transactions.recover_all()
+                    except DiskFullError as exc:  # the next operation retries, once there is space
+                        log.warning("%s", exc)
 
     def __repr__(self) -> str:
         return f"AnnotationStore({str(self.path)!r})"
@@ -291,6 +288,9 @@ class AnnotationStore:
         draft = clean_prompt(draft)
         sample = source.sample
         text = self._text(draft, sample)
+        with fs_errors(f"preparing {self.path} for its first pair"):
+            for folder in (split_dir(self.lidar_dir), split_dir(self.radar_dir)):
+                folder.mkdir(parents=True, exist_ok=True)
         with self.transactions.transaction(f"saving a new pair in {self.path}") as tx:
             sid = format_id(self._next_id())
             record = self._record(

@@ -115,6 +115,7 @@ class Transactions:
             raise StoreError(f"{self.files.path}: another save is still running; try again")
         try:
             try:
+                self.lock_file.parent.mkdir(parents=True, exist_ok=True)  # the first write's
                 fd = os.open(self.lock_file, os.O_RDWR | os.O_CREAT, 0o644)
             except OSError as exc:
                 raise fs_error(exc, f"opening the lock file {self.lock_file}") from exc

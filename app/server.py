@@ -141,8 +141,9 @@ class AppConfig:
         dark_mode: viser's dark theme (points read better on it).
         start_timeout: Seconds :meth:`Talk2PCApp.start` waits for viser to listen before it
             raises :class:`ServerStartError`.
-        pairs_root: Where the Annotate tab saves pairs (a Talk2Radar root, created when
-            missing); None: :func:`default_pairs_root`.
+        pairs_root: Where the Annotate tab saves pairs (a Talk2Radar root, created by the
+            first save); None: the served root when it has prompts, else no saving (the tab
+            suggests :func:`default_pairs_root`).
         freeze_startup: Freeze the objects alive at start before any browser connects
             (:func:`app.memory.freeze_startup_objects`: cheap collections after disconnects);
             process-wide, so for the process that serves (``launch.py``), not for tests.
@@ -166,8 +167,9 @@ class AppConfig:
         None,
         flag="--pairs",
         metavar="PAIRS",
-        help="where annotation saves prompt-to-box pairs, a Talk2Radar root (default: the "
-        "served root when it has prompts, else <ROOT>-talk2radar beside it)",
+        help="where annotation saves prompt-to-box pairs, a Talk2Radar root created by the "
+        "first save (default: the served root when it has prompts; a root without prompts is "
+        "never written beside: without --pairs its pairs are not saved)",
     )
     freeze_startup: bool = False
     scene_labels: Path | None = option(
@@ -188,10 +190,11 @@ def has_prompts(root: Talk2RadarRoot) -> bool:
 
 
 def default_pairs_root(root: Talk2RadarRoot) -> Path:
-    """Where pairs annotated on ``root`` are saved by default: into ``root`` itself when it is a
-    Talk2Radar root with prompts (the pairs join its splits), else into the sibling folder
-    ``<root>-talk2radar``, so that a release's own files (View-of-Delft's ``label_2``,
-    ``ImageSets``) are never touched."""
+    """Where pairs annotated on ``root`` go without ``--pairs``: into ``root`` itself when it is
+    a Talk2Radar root with prompts (the pairs join its splits); for a root without prompts (a
+    release as it comes, whose own files are never touched) the sibling folder
+    ``<root>-talk2radar``, only *suggested*: nothing is written beside a release unless the
+    person names the pairs folder (:class:`app.annotate_tab.AnnotationHub`, ``named``)."""
     if has_prompts(root):
         return root.path
     path = root.path.resolve() if root.path.name in ("", ".", "..") else root.path
@@ -236,6 +239,7 @@ class Talk2PCApp:
             Path(pairs) if pairs is not None else default_pairs_root(root),
             radar_folder=root.radar_folder,
             served=root,
+            named=pairs is not None or has_prompts(root),
         )
         self.server: viser.ViserServer | None = None
         self.sessions: dict[int, ClientSession] = {}

@@ -77,6 +77,7 @@ from app.query_panel import (
     results_markdown,
 )
 from app.scene_view import SceneView, ViewPanel, build_view_panel
+from app.session_options import SessionOptions
 from app.text import md_text
 from scenes.talk2radar.root import Sample
 from scenes.utils.text_policy import collapse_spaces
@@ -84,22 +85,6 @@ from scenes.utils.text_policy import collapse_spaces
 log = logging.getLogger(__name__)
 
 Listener = Callable[["ClientSession"], None]
-
-
-@dataclass(frozen=True)
-class SessionOptions:
-    """What every session shows the same way.
-
-    Attributes:
-        model_note: A warning shown at the top of the panel (None: none).
-        score_threshold: The query panel's initial score threshold.
-        labelled_boxes: The labelled boxes of a sample's frame (``model.LabelledBoxes``, None
-            where it has none); None: the root has no labelled boxes (no "Candidates" control).
-    """
-
-    model_note: str | None = None
-    score_threshold: float = 0.3
-    labelled_boxes: Callable[[Sample], object | None] | None = None
 
 
 @dataclass(frozen=True)
@@ -404,8 +389,9 @@ class ClientSession:
         text, problem = prompt_to_run(prompt)
         if write:
             self.write_prompt(text if problem is None else collapse_spaces(one_line(prompt or "")))
-        if problem is not None:
+        if problem is not None:  # refused: the previous answer goes too (not left as this one's)
             self.notify(*problem, color="yellow")
+            self.clear_answer(f"*Not run:* {md_text(problem[1])}")
             return None
         with self.lock:
             if self.frame is None or self.query is None or self.closed:
@@ -423,6 +409,21 @@ class ClientSession:
             self.query.results.content = f"*Running:* {md_text(text)}"
         self.client.flush()  # viser sends only a widget's latest value: a fast answer hid the line
         return self.engine.submit(self._answer_job, request)
+
+    def clear_answer(self, note: str) -> None:
+        """Remove the answer shown (boxes, heatmap, camera boxes; one still running is dropped)
+        and say ``note`` (markdown) in its place."""
+        with self.lock:
+            if self.closed or self.query is None:
+                return
+            self._generation += 1
+            self.answer = None
+            with self.client.atomic():
+                self.pred_view.clear()
+                self.heatmap_view.clear()
+                self.query.results.content = note
+            self._with_camera(lambda camera: camera.set_layer("pred", None))
+            self._call(self._answer_listeners)
 
     def _stale(self, request: QueryRequest) -> bool:
         return self.closed or request.generation != self._generation

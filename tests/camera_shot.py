@@ -143,7 +143,8 @@ def main() -> int:
         root = launch.open_root(vod, None)
         split = launch.choose_split(root, None)
         model, note = launch.load_model(None, "cpu", threads=1)
-        config = AppConfig(port=0, split=split, model_note=note)
+        pairs = Path(tmp) / "vod-talk2radar"  # named: a release is never written beside
+        config = AppConfig(port=0, split=split, model_note=note, pairs_root=pairs)
         app = Talk2PCApp(root, model, config).start()
         try:
             app.wait_ready(timeout=120)

@@ -368,8 +368,11 @@ class BrowserLikeClient:
         """The options of a dropdown."""
         return self.options[self.gui[label]]
 
-    def click_ground(self, x: float, y: float, ground_z: float) -> None:
-        """A click on the ground point ``(x, y)`` seen from 10 m above the sensor."""
+    def click_ground(
+        self, x: float, y: float, ground_z: float, modifier: str | None = None
+    ) -> None:
+        """A click on the ground point ``(x, y)`` seen from 10 m above the sensor (``modifier``:
+        held with it, e.g. ``"shift"``)."""
         origin = np.array([0.0, 0.0, 10.0])
         direction = np.array([x, y, ground_z]) - origin
         direction /= np.linalg.norm(direction)
@@ -380,7 +383,7 @@ class BrowserLikeClient:
                 "ray_origin": origin.tolist(),
                 "ray_direction": direction.tolist(),
                 "screen_pos": [[0.5, 0.5]],
-                "modifier": None,
+                "modifier": modifier,
             }
         )
 

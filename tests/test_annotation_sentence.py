@@ -18,7 +18,8 @@ def labelled_app(tmp_path_factory, write_vod_root, torch_threads, serve_app):
     root = write_vod_root(tmp_path_factory.mktemp("sentence") / "vod", frames=2)
     with torch_threads(1):
         model = load_checkpoint("checkpoints/tpcnet-small.pt")
-        with serve_app(root, model, split="val", warm_up=False) as app:
+        pairs = root.with_name("vod-talk2radar")  # named: a release is never written beside
+        with serve_app(root, model, split="val", warm_up=False, pairs_root=pairs) as app:
             yield app
 
 
@@ -123,5 +124,39 @@ def test_use_predictions_picks_among_the_labelled_boxes(labelled_app, ws_client)
             lambda: sum(t == "Referents picked" for t, _ in client.notifications) >= 1, 60, ""
         )
         assert all(panel.labelled().index_of(b.box) is not None for b in panel.draft.boxes)
+    finally:
+        client.close()
+
+
+@pytest.mark.parametrize("offset", [(0.0, -1.0), (1.2, 0.0), (-0.9, 0.9)])
+def test_a_near_miss_places_nothing_and_shift_click_places_a_box(labelled_app, ws_client, offset):
+    """Issue 39.6: a click close to but not on a labelled box changes nothing and says so (the
+    status still tells the truth); placing a box there is Shift+click, and then the boxes are
+    the annotator's."""
+    client, panel = _connect(labelled_app, ws_client)
+    try:
+        labelled = panel.labelled()
+        client.set("Pair prompt", "the pedestrian")
+        client.pump_until(lambda: panel.referents_for() == "the pedestrian", 90, "the pick")
+        boxes = panel.draft.box_array.copy()
+        assert "picked by the model" in panel.w.status.content
+        pedestrian = labelled.boxes[labelled.classes.index("Pedestrian")]
+        x, y = float(pedestrian[0] + offset[0]), float(pedestrian[1] + offset[1])
+        client.click_ground(x, y, GROUND_Z)  # beside the pedestrian, on no box
+        client.pump_until(
+            lambda: any(t == "Nothing to pick there" for t, _ in client.notifications), 10, ""
+        )
+        body = next(b for t, b in client.notifications if t == "Nothing to pick there")
+        assert "Shift+click" in body
+        client.drain(0.5)
+        np.testing.assert_array_equal(panel.draft.box_array, boxes)  # no silent new box
+        assert "picked by the model" in panel.w.status.content
+
+        client.click_ground(x, y, GROUND_Z, modifier="shift")  # the explicit act
+        client.pump_until(lambda: len(panel.draft.boxes) == len(boxes) + 1, 10, "the new box")
+        placed = panel.draft.boxes[-1]
+        assert placed.cls == panel.w.cls.value
+        np.testing.assert_allclose(placed.box[:2], [x, y], atol=0.05)  # on the ground estimate
+        client.pump_until(lambda: "chosen by hand" in panel.w.status.content, 10, "the status")
     finally:
         client.close()

@@ -238,7 +238,7 @@ def test_each_app_owns_its_annotation_hub(tmp_path, write_tiny_root) -> None:
         assert first.annotations is not second.annotations
         assert not (root / "annotations").exists()  # nothing written before a tab asks
         assert first.annotations.store is not None and first.annotations.error is None
-        assert (root / "annotations").is_dir()
+        assert not (root / "annotations").exists()  # opening it writes nothing either
         assert first.annotations.store is not second.annotations.store
     finally:
         first.stop()

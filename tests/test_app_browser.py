@@ -270,7 +270,9 @@ def test_browser_camera_panel_shows_projected_boxes(
     root = write_vod_root(tmp_path / "vod", frames=1, splits={"val": [0]})
     with torch_threads(1):
         model = build_model("small", text_encoder="gru", head__score_threshold=0.0).eval()
-        app = Talk2PCApp(root, model, AppConfig(port=0, split="val", warm_up=False)).start()
+        pairs = tmp_path / "vod-talk2radar"  # named: a release is never written beside
+        config = AppConfig(port=0, split="val", warm_up=False, pairs_root=pairs)
+        app = Talk2PCApp(root, model, config).start()
         try:
             shot = ARTIFACTS / "camera-browser.png"
             run = drive_camera(app, chromium, shot, "the car ahead", "the pedestrian on the right")

@@ -110,7 +110,8 @@ def vod_app(tmp_path_factory, write_vod_root, torch_threads, serve_app, untraine
     root = write_vod_root(tmp_path_factory.mktemp("vod-app") / "vod", frames=2)
     with torch_threads(1):
         model = untrained_model(grounding, text_encoder="gru", head__score_threshold=0.0)
-        with serve_app(root, model, split="val", warm_up=False) as app:
+        pairs = root.with_name("vod-talk2radar")  # named: a release is never written beside
+        with serve_app(root, model, split="val", warm_up=False, pairs_root=pairs) as app:
             yield app
 
 
@@ -198,14 +199,21 @@ def test_ready_made_boxes_enter_saves_beside_the_release(vod_app, ws_client) -> 
     assert len(app.frames) == 2  # the served split is the release's
 
 
+def _placing(app) -> str | None:
+    """The modifier of a click that places a box: Shift on the referent path, whose frames here
+    are labelled (sentence first: a plain click only picks, issue 39.6); none on the other."""
+    return "shift" if app.engine.model.cfg.grounding == "referent" else None
+
+
 def test_placements_outside_the_range_are_refused_at_once(vod_app, ws_client) -> None:
     client, panel = _connect(vod_app, ws_client)
+    place = _placing(vod_app)
     try:
         ground = panel.frame.ground_z
-        client.click_ground(55.0, -12.0, ground)
+        client.click_ground(55.0, -12.0, ground, place)
         body = _notified(client, "No box placed there")
         assert "centre x = 55.00 m is outside the annotated range [0, 51.2] m" in body
-        client.click_ground(4.0, 15.0, ground)  # in range, but beside the car: not in the image
+        client.click_ground(4.0, 15.0, ground, place)  # in range, beside the car: not in the image
         client.pump_until(
             lambda: sum(t == "No box placed there" for t, _ in client.notifications) == 2,
             10,
@@ -219,13 +227,14 @@ def test_placements_outside_the_range_are_refused_at_once(vod_app, ws_client) ->
 
 def test_new_box_class_never_relabels_and_change_class_does(vod_app, ws_client) -> None:
     client, panel = _connect(vod_app, ws_client)
+    place = _placing(vod_app)
     try:
         ground = panel.frame.ground_z
-        client.click_ground(30.0, 0.0, ground)
+        client.click_ground(30.0, 0.0, ground, place)
         client.pump_until(lambda: panel.w.length.visible, 5, "a car, its fields shown")
         client.set("New box class", "Cyclist")  # the next box's class: the selected car stays
         client.pump_until(lambda: panel.w.cls.value == "Cyclist", 5, "the class")
-        client.click_ground(35.0, 4.0, ground)
+        client.click_ground(35.0, 4.0, ground, place)
         client.pump_until(lambda: len(panel.draft.boxes) == 2, 5, "the next box")
         assert panel.draft.classes == ("Car", "Cyclist")
         client.click("Change class", "Pedestrian")  # an explicit act on the selected box

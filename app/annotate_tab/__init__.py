@@ -19,8 +19,9 @@ The parts:
   ``client.scene``; :mod:`~app.annotate_tab.tab` wires them together.
 
 Pairs are saved into the root being served when it is a Talk2Radar root with prompts, else
-beside it (:func:`app.server.default_pairs_root`, ``launch.py --pairs``); the status line says
-where. After a save or a deletion into the served root its split is re-read
+into the folder named with ``launch.py --pairs`` (a root without prompts served without it saves
+nothing and suggests :func:`app.server.default_pairs_root`); the status line says where. Nothing
+is written before the first save. After a save or a deletion into the served root its split is re-read
 (:meth:`app.navigation.Navigator.reload`); every browser's list of saved pairs is refreshed.
 
 Using it (a one-box pair: a click and the sentence; see docs/ANNOTATION.md):
@@ -28,8 +29,10 @@ Using it (a one-box pair: a click and the sentence; see docs/ANNOTATION.md):
 - **Click the ground** (with *Click to place* on) to place a box of the *New box class* at its
   typical size (:func:`annotate.default_box`) standing on the frame's ground estimate; the new box
   is selected. A click inside a draft box's footprint selects that box instead; a click on a
-  ready-made box (below) adds it. A box that could not be saved where it would go (outside the
-  annotated range or the camera's view) is not placed: a notification says why at once.
+  ready-made box (below) adds it. On a frame with labelled boxes (sentence first) a click on no
+  box places nothing and says so; Shift+click places a box anywhere. A box that could not be
+  saved where it would go (outside the annotated range or the camera's view) is not placed: a
+  notification says why at once.
 - **Ready-made boxes**: on a root without prompts (View-of-Delft as released) the frame's
   label_2 objects of the metric classes that are not in the draft are drawn (``"+ Car"``) and
   listed under *Object* (nearest first); *Add object* or a click on one adds it.

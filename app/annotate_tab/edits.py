@@ -4,7 +4,10 @@ Each action changes the panel's state through the :class:`annotate.DraftEditor` 
 and redraws only the :class:`~app.annotate_tab.panel.Part` s that show what it changed.
 
 A click in the 3D view selects the draft box under it, else adds the ready-made box under it,
-else places a new box of the *New box class*; a box that could not be saved where it would go
+else places a new box of the *New box class*. In the sentence-first flow (the frame's boxes are
+labelled: :mod:`app.annotate_tab.referents`) a click on nothing pickable places nothing and says
+so: placing a box there is its own act, Shift+click (:meth:`DraftEdits.place_box`, also in the
+other flow). A box that could not be saved where it would go
 (outside the annotated range or the camera's view, :func:`annotate.validate`'s position and
 image rules) is not placed or added, and a notification says why at once.
 """
@@ -54,25 +57,47 @@ class DraftEdits:
 
     # ------------------------------------------------------------------ scene interaction
 
-    def click_ground(self, ray_origin: Sequence[float], ray_direction: Sequence[float]) -> None:
-        """A click in the 3D view: place a box where the ray meets the ground, or select the
-        draft box there."""
+    def _ground_point(
+        self, ray_origin: Sequence[float], ray_direction: Sequence[float]
+    ) -> tuple[float, float] | None:
+        """Where a click's ray meets the draft's ground (None: no placing now, or no hit, said in
+        a notification). Holds the session's lock."""
         p = self.panel
-        if not p.w.place.value:
-            return
+        if not p.w.place.value or p.frame is None:
+            return None
+        if not p.on_screen():
+            p.notify(
+                "The draft is on another frame",
+                f"This draft belongs to sample {p.frame.name}. Go back to its frame "
+                "(button in the Annotate tab) or start a new pair.",
+            )
+            return None
+        hit = ground_hit(ray_origin, ray_direction, p.frame.ground_z)
+        if hit is None:
+            p.notify("Click on the ground", "That click did not hit the ground nearby.")
+        return hit
+
+    def place_box(self, ray_origin: Sequence[float], ray_direction: Sequence[float]) -> None:
+        """Shift+click: place a new box of the *New box class* where the ray meets the ground,
+        whatever is there (the explicit way to add a box the labels lack)."""
+        p = self.panel
         with p.session.lock:
-            if p.frame is None:
+            hit = self._ground_point(ray_origin, ray_direction)
+            if hit is None or p.frame is None:
                 return
-            if not p.on_screen():
-                p.notify(
-                    "The draft is on another frame",
-                    f"This draft belongs to sample {p.frame.name}. Go back to its frame "
-                    "(button in the Annotate tab) or start a new pair.",
-                )
-                return
-            hit = ground_hit(ray_origin, ray_direction, p.frame.ground_z)
-            if hit is None:
-                p.notify("Click on the ground", "That click did not hit the ground nearby.")
+            if p.labelled() is not None:
+                self.referents.by_hand()  # a box of one's own: the model no longer picks
+            cls = p.w.cls.value
+            self._add(default_box(cls, hit[0], hit[1], p.frame.ground_z), cls, "box")
+
+    def click_ground(self, ray_origin: Sequence[float], ray_direction: Sequence[float]) -> None:
+        """A click in the 3D view: select the draft box there (a labelled one in the pair:
+        toggle it out), else add the ready-made box there, else place a new box, except in the
+        sentence-first flow, where a click on nothing pickable only says so."""
+        p = self.panel
+        with p.session.lock:
+            hit = self._ground_point(ray_origin, ray_direction)
+            if hit is None or p.frame is None:
                 return
             draft = p.editor.draft
             index = box_at(draft.box_array, *hit)
@@ -94,6 +119,14 @@ class DraftEdits:
             if ready is not None:
                 self.referents.by_hand()
                 self._add(p.ready_boxes[ready], p.ready_classes[ready], "ready-made box")
+                return
+            if labelled is not None:  # sentence first: a near miss is not a new box
+                p.notify(
+                    "Nothing to pick there",
+                    f"No labelled box at x = {hit[0]:.1f} m, y = {hit[1]:.1f} m: click on a "
+                    "lavender box to add it, on a pair box to take it out. To place a new "
+                    f"{p.w.cls.value} box there, Shift+click.",
+                )
                 return
             cls = p.w.cls.value
             self._add(default_box(cls, hit[0], hit[1], p.frame.ground_z), cls, "box")

@@ -3,12 +3,15 @@
 One :class:`AnnotationHub` per app (:attr:`app.server.Talk2PCApp.annotations`), created with the
 app and forgotten with it (:meth:`AnnotationHub.close` in ``app.stop``): nothing is kept at module
 level, so a second app in the same process (a test, a restarted server) opens its own store.
-The store is opened when the first tab asks for it, so serving a root writes nothing into it
-before someone opens the Annotate tab.
+The store is opened when the first tab asks for it, and opening it writes nothing
+(:class:`annotate.AnnotationStore`): the pairs folder, its lock and its split lists appear with
+the first save, so a page that only looks leaves the disk as it was.
 
-The store's root is the served root (a Talk2Radar root with prompts) or another folder
-(:func:`app.server.default_pairs_root`: beside a View-of-Delft root as released; ``--pairs``):
-:attr:`AnnotationHub.separate` says which, and the tab says where pairs go.
+The store's root is the served root (a Talk2Radar root with prompts) or the folder named with
+``--pairs``: :attr:`AnnotationHub.separate` says which, and the tab says where pairs go. A root
+without prompts (a View-of-Delft release served directly) without ``--pairs`` gets no store: the
+folder beside it (:func:`app.server.default_pairs_root`) is only suggested, never written, and
+the tab says how to name one (:attr:`AnnotationHub.error`).
 """
 
 from __future__ import annotations
@@ -46,12 +49,20 @@ class AnnotationHub:
             file keeps its tree name: ``radar`` is a single scan; a store root that has another
             tree is refused with a message naming both); None: the store's default.
         served: The root being served (None: ``path``).
+        named: Whether the person named ``path`` (the served root, or ``--pairs``); False: it is
+            only the suggestion for a root without prompts, never written (no store).
     """
 
     def __init__(
-        self, path: Path, radar_folder: str | None = None, served: Talk2RadarRoot | None = None
+        self,
+        path: Path,
+        radar_folder: str | None = None,
+        served: Talk2RadarRoot | None = None,
+        *,
+        named: bool = True,
     ) -> None:
         self.path = Path(path)
+        self.named = named
         self.radar_folder = radar_folder
         self.served_path = served.path if served is not None else self.path
         self._store: AnnotationStore | None = None
@@ -70,6 +81,13 @@ class AnnotationHub:
             if self._opened:
                 return
             self._opened = True
+            if not self.named:
+                self._error = (
+                    f"the served root has no prompts (a release as it comes), and pairs are "
+                    f"never written beside it unless you say where: restart with --pairs DIR "
+                    f"(e.g. --pairs {self.path})"
+                )
+                return
             try:
                 self._store = AnnotationStore(self.path, radar_folder=self.radar_folder)
             except (OSError, StoreError, ValueError) as exc:

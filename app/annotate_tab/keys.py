@@ -13,11 +13,25 @@ code of this module only) and **Enter** in *Pair prompt* saves (:mod:`app.annota
 **Esc** in a text field leaves it (:mod:`app.keys`).
 
 Shifted digits are not used: viser matches the character a key types, and Shift+1 types ``!``.
+
+**Keys belong to where the person is** (:data:`KEY_OWNER_LISTENER`, page-side, installed with
+key P). viser's client runs a hotkey for every key that reaches the page's root element, unless
+a text field has the focus; a focused slider (the Query tab's *Score threshold*, the drive's
+frame slider), tab title or list kept its arrows *and* moved the draft's box. The listener
+lets the focused control handle the key and stops it on ``document.body``, before the hotkeys,
+when a slider, list or field has the focus (Esc also leaves a slider), when a tab title or a
+button group's choice has it and the key is one they move with (arrows, Home, End, Space,
+Enter), or when the Annotate tab is not the tab shown. The list of keys (H, :class:`HelpWindow`) is a floating
+window, not a modal: it covers no click on the view; while it is open every key is its own (Esc
+and H close it, the rest act on nothing behind it), and a click outside it closes it and goes
+on to where it was aimed.
 """
 
 from __future__ import annotations
 
+import html
 import logging
+import threading
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
@@ -116,7 +130,7 @@ MOVE_STEP, MOVE_FAR = 0.1, 1.0
 
 TEXT_KEYS: tuple[tuple[str, str], ...] = (
     ("Enter (in Pair prompt)", "save the pair (when nothing blocks it)"),
-    ("Esc (in a text field)", "leave the field, so the next key is a hotkey"),
+    ("Esc (in a text field or a slider)", "leave it, so the next key is a hotkey"),
     ("Tab / Shift+Tab", "move through the controls (the sizes: Length, Width, Height, Yaw)"),
 )
 """Keys that act inside text fields and controls (listed in the help; the browser's or the
@@ -144,7 +158,10 @@ def keys_markdown(extra: tuple[Key, ...] = ()) -> str:
         elif k.action == "delete":
             shown = "Delete / Backspace"
         rows.setdefault(k.group, []).append((shown, label))
-    lines = ["Hotkeys act while no text field has the focus (Esc leaves one)."]
+    lines = [
+        "Hotkeys act in the Annotate tab while no text field, slider or list has the focus "
+        "(Esc leaves one)."
+    ]
     for group, items in rows.items():
         lines += ["", f"**{md_text(group)}**", "", "| key | action |", "| --- | --- |"]
         lines += [f"| {md_text(s)} | {md_text(label)} |" for s, label in items]
@@ -210,9 +227,84 @@ def add_help_folder(gui: viser.GuiApi, extra: tuple[Key, ...] = ()) -> viser.Gui
     return folder
 
 
-def show_help(gui: viser.GuiApi, extra: tuple[Key, ...] = ()) -> None:
-    """A modal window listing the keys (key H), closed by its button."""
-    with gui.add_modal("Annotate keys") as modal:
-        gui.add_markdown(keys_markdown(extra))
-        close = gui.add_button("Close")
-    close.on_click(lambda _event: modal.close())
+HELP_TITLE = "Annotate keys"
+"""The title of the list of keys (the page-side listener finds the window by it)."""
+
+HELP_CLOSE = "Close the key list"
+"""Its close button's label (the page-side listener clicks it on Esc, H or a click outside)."""
+
+KEY_OWNER_LISTENER = (
+    "if(!window.__talk2pcKeyOwner){window.__talk2pcKeyOwner=true;"
+    f"var CLOSE='{HELP_CLOSE}',TITLE='{HELP_TITLE}';"
+    "var OWN='input,textarea,select,[contenteditable=true],[role=slider],[role=combobox],"
+    "[role=listbox],[role=option],[role=spinbutton],.mantine-Slider-root',NAVS='[role=tab],"
+    "[role=radio]',NAV=['arrowleft','arrowright','arrowup','arrowdown','home','end',' ','enter'];"
+    "function closer(){var bs=document.querySelectorAll('button');for(var i=0;i<bs.length;i++)"
+    "{if(bs[i].textContent.trim()===CLOSE&&bs[i].offsetParent!==null)return bs[i];}return null;}"
+    "function win(b){var n=b;while(n.parentElement&&n.textContent.indexOf(TITLE)<0)"
+    "n=n.parentElement;return n;}"
+    "function annotating(){var ts=document.querySelectorAll('[role=tab][aria-selected=true]');"
+    "for(var i=0;i<ts.length;i++){if(ts[i].textContent.trim()==='Annotate')return true;}"
+    "return false;}"
+    "window.addEventListener('keydown',function(e){var b=closer();"
+    "if(b){if(e.key==='Tab')return;e.preventDefault();e.stopImmediatePropagation();"
+    "if(!e.repeat&&(e.key==='Escape'||String(e.key).toLowerCase()==='h'))b.click();return;}"
+    "var k=String(e.key).toLowerCase();if((e.ctrlKey||e.metaKey)&&(k==='k'||k==='p'))return;"
+    "var t=e.target,own=t&&t.closest?t.closest(OWN):null;"
+    "if(!own&&t&&t.closest&&NAV.indexOf(k)>=0)own=t.closest(NAVS);"
+    "if(own&&e.key==='Escape'&&own.closest('[role=slider],.mantine-Slider-root')&&t.blur)"
+    "t.blur();"
+    "if(own||!annotating())e.__talk2pcOwned=true;},true);"
+    "document.body.addEventListener('keydown',function(e){"
+    "if(e.__talk2pcOwned)e.stopPropagation();});"
+    "window.addEventListener('pointerdown',function(e){var b=closer();if(!b)return;"
+    "if(!win(b).contains(e.target))b.click();},true);}"
+)
+"""The page-side code that gives keys to where the person is (see the module docstring;
+installed once per page)."""
+
+KEY_OWNER_HTML = (
+    f'<img alt="" src="data:," style="display:none" onerror="{html.escape(KEY_OWNER_LISTENER)}">'
+)
+"""The element that runs :data:`KEY_OWNER_LISTENER` in the browser (see :mod:`app.keys`; the
+code escaped as an attribute value)."""
+
+
+def add_key_owner(gui: viser.GuiApi) -> viser.GuiHtmlHandle:
+    """Make the hotkeys act only where the person is, in this browser."""
+    return gui.add_html(KEY_OWNER_HTML)
+
+
+class HelpWindow:
+    """The list of keys (key H) in a floating window of one browser (see the module docstring):
+    :meth:`toggle` opens or closes it, its button closes it."""
+
+    def __init__(self, gui: viser.GuiApi, extra: tuple[Key, ...] = ()) -> None:
+        self.gui = gui
+        self.extra = extra
+        self.window: viser.PanelHandle | None = None
+        self._lock = threading.Lock()
+
+    def toggle(self) -> None:
+        """Open the window, or close it when it is open."""
+        with self._lock:
+            if self.window is None:
+                self._open()
+                return
+        self.close()
+
+    def _open(self) -> None:
+        window = self.gui.add_panel()
+        with window.add_tab(HELP_TITLE, icon=viser.Icon.KEYBOARD):
+            self.gui.add_markdown(keys_markdown(self.extra))
+            close = self.gui.add_button(HELP_CLOSE)
+        close.on_click(lambda _event: self.close())
+        window.float(x=16, y=16, width=460, height=460)  # top left: the view stays in sight
+        self.window = window
+
+    def close(self) -> None:
+        """Close the window (nothing when it is closed)."""
+        with self._lock:
+            window, self.window = self.window, None
+        if window is not None:
+            window.remove()

@@ -55,7 +55,9 @@ class PairActions:
         if report.ok and p.store is not None:
             self.save()
         else:
-            reasons = report.messages() or [str(p.hub.error)]
+            reasons = report.messages()
+            if p.store is None:
+                reasons.append(f"Saving is unavailable: {p.hub.error}")
             p.notify("Not saved yet", "\n".join(reasons))
 
     def save(self) -> SaveResult | None:

@@ -12,20 +12,32 @@ camera panel, on the frame it was annotated on. Then:
 
 Each verdict is a ``review`` line of the manifest with the reviewer's name (*Annotator*, under
 *Save options*) (:func:`annotate.review.record_review`, docs/ANNOTATION.md), and the next pair
-opens. Approving with unsaved edits is refused (save them as a fix, or undo them); a pair changed
+opens only once the verdict was recorded.
+
+A verdict belongs to the pair the reviewer was shown: *Approve*, *Reject* and their keys Y / X
+are made anew for each pair opened (:meth:`ReviewPanel.open`), bound to its id, version and the
+latest review of it then (:class:`Shown`). A click or key press sent before the browser showed
+the next pair reaches the old controls: it is the same request (a key of the tab, the pair
+shown and the verdict), answered once (one line, one notification, one step), or, once the old
+controls are gone, dropped by viser; it never lands on the next pair. A verdict on a version
+someone else decided after it was shown here is refused with who decided what, and the pair is
+shown again with that verdict. Approving with unsaved edits is refused (save them as a fix, or undo them); a pair changed
 by someone else since it was opened is refused too (reopen it). Training and evaluation read the
 approved pairs of a split with :func:`scenes.talk2radar.reviews.approved_ids`.
 """
 
 from __future__ import annotations
 
+import uuid
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import viser
 
 from annotate import ConflictError, PairInfo, StoreError
-from annotate.review import record_review, review_states
+from annotate.review import latest_review, record_review, review_states
 from app.annotate_tab.formatting import pair_option
+from app.annotate_tab.keys import KEYS, Key
 from app.annotate_tab.pairs import PairActions
 from app.annotate_tab.panel import AnnotationPanel
 from app.annotate_tab.widgets import SPLITS
@@ -36,10 +48,26 @@ PREVIOUS, NEXT = "Previous", "Next"
 """The step buttons."""
 
 
+VERDICT_KEYS: dict[str, Key] = {k.action: k for k in KEYS if k.action in ("approve", "reject")}
+"""The keys of the verdicts (registered per pair shown, :meth:`ReviewPanel.open`)."""
+
+
+@dataclass(frozen=True)
+class Shown:
+    """The pair under review as it was shown: id, version, and the ``op`` of the latest review of
+    that version then (None: not reviewed)."""
+
+    sample_id: str
+    version: int
+    seen: str | None
+
+
 @dataclass(frozen=True)
 class ReviewWidgets:
-    """The *Review* folder's handles."""
+    """The *Review* folder's handles (*Approve* and *Reject* as first built: the panel makes
+    them anew for each pair shown)."""
 
+    folder: viser.GuiFolderHandle
     split: viser.GuiDropdownHandle
     unreviewed: viser.GuiCheckboxHandle
     step: viser.GuiButtonGroupHandle
@@ -52,7 +80,7 @@ class ReviewWidgets:
 
 def build_review_widgets(gui: viser.GuiApi) -> ReviewWidgets:
     """The *Review* folder (collapsed)."""
-    with gui.add_folder("Review", expand_by_default=False):
+    with gui.add_folder("Review", expand_by_default=False) as folder:
         split = gui.add_dropdown("Review split", SPLITS, initial_value=SPLITS[0])
         unreviewed = gui.add_checkbox(
             "Only not reviewed", False, hint="Skip the pairs whose current version has a verdict"
@@ -68,7 +96,7 @@ def build_review_widgets(gui: viser.GuiApi) -> ReviewWidgets:
             hint="Save your edit of the pair (a new version) and approve it (Shift+F)",
         )
         note = gui.add_text("Note", "", hint="Why it was rejected (kept with the verdict)")
-    return ReviewWidgets(split, unreviewed, step, status, approve, reject, fix, note)
+    return ReviewWidgets(folder, split, unreviewed, step, status, approve, reject, fix, note)
 
 
 class ReviewPanel:
@@ -83,8 +111,15 @@ class ReviewPanel:
         self.panel = panel
         self.pairs = pairs
         self.w = build_review_widgets(panel.session.client.gui)
-        self.current: tuple[str, int] | None = None
-        """``(sample id, version)`` of the pair under review (None: none yet)."""
+        self.current: Shown | None = None
+        """The pair under review (None: none yet)."""
+        self._token = uuid.uuid4().hex
+        """This tab's part of its verdicts' request keys."""
+        self._controls: list[viser.GuiButtonHandle | viser.CommandHandle] = [
+            self.w.approve,
+            self.w.reject,
+        ]
+        """The verdict buttons and keys bound to the pair shown."""
         self._wire()
 
     # ------------------------------------------------------------------ the queue
@@ -110,7 +145,7 @@ class ReviewPanel:
             self._show("*No pair to review in this split.*")
             return
         ids = [p.sample_id for p, _ in queue]
-        sid = self.current[0] if self.current is not None else None
+        sid = self.current.sample_id if self.current is not None else None
         if sid in ids:
             index = ids.index(sid) + delta
         elif delta > 0:  # the start, or the pair left the queue: the nearest one on
@@ -123,25 +158,62 @@ class ReviewPanel:
         self.open(ids[index])
 
     def open(self, sample_id: str) -> None:
-        """Open one pair for review (into the draft, its frame on screen)."""
+        """Open one pair for review (into the draft, its frame on screen), with verdict controls
+        bound to it as shown."""
         p = self.panel
         self.pairs.open_pair(sample_id)
         with p.session.lock:
             draft = p.editor.draft
             if draft.sample_id != sample_id:
                 return  # the store refused it (notified)
-            self.current = (sample_id, draft.base_version)
+            version = draft.base_version
+        seen = latest_review(p.store, sample_id, version) if p.store is not None else None
+        shown = Shown(sample_id, version, seen.op if seen is not None else None)
+        with p.session.lock:
+            self.current = shown
+            self._bind(shown)
         self._show()
+
+    def _bind(self, shown: Shown) -> None:
+        """Replace *Approve*, *Reject* and their keys by controls bound to ``shown`` (same places
+        in the folder; the old ones' clicks in flight find them removed)."""
+        p, gui = self.panel, self.panel.session.client.gui
+        old, self._controls = self._controls, []
+        with p.session.client.atomic():
+            for handle in old:
+                handle.remove()
+            with self.w.folder:
+                for verdict, label, color, icon, order in (
+                    ("approved", "Approve", "green", viser.Icon.CHECK, self.w.approve.order),
+                    ("rejected", "Reject", "red", viser.Icon.X, self.w.reject.order),
+                ):
+                    button = gui.add_button(label, color=color, icon=icon, order=order)
+                    button.on_click(self._act(verdict, shown))
+                    self._controls.append(button)
+            for verdict, key in (("approved", "approve"), ("rejected", "reject")):
+                k = VERDICT_KEYS[key]
+                try:
+                    command = gui.add_command(k.label, hotkey=k.key, modifier=k.modifier)  # type: ignore[arg-type]
+                except Exception:  # experimental in viser 1.1.1: the buttons still work
+                    continue
+                command.on_trigger(self._act(verdict, shown))
+                self._controls.append(command)
+
+    def _act(self, verdict: str, shown: Shown) -> Callable[[object], None]:
+        """The callback of a verdict control bound to ``shown``."""
+        return lambda _event: self.panel.guarded(lambda: self.verdict(verdict, shown))
 
     # ------------------------------------------------------------------ verdicts
 
-    def verdict(self, verdict: str) -> None:
-        """Approve or reject the pair under review (the version shown)."""
+    def verdict(self, verdict: str, shown: Shown | None = None) -> None:
+        """Approve or reject the pair under review as ``shown`` (default: the one under review
+        now)."""
         p = self.panel
-        if self.current is None:
+        shown = shown if shown is not None else self.current
+        if shown is None:
             p.notify("No pair under review", "Open one with Next (or key J).")
             return
-        sid, version = self.current
+        sid = shown.sample_id
         with p.session.lock:
             draft = p.editor.draft
             edited = draft.sample_id == sid and p.editor.history.can_undo
@@ -152,7 +224,7 @@ class ReviewPanel:
                 "Save the edit as a fix (Save fix, Shift+F), or undo it before approving.",
             )
             return
-        if self._record(sid, verdict, reviewer, version, note):
+        if self._record(shown, verdict, reviewer, note):
             self.step(1)
 
     def save_fix(self) -> None:
@@ -161,7 +233,7 @@ class ReviewPanel:
         if self.current is None:
             p.notify("No pair under review", "Open one with Next (or key J).")
             return
-        sid = self.current[0]
+        sid = self.current.sample_id
         with p.session.lock:
             draft = p.editor.draft
             edited = draft.sample_id == sid and p.editor.history.can_undo
@@ -172,22 +244,39 @@ class ReviewPanel:
         result = self.pairs.save()
         if result is None:
             return
-        if self._record(sid, "fixed", reviewer, result.version, note):
+        if self._record(Shown(sid, result.version, None), "fixed", reviewer, note):
             self.step(1)
 
-    def _record(self, sid: str, verdict: str, reviewer: str, version: int, note: str) -> bool:
+    def _record(self, shown: Shown, verdict: str, reviewer: str, note: str) -> bool:
+        """Record the verdict on ``shown``; True only when this request wrote it (a repeated
+        request is answered by the first: no second notification, no second step)."""
         p = self.panel
         store = p.store
         if store is None:
             p.notify("Reviewing is unavailable", str(p.hub.error), color="red")
             return False
+        sid, version = shown.sample_id, shown.version
+        key = f"{self._token}:{sid}:{version}:{shown.seen}:{verdict}"
         try:
-            record_review(store, sid, verdict, reviewer, version=version, note=note)
+            result = record_review(
+                store,
+                sid,
+                verdict,
+                reviewer,
+                version=version,
+                note=note,
+                seen=shown.seen,
+                request=key,
+            )
         except ConflictError as exc:
-            p.notify("The pair changed meanwhile", str(exc), color="red")
+            p.notify("Not recorded: the pair changed meanwhile", str(exc), color="red")
+            if self.current is not None and self.current.sample_id == sid:
+                self.open(sid)  # show what was decided, with controls bound to it
             return False
         except (StoreError, OSError, ValueError) as exc:
             p.notify("Review not recorded", str(exc), color="red")
+            return False
+        if result.repeated:
             return False
         self.w.note.value = ""
         p.notify(f"Pair {sid} {verdict}", f"Version {version}, by {reviewer or 'anonymous'}.")
@@ -201,12 +290,12 @@ class ReviewPanel:
         states = review_states(self.panel.store) if self.panel.store is not None else {}
         queue = self.queue()
         under = self.current is not None
-        for handle in (w.approve, w.reject, w.fix):
+        for handle in (*self._controls, w.fix):
             handle.disabled = not under
         if message is not None or self.current is None:
             w.status.content = message or "*Next opens the split's first pair.*"
             return
-        sid, version = self.current
+        sid, version = self.current.sample_id, self.current.version
         info = next((p for p, _ in queue if p.sample_id == sid), None)
         state = states.get(sid)
         where = ""
@@ -232,4 +321,16 @@ class ReviewPanel:
 
         w.approve.on_click(lambda _e: p.guarded(lambda: self.verdict("approved")))
         w.reject.on_click(lambda _e: p.guarded(lambda: self.verdict("rejected")))
+        for verdict, key in (("approved", "approve"), ("rejected", "reject")):
+            k = VERDICT_KEYS[key]
+            try:
+                command = p.session.client.gui.add_command(
+                    k.label,
+                    hotkey=k.key,  # type: ignore[arg-type]
+                    modifier=k.modifier,  # type: ignore[arg-type]
+                )
+            except Exception:  # experimental in viser 1.1.1: the buttons still work
+                continue
+            command.on_trigger(lambda _e, v=verdict: p.guarded(lambda: self.verdict(v)))
+            self._controls.append(command)
         w.fix.on_click(lambda _e: p.guarded(self.save_fix))

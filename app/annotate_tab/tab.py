@@ -14,10 +14,11 @@ from app.annotate_tab.hub import AnnotationHub
 from app.annotate_tab.keys import (
     MOVE_FAR,
     MOVE_STEP,
+    HelpWindow,
     add_help_folder,
+    add_key_owner,
     add_prompt_key,
     register_keys,
-    show_help,
 )
 from app.annotate_tab.pairs import PairActions
 from app.annotate_tab.panel import AnnotationPanel
@@ -65,6 +66,10 @@ def _wire(
     @scene.on_click()
     def _(event: viser.SceneClickEvent) -> None:
         panel.guarded(lambda: edits.click_ground(event.ray_origin, event.ray_direction))
+
+    @scene.on_click(modifier="shift")
+    def _(event: viser.SceneClickEvent) -> None:
+        panel.guarded(lambda: edits.place_box(event.ray_origin, event.ray_direction))
 
     panel.view.gizmo.on_update(edits.on_gizmo)
 
@@ -165,19 +170,19 @@ def _register_keys(
         "undo": edits.undo,
         "redo": edits.redo,
         "new_pair": edits.new_pair,
-        "help": lambda: show_help(gui),
+        "help": HelpWindow(gui).toggle,
         "play": sequence.toggle_play,
         "drive_previous": lambda: sequence.step(-1),
         "drive_next": lambda: sequence.step(1),
         "carry": sequence.carry,
         "review_next": lambda: review.step(1),
         "review_previous": lambda: review.step(-1),
-        "approve": lambda: review.verdict("approved"),
-        "reject": lambda: review.verdict("rejected"),
+        # approve, reject: the review panel's, bound to each pair shown (ReviewPanel.open)
         "fix": review.save_fix,
     }
     for i, cls in enumerate(CLASSES):
         actions[f"new_class_{i}"] = lambda cls=cls: edits.set_new_class(cls)
     register_keys(gui, actions, panel.guarded)
     add_prompt_key(gui)
+    add_key_owner(gui)
     add_help_folder(gui)

@@ -1,0 +1,28 @@
+"""What every browser's session shows the same way: :class:`SessionOptions` (its own module so
+that :mod:`app.session` stays one screenful of concerns; imported from there as before)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from scenes.talk2radar.root import Sample
+
+
+@dataclass(frozen=True)
+class SessionOptions:
+    """What every session shows the same way.
+
+    Attributes:
+        model_note: A warning shown at the top of the panel (None: none).
+        score_threshold: The query panel's initial score threshold.
+        labelled_boxes: The labelled boxes of a sample's frame (``model.LabelledBoxes``, None
+            where it has none); None: the root has no labelled boxes (no "Candidates" control).
+    """
+
+    model_note: str | None = None
+    score_threshold: float = 0.3
+    labelled_boxes: Callable[[Sample], object | None] | None = None
+
+
+__all__ = ["SessionOptions"]
