@@ -5,6 +5,10 @@ files (``<frame id>.txt``, one detection per line with a 16th score field) again
 ``python -m model.evaluate --data ROOT`` grounds a split (default ``test``) with a checkpoint (default
 the bundled one), writes and scores its prediction files, and adds the per-prompt grounding metrics
 (:mod:`model.evaluation.grounding`) with the class-noun and language-blind oracle baselines beside them.
+``python -m model.evaluate --data NUSC --talk2car NUSC/commands --split val --checkpoint CKPT --out
+DIR`` grounds a nuScenes root's Talk2Car commands instead (:mod:`model.evaluation.talk2car`): it
+prints table II's figures (BEV and 3D AP at MSSG's AP_A and AP_B, overall, rain and night),
+Talk2Car's 2D AP50 and top-1 beside the baselines, and writes ``DIR/{split}_predictions.json``.
 
 Decisions (the devkit behaves differently, see the spec §2.2):
 
@@ -229,7 +233,15 @@ class EvaluateConfig:
         group=FILES_MODE,
         help="folder of prediction files <frame id>.txt (a missing file = no detections)",
     )
-    data: Path | None = option(None, group=MODEL_MODE, help="Talk2Radar root")
+    data: Path | None = option(
+        None, group=MODEL_MODE, help="Talk2Radar root, or a nuScenes root with --talk2car"
+    )
+    talk2car: Path | None = option(
+        None,
+        group=MODEL_MODE,
+        help="the Talk2Car command folder ({split}_commands.json) of the nuScenes --data root: "
+        "ground its commands, print table II and write OUT/{split}_predictions.json",
+    )
     split: str = option("test", group=MODEL_MODE, help="ImageSets split (default: test)")
     checkpoint: Path = option(
         DEFAULT_CHECKPOINT,
@@ -301,7 +313,16 @@ class EvaluateConfig:
         if self.data is not None:
             if self.labels is not None or self.preds is not None:
                 raise ValueError("--data does not go with --labels/--preds")
+            from scenes.datasets.nuscenes_frames import is_nuscenes_root
+
+            if self.talk2car is None and is_nuscenes_root(self.data):
+                raise ValueError(
+                    f"--data {self.data} is a nuScenes root (it holds a v1.0-* folder): give its "
+                    "Talk2Car command folder with --talk2car DIR"
+                )
             return "model"
+        if self.talk2car is not None:
+            raise ValueError("--talk2car goes with --data NUSC (a nuScenes root)")
         if self.labels is None and self.preds is None:
             raise ValueError(
                 "give --labels DIR --preds DIR, or --data ROOT [--checkpoint PATH] [--out DIR]"
@@ -436,9 +457,52 @@ def _run_model_mode(cfg: EvaluateConfig) -> int:
     return 0
 
 
+def _run_talk2car_mode(cfg: EvaluateConfig) -> int:
+    """Ground a nuScenes root's commands of a split, print the table, write the predictions."""
+    from scenes.nuscenes.classes import model_class
+    from scenes.nuscenes.talk2car import model_box_to_camera
+
+    from model.checkpoint import load_checkpoint
+    from model.evaluation.talk2car.predict import iterate_command_predictions, predictions_json
+    from model.evaluation.talk2car.report import build_report
+    from scenes.datasets.nuscenes_frames import open_talk2car
+
+    if cfg.threshold is not None:
+        raise EvaluationInputError("--threshold is not used with --talk2car (AP ranks every box)")
+    out_dir = cfg.out or default_out_dir(cfg.data, cfg.split)
+    root, commands = open_talk2car(cfg.data, cfg.talk2car, cfg.split)
+    model = load_checkpoint(cfg.checkpoint, device=cfg.device)
+    predictions = list(
+        iterate_command_predictions(model, root, commands, model_class, limit=cfg.limit)
+    )
+    if not predictions:
+        raise EvaluationInputError(
+            f"{cfg.talk2car}: split {cfg.split!r} has no command with a referent in the class set"
+        )
+    report = build_report(predictions)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / f"{cfg.split}_predictions.json"
+    from scenes.utils.durable import atomic_write_text
+
+    atomic_write_text(path, json.dumps(predictions_json(predictions, model_box_to_camera)) + "\n")
+    skipped = sum(commands.skipped.values())
+    print(
+        f"data: {cfg.data} commands {cfg.talk2car} split {cfg.split} ({len(predictions)} "
+        f"commands scored, {skipped} skipped); checkpoint {cfg.checkpoint}"
+    )
+    print(report.format_table(), end="")
+    print(f"predictions written to {path}")
+    if cfg.json is not None:
+        write_json(cfg.json, report)
+        print(f"wrote {cfg.json}")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     cfg = parse_args(argv)
     runner = _run_model_mode if cfg.mode() == "model" else _run_files_mode
+    if cfg.talk2car is not None:
+        runner = _run_talk2car_mode
     try:
         return runner(cfg)
     except (EvaluationInputError, LabelError, ValueError) as exc:
