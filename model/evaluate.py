@@ -5,10 +5,8 @@ files (``<frame id>.txt``, one detection per line with a 16th score field) again
 ``python -m model.evaluate --data ROOT`` grounds a split (default ``test``) with a checkpoint (default
 the bundled one), writes and scores its prediction files, and adds the per-prompt grounding metrics
 (:mod:`model.evaluation.grounding`) with the class-noun and language-blind oracle baselines beside them.
-``python -m model.evaluate --data NUSC --talk2car NUSC/commands --split val --checkpoint CKPT --out
-DIR`` grounds a nuScenes root's Talk2Car commands instead (:mod:`model.evaluation.talk2car`): it
-prints table II's figures (BEV and 3D AP at MSSG's AP_A and AP_B, overall, rain and night),
-Talk2Car's 2D AP50 and top-1 beside the baselines, and writes ``DIR/{split}_predictions.json``.
+``--data NUSC --talk2car NUSC/commands`` grounds a nuScenes root's Talk2Car commands instead
+(:func:`model.evaluation.talk2car.report.run_talk2car`: table II, ``OUT/{split}_predictions.json``).
 
 Decisions (the devkit behaves differently, see the spec §2.2):
 
@@ -458,40 +456,20 @@ def _run_model_mode(cfg: EvaluateConfig) -> int:
 
 
 def _run_talk2car_mode(cfg: EvaluateConfig) -> int:
-    """Ground a nuScenes root's commands of a split, print the table, write the predictions."""
-    from scenes.nuscenes.classes import model_class
-    from scenes.nuscenes.talk2car import model_box_to_camera
-
-    from model.checkpoint import load_checkpoint
-    from model.evaluation.talk2car.predict import iterate_command_predictions, predictions_json
-    from model.evaluation.talk2car.report import build_report
-    from scenes.datasets.nuscenes_frames import open_talk2car
+    """:func:`model.evaluation.talk2car.report.run_talk2car` with the command line's settings."""
+    from model.evaluation.talk2car.report import run_talk2car
 
     if cfg.threshold is not None:
         raise EvaluationInputError("--threshold is not used with --talk2car (AP ranks every box)")
-    out_dir = cfg.out or default_out_dir(cfg.data, cfg.split)
-    root, commands = open_talk2car(cfg.data, cfg.talk2car, cfg.split)
-    model = load_checkpoint(cfg.checkpoint, device=cfg.device)
-    predictions = list(
-        iterate_command_predictions(model, root, commands, model_class, limit=cfg.limit)
+    report = run_talk2car(
+        cfg.data,
+        cfg.talk2car,
+        cfg.split,
+        cfg.checkpoint,
+        cfg.out or default_out_dir(cfg.data, cfg.split),
+        device=cfg.device,
+        limit=cfg.limit,
     )
-    if not predictions:
-        raise EvaluationInputError(
-            f"{cfg.talk2car}: split {cfg.split!r} has no command with a referent in the class set"
-        )
-    report = build_report(predictions)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    path = out_dir / f"{cfg.split}_predictions.json"
-    from scenes.utils.durable import atomic_write_text
-
-    atomic_write_text(path, json.dumps(predictions_json(predictions, model_box_to_camera)) + "\n")
-    skipped = sum(commands.skipped.values())
-    print(
-        f"data: {cfg.data} commands {cfg.talk2car} split {cfg.split} ({len(predictions)} "
-        f"commands scored, {skipped} skipped); checkpoint {cfg.checkpoint}"
-    )
-    print(report.format_table(), end="")
-    print(f"predictions written to {path}")
     if cfg.json is not None:
         write_json(cfg.json, report)
         print(f"wrote {cfg.json}")

@@ -20,11 +20,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenes.geometry.calib import boxes_2d, boxes_lidar_to_camera
-from scenes.geometry.calib import Calibration
+from scenes.geometry.calib import Calibration, boxes_2d, boxes_lidar_to_camera
 from scenes.talk2radar.root import Talk2RadarRoot
 
-CATEGORY = {"Car": "vehicle.car", "Pedestrian": "human.pedestrian.adult", "Cyclist": "vehicle.bicycle"}
+CATEGORY = {
+    "Car": "vehicle.car",
+    "Pedestrian": "human.pedestrian.adult",
+    "Cyclist": "vehicle.bicycle",
+}
 IMAGE_SIZE = (1600, 900)
 
 
@@ -33,7 +36,10 @@ def model_class(category: str, attributes) -> str | None:
     if category == "vehicle.car":
         return "Car"
     if category.startswith("human.pedestrian.") and category.split(".")[-1] in (
-        "adult", "child", "construction_worker", "police_officer"
+        "adult",
+        "child",
+        "construction_worker",
+        "police_officer",
     ):
         return "Pedestrian"
     if category == "vehicle.bicycle" and "cycle.with_rider" in attributes:
@@ -137,15 +143,21 @@ def make_fake(synth: Path, path: Path) -> Path:
                 cats = [CATEGORY[a.cls] for a in actors] + ["vehicle.truck"]
                 attrs = [("cycle.with_rider",) if a.cls == "Cyclist" else () for a in actors]
                 frames[token] = FakeFrame(
-                    token, f"scene-{sid}", f"cam-{sid}",
+                    token,
+                    f"scene-{sid}",
+                    f"cam-{sid}",
                     np.asarray(sample.lidar, np.float32),
                     np.zeros(len(sample.lidar), np.float32),
                     np.asarray(sample.radar, np.float32),
                     np.zeros(len(sample.radar), np.float32),
                     np.array(boxes, dtype=np.float64).reshape(-1, 7),
-                    tuple(cats), tuple(attrs) + ((),),
+                    tuple(cats),
+                    (*tuple(attrs), ()),
                     tuple(f"ann-{sid}-{i}" for i in range(len(boxes))),
-                    sample.calib, sample.calib.velo_to_cam, None, IMAGE_SIZE,
+                    sample.calib,
+                    sample.calib.velo_to_cam,
+                    None,
+                    IMAGE_SIZE,
                     ("Rain, " if len(frames) % 2 else "Night, ") + "busy street",
                 )
             token = seen[key]
@@ -155,11 +167,20 @@ def make_fake(synth: Path, path: Path) -> Path:
             gaps = np.hypot(*(frame.boxes[:, :2] - sample.boxes[0, :2]).T)
             index = int(np.argmin(gaps))
             box = frame.boxes[index]
-            x1, y1, x2, y2 = boxes_2d(boxes_lidar_to_camera(box[None], frame.calib), frame.calib, IMAGE_SIZE)[0]
+            x1, y1, x2, y2 = boxes_2d(
+                boxes_lidar_to_camera(box[None], frame.calib), frame.calib, IMAGE_SIZE
+            )[0]
             command = FakeCommand(
-                f"cmd-{sid}", sample.prompt, frame.scene_token, token, frame.cam_front_token,
-                frame.annotation_tokens[index], frame.categories[index],
-                model_box_to_camera(frame, box), (x1, y1, x2 - x1, y2 - y1), f"img_{split}_{sid}.jpg",
+                f"cmd-{sid}",
+                sample.prompt,
+                frame.scene_token,
+                token,
+                frame.cam_front_token,
+                frame.annotation_tokens[index],
+                frame.categories[index],
+                model_box_to_camera(frame, box),
+                (x1, y1, x2 - x1, y2 - y1),
+                f"img_{split}_{sid}.jpg",
             )
             commands.append(command)
             referent[command.command_token] = (box.copy(), sample.classes[0], index)

@@ -5,8 +5,10 @@ class-noun and language-blind baselines."""
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -98,4 +100,50 @@ def build_report(predictions: Sequence[CommandPrediction]) -> Talk2CarReport:
     return Talk2CarReport(rows)
 
 
-__all__ = ["SUBSETS", "Talk2CarReport", "build_report", "figures", "subset_of"]
+def run_talk2car(
+    data: str | Path,
+    talk2car: str | Path,
+    split: str,
+    checkpoint: str | Path,
+    out: Path,
+    device: str = "cpu",
+    limit: int = 0,
+) -> Talk2CarReport:
+    """``python -m model.evaluate --data NUSC --talk2car CMDS``: ground the split's commands with
+    the checkpoint, print the table, write ``out/{split}_predictions.json``; returns the report.
+
+    Raises:
+        ValueError: no command of the split has a referent in the class set; the loader's and
+            the checkpoint's errors.
+    """
+    from scenes.nuscenes.classes import model_class
+    from scenes.nuscenes.talk2car import model_box_to_camera
+
+    from model.checkpoint import load_checkpoint
+    from model.evaluation.talk2car.predict import iterate_command_predictions, predictions_json
+    from scenes.datasets.nuscenes_frames import open_talk2car
+    from scenes.utils.durable import atomic_write_text
+
+    root, commands = open_talk2car(data, talk2car, split)
+    model = load_checkpoint(checkpoint, device=device)
+    predictions = list(iterate_command_predictions(model, root, commands, model_class, limit=limit))
+    if not predictions:
+        raise ValueError(
+            f"{Path(talk2car) / f'{split}_commands.json'}: no command with a referent in the "
+            "class set"
+        )
+    report = build_report(predictions)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / f"{split}_predictions.json"
+    atomic_write_text(path, json.dumps(predictions_json(predictions, model_box_to_camera)) + "\n")
+    skipped = sum(commands.skipped.values())
+    print(
+        f"data: {data} commands {talk2car} split {split} ({len(predictions)} commands scored, "
+        f"{skipped} skipped); checkpoint {checkpoint}"
+    )
+    print(report.format_table(), end="")
+    print(f"predictions written to {path}")
+    return report
+
+
+__all__ = ["SUBSETS", "Talk2CarReport", "build_report", "figures", "run_talk2car", "subset_of"]
