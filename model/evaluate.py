@@ -5,6 +5,8 @@ files (``<frame id>.txt``, one detection per line with a 16th score field) again
 ``python -m model.evaluate --data ROOT`` grounds a split (default ``test``) with a checkpoint (default
 the bundled one), writes and scores its prediction files, and adds the per-prompt grounding metrics
 (:mod:`model.evaluation.grounding`) with the class-noun and language-blind oracle baselines beside them.
+``--data NUSC --talk2car NUSC/commands`` grounds a nuScenes root's Talk2Car commands instead
+(:func:`model.evaluation.talk2car.report.run_talk2car`: table II, ``OUT/{split}_predictions.json``).
 
 Decisions (the devkit behaves differently, see the spec §2.2):
 
@@ -233,7 +235,15 @@ class EvaluateConfig:
         group=FILES_MODE,
         help="folder of prediction files <frame id>.txt (a missing file = no detections)",
     )
-    data: Path | None = option(None, group=MODEL_MODE, help="Talk2Radar root")
+    data: Path | None = option(
+        None, group=MODEL_MODE, help="Talk2Radar root, or a nuScenes root with --talk2car"
+    )
+    talk2car: Path | None = option(
+        None,
+        group=MODEL_MODE,
+        help="the Talk2Car command folder ({split}_commands.json) of the nuScenes --data root: "
+        "ground its commands, print table II and write OUT/{split}_predictions.json",
+    )
     split: str = option("test", group=MODEL_MODE, help="ImageSets split (default: test)")
     checkpoint: Path = option(
         DEFAULT_CHECKPOINT,
@@ -312,7 +322,16 @@ class EvaluateConfig:
         if self.data is not None:
             if self.labels is not None or self.preds is not None:
                 raise ValueError("--data does not go with --labels/--preds")
+            from scenes.datasets.nuscenes_frames import is_nuscenes_root
+
+            if self.talk2car is None and is_nuscenes_root(self.data):
+                raise ValueError(
+                    f"--data {self.data} is a nuScenes root (it holds a v1.0-* folder): give its "
+                    "Talk2Car command folder with --talk2car DIR"
+                )
             return "model"
+        if self.talk2car is not None:
+            raise ValueError("--talk2car goes with --data NUSC (a nuScenes root)")
         if self.labels is None and self.preds is None:
             raise ValueError(
                 "give --labels DIR --preds DIR, or --data ROOT [--checkpoint PATH] [--out DIR]"
@@ -451,9 +470,32 @@ def _run_model_mode(cfg: EvaluateConfig) -> int:
     return 0
 
 
+def _run_talk2car_mode(cfg: EvaluateConfig) -> int:
+    """:func:`model.evaluation.talk2car.report.run_talk2car` with the command line's settings."""
+    from model.evaluation.talk2car.report import run_talk2car
+
+    if cfg.threshold is not None:
+        raise EvaluationInputError("--threshold is not used with --talk2car (AP ranks every box)")
+    report = run_talk2car(
+        cfg.data,
+        cfg.talk2car,
+        cfg.split,
+        cfg.checkpoint,
+        cfg.out or default_out_dir(cfg.data, cfg.split),
+        device=cfg.device,
+        limit=cfg.limit,
+    )
+    if cfg.json is not None:
+        write_json(cfg.json, report)
+        print(f"wrote {cfg.json}")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     cfg = parse_args(argv)
     runner = _run_model_mode if cfg.mode() == "model" else _run_files_mode
+    if cfg.talk2car is not None:
+        runner = _run_talk2car_mode
     try:
         return runner(cfg)
     except (EvaluationInputError, LabelError, ValueError, PredictionWorkerError) as exc:

@@ -206,7 +206,7 @@ def test_a_finished_run_is_calibrated_on_the_validation_split(monkeypatch, tmp_p
 
     seen = {}
 
-    def fake(model, data, split="val", limit=0, min_prompts=50):
+    def fake(model, data, split="val", limit=0, min_prompts=50, talk2car=None):
         seen["split"] = split
         return Calibration(0.35, 80.0, 60.0, 120, ())
 

@@ -110,9 +110,11 @@ def calibrate(
     split: str = "val",
     limit: int = 0,
     min_prompts: int = MIN_REFERRED_PROMPTS,
+    talk2car: str | Path | None = None,
 ) -> Calibration:
     """Ground every prompt of ``split`` with ``model`` (a loaded checkpoint) and choose its
-    threshold.
+    threshold; ``talk2car``: ``data`` is a nuScenes root and these are its command files (each
+    command one prompt with its one referent, :func:`talk2car_answers`).
 
     Raises:
         CalibrationError: fewer than ``min_prompts`` (and at least one) of the prompts have a
@@ -122,22 +124,54 @@ def calibrate(
     from scenes.talk2radar.layout import split_file
     from scenes.talk2radar.root import Talk2RadarRoot
 
-    root = Talk2RadarRoot(data)
-    ids = root.ids(split)[: limit or None]
-    answers = []
     low = min(decode_threshold(model), CANDIDATES[0])
-    for fp in iterate_predictions(model, root, ids, score_threshold=low):
-        predicted = PromptBoxes.make(fp.boxes, fp.classes, fp.scores, source=fp.sample.sample_id)
-        referents = PromptBoxes.make(fp.sample.boxes, fp.sample.classes)
-        answers.append((predicted, referents))
+    if talk2car is not None:
+        answers = talk2car_answers(model, data, talk2car, split, limit, low)
+        where = f"{Path(talk2car) / f'{split}_commands.json'}"
+    else:
+        root = Talk2RadarRoot(data)
+        ids = root.ids(split)[: limit or None]
+        answers = []
+        for fp in iterate_predictions(model, root, ids, score_threshold=low):
+            source = fp.sample.sample_id
+            predicted = PromptBoxes.make(fp.boxes, fp.classes, fp.scores, source=source)
+            referents = PromptBoxes.make(fp.sample.boxes, fp.sample.classes)
+            answers.append((predicted, referents))
+        where = str(split_file(root.lidar_dir, split))
     referred = sum(len(r.boxes) > 0 for _, r in answers)
     if referred < max(1, min_prompts):
         raise CalibrationError(
-            f"{split_file(root.lidar_dir, split)}: {referred} of the "
+            f"{where}: {referred} of the "
             f"{len(answers)} prompts of split {split!r} have a referent; calibrating needs at "
             f"least {max(1, min_prompts)} (--min-prompts), so no threshold is chosen"
         )
     return choose_threshold(answers)
+
+
+def talk2car_answers(
+    model: TPCNet,
+    data: str | Path,
+    talk2car: str | Path,
+    split: str,
+    limit: int,
+    score_threshold: float,
+) -> list[tuple[PromptBoxes, PromptBoxes]]:
+    """``(answer, referent)`` of each command of a nuScenes root's ``split`` with a referent in
+    the class set (:func:`model.evaluation.talk2car.predict.iterate_command_predictions`)."""
+    from model.evaluation.talk2car.predict import iterate_command_predictions
+    from scenes.datasets.nuscenes_frames import open_talk2car
+    from scenes.nuscenes.classes import model_class
+
+    root, commands = open_talk2car(data, talk2car, split)
+    answers = []
+    for p in iterate_command_predictions(
+        model, root, commands, model_class, score_threshold, progress=False, limit=limit
+    ):
+        a = p.answer
+        source = p.command.command_token
+        predicted = PromptBoxes.make(a.boxes, a.classes, a.scores, source=source)
+        answers.append((predicted, PromptBoxes.make(a.referent[None], [a.referent_class])))
+    return answers
 
 
 def calibrate_file(
@@ -147,6 +181,7 @@ def calibrate_file(
     limit: int = 0,
     min_prompts: int = MIN_REFERRED_PROMPTS,
     dry_run: bool = False,
+    talk2car: str | Path | None = None,
 ) -> Calibration:
     """Calibrate the checkpoint at ``path`` on ``split`` of ``data`` and, unless ``dry_run``,
     store the threshold and its source in it (``python -m model.calibrate``; training calls it at
@@ -159,7 +194,7 @@ def calibrate_file(
     from model.checkpoint_meta import CheckpointMeta, portable_path
 
     model = load_checkpoint(path)
-    cal = calibrate(model, data, split, limit, min_prompts)
+    cal = calibrate(model, data, split, limit, min_prompts, talk2car)
     if not dry_run:
         meta = CheckpointMeta.of(model).replace(
             operating_threshold=cal.threshold,
@@ -175,9 +210,11 @@ def calibrate_file(
     return cal
 
 
-def calibrate_run(path: Path, data: str | Path, split: str) -> bool:
-    """Calibrate a finished training run's ``last.pt`` (``path``) on ``split`` of ``data``;
-    whether the threshold was stored.
+def calibrate_run(
+    path: Path, data: str | Path, split: str, talk2car: str | Path | None = None
+) -> bool:
+    """Calibrate a finished training run's ``last.pt`` (``path``) on ``split`` of ``data`` (a
+    nuScenes root's commands with ``talk2car``); whether the threshold was stored.
 
     The run is finished and its checkpoint written whatever happens here, so nothing here fails
     it: a split that cannot measure a threshold, a malformed file of the split (a label, a
@@ -187,7 +224,7 @@ def calibrate_run(path: Path, data: str | Path, split: str) -> bool:
     ``python -m model.train`` exits 0.
     """
     try:
-        cal = calibrate_file(path, data, split)
+        cal = calibrate_file(path, data, split, talk2car=talk2car)
     except (ValueError, OSError, ImportError) as exc:  # bad input: one line, as everywhere
         reason = error_line(exc)
     except Exception as exc:  # a bug, not the data: its traceback, and still a warning
@@ -210,6 +247,7 @@ def calibrate_run(path: Path, data: str | Path, split: str) -> bool:
             str(path),
             "--split",
             split,
+            *(["--talk2car", str(talk2car)] if talk2car is not None else []),
         ]
     )
     print(
@@ -224,7 +262,10 @@ def calibrate_run(path: Path, data: str | Path, split: str) -> bool:
 class CalibrateConfig:
     """The settings of ``python -m model.calibrate`` (each field is one of its flags)."""
 
-    data: str = option(help="Talk2Radar root with a validation split")
+    data: str = option(help="Talk2Radar root with a validation split, or a nuScenes root")
+    talk2car: str | None = option(
+        None, help="the nuScenes --data root's Talk2Car command folder ({split}_commands.json)"
+    )
     checkpoint: str = option(help="checkpoint to calibrate (rewritten)")
     split: str = option("val")
     limit: int = option(0, help="first N samples only (0: all)")
@@ -251,7 +292,13 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     try:
         cal = calibrate_file(
-            a.checkpoint, a.data, a.split, a.limit, a.min_prompts, dry_run=a.dry_run
+            a.checkpoint,
+            a.data,
+            a.split,
+            a.limit,
+            a.min_prompts,
+            dry_run=a.dry_run,
+            talk2car=a.talk2car,
         )
         for t, f1, exact in cal.curve:
             mark = "  <- chosen" if t == cal.threshold else ""

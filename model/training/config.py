@@ -99,6 +99,12 @@ class TrainConfig:
         "matching --data root's frames (in order; 'none' for a root without); such a root trains "
         "on its labels and prompts only, never a sidecar",
     )
+    talk2car: tuple[str, ...] = option(
+        (),
+        help="referent path: the Talk2Car command folder ({split}_commands.json) of the matching "
+        "--data nuScenes root (in order; 'none' for a Talk2Radar root); its commands are the "
+        "given prompts, every annotation of a commanded sample a detection target",
+    )
     out: str = option(help="run folder, e.g. runs/NAME")
     preset: PresetName = option("small")
     epochs: int = option(20, on_resume=True)
@@ -225,14 +231,14 @@ class TrainConfig:
     grad_clip: float = option(35.0, cli=False)
 
     def __post_init__(self) -> None:
-        for name in ("data", "data_weights", "scene_labels", "family_rates"):
+        for name in ("data", "data_weights", "scene_labels", "talk2car", "family_rates"):
             value = getattr(self, name)
             object.__setattr__(self, name, (value,) if isinstance(value, str) else tuple(value))
         try:
             roots = self.roots()
         except DataSpecError as exc:
             raise TrainingError(str(exc)) from exc
-        labelled = [r.scene_labels is not None for r in roots]
+        labelled = [r.labelled for r in roots]
         if self.label_prompts is None:
             object.__setattr__(self, "label_prompts", LABEL_PROMPTS if any(labelled) else 0)
         if self.prompts_per_scene is None:
@@ -272,7 +278,7 @@ class TrainConfig:
 
     def roots(self) -> tuple[RootSpec, ...]:
         """The training roots (:func:`model.training.data.root_specs`)."""
-        return root_specs(self.data, self.data_weights, self.scene_labels)
+        return root_specs(self.data, self.data_weights, self.scene_labels, self.talk2car)
 
     def prompt_draw(self) -> PromptDraw:
         """The referent path's prompts of these settings (the one place the flags are mapped to

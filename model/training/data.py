@@ -9,6 +9,12 @@ never reads a sidecar; a synthetic root with its sidecar trains on generated pro
 (:class:`scenes.datasets.frames.FrameDataset`). So one command can pre-train on our world and
 fine-tune on a user's: ``--data data/synth --data T2R --scene-labels none --scene-labels VOD``.
 
+A ``--data`` root holding a ``v1.0-*`` folder is a nuScenes root (found automatically,
+:func:`scenes.datasets.nuscenes_frames.is_nuscenes_root`); it trains on the Talk2Car commands of
+the matching ``--talk2car`` folder (paired with the ``--data`` roots in order, ``none`` for a
+Talk2Radar root), every annotation of a commanded sample a detection target
+(:class:`scenes.datasets.nuscenes_frames.NuScenesFrames`).
+
 :class:`MixedFrames` is the epoch over several roots: the items of a root of weight ``w`` are seen
 ``w`` times per epoch on average (``floor(w)`` times each, plus a random ``w - floor(w)`` share of
 them, drawn per epoch from ``(seed, epoch)``), so an epoch's length is fixed and a resumed run
@@ -25,6 +31,7 @@ import numpy as np
 from torch.utils.data import Dataset
 
 from scenes.datasets.frames import FrameDataset, FrameItem
+from scenes.datasets.nuscenes_frames import NuScenesFrames, is_nuscenes_root, open_talk2car
 from scenes.talk2radar.scene_labels import SceneLabels
 
 NO_SCENE_LABELS = "none"
@@ -43,25 +50,44 @@ class RootSpec:
         path: The Talk2Radar root.
         weight: Times each of its frames is seen per epoch, on average (> 0).
         scene_labels: A View-of-Delft root with the frames' full labels, or None.
+        talk2car: A nuScenes root's Talk2Car command folder (``{split}_commands.json``), or None
+            (a Talk2Radar root).
     """
 
     path: str
     weight: float = 1.0
     scene_labels: str | None = None
+    talk2car: str | None = None
+
+    @property
+    def labelled(self) -> bool:
+        """Whether the root's frames list every object of the class set (scene labels, or a
+        nuScenes root): label prompts are generated from them."""
+        return self.scene_labels is not None or self.talk2car is not None
 
 
 def root_specs(
-    data: Sequence[str], weights: Sequence[float] = (), scene_labels: Sequence[str] = ()
+    data: Sequence[str],
+    weights: Sequence[float] = (),
+    scene_labels: Sequence[str] = (),
+    talk2car: Sequence[str] = (),
 ) -> tuple[RootSpec, ...]:
-    """Pair the ``--data``, ``--data-weight`` and ``--scene-labels`` values (module docstring).
+    """Pair the ``--data``, ``--data-weight``, ``--scene-labels`` and ``--talk2car`` values
+    (module docstring).
 
     Raises:
-        DataSpecError: no root, more weights or scene-label roots than ``--data`` roots, or a
-            weight that is not a positive finite number.
+        DataSpecError: no root, more weights, scene-label roots or command folders than
+            ``--data`` roots, a weight that is not a positive finite number, a nuScenes root
+            without its ``--talk2car`` folder (or given scene labels), or a command folder for a
+            root that is not a nuScenes root.
     """
     if not data:
         raise DataSpecError("--data: give at least one root")
-    for flag, values in (("--data-weight", weights), ("--scene-labels", scene_labels)):
+    for flag, values in (
+        ("--data-weight", weights),
+        ("--scene-labels", scene_labels),
+        ("--talk2car", talk2car),
+    ):
         if len(values) > len(data):
             raise DataSpecError(
                 f"{flag} given {len(values)} times for {len(data)} --data roots; they pair in order"
@@ -72,12 +98,38 @@ def root_specs(
         if not math.isfinite(weight) or weight <= 0:
             raise DataSpecError(f"--data-weight {weights[i]!r} of {path}: must be a number > 0")
         labels = scene_labels[i] if i < len(scene_labels) else None
-        out.append(RootSpec(path, weight, None if labels in (None, NO_SCENE_LABELS) else labels))
+        labels = None if labels in (None, NO_SCENE_LABELS) else labels
+        commands = talk2car[i] if i < len(talk2car) else None
+        commands = None if commands in (None, NO_SCENE_LABELS) else commands
+        nuscenes = is_nuscenes_root(path)
+        if nuscenes and commands is None:
+            raise DataSpecError(
+                f"--data {path} is a nuScenes root (it holds a v1.0-* folder): give its Talk2Car "
+                "command folder with --talk2car DIR (the folder holding {split}_commands.json)"
+            )
+        if commands is not None and not nuscenes:
+            raise DataSpecError(
+                f"--talk2car {commands} pairs with --data {path}, which is not a nuScenes root "
+                "(no v1.0-* folder in it); give 'none' for a Talk2Radar root"
+            )
+        if nuscenes and labels is not None:
+            raise DataSpecError(
+                f"--scene-labels {labels} pairs with the nuScenes root {path}, whose own "
+                "annotations are its scene labels; give 'none'"
+            )
+        out.append(RootSpec(path, weight, labels, commands))
     return tuple(out)
 
 
-def frame_dataset(spec: RootSpec, split: str, **kwargs: object) -> FrameDataset:
-    """The :class:`FrameDataset` of one root's ``split`` (its source chosen as the module says)."""
+TrainingFrames = FrameDataset | NuScenesFrames
+"""One root's training frames: a Talk2Radar root's, or a nuScenes root's commanded samples."""
+
+
+def frame_dataset(spec: RootSpec, split: str, **kwargs: object) -> TrainingFrames:
+    """The frames of one root's ``split`` (its source chosen as the module says)."""
+    if spec.talk2car is not None:
+        root, commands = open_talk2car(spec.path, spec.talk2car, split)
+        return NuScenesFrames(root, commands, **kwargs)  # type: ignore[arg-type]
     labels = None if spec.scene_labels is None else SceneLabels(spec.scene_labels)
     return FrameDataset(spec.path, split, scene_labels=labels, **kwargs)  # type: ignore[arg-type]
 
@@ -88,7 +140,7 @@ class MixedFrames(Dataset):
     Item ``j`` of an epoch is frame :meth:`resolve` ``(j)`` of the concatenation of the roots.
     """
 
-    def __init__(self, datasets: Sequence[FrameDataset], weights: Sequence[float], seed: int = 0):
+    def __init__(self, datasets: Sequence[TrainingFrames], weights: Sequence[float], seed: int = 0):
         if len(datasets) != len(weights) or not datasets:
             raise DataSpecError("MixedFrames needs one weight per dataset")
         self.datasets = list(datasets)
@@ -141,6 +193,7 @@ __all__ = [
     "DataSpecError",
     "MixedFrames",
     "RootSpec",
+    "TrainingFrames",
     "frame_dataset",
     "root_specs",
 ]

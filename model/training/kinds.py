@@ -35,7 +35,7 @@ from model.grounding.referent import ReferentGrounding
 from model.tpcnet import TPCNet, head_class
 from model.training import distributed
 from model.training.config import TrainConfig, TrainingError
-from model.training.data import MixedFrames, RootSpec, frame_dataset
+from model.training.data import MixedFrames, RootSpec, TrainingFrames, frame_dataset
 from model.training.referent_cache import cached_referent_step
 from model.training.referent_step import ReferentTrainConfig, referent_step
 from model.training.steps import (
@@ -47,7 +47,7 @@ from model.training.steps import (
     freeze_scene,
 )
 from scenes.datasets.augment import AugmentConfig
-from scenes.datasets.frames import FrameDataset, SensorAugment
+from scenes.datasets.frames import SensorAugment
 from scenes.datasets.grounding import GroundingDataset
 from scenes.talk2radar.root import Talk2RadarRoot
 
@@ -65,7 +65,7 @@ class TrainingKind(Protocol):
         """Raise :class:`TrainingError` for a setting this kind does not take."""
 
     def dataset(
-        self, cfg: TrainConfig, specs: Sequence[RootSpec], root: Talk2RadarRoot
+        self, cfg: TrainConfig, specs: Sequence[RootSpec], root: Talk2RadarRoot | None
     ) -> TrainingData:
         """The training items of ``cfg.train_split`` (``root``: the first of ``specs``, read)."""
 
@@ -99,7 +99,7 @@ def _augment(cfg: TrainConfig) -> AugmentConfig:
     return AugmentConfig(flip_probability=cfg.flip_probability)
 
 
-def training_frames(cfg: TrainConfig, spec: RootSpec, **kwargs: object) -> FrameDataset:
+def training_frames(cfg: TrainConfig, spec: RootSpec, **kwargs: object) -> TrainingFrames:
     """One root's training frames (``kwargs``: :func:`model.training.data.frame_dataset`'s),
     the first ``--scene-limit`` only with ``--freeze-scene`` (the scenes cached)."""
     frames = frame_dataset(spec, cfg.train_split, **kwargs)
@@ -115,6 +115,11 @@ class PaperTraining:
     calibrates: bool = False
 
     def check(self, cfg: TrainConfig) -> None:
+        if any(spec.talk2car is not None for spec in cfg.roots()):
+            raise TrainingError(
+                "a nuScenes root with --talk2car trains the referent path (--grounding "
+                "referent); the paper's path trains on a Talk2Radar root's label_2 boxes"
+            )
         if len(cfg.data) > 1 or cfg.scene_labels:
             raise TrainingError(
                 "several --data roots and --scene-labels are the referent path's; the paper's "
@@ -122,7 +127,7 @@ class PaperTraining:
             )
 
     def dataset(
-        self, cfg: TrainConfig, specs: Sequence[RootSpec], root: Talk2RadarRoot
+        self, cfg: TrainConfig, specs: Sequence[RootSpec], root: Talk2RadarRoot | None
     ) -> TrainingData:
         return GroundingDataset(root, cfg.train_split, augment=_augment(cfg), seed=cfg.seed)
 
@@ -161,7 +166,7 @@ class ReferentTraining:
         return None
 
     def dataset(
-        self, cfg: TrainConfig, specs: Sequence[RootSpec], root: Talk2RadarRoot
+        self, cfg: TrainConfig, specs: Sequence[RootSpec], root: Talk2RadarRoot | None
     ) -> TrainingData:
         sensors = SensorAugment() if cfg.sensor_augment else None
         augment = _augment(cfg)

@@ -118,6 +118,8 @@ def validate(model: torch.nn.Module, cfg: TrainConfig, root: Talk2RadarRoot) -> 
 def check_labels(spec: RootSpec, split: str) -> None:
     """Refuse a training root none of whose ``split`` frames has a label of :data:`CLASSES` (its
     ``label_2``, or its scene labels' where given): it would train to nothing and report mAP 0."""
+    if spec.talk2car is not None:
+        return  # a nuScenes root: NuScenesFrames refuses a split without a referred command
     root = Talk2RadarRoot(spec.path, radar=None)
     ids = root.ids(split)
     if not ids:
@@ -164,7 +166,7 @@ class Run:
         cfg: The run's settings.
         kind: How its grounding kind trains (:mod:`model.training.kinds`).
         rank, world: This process's rank and the number of processes.
-        root: The first training root (validated on).
+        root: The first training root (validated on); None for a nuScenes root.
         dataset: The training items.
         model: The model, on its device.
         params: The parameters trained, in checkpoint order.
@@ -181,7 +183,7 @@ class Run:
     kind: TrainingKind
     rank: int
     world: int
-    root: Talk2RadarRoot
+    root: Talk2RadarRoot | None
     dataset: TrainingData
     model: TPCNet
     params: list[torch.nn.Parameter]
@@ -254,7 +256,17 @@ def set_up(cfg: TrainConfig, resume: bool, stop: StopRequest) -> Run:
     torch.manual_seed(cfg.seed + rank)
     radar_folder = None if cfg.radar_folder == "none" else cfg.radar_folder
     specs = cfg.roots()
-    root = Talk2RadarRoot(specs[0].path, radar=radar_folder, sidecar=specs[0].scene_labels is None)
+    root = None
+    if specs[0].talk2car is None:
+        sidecar = specs[0].scene_labels is None
+        root = Talk2RadarRoot(specs[0].path, radar=radar_folder, sidecar=sidecar)
+    elif cfg.val_every:
+        raise TrainingError(
+            f"--data {specs[0].path} is a nuScenes root: validation during training reads a "
+            "Talk2Radar root; give --val-every 0 and evaluate the run with python -m "
+            "model.evaluate --data NUSC --talk2car CMDS (it is calibrated on the val commands "
+            "at the end)"
+        )
     for spec in specs:
         check_labels(spec, cfg.train_split)
     dataset = kind.dataset(cfg, specs, root)
@@ -384,7 +396,12 @@ def end_epoch(run: Run) -> None:
     state.epoch += 1
     state.step_in_epoch = 0
     best = False
-    if run.rank == 0 and cfg.val_every and state.epoch % cfg.val_every == 0:
+    if (
+        run.rank == 0
+        and run.root is not None
+        and cfg.val_every
+        and state.epoch % cfg.val_every == 0
+    ):
         metrics = validate(run.model, cfg, run.root)
         state.last_map = metrics["mAP_3d"]
         best = state.last_map > state.best_map
@@ -432,7 +449,8 @@ def main(argv: list[str] | None = None) -> int:
         if training_kind(cfg).calibrates and cfg.calibrate and state.epoch >= cfg.epochs:
             from model.training.calibrate import calibrate_run
 
-            calibrate_run(Path(cfg.out) / LAST_FILE, cfg.roots()[0].path, cfg.val_split)
+            first = cfg.roots()[0]
+            calibrate_run(Path(cfg.out) / LAST_FILE, first.path, cfg.val_split, first.talk2car)
     return 0
 
 

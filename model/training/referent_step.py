@@ -248,13 +248,14 @@ def frame_prompts(
     """``(text, referent actor ids)`` of a frame's training prompts: the prompts that come with
     it (labels source, all of them), or ``count`` generated from its actors (sidecar source).
 
-    ``label_prompts``: on a labels-source frame with complete labels (scene labels), that many
+    ``label_prompts``: on a labels-source frame with complete labels (scene labels, or a nuScenes
+    sample: :attr:`scenes.datasets.frames.FrameItem.labels_complete`), that many
     more prompts generated from its labelled boxes, of the attributes a box alone decides
     (``PromptConfig.geometry_only``: class, depth, side; the boxes' motion is unknown). Given
     prompts are kept as written; generated ones are reworded as ``config.p_perturb`` says."""
     if not frame.generates_prompts:
         given = [(g.text, g.referent_ids) for g in frame.given]
-        if label_prompts <= 0 or frame.region is None:
+        if label_prompts <= 0 or not frame.labels_complete:
             return given
         geometry = replace(config, geometry_only=True)
         extra: list[Prompt] = generate_prompts(frame.actors, rng, label_prompts, config=geometry)
@@ -266,25 +267,50 @@ def frame_prompts(
 def detection_targets(
     model: TPCNet, frames: Sequence[FrameItem], actors: Sequence[Sequence[Actor]]
 ) -> BatchTargets:
-    """Detector targets of a batch: every in-grid actor of each frame, and where a frame's labels
-    cover only the camera view (:attr:`FrameItem.region`), no negatives outside it."""
+    """Detector targets of a batch: every in-grid actor of each frame; where a frame's labels
+    cover only the camera view (:attr:`FrameItem.region`), no negatives outside it; and no
+    negatives on the footprint of a labelled object outside the class set
+    (:attr:`FrameItem.ignore_boxes`, grown by :data:`IGNORE_MARGIN`)."""
     targets = model.scene.detection_targets(
         [np.stack([a.box for a in acts]) if acts else np.zeros((0, 7)) for acts in actors],
         [[a.cls for a in acts] for acts in actors],
     )
-    if all(f.region is None for f in frames):
+    has_ignore = [f.ignore_boxes is not None and len(f.ignore_boxes) > 0 for f in frames]
+    if all(f.region is None for f in frames) and not any(has_ignore):
         return targets
     h, w = model.head_grid.shape
     ignore = np.zeros((len(frames), 1, h, w), dtype=bool)
     for b, frame in enumerate(frames):
+        if has_ignore[b]:
+            cells = grid_cell_centres(model.head_grid)
+            inside = in_bev_footprint(cells, np.asarray(frame.ignore_boxes), IGNORE_MARGIN)
+            ignore[b, 0] |= inside.reshape(h, w)
         if frame.region is not None:
             region = frame.region
             calib = tuple(
                 (m.tobytes(), m.shape)
                 for m in (region.calib.P2, region.calib.R0_rect, region.calib.Tr_velo_to_cam)
             )
-            ignore[b, 0] = _outside(model.head_grid, calib, region.image_size, region.mirrored)
+            ignore[b, 0] |= _outside(model.head_grid, calib, region.image_size, region.mirrored)
     return replace(targets, ignore=torch.from_numpy(ignore))
+
+
+IGNORE_MARGIN = 0.5
+"""Metres by which an ignored object's footprint grows (the head's cells are 0.32-0.64 m: a cell
+whose centre falls just outside the box still sees its points)."""
+
+
+def in_bev_footprint(xy: np.ndarray, boxes: np.ndarray, margin: float = 0.0) -> np.ndarray:
+    """``(N,)`` bool: which ``(N, 2)`` ground positions lie inside the bird's-eye footprint of any
+    of ``boxes`` ``(J, 7)`` (LiDAR frame), each grown by ``margin`` metres on every side."""
+    pts = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    out = np.zeros(len(pts), dtype=bool)
+    for box in np.asarray(boxes, dtype=np.float64).reshape(-1, 7):
+        d = pts - box[:2]
+        c, s = np.cos(box[6]), np.sin(box[6])
+        along, across = d[:, 0] * c + d[:, 1] * s, -d[:, 0] * s + d[:, 1] * c
+        out |= (np.abs(along) <= box[3] / 2 + margin) & (np.abs(across) <= box[4] / 2 + margin)
+    return out
 
 
 @functools.lru_cache(maxsize=64)
@@ -301,9 +327,11 @@ def _outside(
 
 
 __all__ = [
+    "IGNORE_MARGIN",
     "ReferentLoss",
     "ReferentTrainConfig",
     "float32_output",
+    "in_bev_footprint",
     "in_grid_actors",
     "referent_step",
     "step_text",

@@ -160,6 +160,12 @@ class FrameItem:
         given: Labels source: the prompts that come with the frame; empty on the sidecar source
             (prompts are generated from the actors, :attr:`generates_prompts`).
         region: Labels source with scene labels: where the labels are complete (None: everywhere).
+        from_labels: The labels source (the prompts are given, :attr:`generates_prompts`).
+        ignore_boxes: ``(J, 7)`` float64, LiDAR frame: labelled objects outside the class set
+            (a nuScenes truck, bus, barrier, ...): no detection target and no negative either
+            (:func:`model.training.referent_step.detection_targets`); None: none.
+        labels_complete: Every object of the class set is among :attr:`actors` (scene labels,
+            or a nuScenes sample: 360 degrees): label prompts may be generated from them.
     """
 
     sample_id: str
@@ -170,6 +176,8 @@ class FrameItem:
     given: tuple[GivenPrompt, ...] = ()
     region: AnnotatedRegion | None = None
     from_labels: bool = False
+    ignore_boxes: np.ndarray | None = None
+    labels_complete: bool = False
 
     @property
     def generates_prompts(self) -> bool:
@@ -344,40 +352,74 @@ class FrameDataset(Dataset):
                     "releases come trains on its labels: give --scene-labels VOD_ROOT"
                 )
             actors = tuple(sample.meta.actors)
-        lidar = np.asarray(sample.lidar, dtype=np.float32)
-        radar = np.asarray(sample.radar, dtype=np.float32)
-        flipped = False
-        if self.augment is not None:
-            rng = aug.item_rng(self.seed, self.epoch, index)
-            if self.augment.draws_flip(rng):
-                texts = tuple(g.text for g in given)
-                lidar, radar, actors, texts = aug.flip_frame(lidar, radar, actors, texts)
-                given = tuple(
-                    GivenPrompt(g.sample_id, text, g.referent_ids)
-                    for g, text in zip(given, texts, strict=True)
-                )
-                if region is not None:
-                    region = AnnotatedRegion(region.calib, region.image_size, mirrored=True)
-                flipped = True
-            if self.sensors is not None:
-                lidar, radar = self.sensors.apply(lidar, radar, rng)
-                dz = self.sensors.mount_offset(rng)
-                if dz:
-                    lidar, radar = lidar.copy(), radar.copy()
-                    lidar[:, 2] += dz
-                    radar[:, 2] += dz
-                    actors = tuple(shift_actor(a, dz) for a in actors)
-            lidar, radar = self.augment.thin_and_shuffle(lidar, radar, rng)
-        return FrameItem(
-            sample.sample_id,
-            lidar,
-            radar,
-            actors,
-            flipped,
-            given=given,
-            region=region,
-            from_labels=self.source == "labels",
+        return augment_item(
+            FrameItem(
+                sample.sample_id,
+                np.asarray(sample.lidar, dtype=np.float32),
+                np.asarray(sample.radar, dtype=np.float32),
+                actors,
+                given=given,
+                region=region,
+                from_labels=self.source == "labels",
+                labels_complete=self.scene_labels is not None,
+            ),
+            self.augment,
+            self.sensors,
+            aug.item_rng(self.seed, self.epoch, index),
         )
+
+
+def augment_item(
+    item: FrameItem,
+    augment: AugmentConfig | None,
+    sensors: SensorAugment | None,
+    rng: np.random.Generator,
+) -> FrameItem:
+    """``item`` augmented as the module docstring says (the one home of a training frame's
+    augmentation, whichever dataset read it): the left-right flip drawn by ``augment`` (points,
+    actors, given sentences, annotated region and ignored boxes mirrored), then ``sensors``
+    (with their mounting-height offset), then the thinning and shuffling; ``augment`` None: the
+    item as it is."""
+    if augment is None:
+        return item
+    lidar, radar, actors, given = item.lidar, item.radar, item.actors, item.given
+    region, ignore, flipped = item.region, item.ignore_boxes, item.flipped
+    if augment.draws_flip(rng):
+        texts = tuple(g.text for g in given)
+        lidar, radar, actors, texts = aug.flip_frame(lidar, radar, actors, texts)
+        given = tuple(
+            GivenPrompt(g.sample_id, text, g.referent_ids)
+            for g, text in zip(given, texts, strict=True)
+        )
+        if region is not None:
+            region = AnnotatedRegion(region.calib, region.image_size, mirrored=True)
+        if ignore is not None:
+            ignore = aug.mirror_boxes(ignore)
+        flipped = True
+    if sensors is not None:
+        lidar, radar = sensors.apply(lidar, radar, rng)
+        dz = sensors.mount_offset(rng)
+        if dz:
+            lidar, radar = lidar.copy(), radar.copy()
+            lidar[:, 2] += dz
+            radar[:, 2] += dz
+            actors = tuple(shift_actor(a, dz) for a in actors)
+            if ignore is not None:
+                ignore = ignore.copy()
+                ignore[:, 2] += dz
+    lidar, radar = augment.thin_and_shuffle(lidar, radar, rng)
+    return FrameItem(
+        item.sample_id,
+        lidar,
+        radar,
+        actors,
+        flipped,
+        given=given,
+        region=region,
+        from_labels=item.from_labels,
+        ignore_boxes=ignore,
+        labels_complete=item.labels_complete,
+    )
 
 
 __all__ = [
@@ -387,6 +429,7 @@ __all__ = [
     "FrameItem",
     "GivenPrompt",
     "SensorAugment",
+    "augment_item",
     "frame_groups",
     "scene_ids",
     "shift_actor",

@@ -1,0 +1,148 @@
+"""The report of ``python -m model.evaluate --talk2car``: table II's figures over a split's
+commands (:mod:`model.evaluation.talk2car.metrics`), overall and on the rain and night subsets
+(:func:`subset_of`, from the nuScenes scene descriptions), Talk2Car's AP50, and top-1 beside the
+class-noun and language-blind baselines."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from model.evaluation.talk2car.metrics import table_ii, talk2car_ap, top1_hits
+from model.evaluation.talk2car.predict import CommandPrediction, projected_2d_box
+
+SUBSETS: tuple[str, ...] = ("all", "rain", "night")
+"""The table's rows: every command, and those of scenes whose description names rain or night."""
+
+
+def subset_of(description: str) -> tuple[str, ...]:
+    """The subsets a scene belongs to: ``all``, plus ``rain`` / ``night`` when its nuScenes
+    description says so (a word starting ``rain``, or ``night``; case-insensitive)."""
+    words = description.lower().replace(",", " ").replace(".", " ").split()
+    out = ["all"]
+    if any(w.startswith("rain") for w in words):
+        out.append("rain")
+    if any(w.startswith("night") for w in words):
+        out.append("night")
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class Talk2CarReport:
+    """Figures of one split (percent).
+
+    Attributes:
+        rows: subset -> ``{"commands", "BEV AP_A", "3D AP_A", "BEV AP_B", "3D AP_B", "AP50 2D",
+            "top-1", "top-1 class noun", "top-1 language-blind"}``.
+    """
+
+    rows: dict[str, dict[str, float]]
+
+    def format_table(self) -> str:
+        """The printed table: one line per subset."""
+        names = (
+            "commands",
+            "BEV AP_A",
+            "3D AP_A",
+            "BEV AP_B",
+            "3D AP_B",
+            "AP50 2D",
+            "top-1",
+            "top-1 class noun",
+            "top-1 language-blind",
+        )
+        head = f"{'subset':<7}" + "".join(f"{n:>{max(len(n), 8) + 2}}" for n in names)
+        lines = [head]
+        for subset, row in self.rows.items():
+            cells = []
+            for n in names:
+                width = max(len(n), 8) + 2
+                value = row[n]
+                cells.append(
+                    f"{int(value):>{width}d}" if n == "commands" else f"{value:>{width}.2f}"
+                )
+            lines.append(f"{subset:<7}" + "".join(cells))
+        return "\n".join(lines) + "\n"
+
+    def to_dict(self) -> dict[str, dict[str, float]]:
+        return {k: dict(v) for k, v in self.rows.items()}
+
+
+def figures(predictions: Sequence[CommandPrediction]) -> dict[str, float]:
+    """One row of the table over ``predictions``."""
+    answers = [p.answer for p in predictions]
+    row: dict[str, float] = {"commands": float(len(predictions))}
+    row.update(table_ii(answers))
+    best_2d = [
+        projected_2d_box(p.answer.boxes[0], p.frame) if len(p.answer.boxes) else None
+        for p in predictions
+    ]
+    row["AP50 2D"] = talk2car_ap(best_2d, [list(p.command.box_2d) for p in predictions])
+    n = max(len(predictions), 1)
+    row["top-1"] = 100.0 * float(top1_hits(answers).sum()) / n
+    row["top-1 class noun"] = 100.0 * float(top1_hits([p.noun for p in predictions]).sum()) / n
+    blind = [1.0 / p.in_view_same_class if p.referent_in_view else 0.0 for p in predictions]
+    row["top-1 language-blind"] = 100.0 * float(np.sum(blind)) / n
+    return row
+
+
+def build_report(predictions: Sequence[CommandPrediction]) -> Talk2CarReport:
+    """The table's rows (:data:`SUBSETS`; an empty subset is left out)."""
+    rows = {}
+    for subset in SUBSETS:
+        chosen = [p for p in predictions if subset in subset_of(p.description)]
+        if chosen or subset == "all":
+            rows[subset] = figures(chosen)
+    return Talk2CarReport(rows)
+
+
+def run_talk2car(
+    data: str | Path,
+    talk2car: str | Path,
+    split: str,
+    checkpoint: str | Path,
+    out: Path,
+    device: str = "cpu",
+    limit: int = 0,
+) -> Talk2CarReport:
+    """``python -m model.evaluate --data NUSC --talk2car CMDS``: ground the split's commands with
+    the checkpoint, print the table, write ``out/{split}_predictions.json``; returns the report.
+
+    Raises:
+        ValueError: no command of the split has a referent in the class set; the loader's and
+            the checkpoint's errors.
+    """
+    from model.checkpoint import load_checkpoint
+    from model.evaluation.talk2car.predict import iterate_command_predictions, predictions_json
+    from scenes.datasets.nuscenes_frames import open_talk2car
+    from scenes.nuscenes.classes import model_class
+    from scenes.nuscenes.talk2car import model_box_to_camera
+    from scenes.utils.durable import atomic_write_text
+
+    root, commands = open_talk2car(data, talk2car, split)
+    model = load_checkpoint(checkpoint, device=device)
+    predictions = list(iterate_command_predictions(model, root, commands, model_class, limit=limit))
+    if not predictions:
+        raise ValueError(
+            f"{Path(talk2car) / f'{split}_commands.json'}: no command with a referent in the "
+            "class set"
+        )
+    report = build_report(predictions)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / f"{split}_predictions.json"
+    atomic_write_text(path, json.dumps(predictions_json(predictions, model_box_to_camera)) + "\n")
+    skipped = sum(commands.skipped.values())
+    print(
+        f"data: {data} commands {talk2car} split {split} ({len(predictions)} commands scored, "
+        f"{skipped} skipped); checkpoint {checkpoint}"
+    )
+    print(report.format_table(), end="")
+    print(f"predictions written to {path}")
+    return report
+
+
+__all__ = ["SUBSETS", "Talk2CarReport", "build_report", "figures", "run_talk2car", "subset_of"]

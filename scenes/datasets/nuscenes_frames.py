@@ -1,0 +1,216 @@
+"""nuScenes samples with their Talk2Car commands as training frames (the labels source).
+
+A nuScenes root (``scenes.nuscenes.root.NuScenesRoot``) with the Talk2Car commands of one split
+(``scenes.nuscenes.talk2car.read_commands``) trains the referent path as a View-of-Delft root
+with scene labels does (:class:`scenes.datasets.frames.FrameDataset`'s labels source): one
+:class:`scenes.datasets.frames.FrameItem` per nuScenes sample that a command of the split refers
+to, in the root's sample order, with
+
+- ``actors``: every annotation of the sample whose category maps into the class set
+  (``scenes.nuscenes.classes.model_class``), in the model frame, velocities zero (unknown); an
+  actor's id is its annotation's index in the frame (``NuScenesFrame.boxes``), so a command's
+  referent (``CommandSet.referent``: box, class, annotation index) is the actor of that id;
+- ``ignore_boxes``: the annotations outside the class set (a truck, a bus, a barrier): no
+  detection target, and no negative either (as View-of-Delft's non-metric labels are kept out of
+  the metric);
+- ``given``: the sample's commands, each with its one referent;
+- ``region`` None and ``labels_complete`` True: nuScenes labels every object around the car, so
+  label prompts are generated from the boxes (``--label-prompts``) and nothing is outside.
+
+Augmentations are :func:`scenes.datasets.frames.augment_item`'s (the one home).
+
+Only the names of the issue-40 contract are read from ``scenes.nuscenes`` (``NuScenesRoot``,
+``NuScenesFrame``, ``read_commands`` and ``CommandSet``, ``model_class``); :func:`open_talk2car`
+is the one place they are imported (tests give their own root and commands to
+:class:`NuScenesFrames` directly).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+from torch.utils.data import Dataset
+
+from scenes.datasets import augment as aug
+from scenes.datasets.augment import AugmentConfig
+from scenes.datasets.frames import FrameItem, GivenPrompt, SensorAugment, augment_item
+from scenes.geometry.actors import CLASSES, Actor
+
+VERSION_PREFIX = "v1.0-"
+"""A nuScenes root holds one folder named ``v1.0-<version>`` (trainval, mini, test) of tables."""
+
+
+def is_nuscenes_root(path: str | Path) -> bool:
+    """Whether ``path`` is a folder holding a ``v1.0-*`` table folder (a nuScenes root as the
+    release comes); a Talk2Radar root never does."""
+    folder = Path(path)
+    if not folder.is_dir():
+        return False
+    return any(p.is_dir() and p.name.startswith(VERSION_PREFIX) for p in folder.iterdir())
+
+
+class CommandSetLike(Protocol):
+    """What is read of ``scenes.nuscenes.talk2car.CommandSet``."""
+
+    commands: Sequence[Any]
+    referent: dict[str, tuple[np.ndarray, str, int]]
+    split: str
+
+
+class NuScenesRootLike(Protocol):
+    """What is read of ``scenes.nuscenes.root.NuScenesRoot``."""
+
+    samples: tuple[str, ...]
+
+    def frame(self, sample_token: str) -> Any: ...
+
+
+def open_talk2car(
+    path: str | Path, commands: str | Path, split: str
+) -> tuple[NuScenesRootLike, CommandSetLike]:
+    """The nuScenes root at ``path`` and its Talk2Car commands of ``split`` (``commands``: the
+    folder holding ``{split}_commands.json``); the loader's skip reasons are printed by count.
+
+    Raises:
+        ValueError: a malformed root or command file (the loader's one-line message).
+    """
+    import sys
+
+    from scenes.nuscenes.root import NuScenesRoot
+    from scenes.nuscenes.talk2car import read_commands
+
+    root = NuScenesRoot(path)
+    found = read_commands(commands, split, root)
+    for reason, count in sorted(found.skipped.items()):
+        print(f"{commands}: {split}: {count} command(s) skipped: {reason}", file=sys.stderr)
+    return root, found
+
+
+def frame_actors(frame: Any, model_class: Any) -> tuple[tuple[Actor, ...], np.ndarray]:
+    """The actors of a ``NuScenesFrame`` (annotations in the class set, id = annotation index) and
+    the ``(J, 7)`` boxes of the others (:attr:`FrameItem.ignore_boxes`)."""
+    boxes = np.asarray(frame.boxes, dtype=np.float64).reshape(-1, 7)
+    actors, ignored = [], []
+    for i, (box, category, attributes) in enumerate(
+        zip(boxes, frame.categories, frame.attributes, strict=True)
+    ):
+        cls = model_class(category, attributes)
+        if cls is None:
+            ignored.append(box)
+        elif cls not in CLASSES:
+            raise ValueError(f"model_class({category!r}) gave {cls!r}, not one of {CLASSES}")
+        else:
+            actors.append(Actor(i, cls, box.copy(), np.zeros(2)))
+    return tuple(actors), np.array(ignored, dtype=np.float64).reshape(-1, 7)
+
+
+def _model_class() -> Any:
+    from scenes.nuscenes.classes import model_class
+
+    return model_class
+
+
+class NuScenesFrames(Dataset):
+    """The nuScenes samples of a split's Talk2Car commands as training frames (module docstring).
+
+    Args:
+        root: The nuScenes root (``NuScenesRoot``).
+        commands: Its commands of one split (``CommandSet``); only kept commands with a referent.
+        augment, sensors, seed: As :class:`scenes.datasets.frames.FrameDataset`'s.
+        model_class: ``(category, attributes) -> class name or None`` (default
+            ``scenes.nuscenes.classes.model_class``, the mapping's one home).
+
+    Raises:
+        ValueError: no command of the split has a referent.
+    """
+
+    source = "labels"
+
+    def __init__(
+        self,
+        root: NuScenesRootLike,
+        commands: CommandSetLike,
+        augment: AugmentConfig | None = None,
+        sensors: SensorAugment | None = None,
+        seed: int = 0,
+        model_class: Any = None,
+    ) -> None:
+        self.root = root
+        self.commands = commands
+        self.split = commands.split
+        self.augment = augment
+        self.sensors = sensors
+        self.seed = seed
+        self.epoch = 0
+        self.model_class = model_class or _model_class()
+        by_sample: dict[str, list[Any]] = {}
+        for command in commands.commands:
+            if command.command_token in commands.referent:
+                by_sample.setdefault(command.sample_token, []).append(command)
+        order = {token: i for i, token in enumerate(root.samples)}
+        self.ids = sorted(by_sample, key=lambda t: order.get(t, len(order)))
+        self.by_sample = by_sample
+        if not self.ids:
+            raise ValueError(
+                f"Talk2Car split {commands.split!r}: no command with a referent in the class set "
+                f"({', '.join(CLASSES)}): nothing to train on"
+            )
+
+    @property
+    def command_count(self) -> int:
+        """Commands of the frames kept."""
+        return sum(len(self.by_sample[t]) for t in self.ids)
+
+    def limit(self, count: int) -> None:
+        """Keep only the first ``count`` frames."""
+        self.ids = self.ids[:count]
+
+    def set_epoch(self, epoch: int) -> None:
+        """Select the augmentation stream of ``epoch``."""
+        self.epoch = epoch
+
+    def __len__(self) -> int:
+        return len(self.ids)
+
+    def item(self, index: int) -> FrameItem:
+        """Frame ``index`` as read (not augmented)."""
+        token = self.ids[index]
+        frame = self.root.frame(token)
+        actors, ignored = frame_actors(frame, self.model_class)
+        known = {a.actor_id for a in actors}
+        given = []
+        for command in self.by_sample[token]:
+            _, _, annotation = self.commands.referent[command.command_token]
+            if int(annotation) not in known:
+                raise ValueError(
+                    f"Talk2Car command {command.command_token}: its referent, annotation "
+                    f"{annotation} of sample {token}, is not in the class set of the frame"
+                )
+            given.append(GivenPrompt(command.command_token, command.text, (int(annotation),)))
+        return FrameItem(
+            token,
+            np.asarray(frame.lidar, dtype=np.float32).reshape(-1, 4),
+            np.asarray(frame.radar, dtype=np.float32).reshape(-1, 7),
+            actors,
+            given=tuple(given),
+            region=None,
+            from_labels=True,
+            ignore_boxes=ignored,
+            labels_complete=True,
+        )
+
+    def __getitem__(self, index: int) -> FrameItem:
+        item = self.item(index)
+        rng = aug.item_rng(self.seed, self.epoch, index)
+        return augment_item(item, self.augment, self.sensors, rng)
+
+
+__all__ = [
+    "NuScenesFrames",
+    "frame_actors",
+    "is_nuscenes_root",
+    "open_talk2car",
+]
