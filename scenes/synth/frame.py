@@ -65,6 +65,8 @@ class SynthSettings:
             ``scenes.language.prompts.PromptConfig.language``): extended adds out-of-class,
             unsatisfiable, negation, exclusion, ordinal, relation and counting prompts, some of
             whose samples have no referent (an empty ``label_2``).
+        command_share: Share of single-referent prompts phrased as driving commands
+            (``--command-share``; ``scenes.language.prompts.PromptConfig.command_share``).
     """
 
     seed: int = option(0, help="base seed (default %(default)s)")
@@ -107,7 +109,17 @@ class SynthSettings:
         "samples then have no referent: an empty label_2); default %(default)s",
     )
 
+    command_share: float = option(
+        0.0,
+        metavar="S",
+        help="share of single-referent prompts phrased as driving commands around their "
+        "description, Talk2Car style ('pull over behind the cyclist on the right'; "
+        "scenes.language.prompts.commands); default %(default)s",
+    )
+
     def __post_init__(self) -> None:
+        if not 0.0 <= self.command_share <= 1.0:
+            raise SynthError(f"command_share must be in [0, 1], got {self.command_share}")
         if self.phrasing not in PHRASINGS:
             raise SynthError(f"phrasing must be one of {list(PHRASINGS)}, got {self.phrasing!r}")
         if self.language not in LANGUAGES:
@@ -139,6 +151,7 @@ class SynthSettings:
             **({"camera": self.camera.key()} if self.camera is not None else {}),
             **({"sequence_length": self.sequence_length} if self.sequence_length > 1 else {}),
             **({"language": self.language} if self.language != "base" else {}),
+            **({"command_share": self.command_share} if self.command_share else {}),
         }
 
     def calibrations(self) -> tuple[Calibration, Calibration]:
@@ -296,7 +309,11 @@ def _sense(
             candidates,
             rngs["prompts"],
             settings.prompts_per_world,
-            config=PromptConfig(phrasing=settings.phrasing, language=settings.language),
+            config=PromptConfig(
+                phrasing=settings.phrasing,
+                language=settings.language,
+                command_share=settings.command_share,
+            ),
         )
     )
     t4 = time.perf_counter()

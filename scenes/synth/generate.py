@@ -406,7 +406,7 @@ _FLAG_ORDER: tuple[tuple[type, tuple[str, ...]], ...] = (
     (SynthCommand, ("out", "frames")),
     (SynthSettings, ("seed", "weather", "radar_scans", "prompts_per_world")),
     (SynthCommand, ("split_fractions",)),
-    (SynthSettings, ("phrasing", "language")),
+    (SynthSettings, ("phrasing", "language", "command_share")),
     (SynthCommand, ("no_camera",)),
     (CameraConfig, ("image_scale", "ray_step")),
     (SynthSettings, ("sequence_length",)),
