@@ -192,3 +192,31 @@ def test_command_share_flags_reach_the_generator(tmp_path):
     assert (
         synth_main(["--out", str(tmp_path / "bad"), "--frames", "1", "--command-share", "2"]) == 2
     )
+
+
+def test_suite_commands_are_hand_typed_not_the_templates_and_come_in_pairs():
+    import json
+
+    from bench.language_cases import SUITE_FILE, SuiteError, load_suite, parse_suite
+
+    suite = load_suite()
+    commands = [s for s in suite.sentences if s.family == "command"]
+    descriptions = {s.id: s for s in suite.sentences if s.family == "command_description"}
+    assert len(commands) >= 40 and len(descriptions) == len(commands)
+    templates = [
+        re.compile(
+            "^"
+            + re.escape(t).replace(re.escape("{np}"), ".+").replace(re.escape("{it}"), r"\w+")
+            + r"\.?$"
+        )
+        for slot in COMMAND_SLOTS.values()
+        for t in slot.core + slot.more
+    ]
+    for s in commands:
+        assert not any(t.match(s.text.lower()) for t in templates), s.text
+        twin = descriptions[s.id + "-desc"]
+        assert twin.query == s.query
+    data = json.loads(SUITE_FILE.read_text(encoding="utf-8"))
+    lone = [e for e in data["sentences"] if e["id"] != "cmd-01-desc"]
+    with pytest.raises(SuiteError, match="command cmd-01 needs a command_description cmd-01-desc"):
+        parse_suite(dict(data, sentences=lone), "suite.json")
