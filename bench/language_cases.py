@@ -12,7 +12,10 @@ A **case** is a sentence in a scene where :func:`scenes.language.resolve.resolve
 unsatisfiable ones, scenes with at least one referent for the single-referent and rewording
 families, any answer (the empty set included) for negation, exclusion and counting. At most
 :data:`MAX_SCENES_PER_SENTENCE` scenes per sentence are kept, drawn by a generator seeded from the
-sentence id, so the suite stays a few thousand cases.
+sentence id, so the suite stays a few thousand cases. The ``command`` family (driving instructions
+typed in Talk2Car's style, none of them the generator's command templates) pairs each sentence
+with its plain description (``command_description``, id ``<id>-desc``, the same query), chosen on
+the same scenes (:func:`selection_key`), so that the two rows measure the cost of the wrapping.
 
 The actors are the synthetic root's own (its sidecar, ``meta/``), less those it lists as seen by
 neither sensor (``extra.unsensed_actor_ids``): a person looking at the scene could not see them.
@@ -47,10 +50,18 @@ FAMILIES = (
     "relation",
     "counting",
     "rewording",
+    "command",
+    "command_description",
 )
+COMMAND, COMMAND_DESCRIPTION = "command", "command_description"
+DESCRIPTION_SUFFIX = "-desc"
+"""A ``command`` sentence ``cmd-07`` ("hold back until the person who's crossing has gone") has its
+plain description ``cmd-07-desc`` ("the person who's crossing", family ``command_description``)
+with the same query; both are kept on the same scenes, so the two families' figures are the cost
+of wrapping a description in a driving command (issue 40 item 4)."""
 EMPTY_FAMILIES = ("out_of_class", "unsatisfiable")
 """Families whose correct answer is no box."""
-SINGLE_FAMILIES = ("ordinal", "relation")
+SINGLE_FAMILIES = ("ordinal", "relation", COMMAND, COMMAND_DESCRIPTION)
 """Families scored by top-1 (one referent, or the top box must be one of a few)."""
 SET_FAMILIES = ("negation", "exclusion", "counting")
 """Families scored as sets (set F1, exact set)."""
@@ -118,10 +129,39 @@ def parse_suite(data: object, source: str) -> Suite:
     args = scenes.get("synth_args") if isinstance(scenes, dict) else None
     if not isinstance(args, list) or not all(isinstance(a, str) for a in args):
         raise SuiteError(f"{source}: scenes.synth_args must be a list of strings")
+    _check_command_pairs(sentences, source)
     fingerprint = scenes.get("fingerprint", [])
     if not isinstance(fingerprint, list):
         raise SuiteError(f"{source}: scenes.fingerprint must be a list")
     return Suite(tuple(sentences), tuple(args), tuple(fingerprint), source)
+
+
+def _check_command_pairs(sentences: Sequence[Sentence], source: str) -> None:
+    """Every command has its description (``<id>-desc``, same query) and every description its
+    command."""
+    by_id = {s.id: s for s in sentences}
+    for s in sentences:
+        if s.family == COMMAND:
+            twin = by_id.get(s.id + DESCRIPTION_SUFFIX)
+            if twin is None or twin.family != COMMAND_DESCRIPTION or twin.query != s.query:
+                raise SuiteError(
+                    f"{source}: command {s.id} needs a {COMMAND_DESCRIPTION} "
+                    f"{s.id}{DESCRIPTION_SUFFIX} with the same query"
+                )
+        elif s.family == COMMAND_DESCRIPTION:
+            twin = by_id.get(s.id.removesuffix(DESCRIPTION_SUFFIX))
+            if not s.id.endswith(DESCRIPTION_SUFFIX) or twin is None or twin.family != COMMAND:
+                raise SuiteError(
+                    f"{source}: {COMMAND_DESCRIPTION} {s.id} is not <command id>{DESCRIPTION_SUFFIX}"
+                )
+
+
+def selection_key(sentence: Sentence) -> str:
+    """What seeds the choice of a sentence's scenes: its id, a description's command's id (so
+    both are scored on the same cases)."""
+    if sentence.family == COMMAND_DESCRIPTION:
+        return sentence.id.removesuffix(DESCRIPTION_SUFFIX)
+    return sentence.id
 
 
 def load_suite(path: str | Path = SUITE_FILE) -> Suite:
@@ -232,7 +272,7 @@ def build_cases(
             if res.refused is None and _keeps(sentence, res.ids):
                 usable.append(Case(sentence, sid, res.ids))
         if len(usable) > max_scenes:
-            rng = np.random.default_rng(zlib.crc32(sentence.id.encode()))
+            rng = np.random.default_rng(zlib.crc32(selection_key(sentence).encode()))
             keep = sorted(rng.choice(len(usable), size=max_scenes, replace=False))
             usable = [usable[i] for i in keep]
         cases.extend(usable)

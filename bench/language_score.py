@@ -13,7 +13,7 @@ taken by score (:func:`scenes.geometry.boxes.match_by_centre`). Per case:
 
 Each family's figures (:data:`FIGURES`) are means over its cases, in percent: out-of-class and
 unsatisfiable: no box; ordinal and relation: top-1; negation, exclusion, counting: set F1 and
-exact set; rewording: top-1 and set F1.
+exact set; rewording: top-1 and set F1; command and its description counterpart: top-1.
 """
 
 from __future__ import annotations
@@ -35,6 +35,8 @@ FIGURES = {
     "ordinal": ("top1",),
     "relation": ("top1",),
     "rewording": ("top1", "f1"),
+    "command": ("top1",),
+    "command_description": ("top1",),
 }
 FIGURE_NAMES = {"empty": "no box %", "top1": "top-1 %", "f1": "set F1", "exact": "exact set %"}
 

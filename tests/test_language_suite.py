@@ -67,11 +67,14 @@ def _generator_configs() -> list[PromptConfig]:
     """Every wording of the generator: its phrasings, and its languages where it has several
     (issue 23's extended language adds ``PromptConfig.language``)."""
     languages = ("base", "extended") if "language" in PromptConfig.__dataclass_fields__ else (None,)
-    return [
+    configs = [
         PromptConfig(phrasing=p) if lang is None else PromptConfig(phrasing=p, language=lang)
         for p in ("train", "heldout")
         for lang in languages
     ]
+    if "command_share" in PromptConfig.__dataclass_fields__:  # issue 40's driving commands
+        configs += [PromptConfig(phrasing=p, command_share=1.0) for p in ("train", "heldout")]
+    return configs
 
 
 def test_no_sentence_is_one_the_generator_writes() -> None:

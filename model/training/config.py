@@ -70,7 +70,7 @@ class PromptDraw:
         label_prompts: Labels-source frames with scene labels: prompts generated per frame from
             its labelled boxes, beside the given ones (``--label-prompts``).
         config: The generator's settings: ``--phrasing``, ``--language``, ``--text-noise`` (its
-            ``p_perturb``) and ``--family-rate`` (:class:`scenes.language.prompts.PromptConfig`).
+            ``p_perturb``), ``--command-share`` and ``--family-rate`` (:class:`scenes.language.prompts.PromptConfig`).
     """
 
     per_scene: int
@@ -195,6 +195,12 @@ class TrainConfig:
         help="referent path: share of generated prompts reworded by scenes.language.prompts.perturb "
         "(filler-word dropout, synonyms, typos, casing; the meaning kept), default 0",
     )
+    command_share: float = option(
+        0.0,
+        help="referent path: share of generated single-referent prompts phrased as driving "
+        "commands around their description, Talk2Car style (scenes.language.prompts.commands; "
+        "the referent kept), default 0",
+    )
     family_rates: tuple[float, ...] = option(
         (),
         flag="--family-rate",
@@ -270,6 +276,8 @@ class TrainConfig:
                 ) from exc
         if not 0.0 <= self.text_noise <= 1.0:
             raise TrainingError(f"--text-noise must be in [0, 1], got {self.text_noise}")
+        if not 0.0 <= self.command_share <= 1.0:
+            raise TrainingError(f"--command-share must be in [0, 1], got {self.command_share}")
         if self.grounding not in get_args(GroundingKind):
             kinds = " or ".join(get_args(GroundingKind))
             raise TrainingError(f"--grounding must be {kinds}, got {self.grounding!r}")
@@ -285,7 +293,11 @@ class TrainConfig:
         the generator's)."""
         rates = {"family_rates": self.family_rates} if self.family_rates else {}
         config = PromptConfig(
-            phrasing=self.phrasing, language=self.language, p_perturb=self.text_noise, **rates
+            phrasing=self.phrasing,
+            language=self.language,
+            p_perturb=self.text_noise,
+            command_share=self.command_share,
+            **rates,
         )
         return PromptDraw(self.prompts_per_scene, self.label_prompts, config)
 

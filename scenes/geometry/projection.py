@@ -32,19 +32,20 @@ BOX_EDGES = np.array(
 ring, verticals)."""
 
 
-def image_size_at(scale: float) -> tuple[int, int]:
-    """``(width, height)`` of VoD's 1936 x 1216 image resized by ``scale``.
+def image_size_at(scale: float, base: tuple[int, int] = IMAGE_SIZE) -> tuple[int, int]:
+    """``(width, height)`` of VoD's 1936 x 1216 image (or ``base``) resized by ``scale``.
 
     Raises:
         ValueError: ``scale`` is not positive or the size would not be whole pixels.
     """
     if not scale > 0:
         raise ValueError(f"image scale must be > 0, got {scale}")
-    width, height = IMAGE_SIZE[0] * scale, IMAGE_SIZE[1] * scale
+    width, height = base[0] * scale, base[1] * scale
     if abs(width - round(width)) > 1e-9 or abs(height - round(height)) > 1e-9:
         raise ValueError(
             f"image scale {scale} gives {width} x {height} pixels; use one that divides "
-            f"{IMAGE_SIZE[0]} x {IMAGE_SIZE[1]} exactly (1, 1/2, 1/4, 1/8)"
+            f"{base[0]} x {base[1]} exactly"
+            + (" (1, 1/2, 1/4, 1/8)" if tuple(base) == tuple(IMAGE_SIZE) else "")
         )
     return round(width), round(height)
 

@@ -33,7 +33,7 @@ from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 from PIL import Image
 
-from scenes.geometry.calib import Calibration
+from scenes.geometry.calib import IMAGE_SIZE, Calibration
 from scenes.geometry.projection import image_size_at, scale_calibration
 from scenes.synth.weather import Weather
 from scenes.synth.world import Mat, TaggedMesh, World
@@ -59,6 +59,8 @@ class CameraConfig:
         sun_elevation_deg: Range of the sun's elevation, drawn per world (degrees).
         haze: Extinction coefficient (1/m) of clear air for the veil; the weather's LiDAR
             extinction is used where larger.
+        base_size: ``(width, height)`` at scale 1: VoD's 1936 x 1216, or the sensor set's
+            (``scenes.synth.sensors``: nuScenes' CAM_FRONT is 1600 x 900).
     """
 
     image_scale: float = option(
@@ -78,9 +80,11 @@ class CameraConfig:
     jpeg_quality: int = option(90, cli=False)
     sun_elevation_deg: tuple[float, float] = option((20.0, 60.0), cli=False)
     haze: float = option(0.003, cli=False)
+    base_size: tuple[int, int] = option(IMAGE_SIZE, cli=False)
 
     def __post_init__(self) -> None:
-        width, height = image_size_at(self.image_scale)  # raises for a scale that is not exact
+        # raises for a scale that is not exact
+        width, height = image_size_at(self.image_scale, self.base_size)
         if self.ray_step < 1 or width % self.ray_step or height % self.ray_step:
             raise ValueError(
                 f"ray_step must be >= 1 and divide the {width} x {height} image, got {self.ray_step}"
@@ -94,7 +98,7 @@ class CameraConfig:
     @property
     def image_size(self) -> tuple[int, int]:
         """``(width, height)`` of the written image."""
-        return image_size_at(self.image_scale)
+        return image_size_at(self.image_scale, self.base_size)
 
     def key(self) -> dict:
         """What determines the pixels (recorded in the synth manifest)."""
@@ -104,6 +108,8 @@ class CameraConfig:
             "jpeg_quality": self.jpeg_quality,
             "sun_elevation_deg": list(self.sun_elevation_deg),
             "haze": self.haze,
+            # Only when not VoD's, so roots written before the option resume as before.
+            **({"base_size": list(self.base_size)} if self.base_size != IMAGE_SIZE else {}),
         }
 
 

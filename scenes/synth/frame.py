@@ -16,6 +16,8 @@ from scenes.language.prompts import LANGUAGES, PHRASINGS, Prompt, PromptConfig, 
 from scenes.synth.camera import CameraConfig, render_image
 from scenes.synth.lidar import LidarConfig, LidarScan, simulate_lidar
 from scenes.synth.radar import RadarConfig, RadarScan, simulate_radar
+from scenes.synth.sensors import SENSOR_SETS, SensorSet, simulate_radars
+from scenes.synth.sensors import sensor_set as _preset
 from scenes.synth.sequence import world_at
 from scenes.synth.weather import WEATHERS, Weather
 from scenes.synth.world import RayCaster, World, WorldConfig, generate_world
@@ -65,6 +67,12 @@ class SynthSettings:
             ``scenes.language.prompts.PromptConfig.language``): extended adds out-of-class,
             unsatisfiable, negation, exclusion, ordinal, relation and counting prompts, some of
             whose samples have no referent (an empty ``label_2``).
+        command_share: Share of single-referent prompts phrased as driving commands
+            (``--command-share``; ``scenes.language.prompts.PromptConfig.command_share``).
+        sensors: ``vod`` (the default: ``lidar``, ``radar``, ``world`` and ``camera`` as given)
+            or ``nuscenes`` (:data:`scenes.synth.sensors.NUSCENES`: its LiDAR replaces ``lidar``,
+            its mounting height ``world.lidar_height``, its camera size ``camera.base_size``, and
+            its five radars, merged in the LiDAR frame, replace ``radar``).
     """
 
     seed: int = option(0, help="base seed (default %(default)s)")
@@ -107,7 +115,37 @@ class SynthSettings:
         "samples then have no referent: an empty label_2); default %(default)s",
     )
 
+    command_share: float = option(
+        0.0,
+        metavar="S",
+        help="share of single-referent prompts phrased as driving commands around their "
+        "description, Talk2Car style ('pull over behind the cyclist on the right'; "
+        "scenes.language.prompts.commands); default %(default)s",
+    )
+
+    sensors: str = option(
+        "vod",
+        choices=SENSOR_SETS,
+        help="sensor set: vod (64-beam LiDAR, one 4D radar, 1936 x 1216 camera) or nuscenes "
+        "(32-beam HDL-32E-like LiDAR 1.84 m up, five sparse 2D ARS-408-like radars merged in the "
+        "LiDAR frame, 1600 x 900 CAM_FRONT; scenes.synth.sensors); default %(default)s",
+    )
+
     def __post_init__(self) -> None:
+        if self.sensors not in SENSOR_SETS:
+            raise SynthError(f"sensors must be one of {list(SENSOR_SETS)}, got {self.sensors!r}")
+        preset = _preset(self.sensors)
+        if preset is not None:
+            object.__setattr__(self, "lidar", preset.lidar)
+            object.__setattr__(self, "world", replace(self.world, lidar_height=preset.lidar_height))
+            if self.camera is not None and self.camera.base_size != preset.image_size:
+                try:
+                    camera = replace(self.camera, base_size=preset.image_size)
+                except ValueError as exc:
+                    raise SynthError(f"--sensors {self.sensors} camera: {exc}") from exc
+                object.__setattr__(self, "camera", camera)
+        if not 0.0 <= self.command_share <= 1.0:
+            raise SynthError(f"command_share must be in [0, 1], got {self.command_share}")
         if self.phrasing not in PHRASINGS:
             raise SynthError(f"phrasing must be one of {list(PHRASINGS)}, got {self.phrasing!r}")
         if self.language not in LANGUAGES:
@@ -139,11 +177,24 @@ class SynthSettings:
             **({"camera": self.camera.key()} if self.camera is not None else {}),
             **({"sequence_length": self.sequence_length} if self.sequence_length > 1 else {}),
             **({"language": self.language} if self.language != "base" else {}),
+            **({"command_share": self.command_share} if self.command_share else {}),
+            **({"sensors": self.sensors} if self.sensors != "vod" else {}),
         }
+
+    def sensor_set(self) -> SensorSet | None:
+        """The sensor preset (None: ``vod``, the configs as given)."""
+        return _preset(self.sensors)
 
     def calibrations(self) -> tuple[Calibration, Calibration]:
         """The LiDAR and radar calibrations written: VoD's, with ``P2`` scaled to the camera
-        image (:attr:`scenes.synth.camera.CameraConfig.image_scale`) where there is one."""
+        image (:attr:`scenes.synth.camera.CameraConfig.image_scale`) where there is one; with
+        ``--sensors nuscenes`` the preset's camera, and the radar calibration equal to the
+        LiDAR's: the merged radar cloud is in the LiDAR frame)."""
+        preset = self.sensor_set()
+        if preset is not None:
+            scale = self.camera.image_scale if self.camera is not None else 1.0
+            calib = preset.calibration(scale)
+            return calib, calib
         lidar, radar = vod_lidar_calibration(), vod_radar_calibration()
         if self.camera is None or self.camera.image_scale == 1.0:
             return lidar, radar
@@ -285,9 +336,13 @@ def _sense(
     caster = RayCaster(world)
     lidar = simulate_lidar(caster, rngs["lidar"], settings.lidar, weather)
     t2 = time.perf_counter()
-    radar = simulate_radar(
-        caster, radar_to_lidar, rngs["radar"], settings.radar, weather, settings.radar_scans
-    )
+    preset = settings.sensor_set()
+    if preset is None:
+        radar = simulate_radar(
+            caster, radar_to_lidar, rngs["radar"], settings.radar, weather, settings.radar_scans
+        )
+    else:
+        radar = simulate_radars(caster, preset.radars, rngs["radar"], weather, settings.radar_scans)
     t3 = time.perf_counter()
     sensed = sensed_actor_ids(lidar, radar, settings.min_lidar_points, settings.min_radar_points)
     candidates = [world.actors[i] for i in sensed]
@@ -296,7 +351,11 @@ def _sense(
             candidates,
             rngs["prompts"],
             settings.prompts_per_world,
-            config=PromptConfig(phrasing=settings.phrasing, language=settings.language),
+            config=PromptConfig(
+                phrasing=settings.phrasing,
+                language=settings.language,
+                command_share=settings.command_share,
+            ),
         )
     )
     t4 = time.perf_counter()

@@ -169,6 +169,7 @@ def write_frame(
     by_id = {a.actor_id: a for a in world.actors}
     seen = {world.actors[i].actor_id for i in frame.sensed}
     unseen = [a.actor_id for a in world.actors if a.actor_id not in seen]
+    preset = settings.sensor_set()
     ids = []
     for k, prompt in enumerate(frame.prompts[:count]):
         referents = [by_id[i] for i in prompt.referent_ids]
@@ -186,6 +187,7 @@ def write_frame(
                 "seed": settings.seed,
                 "unsensed_actor_ids": unseen,
                 "clutter": [c.to_json() for c in world.clutter],
+                **({"sensors": preset.meta()} if preset is not None else {}),
                 **({"sequence_frame": sequence_frame} if sequence_frame is not None else {}),
             },
         )
@@ -404,9 +406,9 @@ class SynthCommand:
 
 _FLAG_ORDER: tuple[tuple[type, tuple[str, ...]], ...] = (
     (SynthCommand, ("out", "frames")),
-    (SynthSettings, ("seed", "weather", "radar_scans", "prompts_per_world")),
+    (SynthSettings, ("seed", "weather", "sensors", "radar_scans", "prompts_per_world")),
     (SynthCommand, ("split_fractions",)),
-    (SynthSettings, ("phrasing", "language")),
+    (SynthSettings, ("phrasing", "language", "command_share")),
     (SynthCommand, ("no_camera",)),
     (CameraConfig, ("image_scale", "ray_step")),
     (SynthSettings, ("sequence_length",)),

@@ -86,6 +86,11 @@ class RadarConfig:
         car, pedestrian, cyclist: Class signatures.
         clutter_per_scan: Mean number of random clutter points per scan.
         ghost_prob: Probability that an actor detection has a multipath ghost.
+        static_prob_scale: Factor on every static surface's detection probability (1: VoD's
+            dense 4D radar; a cluster-list radar such as the ARS-408 reports far fewer).
+        measures_elevation: False for a 2D radar (the ARS-408): the reported elevation is 0 in
+            the radar frame plus ``elevation_std_deg`` noise, so ``z`` sits near the mounting
+            height whatever the target's (clutter too).
     """
 
     azimuth_half_fov_deg: float = 60.0
@@ -107,6 +112,8 @@ class RadarConfig:
     cyclist: RadarClassModel = RadarClassModel(-11.0, -6.0, 6.0, 0.2)
     clutter_per_scan: float = 40.0
     ghost_prob: float = 0.05
+    static_prob_scale: float = 1.0
+    measures_elevation: bool = True
 
     def class_model(self, cls: str) -> RadarClassModel:
         """The signature of class ``cls`` (one of :data:`scenes.geometry.actors.CLASSES`)."""
@@ -235,7 +242,11 @@ def _scan(
     mat = hits.material[static]
     dist = hits.distance[static]
     rcs = RADAR_RCS[mat]
-    p = RADAR_PROB[mat] * _sigmoid(_snr(rcs, dist, config, weather) / config.snr_softness)
+    p = (
+        RADAR_PROB[mat]
+        * config.static_prob_scale
+        * _sigmoid(_snr(rcs, dist, config, weather) / config.snr_softness)
+    )
     chosen = static[rng.random(len(static)) < p]
     rcs_static = RADAR_RCS[hits.material[chosen]] + rng.normal(0.0, config.rcs_std, len(chosen))
     det.add(hits.points[chosen], rcs_static, np.zeros(3), STATIC, 0.0)
@@ -296,6 +307,8 @@ def _scan(
     local = u_true @ rot  # radar-frame directions
     az = np.arctan2(local[:, 1], local[:, 0])
     el = np.arcsin(np.clip(local[:, 2], -1.0, 1.0))
+    if not config.measures_elevation:
+        el = np.zeros_like(el)
     n = len(points)
     meas_r = rng_true + rng.normal(0.0, config.range_std * noise_scale, n)
     az = az + np.deg2rad(rng.normal(0.0, config.azimuth_std_deg * noise_scale, n))
@@ -309,6 +322,8 @@ def _scan(
     c_r = rng.uniform(1.0, 60.0, m)
     c_az = np.deg2rad(rng.uniform(-config.azimuth_half_fov_deg, config.azimuth_half_fov_deg, m))
     c_el = np.deg2rad(rng.uniform(-5.0, config.elevation_half_fov_deg, m))
+    if not config.measures_elevation:
+        c_el = np.deg2rad(rng.normal(0.0, config.elevation_std_deg, m))
     c_u = np.stack([np.cos(c_el) * np.cos(c_az), np.cos(c_el) * np.sin(c_az), np.sin(c_el)], -1)
     c_u = c_u @ rot.T
     c_comp = np.where(rng.random(m) < 0.8, rng.normal(0.0, 0.2, m), rng.uniform(-4.0, 4.0, m))

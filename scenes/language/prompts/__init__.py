@@ -29,6 +29,8 @@ Modules, in import order (each imports only those above it):
   :class:`Exclusion`, :class:`Ordinal`, :class:`Related`, :class:`Count`, unsatisfiable.
 * :mod:`~scenes.language.prompts.nouns` -- out-of-class things (no referent) and nonsense text.
 * :mod:`~scenes.language.prompts.compose_render` -- sentences of the compositional families.
+* :mod:`~scenes.language.prompts.commands` -- driving commands around a single-referent description
+  (:func:`as_command`, ``PromptConfig.command_share``).
 * :mod:`~scenes.language.prompts.extended` -- the extended language's generator (every family).
 * :mod:`~scenes.language.prompts.generate` -- :func:`generate_prompts` (base, or extended by
   ``PromptConfig.language``).
@@ -68,6 +70,7 @@ from scenes.language.prompts.atoms import (
     SpeedBelow,
     SpeedUnit,
 )
+from scenes.language.prompts.commands import as_command
 from scenes.language.prompts.describe import describe, describe_predicate
 from scenes.language.prompts.families import (
     Count,
@@ -131,6 +134,7 @@ __all__ = [
     "SpeedBelow",
     "SpeedUnit",
     "analyse",
+    "as_command",
     "describe",
     "describe_predicate",
     "flip_left_right",

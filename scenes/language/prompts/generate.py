@@ -14,6 +14,7 @@ from dataclasses import replace
 import numpy as np
 
 from scenes.geometry.actors import Actor
+from scenes.language.prompts.commands import commands_for
 from scenes.language.prompts.extended import generate_extended
 from scenes.language.prompts.features import DEFAULT_REGION, ReferableRegion, actor_features
 from scenes.language.prompts.noise import perturb
@@ -41,7 +42,9 @@ def generate_prompts(
     the text was emitted before. Fewer than ``n`` prompts come back when the scene does not admit
     ``n`` (none when no actor is referable). Deterministic for a given ``rng`` state.
     ``config`` defaults to :class:`PromptConfig()`. ``config.p_perturb`` > 0 rewrites that share
-    of the texts with :func:`scenes.language.prompts.noise.perturb` (referents and tags kept). With ``config.language == "extended"`` the
+    of the texts with :func:`scenes.language.prompts.noise.perturb` (referents and tags kept);
+    ``config.command_share`` > 0 first phrases that share of the single-referent prompts as driving
+    commands (:func:`scenes.language.prompts.commands.commands_for`; referents kept). With ``config.language == "extended"`` the
     prompts come from :func:`scenes.language.prompts.extended.generate_extended` (every family of
     :data:`~scenes.language.prompts.sampling.FAMILIES`, some with an empty referent set).
 
@@ -60,6 +63,12 @@ def generate_prompts(
         out = generate_extended(actors, rng, n, region=region, config=config)
     else:
         out = _generate_base(actors, rng, n, region, config)
+    if config.command_share > 0.0 and out:
+        commands = np.random.default_rng(int(rng.integers(2**63)))
+        by_id = {a.actor_id: a for a in actors}
+        out = commands_for(
+            out, by_id, commands, config.command_share, config.phrasing, config.max_words
+        )
     if config.p_perturb <= 0.0 or not out:
         return out
     noise = np.random.default_rng(int(rng.integers(2**63)))

@@ -266,10 +266,14 @@ def variant_id(slot: str, text: str) -> str:
     return f"{group_of(slot)}:{text}"
 
 
-def _split() -> tuple[frozenset[str], frozenset[str]]:
+def split_variants(slots: dict[str, Slot]) -> tuple[frozenset[str], frozenset[str]]:
+    """Ids of the ``train`` and ``heldout`` variants of ``slots`` by the module docstring's rule
+    (per group: the ``more`` texts not core anywhere in the group, ranked by CRC-32 of their id,
+    the first ``max(1, round(k / 3))`` held out); the one home of the rule, which
+    :mod:`scenes.language.prompts.commands` applies to its own table too."""
     core: dict[str, set[str]] = {}
     more: dict[str, set[str]] = {}
-    for name, slot in SLOTS.items():
+    for name, slot in slots.items():
         g = group_of(name)
         core.setdefault(g, set()).update(variant_id(name, t) for t in slot.core)
         more.setdefault(g, set()).update(variant_id(name, t) for t in slot.more)
@@ -283,7 +287,7 @@ def _split() -> tuple[frozenset[str], frozenset[str]]:
     return frozenset(train), frozenset(heldout)
 
 
-TRAIN_VARIANTS, HELDOUT_VARIANTS = _split()
+TRAIN_VARIANTS, HELDOUT_VARIANTS = split_variants(SLOTS)
 """Ids (``group:text``) of the ``train`` and ``heldout`` variants; disjoint, together all."""
 
 

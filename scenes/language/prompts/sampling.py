@@ -93,6 +93,10 @@ class PromptConfig:
         p_perturb: Probability of rewriting each prompt's text with
             :func:`scenes.language.prompts.noise.perturb` (meaning kept: referents and tags stay); 0 draws
             nothing, so the prompts are those without the option.
+        command_share: Share of the single-referent prompts (not counting questions) phrased as
+            a driving command about their referent ("follow the car on the left",
+            :mod:`scenes.language.prompts.commands`; the wording stream is ``phrasing``'s);
+            referents kept. 0 draws nothing, so the prompts are those without the option.
     """
 
     attribute_weights: tuple[float, float, float, float] = (0.1, 0.4, 0.35, 0.15)
@@ -113,6 +117,7 @@ class PromptConfig:
     family_rates: tuple[float, float, float, float, float, float, float] = EXTENDED_RATES
     p_nonsense: float = 0.1
     p_perturb: float = 0.0
+    command_share: float = 0.0
 
     def __post_init__(self) -> None:
         w = self.attribute_weights
@@ -129,6 +134,7 @@ class PromptConfig:
             "p_number_words",
             "p_nonsense",
             "p_perturb",
+            "command_share",
         )
         for name in probabilities:
             p = getattr(self, name)
