@@ -4,8 +4,7 @@ One session per viser client (websocket connection), created when the browser co
 when it leaves. It owns that browser's GUI (``client.gui``) and scene nodes (``client.scene``):
 points, ground-truth and predicted boxes, heatmap. It knows nothing of the app object: what every
 browser shares comes in as the :class:`~app.navigation.Navigator` (the current frame: the session
-subscribes to its moves, :meth:`ClientSession.frame_shown`, and shows a failed move, a
-:class:`~app.navigation.NavigationError`, as a notification), the
+subscribes to its moves, :meth:`ClientSession.frame_shown`, and shows a failed move as a notification), the
 :class:`~app.engine.GroundingEngine` (model, worker pool, scene-feature cache) and
 :class:`SessionOptions`.
 

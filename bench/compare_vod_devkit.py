@@ -8,7 +8,7 @@ scratch virtual environment outside the repository and point this script at its 
 
 The script writes random label / prediction folders (VoD-like camera, realistic projected 2D boxes,
 noisy predictions with random scores, false positives, class confusions, flipped headings, small
-and far objects), scores them with :func:`model.evaluate.score_directories`, runs the devkit on the
+and far objects), scores them with :func:`model.evaluation.files.score_directories`, runs the devkit on the
 same folders in a subprocess (the devkit is imported only there, only when this script runs), and
 prints the largest absolute difference of every reported number (R11 and R40; 3D, BEV, AOS; both
 areas).

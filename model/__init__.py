@@ -45,8 +45,8 @@ if TYPE_CHECKING:
     from model.core.candidates import SceneMaps
     from model.core.features import Predictions, SceneFeatures, as_points
     from model.core.labelled import LabelledBoxes
-    from model.evaluate import score_directories
     from model.evaluation.baselines import class_noun_prompt
+    from model.evaluation.files import score_directories
     from model.evaluation.predict import operating_threshold
     from model.grounding.referent import UNCALIBRATED_REFERENT, referent_head
     from model.head.decode import decode
@@ -71,7 +71,7 @@ _EXPORTS = {
     "read_checkpoint": "model.checkpoint",
     "save_checkpoint": "model.checkpoint",
     "ModelConfig": "model.config",
-    "score_directories": "model.evaluate",
+    "score_directories": "model.evaluation.files",
     "class_noun_prompt": "model.evaluation.baselines",
     "operating_threshold": "model.evaluation.predict",
     "Predictions": "model.core.features",

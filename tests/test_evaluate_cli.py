@@ -11,7 +11,8 @@ from pathlib import Path
 
 import pytest
 
-from model.evaluate import main, score_directories
+from model.evaluate import main
+from model.evaluation.files import score_directories
 from scenes.talk2radar.kitti import ObjectLabel, format_label_line, read_label_file
 from scenes.talk2radar.layout import LIDAR_FOLDER, PROMPT, sample_file
 

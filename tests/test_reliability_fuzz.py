@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from model.evaluate import EvaluationInputError, main, score_directories
+from model.evaluate import main
+from model.evaluation.files import EvaluationInputError, score_directories
 from scenes.geometry.actors import Actor
 from scenes.geometry.calib import CalibrationError
 from scenes.talk2radar.kitti import LabelError, format_label_line, read_label_file

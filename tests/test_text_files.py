@@ -21,7 +21,8 @@ from annotate import AnnotationStore, SourceFrame, default_box
 from annotate.draft import Draft
 from annotate.review import record_review
 from bench.language_cases import SUITE_FILE, SuiteError, load_suite
-from model.evaluate import load_label_dir, score_directories, write_json
+from model.evaluate import write_json
+from model.evaluation.files import load_label_dir, score_directories
 from model.evaluation.results_table import load_row
 from scenes.geometry.calib import CalibrationError, read_calib
 from scenes.talk2radar.kitti import LabelError, read_label_file
