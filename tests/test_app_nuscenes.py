@@ -119,3 +119,41 @@ def test_commands_prompts_and_a_pair_saved_as_a_command(nusc_app, ws_client) -> 
     assert command.cam_token == root.frame(sample.sample_id).cam_front_token
     np.testing.assert_allclose(found.referent[command.command_token].box, box, atol=1e-6)
     assert found.referent[command.command_token].cls == sample.classes[k]
+
+
+def test_browser_shows_the_commands_and_the_camera_image(nusc_app, chromium, chromium_args) -> None:
+    """Real browser (headless Chromium): the nuScenes root's sample shows its commands in the
+    panel, the LiDAR and radar in the scene, and the 1600 x 900 CAM_FRONT image in the camera
+    panel; screenshot ``artifacts/nuscenes-browser.png``."""
+    from playwright.sync_api import sync_playwright
+
+    from tests.browser_helpers import ARTIFACTS, scene_has
+    from tests.camera_shot import CAMERA_IMAGE_WIDTH
+
+    app = nusc_app
+    commands = app.frames.root.commands(app.frame.sample.sample_id)
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=chromium, headless=True, args=chromium_args)
+        try:
+            page = browser.new_page(viewport={"width": 1400, "height": 860})
+            page.goto(app.url)
+            page.wait_for_function(scene_has("/scene/lidar"), timeout=60_000)
+            page.wait_for_function(scene_has("/scene/radar"), timeout=10_000)
+            for c in commands:
+                page.get_by_text(c.command.text, exact=False).first.wait_for(timeout=10_000)
+            page.get_by_text(f"Commands ({len(commands)}):").first.wait_for(timeout=10_000)
+            page.wait_for_function(f"() => ({CAMERA_IMAGE_WIDTH})() > 400", timeout=20_000)
+            # The camera panel's image (the widest) has CAM_FRONT's 16:9 shape, not VoD's.
+            width, height = page.evaluate(
+                """() => Array.from(document.images)
+                    .filter((img) => img.complete && img.naturalWidth > 400)
+                    .map((img) => [img.naturalWidth, img.naturalHeight])
+                    .sort((a, b) => b[0] - a[0])[0]"""
+            )
+            assert abs(height / width - 900 / 1600) < 0.01, (width, height)
+            page.add_style_tag(content=".mantine-Notifications-root{display:none !important}")
+            page.wait_for_timeout(1500)  # SwiftShader renders slowly
+            ARTIFACTS.mkdir(exist_ok=True)
+            page.screenshot(path=str(ARTIFACTS / "nuscenes-browser.png"))
+        finally:
+            browser.close()
