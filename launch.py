@@ -1,5 +1,5 @@
 """Serve the Talk2PC app: ``python launch.py [--data ROOT] [--checkpoint PATH] [--host 127.0.0.1]
-[--port 8080] [--device cpu|cuda] [--split SPLIT] [--threads 1] [--pairs DIR]``.
+[--port 8080] [--device cpu|cuda] [--split SPLIT] [--threads 1] [--pairs DIR] [--talk2car CMDS]``.
 
 - No ``--data``: a small deterministic synthetic set is generated once into ``data/default``
   (``python -m scenes.synth --out data/default --frames 60 --seed 0``, about 10 s) and served;
@@ -14,8 +14,13 @@
 - Annotation saves pairs into ``--pairs DIR`` (created by the first save); by default into the
   served root when it has prompts (a Talk2Radar root). A root without prompts (a release as it
   comes) is never written into or beside: without ``--pairs`` the Annotate tab does not save and
-  suggests ``--pairs <ROOT>-talk2radar`` (:func:`app.server.default_pairs_root`). Serving writes
+  suggests ``--pairs <ROOT>-talk2radar`` (:func:`app.served.default_pairs_root`). Serving writes
   nothing until the first save.
+- ``--data`` may be a nuScenes root as released (``v1.0-*/``, ``samples/``, ``sweeps/``) with
+  ``--talk2car CMDS`` (the folder holding Talk2Car's ``{split}_commands.json``): every sample
+  (split ``all``) or a command file's samples (``--split val``) with their commands listed; pairs
+  annotated there are Talk2Car commands saved into ``--pairs DIR`` (``DIR/commands/``), and nowhere
+  without it (docs/TALK2CAR.md, section 9).
 - A root without an ``ImageSets`` folder (the View-of-Delft devkit's example set) serves every
   frame of ``lidar/training/velodyne/`` (split ``all``, with a notice).
 - A ``--checkpoint`` or ``--data`` that is missing or invalid, an unknown split, an ImageSets
@@ -44,6 +49,7 @@ from typing import TYPE_CHECKING, Literal
 from scenes.utils.cli import add_options, from_args, option
 
 if TYPE_CHECKING:
+    from app.served_nuscenes import NuScenesSource
     from model import TPCNet
     from scenes.talk2radar.root import Talk2RadarRoot
 
@@ -72,12 +78,15 @@ class LaunchConfig:
         data: The served root (None: the default synthetic set, :func:`ensure_default_data`).
         checkpoint: The served checkpoint (None: ``model.DEFAULT_CHECKPOINT``).
         device: The model's device.
-        split: The ImageSets split served (None: :func:`choose_split`'s choice).
+        split: The ImageSets split served (None: :func:`choose_split`'s choice; on a nuScenes
+            root ``all`` or a command file's split, None: ``all``).
         threads: torch's CPU threads per model call.
     """
 
     data: Path | None = option(
-        None, help=f"a Talk2Radar root (default: synthetic scenes generated into {DEFAULT_DATA})"
+        None,
+        help="a Talk2Radar root, a View-of-Delft release or a nuScenes root (with --talk2car) "
+        f"(default: synthetic scenes generated into {DEFAULT_DATA})",
     )
     checkpoint: Path | None = option(
         None, help="a TPCNet checkpoint (default: the bundled one, model.DEFAULT_CHECKPOINT)"
@@ -107,7 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_options(p, LaunchConfig, only=("data", "checkpoint"))
     add_options(p, AppConfig, only=("host", "port"))
     add_options(p, LaunchConfig, only=("device", "split"))
-    add_options(p, AppConfig, only=("pairs_root", "scene_labels"))
+    add_options(p, AppConfig, only=("pairs_root", "scene_labels", "talk2car"))
     add_options(p, LaunchConfig, only=("threads",))
     return p
 
@@ -247,6 +256,35 @@ def choose_split(root: Talk2RadarRoot, split: str | None) -> str:
     raise LaunchError(f"no split can be served; {problems[0]}")
 
 
+def is_nuscenes(path: Path) -> bool:
+    """Whether ``path`` is a nuScenes root as the release comes (it holds a ``v1.0-*`` table
+    folder: :func:`scenes.datasets.nuscenes_frames.is_nuscenes_root`)."""
+    from scenes.datasets.nuscenes_frames import is_nuscenes_root
+
+    return is_nuscenes_root(path)
+
+
+def open_nuscenes(
+    path: Path, talk2car: Path | None, split: str | None
+) -> tuple[NuScenesSource, str]:
+    """A nuScenes root with its Talk2Car commands (``talk2car``: the folder of
+    ``{split}_commands.json``), and the split served: ``split`` when given (``all`` or a command
+    file's), else ``all`` (every sample).
+
+    Raises:
+        LaunchError: a malformed root or command file, an unknown split (one line).
+    """
+    from app.served_nuscenes import NuScenesSource
+    from scenes.nuscenes.tables import NuScenesError
+    from scenes.talk2radar.root import RootError
+
+    try:
+        source = NuScenesSource(path, talk2car)
+        return source, source.choose_split(split)
+    except (NuScenesError, RootError, OSError) as exc:
+        raise LaunchError(str(exc)) from exc
+
+
 def load_model(checkpoint: Path | None, device: str, threads: int = 1) -> tuple[TPCNet, str | None]:
     """The checkpoint's model, or an untrained small one when the default checkpoint is absent.
 
@@ -294,8 +332,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         app_flags = from_args(AppConfig, flags)
         check_listen_address(app_flags.host, app_flags.port)
         data = args.data if args.data is not None else ensure_default_data()
-        root = open_root(data, args.split)
-        split = choose_split(root, args.split)
+        if is_nuscenes(data):
+            root, split = open_nuscenes(data, app_flags.talk2car, args.split)
+        else:
+            if app_flags.talk2car is not None:
+                raise LaunchError(
+                    f"--talk2car goes with a nuScenes root as --data (a folder holding v1.0-*/); "
+                    f"{data} is not one"
+                )
+            root = open_root(data, args.split)
+            split = choose_split(root, args.split)
         model, note = load_model(args.checkpoint, args.device, args.threads)
     except (LaunchError, ServerStartError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -41,11 +41,14 @@ class Frame:
         index: Position in the split (0-based).
         sample: The loaded sample (points in the LiDAR frame).
         ground_z: Ground height estimate (m, LiDAR frame).
+        notes: Markdown lines under the frame summary (the root kind's
+            :meth:`app.served.ServedRoot.frame_notes`: a nuScenes sample's scene and commands).
     """
 
     index: int
     sample: Sample
     ground_z: float
+    notes: str = ""
 
     @property
     def sample_id(self) -> str:
@@ -62,12 +65,26 @@ def step_index(index: int, delta: int, count: int) -> int:
 class FrameStore:
     """The frames of ``split`` in ``root``, loaded on demand (thread-safe, small LRU cache).
 
+    Args:
+        root: The frames (a :class:`Talk2RadarRoot`, or another :class:`app.served.FrameLoader`:
+            ``ids``, ``load``, ``path``).
+        split: The split served.
+        cache_size: Frames kept.
+        notes: The lines shown under a frame's summary (None: none).
+
     Raises:
         RootError: the split is missing or lists no frame.
     """
 
-    def __init__(self, root: Talk2RadarRoot, split: str, cache_size: int = 4) -> None:
+    def __init__(
+        self,
+        root: Talk2RadarRoot,
+        split: str,
+        cache_size: int = 4,
+        notes: Callable[[Sample], str] | None = None,
+    ) -> None:
         self.root = root
+        self._notes = notes
         self.split = split
         self.ids: tuple[str, ...] = tuple(root.ids(split))
         if not self.ids:
@@ -100,7 +117,8 @@ class FrameStore:
         if cached is not None:
             return cached
         sample = self.root.load(self.ids[index])
-        frame = Frame(index=index, sample=sample, ground_z=estimate_ground_z(sample.lidar))
+        notes = self._notes(sample) if self._notes is not None else ""
+        frame = Frame(index, sample, estimate_ground_z(sample.lidar), notes)
         self._cache.put(index, frame)
         return frame
 
@@ -252,7 +270,7 @@ def frame_markdown(frame: Frame, count: int) -> str:
     return (
         f"**Frame {frame.index + 1} / {count}** · sample {sid}  \n"
         f"{len(s.lidar):,} LiDAR · {len(s.radar):,} radar points · GT: {gt}  \n"
-        f"*Sample prompt:* {prompt}"
+        f"*Sample prompt:* {prompt}" + (f"  \n{frame.notes}" if frame.notes else "")
     )
 
 

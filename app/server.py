@@ -1,4 +1,5 @@
-"""The app object: :class:`Talk2PCApp` serves one split of a Talk2Radar root with one model.
+"""The app object: :class:`Talk2PCApp` serves one split of a root with one model (a Talk2Radar
+root, a View-of-Delft release or a nuScenes root with its Talk2Car commands: :mod:`app.served`).
 
 Shared by every browser, owned here: the viser server, the current frame and the frame cache
 (:class:`app.navigation.Navigator`: navigation is shared), the model engine
@@ -42,6 +43,7 @@ from concurrent.futures import wait as futures_wait
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import viser
 
@@ -49,7 +51,6 @@ from app.annotate_tab import AnnotationHub, build_annotation_tab
 from app.engine import GroundingEngine, GroundingModel, initial_threshold
 from app.guards import InputWarnings, LogGuards, guard_client, guard_server
 from app.keys import add_escape_leaves_fields
-from app.labelled import LabelledFrames
 from app.memory import MemoryReaper, freeze_startup_objects
 from app.navigation import (
     Frame,
@@ -59,9 +60,13 @@ from app.navigation import (
     Navigator,
 )
 from app.scene_view import chase_pose
+from app.served import ServedRoot, serve_root
 from app.session import ClientSession, ExtraTab, SessionOptions
 from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.utils.cli import option
+
+if TYPE_CHECKING:
+    from app.served_nuscenes import NuScenesSource
 
 log = logging.getLogger(__name__)
 
@@ -142,14 +147,17 @@ class AppConfig:
         start_timeout: Seconds :meth:`Talk2PCApp.start` waits for viser to listen before it
             raises :class:`ServerStartError`.
         pairs_root: Where the Annotate tab saves pairs (a Talk2Radar root, created by the
-            first save); None: the served root when it has prompts, else no saving (the tab
-            suggests :func:`default_pairs_root`).
+            first save; on a nuScenes root, Talk2Car commands in ``DIR/commands/``); None: the
+            served root when it has prompts, else no saving (the tab suggests
+            :func:`app.served.default_pairs_root`, or ``<root>-talk2car``).
         freeze_startup: Freeze the objects alive at start before any browser connects
             (:func:`app.memory.freeze_startup_objects`: cheap collections after disconnects);
             process-wide, so for the process that serves (``launch.py``), not for tests.
         scene_labels: The View-of-Delft root with every object of the served frames (for a
             Talk2Radar root; a release opened directly is its own): the Query tab then offers
             "Candidates: Labelled boxes".
+        talk2car: The folder of a nuScenes root's Talk2Car command files (``{split}_commands.json``;
+            a nuScenes root served without it has no commands).
     """
 
     host: str = option("127.0.0.1", help="interface to bind (default %(default)s)")
@@ -168,8 +176,9 @@ class AppConfig:
         flag="--pairs",
         metavar="PAIRS",
         help="where annotation saves prompt-to-box pairs, a Talk2Radar root created by the "
-        "first save (default: the served root when it has prompts; a root without prompts is "
-        "never written beside: without --pairs its pairs are not saved)",
+        "first save (on a nuScenes root: Talk2Car commands in PAIRS/commands/); default: the "
+        "served root when it has prompts; a root without prompts is never written beside: "
+        "without --pairs its pairs are not saved",
     )
     freeze_startup: bool = False
     scene_labels: Path | None = option(
@@ -177,53 +186,43 @@ class AppConfig:
         help="the View-of-Delft root whose label_2 lists every object of the served frames: the "
         "Query tab then offers Candidates: Labelled boxes (a VoD root opened directly is its own)",
     )
-
-
-PAIRS_SUFFIX = "-talk2radar"
-"""Name suffix of the folder beside a root without prompts where its pairs are saved."""
-
-
-def has_prompts(root: Talk2RadarRoot) -> bool:
-    """Whether ``root`` is a Talk2Radar root with prompts (``lidar/training/prompt/``); a
-    View-of-Delft root as released has none."""
-    return root.has_prompts
-
-
-def default_pairs_root(root: Talk2RadarRoot) -> Path:
-    """Where pairs annotated on ``root`` go without ``--pairs``: into ``root`` itself when it is
-    a Talk2Radar root with prompts (the pairs join its splits); for a root without prompts (a
-    release as it comes, whose own files are never touched) the sibling folder
-    ``<root>-talk2radar``, only *suggested*: nothing is written beside a release unless the
-    person names the pairs folder (:class:`app.annotate_tab.AnnotationHub`, ``named``)."""
-    if has_prompts(root):
-        return root.path
-    path = root.path.resolve() if root.path.name in ("", ".", "..") else root.path
-    return path.with_name(path.name + PAIRS_SUFFIX)
+    talk2car: Path | None = option(
+        None,
+        metavar="CMDS",
+        help="with a nuScenes root as --data: the folder holding its Talk2Car "
+        "{split}_commands.json; each sample's commands are listed with their referred boxes and "
+        "each file is a --split",
+    )
 
 
 class Talk2PCApp:
     """The viser app (see the module docstring).
 
     Args:
-        root: A Talk2Radar root (or its path).
+        root: A Talk2Radar root, a View-of-Delft release, a nuScenes root
+            (:class:`app.served_nuscenes.NuScenesSource`, with ``config.talk2car``'s commands), or
+            the path of one (the kind is chosen once: :func:`app.served.serve_root`).
         model: The grounding model, in eval mode (``model.tpcnet.TPCNet``).
         config: Server and display settings.
 
     Raises:
-        RootError: the root is not a Talk2Radar root, or the split is missing or empty.
+        RootError: the root is not a root, or the split is missing or empty.
+        scenes.nuscenes.tables.NuScenesError: a malformed nuScenes root or command file.
     """
 
     def __init__(
         self,
-        root: Talk2RadarRoot | str | Path,
+        root: Talk2RadarRoot | NuScenesSource | str | Path,
         model: GroundingModel,
         config: AppConfig | None = None,
     ) -> None:
-        self.config = config or AppConfig()
-        if not isinstance(root, Talk2RadarRoot):
-            root = Talk2RadarRoot(root)
+        self.config = cfg = config or AppConfig()
+        self.served: ServedRoot = serve_root(
+            root, pairs=cfg.pairs_root, scene_labels=cfg.scene_labels, talk2car=cfg.talk2car
+        )
+        """The kind of root served, chosen once (:mod:`app.served`)."""
         self.navigator = Navigator(
-            FrameStore(root, self.config.split, self.config.frame_cache_size),
+            FrameStore(self.served.root, cfg.split, cfg.frame_cache_size, self.served.frame_notes),
             after_move=self._prefetch,
         )
         self.engine = GroundingEngine(
@@ -231,16 +230,10 @@ class Talk2PCApp:
         )
         self.score_threshold = initial_threshold(model, DEFAULT_SCORE_THRESHOLD)
         self.model_note = self.config.model_note
-        self.labelled = LabelledFrames(root, self.config.scene_labels)
+        self.labelled = self.served.labelled
         chooses = bool(getattr(model, "takes_labelled_candidates", False))
         self.labelled_boxes = self.labelled.boxes if self.labelled.available and chooses else None
-        pairs = self.config.pairs_root
-        self.annotations = AnnotationHub(
-            Path(pairs) if pairs is not None else default_pairs_root(root),
-            radar_folder=root.radar_folder,
-            served=root,
-            named=pairs is not None or has_prompts(root),
-        )
+        self.annotations = AnnotationHub(self.served)
         self.server: viser.ViserServer | None = None
         self.sessions: dict[int, ClientSession] = {}
         self.input_warnings = InputWarnings()

@@ -485,3 +485,31 @@ def real_format_roots(real_format_source: Path) -> tuple[Path, Path]:
     base = real_format_source.parent
     export(real_format_source, base / "t2r", base / "vod", radar="both")
     return base / "t2r", base / "vod"
+
+
+# ---------------------------------------------------------------------------- nuScenes roots
+
+NUSCENES_SOURCE = {"frames": 16, "seed": 5, "prompts_per_world": 4, "camera_scale": 0.125}
+"""The synthetic root :func:`nuscenes_root` exports: 4 worlds of 4 prompts (4 nuScenes samples,
+10 single-referent commands: train 6, val 2, test 2)."""
+
+
+@pytest.fixture(scope="session")
+def nuscenes_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A tiny nuScenes root with Talk2Car commands (``<root>/commands/{split}_commands.json``),
+    exported by ``python -m scenes.export_nuscenes`` from :data:`NUSCENES_SOURCE` (about 4 s).
+    Read only (copy it before changing it)."""
+    from scenes.export_nuscenes import export
+    from scenes.synth.camera import CameraConfig
+    from scenes.synth.generate import SynthSettings, generate_root
+
+    spec = NUSCENES_SOURCE
+    settings = SynthSettings(
+        seed=spec["seed"],
+        prompts_per_world=spec["prompts_per_world"],
+        camera=CameraConfig(image_scale=spec["camera_scale"]),
+    )
+    base = tmp_path_factory.mktemp("nuscenes")
+    generate_root(base / "synth", spec["frames"], settings, split_fractions=(0.5, 0.25, 0.25))
+    export(base / "synth", base / "nusc", seed=3)
+    return base / "nusc"

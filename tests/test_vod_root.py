@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import launch
-from app.server import default_pairs_root
+from app.served import default_pairs_root
 from scenes.talk2radar.root import RootError, Talk2RadarRoot
 
 

@@ -74,9 +74,10 @@ def pair_option(pair: PairInfo) -> str:
 
 
 def option_pair_id(option: str) -> str | None:
-    """The sample id of a :func:`pair_option` entry (None for :data:`NO_PAIRS`)."""
+    """The pair id of a :func:`pair_option` entry: a sample id, or a Talk2Car command_token on a
+    nuScenes root (None for :data:`NO_PAIRS`)."""
     head = option.split(" ", 1)[0]
-    return head if head.isdigit() else None
+    return head if head.isalnum() and head.isascii() else None
 
 
 def evidence_markdown(

@@ -10,8 +10,10 @@ the first save, so a page that only looks leaves the disk as it was.
 The store's root is the served root (a Talk2Radar root with prompts) or the folder named with
 ``--pairs``: :attr:`AnnotationHub.separate` says which, and the tab says where pairs go. A root
 without prompts (a View-of-Delft release served directly) without ``--pairs`` gets no store: the
-folder beside it (:func:`app.server.default_pairs_root`) is only suggested, never written, and
-the tab says how to name one (:attr:`AnnotationHub.error`).
+folder beside it (:func:`app.served.default_pairs_root`) is only suggested, never written, and
+the tab says how to name one (:attr:`AnnotationHub.error`). A nuScenes root's pairs are Talk2Car
+commands (:class:`annotate.talk2car.Talk2CarStore`), saved only into ``--pairs DIR``. What
+differs between the kinds is the root kind's (:mod:`app.served`).
 """
 
 from __future__ import annotations
@@ -23,10 +25,11 @@ from pathlib import Path
 from typing import Protocol
 
 from annotate import AnnotationStore, StoreError
+from annotate.talk2car import Talk2CarStore
+from app.served import ServedRoot
 from app.session import ClientSession
-from scenes.talk2radar.drives import Drives, find_drives
+from scenes.talk2radar.drives import Drives
 from scenes.talk2radar.layout import RootError
-from scenes.talk2radar.root import Talk2RadarRoot
 
 log = logging.getLogger(__name__)
 
@@ -44,34 +47,24 @@ class AnnotationHub:
     """The store of one served root and the open Annotate tabs (see the module docstring).
 
     Args:
-        path: The root pairs are saved into.
-        radar_folder: The radar tree written there (the served root's, so that a pair's radar
-            file keeps its tree name: ``radar`` is a single scan; a store root that has another
-            tree is refused with a message naming both); None: the store's default.
-        served: The root being served (None: ``path``).
-        named: Whether the person named ``path`` (the served root, or ``--pairs``); False: it is
-            only the suggestion for a root without prompts, never written (no store).
+        served: The root kind served (:class:`app.served.ServedRoot`): where pairs go
+            (``pairs_path``; ``named`` False: only a suggestion, never written, no store), the
+            store it opens there, the frame a pair is made on, the rules a pair must meet beyond
+            :func:`annotate.validate`, and the drives of a split.
     """
 
-    def __init__(
-        self,
-        path: Path,
-        radar_folder: str | None = None,
-        served: Talk2RadarRoot | None = None,
-        *,
-        named: bool = True,
-    ) -> None:
-        self.path = Path(path)
-        self.named = named
-        self.radar_folder = radar_folder
-        self.served_path = served.path if served is not None else self.path
-        self._store: AnnotationStore | None = None
+    def __init__(self, served: ServedRoot) -> None:
+        self.served = served
+        self.path = Path(served.pairs_path)
+        self.named = served.named
+        self.served_path = served.root.path
+        self._store: AnnotationStore | Talk2CarStore | None = None
         self._error: str | None = None
         self._opened = False
         self._open_lock = threading.Lock()
         self._views: weakref.WeakValueDictionary[int, PairsView] = weakref.WeakValueDictionary()
         self._lock = threading.Lock()
-        self._drives: tuple[tuple[str, tuple[str, ...]], Drives] | None = None
+        self._drives: tuple[tuple[str, ...], Drives] | None = None
         self._drives_lock = threading.Lock()
         self.drives_error: str | None = None
         """Why the served split's drives could not be read (None: they could, or not asked)."""
@@ -82,14 +75,10 @@ class AnnotationHub:
                 return
             self._opened = True
             if not self.named:
-                self._error = (
-                    f"the served root has no prompts (a release as it comes), and pairs are "
-                    f"never written beside it unless you say where: restart with --pairs DIR "
-                    f"(e.g. --pairs {self.path})"
-                )
+                self._error = self.served.unnamed_message()
                 return
             try:
-                self._store = AnnotationStore(self.path, radar_folder=self.radar_folder)
+                self._store = self.served.open_store()
             except (OSError, StoreError, ValueError) as exc:
                 self._error = f"{type(exc).__name__}: {exc}"
                 log.error("annotation store of %s unavailable: %s", self.path, self._error)
@@ -100,8 +89,10 @@ class AnnotationHub:
         return self.path.resolve() != Path(self.served_path).resolve()
 
     @property
-    def store(self) -> AnnotationStore | None:
-        """The root's :class:`annotate.AnnotationStore`, or None when it cannot be opened."""
+    def store(self) -> AnnotationStore | Talk2CarStore | None:
+        """The root's store (an :class:`annotate.AnnotationStore`, or a
+        :class:`annotate.talk2car.Talk2CarStore` on a nuScenes root), or None when it cannot be
+        opened."""
         self._open()
         return self._store
 
@@ -111,18 +102,18 @@ class AnnotationHub:
         self._open()
         return self._error
 
-    def drives(self, root: Talk2RadarRoot, ids: tuple[str, ...]) -> Drives:
-        """The drives of a split list of ``root`` (:func:`scenes.talk2radar.drives.find_drives`), computed
-        once per list and shared by every browser; none when a pose file is malformed
+    def drives(self, ids: tuple[str, ...]) -> Drives:
+        """The drives of a split list of the served root (:meth:`app.served.ServedRoot.drives`),
+        computed once per list and shared by every browser; none when a pose file is malformed
         (:attr:`drives_error` says which)."""
-        key = (str(root.path), tuple(ids))
+        key = tuple(ids)
         with self._drives_lock:
             if self._drives is None or self._drives[0] != key:
                 try:
-                    drives, self.drives_error = find_drives(root, ids), None
+                    drives, self.drives_error = self.served.drives(ids), None
                 except (RootError, OSError) as exc:
                     drives, self.drives_error = Drives(()), str(exc)
-                    log.error("drives of %s: %s", root.path, exc)
+                    log.error("drives of %s: %s", self.served_path, exc)
                 self._drives = (key, drives)
             return self._drives[1]
 

@@ -20,7 +20,6 @@ from pathlib import Path
 from annotate import (
     ConflictError,
     SaveResult,
-    SourceFrame,
     StoreError,
     ValidationError,
     is_pristine,
@@ -79,11 +78,10 @@ class PairActions:
             return
         if frame is None:
             return
-        root = p.navigator.frames.root
         try:
             source = None
             if draft.sample_id is None:
-                source = SourceFrame.from_root(root, frame.sample.sample_id, sample=frame.sample)
+                source = p.hub.served.source_frame(frame.sample)
             request = f"{self._token}:{version}"
             result = store.save(draft, source, annotator=annotator, split=split, request=request)
         except ValidationError as exc:

@@ -21,7 +21,7 @@ from __future__ import annotations
 import enum
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import viser
@@ -356,7 +356,13 @@ class AnnotationPanel:
         """Validate the draft; *Save pair* is enabled only when nothing blocks saving."""
         w = self.w
         calib = self.frame.sample.calib if self.frame is not None else None
-        self.report = validate(draft, self.config(), calib)
+        report = validate(draft, self.config(), calib)
+        if (
+            self.frame is not None
+        ):  # what the root kind asks more (a Talk2Car command: one referent)
+            extra = self.hub.served.draft_issues(draft, self.frame.sample)
+            report = replace(report, issues=report.issues + extra) if extra else report
+        self.report = report
         w.checks.content = checks_markdown(self.report)
         w.save.disabled = self.store is None or self.frame is None or not self.report.ok
         w.split.disabled = draft.sample_id is not None

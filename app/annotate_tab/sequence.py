@@ -92,7 +92,7 @@ class SequencePanel:
     def drives(self) -> Drives:
         """The drives of the split served (the hub's, computed once per split list)."""
         frames = self.panel.navigator.frames
-        return self.panel.hub.drives(frames.root, frames.ids)
+        return self.panel.hub.drives(frames.ids)
 
     def position(self) -> tuple[Drive, int] | None:
         """``(drive, frame index)`` of the frame on screen (None: no frame, or a lone frame)."""

@@ -1,0 +1,185 @@
+"""The kind of root the app serves, chosen once: :func:`serve_root` -> a :class:`ServedRoot`.
+
+Three kinds of root are served: a Talk2Radar root (prompts and their referents), a View-of-Delft
+release as it comes (every object labelled, no prompts), both read by
+:class:`scenes.talk2radar.root.Talk2RadarRoot` (:class:`Talk2RadarServed`), and a nuScenes root
+with its Talk2Car commands (:class:`app.served_nuscenes.NuScenesServed`). What differs between
+them lives in the one object :class:`Talk2PCApp <app.server.Talk2PCApp>` chooses at start, never
+in branches elsewhere:
+
+- ``root``: the frames (``ids(split)``, ``load(id) -> Sample``, ``splits()``, ``path``) that
+  :class:`app.navigation.FrameStore` reads;
+- ``labelled``: the frames' labelled boxes ("Candidates: Labelled boxes", the Annotate tab's
+  ready-made boxes);
+- ``frame_notes(sample)``: lines under the frame summary (a nuScenes sample's scene and commands);
+- where pairs go (``pairs_path``, ``named``: nothing is written where the person did not say) and
+  the store that writes them (``open_store``: an :class:`annotate.AnnotationStore` of Talk2Radar
+  pairs, or an :class:`annotate.talk2car.Talk2CarStore` of Talk2Car commands), the frame a new
+  pair is made on (``source_frame``), what a pair must be beyond :func:`annotate.validate`
+  (``draft_issues``: a Talk2Car command refers to exactly one labelled annotation);
+- ``drives(ids)``: the drives the Annotate tab's *Sequence* folder plays.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, Protocol
+
+from annotate import AnnotationStore, Draft, SourceFrame
+from annotate.validation import Issue
+from app.labelled import LabelledFrames
+from scenes.talk2radar.drives import Drives, find_drives
+from scenes.talk2radar.layout import RootError
+from scenes.talk2radar.root import Sample, Talk2RadarRoot
+
+__all__ = [
+    "PAIRS_SUFFIX",
+    "FrameLoader",
+    "ServedRoot",
+    "Talk2RadarServed",
+    "default_pairs_root",
+    "has_prompts",
+    "serve_root",
+]
+
+PAIRS_SUFFIX = "-talk2radar"
+"""Name suffix of the folder beside a root without prompts where its pairs are saved."""
+
+
+class FrameLoader(Protocol):
+    """The frames of a root, as :class:`app.navigation.FrameStore` reads them."""
+
+    path: Path
+
+    def splits(self) -> list[str]:
+        """The split names."""
+
+    def ids(self, split: str) -> list[str]:
+        """The sample ids of ``split``, in order."""
+
+    def load(self, sample_id: str) -> Sample:
+        """One sample (points in the model's LiDAR frame)."""
+
+
+class ServedRoot(Protocol):
+    """What differs between the kinds of root served (module docstring)."""
+
+    root: FrameLoader
+    labelled: LabelledFrames
+    pairs_path: Path
+    named: bool
+
+    def unnamed_message(self) -> str:
+        """Why pairs are not saved when the person named no folder (``named`` False)."""
+
+    def open_store(self) -> Any:
+        """The store pairs are saved into (at ``pairs_path``; opening writes nothing)."""
+
+    def source_frame(self, sample: Sample) -> SourceFrame:
+        """The frame a new pair on ``sample`` (a frame of ``root``) is made on."""
+
+    def draft_issues(self, draft: Draft, sample: Sample) -> tuple[Issue, ...]:
+        """Errors that block saving ``draft`` on ``sample`` beyond :func:`annotate.validate`."""
+
+    def frame_notes(self, sample: Sample) -> str:
+        """Markdown lines shown under the frame summary ("" for none)."""
+
+    def drives(self, ids: Sequence[str]) -> Drives:
+        """The drives of a split list of ``root``."""
+
+
+def has_prompts(root: Talk2RadarRoot) -> bool:
+    """Whether ``root`` is a Talk2Radar root with prompts (``lidar/training/prompt/``); a
+    View-of-Delft root as released has none."""
+    return root.has_prompts
+
+
+def default_pairs_root(root: Talk2RadarRoot) -> Path:
+    """Where pairs annotated on ``root`` go without ``--pairs``: into ``root`` itself when it is
+    a Talk2Radar root with prompts (the pairs join its splits); for a root without prompts (a
+    release as it comes, whose own files are never touched) the sibling folder
+    ``<root>-talk2radar``, only *suggested*: nothing is written beside a release unless the
+    person names the pairs folder (:class:`app.annotate_tab.AnnotationHub`, ``named``)."""
+    if has_prompts(root):
+        return root.path
+    path = root.path.resolve() if root.path.name in ("", ".", "..") else root.path
+    return path.with_name(path.name + PAIRS_SUFFIX)
+
+
+class Talk2RadarServed:
+    """A Talk2Radar root or a View-of-Delft release (:class:`Talk2RadarRoot`).
+
+    Args:
+        root: The served root.
+        pairs: ``--pairs`` (None: the root itself when it has prompts, else no saving).
+        scene_labels: ``--scene-labels`` (:class:`app.labelled.LabelledFrames`).
+    """
+
+    def __init__(
+        self, root: Talk2RadarRoot, pairs: Path | None = None, scene_labels: Path | None = None
+    ) -> None:
+        self.root = root
+        self.labelled = LabelledFrames(root, scene_labels)
+        self.pairs_path = Path(pairs) if pairs is not None else default_pairs_root(root)
+        self.named = pairs is not None or has_prompts(root)
+
+    def unnamed_message(self) -> str:
+        return (
+            "the served root has no prompts (a release as it comes), and pairs are never "
+            "written beside it unless you say where: restart with --pairs DIR "
+            f"(e.g. --pairs {self.pairs_path})"
+        )
+
+    def open_store(self) -> AnnotationStore:
+        return AnnotationStore(self.pairs_path, radar_folder=self.root.radar_folder)
+
+    def source_frame(self, sample: Sample) -> SourceFrame:
+        return SourceFrame.from_root(self.root, sample.sample_id, sample=sample)
+
+    def draft_issues(self, draft: Draft, sample: Sample) -> tuple[Issue, ...]:
+        return ()
+
+    def frame_notes(self, sample: Sample) -> str:
+        return ""
+
+    def drives(self, ids: Sequence[str]) -> Drives:
+        """:func:`scenes.talk2radar.drives.find_drives` (errors: ``RootError``, ``OSError``)."""
+        return find_drives(self.root, ids)
+
+
+def serve_root(
+    root: Any,
+    *,
+    pairs: Path | None = None,
+    scene_labels: Path | None = None,
+    talk2car: Path | None = None,
+) -> ServedRoot:
+    """The :class:`ServedRoot` of ``root``: a :class:`Talk2RadarRoot`, an
+    :class:`app.served_nuscenes.NuScenesSource`, or a path to either (a folder holding a
+    ``v1.0-*`` table folder is a nuScenes root, read with its ``talk2car`` commands).
+
+    Raises:
+        RootError: not a root; ``talk2car`` or a split problem on the wrong kind of root.
+        scenes.nuscenes.tables.NuScenesError: a malformed nuScenes root or command file.
+    """
+    from app.served_nuscenes import NuScenesServed, NuScenesSource
+    from scenes.datasets.nuscenes_frames import is_nuscenes_root
+
+    if not isinstance(root, Talk2RadarRoot | NuScenesSource) and is_nuscenes_root(root):
+        root = NuScenesSource(root, talk2car)
+    if isinstance(root, NuScenesSource):
+        if scene_labels is not None:
+            raise RootError(
+                f"--scene-labels is for a Talk2Radar root; {root.path} is a nuScenes root "
+                "(its own annotations are its labelled boxes)"
+            )
+        return NuScenesServed(root, pairs)
+    if talk2car is not None:
+        raise RootError(
+            f"--talk2car {talk2car}: Talk2Car commands go with a nuScenes root (a folder holding "
+            f"v1.0-*/), not {root if isinstance(root, str | Path) else root.path}"
+        )
+    if not isinstance(root, Talk2RadarRoot):
+        root = Talk2RadarRoot(root)
+    return Talk2RadarServed(root, pairs, scene_labels)
