@@ -23,7 +23,7 @@ from pathlib import Path
 
 from scenes.nuscenes.export import ExportReport, SourceFrame, SourcePrompt, export_frames
 from scenes.synth.radar import RadarConfig
-from scenes.talk2radar.layout import RootError, meta_file
+from scenes.talk2radar.layout import RootError
 from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.utils.cli import add_options, from_args, option
 
@@ -43,12 +43,7 @@ def source_frames(root: Talk2RadarRoot, splits: Sequence[str]) -> list[SourceFra
     frames: dict[tuple, dict] = {}
     for split in splits:
         for sid in root.ids(split):
-            meta = root.load_meta(sid)
-            if meta is None:
-                raise RootError(
-                    f"{meta_file(root.path, sid)}: missing sidecar; the export needs a root "
-                    "written by scenes.synth (its sidecars list every object of the frame)"
-                )
+            meta = root.source_meta(sid)
             key = root.frame_key(sid)
             prompt = SourcePrompt(sid, split, root.load_prompt(sid) or "", meta.referent_ids)
             if key in frames:

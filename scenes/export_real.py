@@ -132,12 +132,7 @@ def source_frames(root: Talk2RadarRoot, splits: Sequence[str]) -> tuple[list[tup
     dropped = 0
     for split in splits:
         for sid in root.ids(split):
-            meta = root.load_meta(sid)
-            if meta is None:
-                raise RootError(
-                    f"{meta_file(root.path, sid)}: missing sidecar; the export needs a "
-                    "root written by scenes.synth (its sidecars list every object of the frame)"
-                )
+            meta = root.source_meta(sid)
             if meta.world_id >= 0 and meta.world_id in seen:
                 dropped += 1
                 continue

@@ -265,6 +265,21 @@ class Talk2RadarRoot:
         data = read_json_file(path, "sidecar", RootError)
         return SampleMeta.from_json(data, source=str(path))
 
+    def source_meta(self, sample_id: str | int) -> SampleMeta:
+        """The sidecar of a sample of a root written by ``scenes.synth`` (what the exports read:
+        it lists every object of the frame).
+
+        Raises:
+            RootError: the sample has no sidecar (names the file), or :meth:`load_meta`'s.
+        """
+        meta = self.load_meta(sample_id)
+        if meta is None:
+            raise RootError(
+                f"{meta_file(self.path, format_id(sample_id))}: missing sidecar; the export needs "
+                "a root written by scenes.synth (its sidecars list every object of the frame)"
+            )
+        return meta
+
     def frame_key(self, sample_id: str | int) -> tuple[object, ...]:
         """The identity of a sample's frame: ``(device, inode)`` of its LiDAR and radar point files
         and of both calibrations (and the radar tree read). This is the one definition of "the
