@@ -48,6 +48,7 @@ from model.evaluation.class_prompt_counts import (
 from scenes.geometry.actors import CLASSES
 from scenes.geometry.calib import IMAGE_SIZE
 from scenes.geometry.projection import in_camera_view
+from scenes.utils.cli import add_options, from_args, option
 
 CONDITIONS = ("as is", "blind", "shifted sensor")
 """The detector conditions, in table order (module docstring)."""
@@ -193,21 +194,32 @@ def format_table(results: dict[str, dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+@dataclass(frozen=True, kw_only=True)
+class LabelledShiftOptions:
+    """The flags of ``python -m bench.labelled_shift``."""
+
+    data: Path = option(help="a root with full labels (VoD layout)")
+    checkpoint: tuple[Path, ...] = option(
+        (),
+        help="checkpoint to measure (repeat for several; default checkpoints/tpcnet-small.pt)",
+    )
+    max_range: float = option(30.0, help="metres, BEV (default %(default)s)")
+    limit: int = option(0, help="first N frames only (0: all)")
+    json: Path | None = option(None, help="write the figures here")
+    quiet: bool = option(False, help="no progress bar")
+
+
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="python -m bench.labelled_shift", description=__doc__.split("\n")[0]
     )
-    p.add_argument("--data", required=True, type=Path, help="a root with full labels (VoD layout)")
-    p.add_argument(
-        "--checkpoint", type=Path, action="append", default=None,
-        help="checkpoint to measure (repeat for several; default checkpoints/tpcnet-small.pt)",
-    )  # fmt: skip
-    p.add_argument("--max-range", type=float, default=30.0, help="metres, BEV (default 30)")
-    p.add_argument("--limit", type=int, default=0, help="first N frames only (0: all)")
-    p.add_argument("--json", type=Path, default=None, help="write the figures here")
-    p.add_argument("--quiet", action="store_true")
-    args = p.parse_args(argv)
-    checkpoints = args.checkpoint or [Path("checkpoints/tpcnet-small.pt")]
+    add_options(p, LabelledShiftOptions)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = from_args(LabelledShiftOptions, build_parser().parse_args(argv))
+    checkpoints = list(args.checkpoint) or [Path("checkpoints/tpcnet-small.pt")]
     results = {
         str(c): run(c, args.data, args.max_range, args.limit, not args.quiet) for c in checkpoints
     }

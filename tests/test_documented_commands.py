@@ -35,6 +35,7 @@ PARSERS: dict[str, tuple[str, str]] = {
             "floor",
             "fusion_cost",
             "graph_cost",
+            "labelled_shift",
             "language_suite",
             "latency",
             "model_size",
