@@ -9,7 +9,7 @@ to, in the root's sample order, with
 - ``actors``: every annotation of the sample whose category maps into the class set
   (``scenes.nuscenes.classes.model_class``), in the model frame, velocities zero (unknown); an
   actor's id is its annotation's index in the frame (``NuScenesFrame.boxes``), so a command's
-  referent (``CommandSet.referent``: box, class, annotation index) is the actor of that id;
+  referent (``CommandSet.referent``: a ``Referent`` with box, cls and annotation index) is the actor of that id;
 - ``ignore_boxes``: the annotations outside the class set (a truck, a bus, a barrier): no
   detection target, and no negative either (as View-of-Delft's non-metric labels are kept out of
   the metric);
@@ -52,11 +52,19 @@ def is_nuscenes_root(path: str | Path) -> bool:
     return any(p.is_dir() and p.name.startswith(VERSION_PREFIX) for p in folder.iterdir())
 
 
+class ReferentLike(Protocol):
+    """What is read of ``scenes.nuscenes.talk2car.Referent``: the referred annotation."""
+
+    box: np.ndarray  # (7,) float64, model frame
+    cls: str  # its model class
+    index: int  # its index in the frame's annotations (NuScenesFrame.annotation_tokens)
+
+
 class CommandSetLike(Protocol):
     """What is read of ``scenes.nuscenes.talk2car.CommandSet``."""
 
     commands: Sequence[Any]
-    referent: dict[str, tuple[np.ndarray, str, int]]
+    referent: dict[str, ReferentLike]
     split: str
 
 
@@ -183,7 +191,7 @@ class NuScenesFrames(Dataset):
         known = {a.actor_id for a in actors}
         given = []
         for command in self.by_sample[token]:
-            _, _, annotation = self.commands.referent[command.command_token]
+            annotation = self.commands.referent[command.command_token].index
             if int(annotation) not in known:
                 raise ValueError(
                     f"Talk2Car command {command.command_token}: its referent, annotation "
