@@ -123,3 +123,24 @@ def test_nuscenes_root_refuses_validation_during_training(nusc, tmp_path, capsys
     args = ["--data", str(nusc), "--talk2car", str(nusc / "commands"), "--out", str(tmp_path)]
     assert train([*args, "--epochs", "1"]) == 2
     assert "--val-every 0" in capsys.readouterr().err
+
+
+def test_freeze_scene_runs_with_one_thread_unless_told(nusc, tmp_path):
+    """A --freeze-scene run on the CPU takes FREEZE_SCENE_THREADS torch threads by default (its
+    small steps slow down several times with two threads on a shared machine); --threads wins."""
+    from model.training.config import FREEZE_SCENE_THREADS, parse_args
+
+    args = ["--data", str(nusc), "--talk2car", str(nusc / "commands"), "--device", "cpu"]
+    args += ["--out", str(tmp_path / "run")]
+    before = torch.get_num_threads()
+    try:
+        torch.set_num_threads(2)
+        parse_args([*args, "--freeze-scene"])
+        assert torch.get_num_threads() == FREEZE_SCENE_THREADS == 1
+        torch.set_num_threads(2)
+        parse_args([*args, "--freeze-scene", "--threads", "2"])
+        assert torch.get_num_threads() == 2
+        parse_args(args)  # the joint stage: torch's default, untouched
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)

@@ -301,13 +301,25 @@ class TrainCommand:
 
     Attributes:
         resume: Continue the run in ``--out``.
-        threads: torch's CPU threads (0: torch's default).
+        threads: torch's CPU threads (0: :data:`FREEZE_SCENE_THREADS` for a ``--freeze-scene``
+            run on the CPU, torch's default otherwise).
     """
 
     resume: bool = option(False, help="continue the run in --out")
     threads: int = option(
-        0, help="torch CPU threads (0: torch's default); use 1 when other jobs share the cores"
+        0,
+        help="torch CPU threads (0: 1 for --freeze-scene on the CPU, torch's default otherwise); "
+        "use 1 when other jobs share the cores",
     )
+
+
+FREEZE_SCENE_THREADS = 1
+"""torch's CPU threads of a ``--freeze-scene`` run when ``--threads`` is not given. Its steps are
+many small operations on cached candidates (the referent stage: overhead, not FLOPs; a second
+thread buys nothing, docs/PERFORMANCE.md's thread tables), and torch's two-thread pool slows down
+several times over when another job takes a core: measured on the 2-core machine with another
+training job running, 8 cached nuScenes scenes and 80 steps took 50 s with 1 thread against
+209 s with 2 (docs/RESULTS.md, "Talk2Car on synthetic nuScenes roots")."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -323,12 +335,17 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     """Parse the command line into a :class:`TrainConfig` and the resume flag."""
     a = build_parser().parse_args(argv)
     command = from_args(TrainCommand, a)
-    if command.threads:
-        torch.set_num_threads(command.threads)
-    return from_args(TrainConfig, a), command.resume
+    cfg = from_args(TrainConfig, a)
+    threads = command.threads
+    if not threads and cfg.freeze_scene and str(cfg.device).startswith("cpu"):
+        threads = FREEZE_SCENE_THREADS
+    if threads:
+        torch.set_num_threads(threads)
+    return cfg, command.resume
 
 
 __all__ = [
+    "FREEZE_SCENE_THREADS",
     "GENERATED_PROMPTS_PER_SCENE",
     "LABELLED_PROMPTS_PER_SCENE",
     "LABEL_PROMPTS",
