@@ -127,16 +127,24 @@ def test_nuscenes_root_refuses_validation_during_training(nusc, tmp_path, capsys
 
 def test_freeze_scene_runs_with_one_thread_unless_told(nusc, tmp_path):
     """A --freeze-scene run on the CPU takes FREEZE_SCENE_THREADS torch threads by default (its
-    small steps slow down several times with two threads on a shared machine); --threads wins."""
-    from model.training.config import FREEZE_SCENE_THREADS, parse_args
+    small steps slow down several times with two threads on a shared machine); --threads wins.
+    A nuScenes root draws TALK2CAR_PROMPTS_PER_SCENE prompts a sample and step by default."""
+    from model.training.config import (
+        FREEZE_SCENE_THREADS,
+        LABELLED_PROMPTS_PER_SCENE,
+        TALK2CAR_PROMPTS_PER_SCENE,
+        parse_args,
+    )
 
     args = ["--data", str(nusc), "--talk2car", str(nusc / "commands"), "--device", "cpu"]
     args += ["--out", str(tmp_path / "run")]
     before = torch.get_num_threads()
     try:
         torch.set_num_threads(2)
-        parse_args([*args, "--freeze-scene"])
+        cfg, _ = parse_args([*args, "--freeze-scene"])
         assert torch.get_num_threads() == FREEZE_SCENE_THREADS == 1
+        assert cfg.prompts_per_scene == TALK2CAR_PROMPTS_PER_SCENE > LABELLED_PROMPTS_PER_SCENE
+        assert cfg.label_prompts == 24
         torch.set_num_threads(2)
         parse_args([*args, "--freeze-scene", "--threads", "2"])
         assert torch.get_num_threads() == 2

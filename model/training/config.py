@@ -54,6 +54,12 @@ holds its given prompt and :data:`LABEL_PROMPTS` more; measured beside the label
 GENERATED_PROMPTS_PER_SCENE = 8
 """``--prompts-per-scene`` otherwise (prompts generated per scene and step)."""
 
+TALK2CAR_PROMPTS_PER_SCENE = 16
+"""``--prompts-per-scene`` when every root is a nuScenes root with Talk2Car commands and the flag
+is not given: a sample holds several commands beside its :data:`LABEL_PROMPTS` label prompts, and
+with 4 a step a command was drawn about 4 times in a 30-epoch ``--freeze-scene`` run (docs/
+RESULTS.md, "Talk2Car on synthetic nuScenes roots": top-1 and the step's cost measured)."""
+
 
 class TrainingError(RuntimeError):
     """Training cannot go on (bad data, non-finite loss); the message says why."""
@@ -137,7 +143,8 @@ class TrainConfig:
         None,
         on_resume=True,
         help=f"referent path: prompts per scene and step (default {GENERATED_PROMPTS_PER_SCENE}; "
-        f"{LABELLED_PROMPTS_PER_SCENE} when every root has --scene-labels)",
+        f"{LABELLED_PROMPTS_PER_SCENE} when every root has --scene-labels, "
+        f"{TALK2CAR_PROMPTS_PER_SCENE} when every root is a nuScenes root with --talk2car)",
     )
     radar_folder: str = option("auto", help="radar tree, 'auto' or 'none'")
     train_split: str = option("train", help="the split trained on (default train)")
@@ -243,6 +250,8 @@ class TrainConfig:
             object.__setattr__(self, "label_prompts", LABEL_PROMPTS if any(labelled) else 0)
         if self.prompts_per_scene is None:
             per_scene = LABELLED_PROMPTS_PER_SCENE if all(labelled) else GENERATED_PROMPTS_PER_SCENE
+            if all(r.talk2car is not None for r in roots):
+                per_scene = TALK2CAR_PROMPTS_PER_SCENE
             object.__setattr__(self, "prompts_per_scene", per_scene)
         if self.label_prompts < 0:
             raise TrainingError(f"--label-prompts must be >= 0, got {self.label_prompts}")
@@ -349,6 +358,7 @@ __all__ = [
     "GENERATED_PROMPTS_PER_SCENE",
     "LABELLED_PROMPTS_PER_SCENE",
     "LABEL_PROMPTS",
+    "TALK2CAR_PROMPTS_PER_SCENE",
     "PromptDraw",
     "TrainConfig",
     "TrainingError",
