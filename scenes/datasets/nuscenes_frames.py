@@ -39,6 +39,11 @@ from scenes.datasets.augment import AugmentConfig
 from scenes.datasets.frames import FrameItem, GivenPrompt, SensorAugment, augment_item
 from scenes.geometry.actors import CLASSES, Actor
 
+RADAR_SWEEPS = 5
+"""Radar sweeps accumulated per radar when the model reads a nuScenes root (``time = -k`` for the
+k-th older one): the model's radar channels are View-of-Delft's five accumulated scans with their
+scan index, and nuScenes' single sweeps are sparse (docs/TALK2CAR.md, sections 3 and 4)."""
+
 VERSION_PREFIX = "v1.0-"
 """A nuScenes root holds one folder named ``v1.0-<version>`` (trainval, mini, test) of tables."""
 
@@ -79,8 +84,9 @@ class NuScenesRootLike(Protocol):
 def open_talk2car(
     path: str | Path, commands: str | Path, split: str
 ) -> tuple[NuScenesRootLike, CommandSetLike]:
-    """The nuScenes root at ``path`` and its Talk2Car commands of ``split`` (``commands``: the
-    folder holding ``{split}_commands.json``); the loader's skip reasons are printed by count.
+    """The nuScenes root at ``path`` (:data:`RADAR_SWEEPS` radar sweeps a frame) and its Talk2Car
+    commands of ``split`` (``commands``: the folder holding ``{split}_commands.json``); the
+    loader's skip reasons are printed by count.
 
     Raises:
         ValueError: a malformed root or command file (the loader's one-line message).
@@ -90,7 +96,7 @@ def open_talk2car(
     from scenes.nuscenes.root import NuScenesRoot
     from scenes.nuscenes.talk2car import read_commands
 
-    root = NuScenesRoot(path)
+    root = NuScenesRoot(path, radar_sweeps=RADAR_SWEEPS)
     found = read_commands(commands, split, root)
     for reason, count in sorted(found.skipped.items()):
         print(f"{commands}: {split}: {count} command(s) skipped: {reason}", file=sys.stderr)
@@ -217,6 +223,7 @@ class NuScenesFrames(Dataset):
 
 
 __all__ = [
+    "RADAR_SWEEPS",
     "NuScenesFrames",
     "frame_actors",
     "is_nuscenes_root",
