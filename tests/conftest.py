@@ -23,6 +23,8 @@ Fixtures (test modules take them by name; none imports another test module):
 - ``chromium``: Debian's Chromium (the test skips without it); ``chromium_args``: its flags.
 - ``torchrun(args, log, timeout)``: ``torchrun`` with 2 CPU processes on a free local port, output
   into the file ``log``; its exit code (the process group is killed if it outlives ``timeout``).
+- ``nuscenes_root``: a tiny nuScenes root with Talk2Car commands (train, val) written by
+  ``scenes.export_nuscenes``, a ``vehicle.truck`` added to every sample (read only).
 """
 
 from __future__ import annotations
@@ -513,3 +515,17 @@ def nuscenes_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
     generate_root(base / "synth", spec["frames"], settings, split_fractions=(0.5, 0.25, 0.25))
     export(base / "synth", base / "nusc", seed=3)
     return base / "nusc"
+
+
+@pytest.fixture(scope="session")
+def nuscenes_training_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A tiny nuScenes root written by ``python -m scenes.export_nuscenes``'s export (4 synthetic
+    worlds, half train, half val; ``commands/{train,val}_commands.json``) with one parked
+    ``vehicle.truck`` (outside the class set) added to every sample and the scene descriptions
+    made "Rain, ..." and "Night, ..." in turn (:mod:`tests.nuscenes_fixtures`). Read only (copy it before changing it)."""
+    from tests.nuscenes_fixtures import add_out_of_class, prefix_descriptions, write_nuscenes_root
+
+    path = write_nuscenes_root(tmp_path_factory.mktemp("nuscenes") / "NUSC")
+    add_out_of_class(path)
+    prefix_descriptions(path)
+    return path

@@ -1,5 +1,7 @@
-"""Training and evaluating on a nuScenes root with Talk2Car commands (issue 40, N3's side), on a
-stand-in for scenes.nuscenes (tests/nuscenes_fake.py) made from a small synthetic root."""
+"""Training and evaluating on a nuScenes root with Talk2Car commands (issue 40): the model side
+(scenes.datasets.nuscenes_frames, model.train / model.evaluate --talk2car) on a real tiny root
+written by scenes.export_nuscenes, a vehicle.truck outside the class set in every sample
+(tests/conftest.py's ``nuscenes_training_root``)."""
 
 from __future__ import annotations
 
@@ -14,20 +16,14 @@ from model.training.data import DataSpecError, root_specs
 from model.training.referent_step import detection_targets, frame_prompts, in_bev_footprint
 from scenes.datasets.nuscenes_frames import NuScenesFrames, is_nuscenes_root
 from scenes.language.prompts import PromptConfig
-from scenes.synth.generate import SynthSettings, generate_root
-from tests import nuscenes_fake
+from scenes.nuscenes.root import NuScenesRoot
+from scenes.nuscenes.talk2car import read_commands
+from tests.nuscenes_fixtures import TRUCK
 
 
 @pytest.fixture(scope="module")
-def nusc(tmp_path_factory) -> Path:
-    synth = tmp_path_factory.mktemp("synth") / "root"
-    generate_root(synth, 8, SynthSettings(seed=7), split_fractions=(0.5, 0.5, 0.0))
-    return nuscenes_fake.make_fake(synth, tmp_path_factory.mktemp("nusc") / "NUSC")
-
-
-@pytest.fixture(autouse=True)
-def fake_modules(monkeypatch):
-    nuscenes_fake.install(monkeypatch)
+def nusc(nuscenes_training_root: Path) -> Path:
+    return nuscenes_training_root
 
 
 def frames(nusc: Path, split: str = "train") -> NuScenesFrames:
@@ -50,14 +46,17 @@ def test_every_annotation_in_the_class_set_is_an_actor_the_rest_ignored(nusc):
     data = frames(nusc)
     item = data.item(0)
     frame = data.root.frame(item.sample_id)
+    truck = frame.categories.index(TRUCK)
+    assert frame.categories.count(TRUCK) == 1 and item.given
     assert len(item.actors) == len(frame.boxes) - 1  # all but the truck
-    np.testing.assert_allclose(item.ignore_boxes, frame.boxes[-1:])
+    assert truck not in {a.actor_id for a in item.actors}
+    np.testing.assert_allclose(item.ignore_boxes, frame.boxes[truck : truck + 1])
     assert item.region is None and item.labels_complete and not item.generates_prompts
     for given in item.given:
-        box, cls, index = data.commands.referent[given.sample_id]
-        assert given.referent_ids == (index,)
-        actor = next(a for a in item.actors if a.actor_id == index)
-        assert actor.cls == cls and np.allclose(actor.box, box)
+        referent = data.commands.referent[given.sample_id]
+        assert given.referent_ids == (referent.index,)
+        actor = next(a for a in item.actors if a.actor_id == referent.index)
+        assert actor.cls == referent.cls and np.allclose(actor.box, referent.box)
     prompts = frame_prompts(item, np.random.default_rng(0), 4, PromptConfig(), label_prompts=6)
     assert len(prompts) == len(item.given) + 6  # the commands and label prompts from the boxes
 
@@ -109,8 +108,8 @@ def test_freeze_scene_training_then_evaluation(nusc, tmp_path, capsys):
     assert "BEV AP_A" in printed and "top-1 class noun" in printed
     assert {"all", "rain", "night"} <= {line.split()[0] for line in printed.splitlines() if line}
     written = json.loads((preds / "val_predictions.json").read_text())
-    val = nuscenes_fake.REGISTRY[str(nusc.resolve())][1]["val"]
-    assert set(written) == {c.command_token for c in val.commands}
+    val = read_commands(nusc / "commands", "val", NuScenesRoot(nusc))
+    assert val.commands and set(written) == {c.command_token for c in val.commands}
     for entries in written.values():
         scores = [e["score"] for e in entries]
         assert scores == sorted(scores, reverse=True)
@@ -124,3 +123,32 @@ def test_nuscenes_root_refuses_validation_during_training(nusc, tmp_path, capsys
     args = ["--data", str(nusc), "--talk2car", str(nusc / "commands"), "--out", str(tmp_path)]
     assert train([*args, "--epochs", "1"]) == 2
     assert "--val-every 0" in capsys.readouterr().err
+
+
+def test_freeze_scene_runs_with_one_thread_unless_told(nusc, tmp_path):
+    """A --freeze-scene run on the CPU takes FREEZE_SCENE_THREADS torch threads by default (its
+    small steps slow down several times with two threads on a shared machine); --threads wins.
+    A nuScenes root draws TALK2CAR_PROMPTS_PER_SCENE prompts a sample and step by default."""
+    from model.training.config import (
+        FREEZE_SCENE_THREADS,
+        LABELLED_PROMPTS_PER_SCENE,
+        TALK2CAR_PROMPTS_PER_SCENE,
+        parse_args,
+    )
+
+    args = ["--data", str(nusc), "--talk2car", str(nusc / "commands"), "--device", "cpu"]
+    args += ["--out", str(tmp_path / "run")]
+    before = torch.get_num_threads()
+    try:
+        torch.set_num_threads(2)
+        cfg, _ = parse_args([*args, "--freeze-scene"])
+        assert torch.get_num_threads() == FREEZE_SCENE_THREADS == 1
+        assert cfg.prompts_per_scene == TALK2CAR_PROMPTS_PER_SCENE > LABELLED_PROMPTS_PER_SCENE
+        assert cfg.label_prompts == 24
+        torch.set_num_threads(2)
+        parse_args([*args, "--freeze-scene", "--threads", "2"])
+        assert torch.get_num_threads() == 2
+        parse_args(args)  # the joint stage: torch's default, untouched
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)

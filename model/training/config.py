@@ -54,6 +54,12 @@ holds its given prompt and :data:`LABEL_PROMPTS` more; measured beside the label
 GENERATED_PROMPTS_PER_SCENE = 8
 """``--prompts-per-scene`` otherwise (prompts generated per scene and step)."""
 
+TALK2CAR_PROMPTS_PER_SCENE = 16
+"""``--prompts-per-scene`` when every root is a nuScenes root with Talk2Car commands and the flag
+is not given: a sample holds several commands beside its :data:`LABEL_PROMPTS` label prompts, and
+with 4 a step a command was drawn about 4 times in a 30-epoch ``--freeze-scene`` run (docs/
+RESULTS.md, "Talk2Car on synthetic nuScenes roots": top-1 and the step's cost measured)."""
+
 
 class TrainingError(RuntimeError):
     """Training cannot go on (bad data, non-finite loss); the message says why."""
@@ -137,7 +143,8 @@ class TrainConfig:
         None,
         on_resume=True,
         help=f"referent path: prompts per scene and step (default {GENERATED_PROMPTS_PER_SCENE}; "
-        f"{LABELLED_PROMPTS_PER_SCENE} when every root has --scene-labels)",
+        f"{LABELLED_PROMPTS_PER_SCENE} when every root has --scene-labels, "
+        f"{TALK2CAR_PROMPTS_PER_SCENE} when every root is a nuScenes root with --talk2car)",
     )
     radar_folder: str = option("auto", help="radar tree, 'auto' or 'none'")
     train_split: str = option("train", help="the split trained on (default train)")
@@ -249,6 +256,8 @@ class TrainConfig:
             object.__setattr__(self, "label_prompts", LABEL_PROMPTS if any(labelled) else 0)
         if self.prompts_per_scene is None:
             per_scene = LABELLED_PROMPTS_PER_SCENE if all(labelled) else GENERATED_PROMPTS_PER_SCENE
+            if all(r.talk2car is not None for r in roots):
+                per_scene = TALK2CAR_PROMPTS_PER_SCENE
             object.__setattr__(self, "prompts_per_scene", per_scene)
         if self.label_prompts < 0:
             raise TrainingError(f"--label-prompts must be >= 0, got {self.label_prompts}")
@@ -313,13 +322,25 @@ class TrainCommand:
 
     Attributes:
         resume: Continue the run in ``--out``.
-        threads: torch's CPU threads (0: torch's default).
+        threads: torch's CPU threads (0: :data:`FREEZE_SCENE_THREADS` for a ``--freeze-scene``
+            run on the CPU, torch's default otherwise).
     """
 
     resume: bool = option(False, help="continue the run in --out")
     threads: int = option(
-        0, help="torch CPU threads (0: torch's default); use 1 when other jobs share the cores"
+        0,
+        help="torch CPU threads (0: 1 for --freeze-scene on the CPU, torch's default otherwise); "
+        "use 1 when other jobs share the cores",
     )
+
+
+FREEZE_SCENE_THREADS = 1
+"""torch's CPU threads of a ``--freeze-scene`` run when ``--threads`` is not given. Its steps are
+many small operations on cached candidates (the referent stage: overhead, not FLOPs; a second
+thread buys nothing, docs/PERFORMANCE.md's thread tables), and torch's two-thread pool slows down
+several times over when another job takes a core: measured on the 2-core machine with another
+training job running, 8 cached nuScenes scenes and 80 steps took 50 s with 1 thread against
+209 s with 2 (docs/RESULTS.md, "Talk2Car on synthetic nuScenes roots")."""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -335,15 +356,21 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     """Parse the command line into a :class:`TrainConfig` and the resume flag."""
     a = build_parser().parse_args(argv)
     command = from_args(TrainCommand, a)
-    if command.threads:
-        torch.set_num_threads(command.threads)
-    return from_args(TrainConfig, a), command.resume
+    cfg = from_args(TrainConfig, a)
+    threads = command.threads
+    if not threads and cfg.freeze_scene and str(cfg.device).startswith("cpu"):
+        threads = FREEZE_SCENE_THREADS
+    if threads:
+        torch.set_num_threads(threads)
+    return cfg, command.resume
 
 
 __all__ = [
+    "FREEZE_SCENE_THREADS",
     "GENERATED_PROMPTS_PER_SCENE",
     "LABELLED_PROMPTS_PER_SCENE",
     "LABEL_PROMPTS",
+    "TALK2CAR_PROMPTS_PER_SCENE",
     "PromptDraw",
     "TrainConfig",
     "TrainingError",

@@ -9,7 +9,7 @@ to, in the root's sample order, with
 - ``actors``: every annotation of the sample whose category maps into the class set
   (``scenes.nuscenes.classes.model_class``), in the model frame, velocities zero (unknown); an
   actor's id is its annotation's index in the frame (``NuScenesFrame.boxes``), so a command's
-  referent (``CommandSet.referent``: box, class, annotation index) is the actor of that id;
+  referent (``CommandSet.referent``: a ``Referent`` with box, cls and annotation index) is the actor of that id;
 - ``ignore_boxes``: the annotations outside the class set (a truck, a bus, a barrier): no
   detection target, and no negative either (as View-of-Delft's non-metric labels are kept out of
   the metric);
@@ -39,6 +39,11 @@ from scenes.datasets.augment import AugmentConfig
 from scenes.datasets.frames import FrameItem, GivenPrompt, SensorAugment, augment_item
 from scenes.geometry.actors import CLASSES, Actor
 
+RADAR_SWEEPS = 5
+"""Radar sweeps accumulated per radar when the model reads a nuScenes root (``time = -k`` for the
+k-th older one): the model's radar channels are View-of-Delft's five accumulated scans with their
+scan index, and nuScenes' single sweeps are sparse (docs/TALK2CAR.md, sections 3 and 4)."""
+
 VERSION_PREFIX = "v1.0-"
 """A nuScenes root holds one folder named ``v1.0-<version>`` (trainval, mini, test) of tables."""
 
@@ -52,11 +57,19 @@ def is_nuscenes_root(path: str | Path) -> bool:
     return any(p.is_dir() and p.name.startswith(VERSION_PREFIX) for p in folder.iterdir())
 
 
+class ReferentLike(Protocol):
+    """What is read of ``scenes.nuscenes.talk2car.Referent``: the referred annotation."""
+
+    box: np.ndarray  # (7,) float64, model frame
+    cls: str  # its model class
+    index: int  # its index in the frame's annotations (NuScenesFrame.annotation_tokens)
+
+
 class CommandSetLike(Protocol):
     """What is read of ``scenes.nuscenes.talk2car.CommandSet``."""
 
     commands: Sequence[Any]
-    referent: dict[str, tuple[np.ndarray, str, int]]
+    referent: dict[str, ReferentLike]
     split: str
 
 
@@ -71,8 +84,9 @@ class NuScenesRootLike(Protocol):
 def open_talk2car(
     path: str | Path, commands: str | Path, split: str
 ) -> tuple[NuScenesRootLike, CommandSetLike]:
-    """The nuScenes root at ``path`` and its Talk2Car commands of ``split`` (``commands``: the
-    folder holding ``{split}_commands.json``); the loader's skip reasons are printed by count.
+    """The nuScenes root at ``path`` (:data:`RADAR_SWEEPS` radar sweeps a frame) and its Talk2Car
+    commands of ``split`` (``commands``: the folder holding ``{split}_commands.json``); the
+    loader's skip reasons are printed by count.
 
     Raises:
         ValueError: a malformed root or command file (the loader's one-line message).
@@ -82,7 +96,7 @@ def open_talk2car(
     from scenes.nuscenes.root import NuScenesRoot
     from scenes.nuscenes.talk2car import read_commands
 
-    root = NuScenesRoot(path)
+    root = NuScenesRoot(path, radar_sweeps=RADAR_SWEEPS)
     found = read_commands(commands, split, root)
     for reason, count in sorted(found.skipped.items()):
         print(f"{commands}: {split}: {count} command(s) skipped: {reason}", file=sys.stderr)
@@ -183,7 +197,7 @@ class NuScenesFrames(Dataset):
         known = {a.actor_id for a in actors}
         given = []
         for command in self.by_sample[token]:
-            _, _, annotation = self.commands.referent[command.command_token]
+            annotation = self.commands.referent[command.command_token].index
             if int(annotation) not in known:
                 raise ValueError(
                     f"Talk2Car command {command.command_token}: its referent, annotation "
@@ -209,6 +223,7 @@ class NuScenesFrames(Dataset):
 
 
 __all__ = [
+    "RADAR_SWEEPS",
     "NuScenesFrames",
     "frame_actors",
     "is_nuscenes_root",

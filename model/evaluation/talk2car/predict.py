@@ -123,7 +123,8 @@ def iterate_command_predictions(
             kept = without_points(frame)
             nouns: dict[str, Any] = {}
             for command in by_sample[token]:
-                referent, cls, index = commands.referent[command.command_token]
+                found = commands.referent[command.command_token]
+                referent, cls, index = found.box, found.cls, found.index
                 pred = model.ground(features, command.text, score_threshold=score_threshold)
                 if cls not in nouns:
                     nouns[cls] = model.ground(
