@@ -15,6 +15,7 @@ from model.nets.text import (
     load_minilm,
     load_minilm_forward,
     tokenize,
+    validate_prompt,
 )
 from model.referent.candidates import LIDAR_EVIDENCE, RADAR_EVIDENCE
 from model.referent.stage import CandidateBatch, ReferentStage, geometry_width
@@ -48,7 +49,8 @@ def test_minilm_forward_equals_bert_model_single_and_padded():
 def test_prompt_cache_serves_a_repeated_prompt():
     encoder = MiniLMTextEncoder(max_tokens=30, cache_size=4)
     first = encoder([PROMPTS[1]])
-    again = encoder([f"  {PROMPTS[1]} "])  # the same prompt once stripped
+    # the same prompt as the model passes it on once checked where it enters (validate_prompt)
+    again = encoder([validate_prompt(f"  {PROMPTS[1]} ")])
     assert (encoder.cache_misses, encoder.cache_hits) == (1, 1)
     assert torch.equal(first.tokens, again.tokens) and torch.equal(first.numbers, again.numbers)
     both = encoder([PROMPTS[0], PROMPTS[1]])

@@ -115,15 +115,15 @@ class PaperTraining:
     calibrates: bool = False
 
     def check(self, cfg: TrainConfig) -> None:
-        if any(spec.talk2car is not None for spec in cfg.roots()):
-            raise TrainingError(
-                "a nuScenes root with --talk2car trains the referent path (--grounding "
-                "referent); the paper's path trains on a Talk2Radar root's label_2 boxes"
-            )
         if len(cfg.data) > 1 or cfg.scene_labels:
             raise TrainingError(
                 "several --data roots and --scene-labels are the referent path's; the paper's "
                 "path trains on one root's label_2 boxes"
+            )
+        if any(spec.talk2car is not None for spec in cfg.roots()):
+            raise TrainingError(
+                "a nuScenes root with --talk2car trains the referent path (--grounding "
+                "referent); the paper's path trains on a Talk2Radar root's label_2 boxes"
             )
 
     def dataset(
