@@ -16,6 +16,7 @@ from pathlib import Path
 
 import torch
 
+import model.training.kinds as step_module
 import model.training.loop as train_module
 from model.checkpoint import load_checkpoint
 from model.training import distributed
@@ -29,7 +30,7 @@ STAGES = {
 
 def _signal_on_rank_1(name: str, call: int) -> None:
     """Rank 1 sends itself SIGINT inside its ``call``-th step (rank 0 gets no signal)."""
-    real = getattr(train_module, name)
+    real = getattr(step_module, name)
     calls = [0]
 
     def step(*args):
@@ -38,7 +39,7 @@ def _signal_on_rank_1(name: str, call: int) -> None:
             os.kill(os.getpid(), signal.SIGINT)
         return real(*args)
 
-    setattr(train_module, name, step)
+    setattr(step_module, name, step)
 
 
 def main(root: str, init: str, out: str) -> None:
@@ -57,10 +58,10 @@ def main(root: str, init: str, out: str) -> None:
         common += ["--log-every", "1", "--prompts-per-scene", "4", "--bank-prompts", "8", *extra]
         whole, cut = Path(out) / f"{stage}-whole", Path(out) / f"{stage}-cut"
         codes = [train_module.main([*common, "--out", str(whole)])]
-        real = getattr(train_module, step_name)
+        real = getattr(step_module, step_name)  # the step functions each kind binds
         _signal_on_rank_1(step_name, call=1)
         codes.append(train_module.main([*common, "--out", str(cut)]))
-        setattr(train_module, step_name, real)
+        setattr(step_module, step_name, real)
         stopped = load_run(cut).progress
         codes.append(train_module.main([*common, "--out", str(cut), "--resume"]))
         distributed.barrier()

@@ -165,3 +165,41 @@ def test_the_rank_watch_names_a_rank_whose_heartbeat_stops() -> None:
             RankLiveness.from_env()
         finally:
             del os.environ["TALK2PC_RANK_TIMEOUT"]
+
+
+def test_a_rank_that_raises_exits_and_stops_beating() -> None:
+    """A rank whose main thread ends on an uncaught exception without closing its watch: the
+    watch stops within a beat and the process exits, so that torchrun sees the rank go (before,
+    the watch thread kept the process alive and beating, and the other ranks waited for ever)."""
+    import subprocess
+    import sys
+    import textwrap
+    import time
+
+    code = textwrap.dedent(
+        """
+        from model.training.rank_watch import RankLiveness, RankWatch
+
+        class Store:
+            def __init__(self):
+                self.data = {}
+
+            def set(self, key, value):
+                self.data[key] = value.encode()
+
+            def get(self, key):
+                return self.data[key]
+
+            def check(self, keys):
+                return all(k in self.data for k in keys)
+
+        RankWatch(Store(), 0, 1, RankLiveness(1.0)).start()
+        raise RuntimeError("a bug in the step")
+        """
+    )
+    start = time.monotonic()
+    done = subprocess.run(
+        [sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=60
+    )
+    assert done.returncode == 1 and "a bug in the step" in done.stderr
+    assert time.monotonic() - start < 30

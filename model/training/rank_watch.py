@@ -116,6 +116,10 @@ class RankWatch:
 
     def _run(self) -> None:
         while not self._stop.wait(self.liveness.beat_s):
+            if not threading.main_thread().is_alive():
+                # The main thread ended without stop() (an uncaught exception): stop beating, so
+                # that the process exits and the others see this rank go instead of a live one.
+                return
             try:
                 self._beat()
                 stopped = self.stopped_rank()
