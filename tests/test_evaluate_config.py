@@ -12,31 +12,16 @@ import pytest
 
 from model.checkpoint import DEFAULT_CHECKPOINT
 from model.evaluate import EvaluateConfig, build_parser, parse_args
+from tests.test_documented_commands import documented_command_lines as all_command_lines
 
 REPO = Path(__file__).resolve().parents[1]
 COMMAND = "python -m model.evaluate"
 
 
 def documented_command_lines() -> list[tuple[str, str]]:
-    """``(file, arguments)`` of every ``python -m model.evaluate`` in README.md and docs/*.md: an
-    inline-code span up to its closing backtick, a code-block line with its ``\\``
-    continuations; a ``#`` comment dropped (a mention of the command without flags is not a
-    command line)."""
-    found = []
-    for path in [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]:
-        text = path.read_text()
-        for m in re.finditer(re.escape(COMMAND) + r"(?=[\s`])", text):
-            if text[m.start() - 1] == "`":
-                end = text.index("`", m.end())
-            else:  # a code-block line and its continuations
-                end = text.find("\n", m.end())
-                while end != -1 and text[end - 1] == "\\":
-                    end = text.find("\n", end + 1)
-                end = len(text) if end == -1 else end
-            args = " ".join(text[m.end() : end].replace("\\\n", " ").split("#")[0].split())
-            if args.startswith("--"):  # else the command named, not a command line
-                found.append((path.name, args))
-    return found
+    """``(file, arguments)`` of every ``python -m model.evaluate`` command line in README.md and
+    docs/*.md, as :func:`tests.test_documented_commands.documented_command_lines` finds them."""
+    return [(where, args) for where, c, args in all_command_lines() if c == COMMAND]
 
 
 def test_the_docs_show_command_lines() -> None:

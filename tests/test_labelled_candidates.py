@@ -4,13 +4,11 @@ such candidate sets too (labelled views, some boxes reading another candidate's 
 
 from __future__ import annotations
 
-import contextlib
-from collections.abc import Iterator
-
 import numpy as np
 import pytest
 import torch
 
+from bench.labelled_shift import blind_detector as blind
 from model import LabelledBoxes
 from model.checkpoint import load_checkpoint
 from model.core.candidates import SceneCandidates
@@ -32,22 +30,6 @@ def shipped():
     model = load_checkpoint(SHIPPED)
     model.eval()
     return model
-
-
-@contextlib.contextmanager
-def blind(model: torch.nn.Module) -> Iterator[None]:
-    """The detector's heatmap forced to zero (logit -30) while in the block."""
-    original = model.scene.detector
-
-    def zero(stages):
-        neck, out = original(stages)
-        return neck, type(out)(torch.full_like(out.heatmap, -30.0), out.regression)
-
-    model.scene.detector = zero
-    try:
-        yield
-    finally:
-        del model.scene.detector
 
 
 def test_a_labelled_candidate_is_certain_and_of_its_label_class(shipped, real_format_roots):

@@ -40,6 +40,7 @@ from model.training.referent_step import (
     ReferentTrainConfig,
     _per_item,
     frame_prompts,
+    in_grid_actors,
 )
 from scenes.datasets.frames import FrameDataset
 from scenes.geometry.actors import CLASSES, Actor
@@ -123,15 +124,8 @@ def scene_views(
     them), the detector's other proposals the context. The labelled view comes with its
     candidates' actor ids ``(K,)`` (-1 for context); it is None without ``labelled`` or when no
     actor is in the grid."""
-    kept: list[Actor] = []
-    boxes = None
-    if labelled:
-        metric = [a for a in actors if a.cls in CLASSES]
-        if metric:
-            all_boxes = np.stack([a.box for a in metric])
-            inside = model.scene.anchors_in_grid(all_boxes)
-            kept = [a for a, ok in zip(metric, inside, strict=True) if ok]
-            boxes = all_boxes[inside]
+    kept = in_grid_actors(actors, model) if labelled else []
+    boxes = np.stack([a.box for a in kept]) if kept else None
     views = (None, LabelledBoxes(boxes, [CLASSES.index(a.cls) for a in kept])) if kept else (None,)
     lidar_t = model.scene.clouds([lidar], 1, "lidar")
     radar_t = model.scene.clouds([radar], 1, "radar")
