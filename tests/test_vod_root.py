@@ -158,9 +158,15 @@ def test_ready_made_boxes_enter_saves_beside_the_release(vod_app, ws_client) -> 
         # A click on the car adds its label_2 box to the draft (not a default-sized box).
         car = sample.boxes[0]
         client.click_ground(car[0] + 0.5, car[1], panel.frame.ground_z)
-        client.pump_until(lambda: len(panel.draft.boxes) == 1, 5, "the car added")
+        # The draft and the offered boxes change in one refresh on the server's thread: wait
+        # for both (the draft is filled before the refresh that updates the offers ends).
+        client.pump_until(
+            lambda: len(panel.draft.boxes) == 1 and len(panel.ready_boxes) == len(offered) - 1,
+            5,
+            "the car added",
+        )
         np.testing.assert_allclose(panel.draft.boxes[0].box, car, atol=1e-9)
-        assert panel.draft.boxes[0].cls == "Car" and len(panel.ready_boxes) == len(offered) - 1
+        assert panel.draft.boxes[0].cls == "Car"
         client.pump_until(
             lambda: len(client.dropdown("Object")) == len(offered) - 1, 5, "the list updated"
         )
