@@ -13,8 +13,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-CLASSES: tuple[str, ...] = ("Car", "Pedestrian", "Cyclist")
-"""The Talk2Radar metric classes, in the order of the model's heatmap channels."""
+from scenes.geometry.classes import ALL_CLASSES, VOD
+
+CLASSES: tuple[str, ...] = VOD.names
+"""The Talk2Radar metric classes (the ``vod`` class set), in the order of its heatmap channels."""
 
 MOVING_SPEED = 0.5
 """Ground speed (m/s) above which an actor counts as moving."""
@@ -26,7 +28,7 @@ class Actor:
 
     Attributes:
         actor_id: Unique id within the scene.
-        cls: One of :data:`CLASSES`.
+        cls: A class name of some class set (:data:`scenes.geometry.classes.ALL_CLASSES`).
         box: ``(7,)`` float64 ``x, y, z, l, w, h, yaw`` in the LiDAR frame, z at the geometric centre.
         velocity: ``(2,)`` float64 ground velocity ``(vx, vy)`` in m/s, LiDAR-frame axes.
     """
@@ -37,8 +39,10 @@ class Actor:
     velocity: np.ndarray = field(repr=False)
 
     def __post_init__(self) -> None:
-        if self.cls not in CLASSES:
-            raise ValueError(f"Actor {self.actor_id}: class {self.cls!r} is not one of {CLASSES}")
+        if self.cls not in ALL_CLASSES:
+            raise ValueError(
+                f"Actor {self.actor_id}: class {self.cls!r} is not one of {ALL_CLASSES}"
+            )
         box = np.asarray(self.box, dtype=np.float64).reshape(7)
         vel = np.asarray(self.velocity, dtype=np.float64).reshape(2)
         if not (np.all(np.isfinite(box)) and np.all(np.isfinite(vel))):
