@@ -26,6 +26,8 @@ import statistics
 import sys
 import tempfile
 import time
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -45,6 +47,7 @@ from scenes.synth.generate import (  # noqa: E402
 )
 from scenes.synth.lidar import ray_directions  # noqa: E402
 from scenes.talk2radar.root import Talk2RadarWriter  # noqa: E402
+from scenes.utils.cli import add_options, from_args, option  # noqa: E402
 from scenes.utils.durable import atomic_write_text  # noqa: E402
 
 
@@ -137,15 +140,39 @@ def markdown(stages: dict, e2e: dict, load: float) -> str:
     return "\n".join(lines)
 
 
-def main() -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--worlds", type=int, default=20, help="worlds for the per-stage measurement")
-    p.add_argument("--frames", type=int, default=40, help="samples for the end-to-end run")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--no-camera", action="store_true", help="measure without camera images")
-    p.add_argument("--out", type=Path, default=_REPO / "bench" / "results" / "synth.json")
-    args = p.parse_args()
-    settings = SynthSettings(seed=args.seed, camera=None if args.no_camera else CameraConfig())
+@dataclass(frozen=True, kw_only=True)
+class BenchSynthOptions:
+    """``bench/bench_synth.py``'s own flags (the generator's ``--seed`` is
+    :class:`~scenes.synth.generate.SynthSettings`').
+
+    Attributes:
+        worlds: Worlds for the per-stage measurement.
+        frames: Samples for the end-to-end run.
+        no_camera: Measure without camera images.
+        out: Where the JSON goes.
+    """
+
+    worlds: int = option(20, help="worlds for the per-stage measurement")
+    frames: int = option(40, help="samples for the end-to-end run")
+    no_camera: bool = option(False, help="measure without camera images")
+    out: Path = option(_REPO / "bench" / "results" / "synth.json")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``bench/bench_synth.py``'s parser: :class:`BenchSynthOptions`' flags and the generator's
+    ``--seed``."""
+    p = argparse.ArgumentParser(
+        prog="python bench/bench_synth.py", description=__doc__.splitlines()[0]
+    )
+    add_options(p, BenchSynthOptions)
+    add_options(p, SynthSettings, only=("seed",))
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parsed = build_parser().parse_args(argv)
+    args = from_args(BenchSynthOptions, parsed)
+    settings = from_args(SynthSettings, parsed, camera=None if args.no_camera else CameraConfig())
     load = os.getloadavg()[0]
     bench_stages(settings, 1)  # warm-up: imports, caches
     stages = bench_stages(settings, args.worlds)

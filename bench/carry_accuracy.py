@@ -29,6 +29,7 @@ import itertools
 import sys
 import tempfile
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -43,6 +44,7 @@ from scenes.geometry.actors import CLASSES  # noqa: E402
 from scenes.synth.generate import SynthSettings, generate_root  # noqa: E402
 from scenes.talk2radar.poses import FRAME_RATE, consecutive, lidar_motion, read_pose  # noqa: E402
 from scenes.talk2radar.root import Sample, Talk2RadarRoot  # noqa: E402
+from scenes.utils.cli import add_options, from_args, option  # noqa: E402
 
 METHODS = (
     "in place",
@@ -52,6 +54,9 @@ METHODS = (
     "ego + radar + refit (always)",
 )
 """The methods compared, in print order (see the module docstring)."""
+
+MIN_POINTS = 5
+"""LiDAR points an actor needs inside its box to be measured (``--min-points``)."""
 
 X_RANGE, Y_RANGE = (0.0, 51.2), 25.6
 """The annotated range (:class:`annotate.ValidationConfig`'s defaults)."""
@@ -73,7 +78,9 @@ def _in_range(box: np.ndarray) -> bool:
     return X_RANGE[0] <= box[0] <= X_RANGE[1] and abs(box[1]) <= Y_RANGE
 
 
-def measure(root: Talk2RadarRoot, min_points: int = 5) -> dict[str, dict[str, list[float]]]:
+def measure(
+    root: Talk2RadarRoot, min_points: int = MIN_POINTS
+) -> dict[str, dict[str, list[float]]]:
     """``errors[method][class]``: BEV centre errors (m) of every carried box."""
     errors: dict[str, dict[str, list[float]]] = {m: {c: [] for c in CLASSES} for m in METHODS}
     items = frames(root)
@@ -154,14 +161,36 @@ def table(errors: dict[str, dict[str, list[float]]]) -> str:
     return "\n".join(rows)
 
 
+@dataclass(frozen=True, kw_only=True)
+class CarryAccuracyOptions:
+    """``python -m bench.carry_accuracy``'s flags.
+
+    Attributes:
+        data: A sequence root to measure on (None: generate one).
+        worlds: Worlds generated.
+        length: Frames per world generated (``scenes.synth --sequence-length``).
+        seed: The generator's seed.
+        min_points: LiDAR points an actor needs to be measured.
+    """
+
+    data: Path | None = option(None, help="a sequence root (default: generate)")
+    worlds: int = option(8, help="worlds generated (default %(default)s)")
+    length: int = option(6, help="frames per world (default %(default)s)")
+    seed: int = option(7, help="generator seed (default %(default)s)")
+    min_points: int = option(MIN_POINTS, help="LiDAR points an actor needs")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``python -m bench.carry_accuracy``'s parser (:class:`CarryAccuracyOptions`)."""
+    p = argparse.ArgumentParser(
+        prog="python -m bench.carry_accuracy", description=__doc__.splitlines()[0]
+    )
+    add_options(p, CarryAccuracyOptions)
+    return p
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--data", type=Path, default=None, help="a sequence root (default: generate)")
-    p.add_argument("--worlds", type=int, default=8, help="worlds generated (default 8)")
-    p.add_argument("--length", type=int, default=6, help="frames per world (default 6)")
-    p.add_argument("--seed", type=int, default=7, help="generator seed (default 7)")
-    p.add_argument("--min-points", type=int, default=5, help="LiDAR points an actor needs")
-    args = p.parse_args(argv)
+    args = from_args(CarryAccuracyOptions, build_parser().parse_args(argv))
     with tempfile.TemporaryDirectory() as tmp:
         root_path = args.data
         if root_path is None:

@@ -178,12 +178,17 @@ def compare(root_path: Path, devkit_python: Path, radar_sweeps: int) -> dict[str
     return diff
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
+    """``bench/compare_nuscenes_devkit.py``'s parser (:class:`CompareOptions`)."""
     p = argparse.ArgumentParser(
         prog="python bench/compare_nuscenes_devkit.py", description=__doc__.split("\n\n")[0]
     )
     add_options(p, CompareOptions)
-    opts = from_args(CompareOptions, p.parse_args(argv))
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    opts = from_args(CompareOptions, build_parser().parse_args(argv))
     diff = compare(opts.root, opts.devkit_python, opts.radar_sweeps)
     width = max(len(k) for k in diff)
     for k, v in diff.items():

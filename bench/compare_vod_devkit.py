@@ -8,10 +8,10 @@ scratch virtual environment outside the repository and point this script at its 
 
 The script writes random label / prediction folders (VoD-like camera, realistic projected 2D boxes,
 noisy predictions with random scores, false positives, class confusions, flipped headings, small
-and far objects), scores them with :func:`model.evaluation.files.score_directories`, runs the devkit on the
-same folders in a subprocess (the devkit is imported only there, only when this script runs), and
-prints the largest absolute difference of every reported number (R11 and R40; 3D, BEV, AOS; both
-areas).
+and far objects), scores them with :func:`model.evaluation.files.score_directories`, runs the
+devkit on the same folders in a subprocess (``bench/vod_devkit_worker.py``: the devkit is imported
+only there, only when this script runs), and prints the largest absolute difference of every
+reported number (R11 and R40; 3D, BEV, AOS; both areas).
 
 The devkit (1.0.3) adds 0.01 rad to every detection's ``rotation_y`` and 0.01 px to its 2D box
 before computing overlaps. Three comparisons are printed:
@@ -35,59 +35,20 @@ import json
 import subprocess
 import sys
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 _REPO = Path(__file__).resolve().parents[1]
+if str(_REPO) not in sys.path:
+    sys.path.insert(0, str(_REPO))
+
+from scenes.utils.cli import add_options, from_args, option  # noqa: E402
+
+_WORKER = Path(__file__).with_name("vod_devkit_worker.py")
+"""The script the devkit's interpreter runs (:func:`bench.vod_devkit_worker.devkit_scores`)."""
 _DEVKIT_OFFSET = 0.01  # the devkit's detection offsets: rotation_y + 0.01 rad, 2D box + 0.01 px
-
-
-# ---------------------------------------------------------------------------------------------
-# Devkit worker: runs under the scratch interpreter; imports the devkit and nothing of ours.
-
-
-def _devkit_worker(folders: list[str]) -> None:
-    import contextlib
-    import io
-
-    from vod.evaluation import Evaluation
-    from vod.evaluation import evaluation_common as common
-    from vod.evaluation.kitti_official_evaluate import do_eval
-
-    names = ("Car", "Pedestrian", "Cyclist")
-    first = np.full((3, 3), 0.7)
-    first[:, 1:] = 0.5
-    second = np.array([[0.7, 0.5, 0.5], [0.5, 0.25, 0.25], [0.5, 0.25, 0.25]])
-    min_overlaps = np.stack([first, second])  # [table, metric (2d, bev, 3d), class]
-    out = {}
-    for folder in [f"{f}|{kind}" for f in folders for kind in ("devkit_preds", "raw_preds")]:
-        root, kind = folder.split("|")
-        labels, preds = str(Path(root) / "labels"), str(Path(root) / kind)
-        res: dict[str, dict[str, float]] = {}
-        with contextlib.redirect_stdout(io.StringIO()):
-            official = Evaluation(test_annotation_file=labels).evaluate(
-                result_path=preds, current_class=[0, 1, 2]
-            )
-            ids = sorted(p.stem for p in Path(preds).glob("*.txt"))
-            gt = common.get_label_annotations(labels, ids)
-            dt = common.get_label_annotations(preds, ids)
-            for area, method in (("entire_area", 0), ("roi", 3)):
-                (_, bev, d3, aos, _, bev40, d340, aos40) = do_eval(
-                    gt, dt, [0, 1, 2], min_overlaps, True, custom_method=method
-                )
-                block = {k: float(v) for k, v in official[area].items()}
-                for j, name in enumerate(names):
-                    block[f"{name}_3d_all_R40"] = float(d340[j, 0, 1])
-                    block[f"{name}_bev_all_R40"] = float(bev40[j, 0, 1])
-                    block[f"{name}_aos_all_R40"] = float(aos40[j, 0, 1])
-                    # do_eval's R11 must be the official numbers (a self-check of this worker)
-                    assert abs(block[f"{name}_3d_all"] - d3[j, 0, 1]) < 1e-9
-                    assert abs(block[f"{name}_bev_all"] - bev[j, 0, 1]) < 1e-9
-                    assert abs(block[f"{name}_aos_all"] - aos[j, 0, 1]) < 1e-9
-                res[area] = block
-        out[folder] = res
-    print(json.dumps(out))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -242,19 +203,34 @@ def _max_differences(ours: dict, devkit: dict) -> dict[str, float]:
     return worst
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--devkit-python", default="/tmp/vodenv/bin/python")
-    parser.add_argument("--sets", type=int, default=12, help="random sets")
-    parser.add_argument("--frames", type=int, default=80, help="frames per set")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--worker", nargs="+", help=argparse.SUPPRESS)
-    args = parser.parse_args(argv)
-    if args.worker:
-        _devkit_worker(args.worker)
-        return 0
+@dataclass(frozen=True, kw_only=True)
+class CompareVodOptions:
+    """``bench/compare_vod_devkit.py``'s flags.
 
-    sys.path.insert(0, str(_REPO))
+    Attributes:
+        devkit_python: The interpreter of a virtual environment with the devkit installed.
+        sets: Random sets written and scored.
+        frames: Frames per set.
+        seed: Set ``s`` is drawn with seed ``seed * 1000 + s``.
+    """
+
+    devkit_python: str = option("/tmp/vodenv/bin/python")
+    sets: int = option(12, help="random sets")
+    frames: int = option(80, help="frames per set")
+    seed: int = option(0)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``bench/compare_vod_devkit.py``'s parser (:class:`CompareVodOptions`)."""
+    parser = argparse.ArgumentParser(
+        prog="python bench/compare_vod_devkit.py", description=__doc__.split("\n\n")[0]
+    )
+    add_options(parser, CompareVodOptions)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = from_args(CompareVodOptions, build_parser().parse_args(argv))
     from model import score_directories
 
     with tempfile.TemporaryDirectory(prefix="vodcmp") as tmp:
@@ -271,7 +247,7 @@ def main(argv: list[str] | None = None) -> int:
             emulated[f"{folder}|raw_preds"] = score_directories(labels, preds).result.to_dict()
             folders.append(str(folder))
         proc = subprocess.run(
-            [args.devkit_python, __file__, "--worker", *folders],
+            [args.devkit_python, str(_WORKER), *folders],
             capture_output=True,
             text=True,
             check=False,

@@ -1,5 +1,5 @@
 """The detector's ceiling on a split's Talk2Car commands: ``python -m bench.talk2car_recall --data
-NUSC [--split val] [--radar-sweeps 5] [--checkpoint checkpoints/tpcnet-small.pt]``.
+NUSC [--split val] [--radar-sweeps 5] [--checkpoint CHECKPOINT]``.
 
 For each kept command (``scenes.nuscenes.talk2car.read_commands``), whether the checkpoint's
 detector proposes a box of the referent's class whose bird's-eye centre lies within the top-1
@@ -13,12 +13,16 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import torch
 
-__all__ = ["detector_recall", "main"]
+from scenes.datasets.nuscenes_frames import RADAR_SWEEPS
+from scenes.utils.cli import add_options, from_args, option
+
+__all__ = ["Talk2CarRecallOptions", "build_parser", "detector_recall", "main"]
 
 
 def detector_recall(
@@ -57,15 +61,43 @@ def detector_recall(
     return {k: (v[0], v[1]) for k, v in counts.items()}
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+@dataclass(frozen=True, kw_only=True)
+class Talk2CarRecallOptions:
+    """``python -m bench.talk2car_recall``'s flags.
+
+    Attributes:
+        data: A nuScenes root with its Talk2Car ``commands/``.
+        split: The commands' split.
+        radar_sweeps: Radar sweeps accumulated per frame (default: what the model reads,
+            :data:`scenes.datasets.nuscenes_frames.RADAR_SWEEPS`).
+        checkpoint: The checkpoint whose detector is measured (None: the bundled one,
+            ``model.DEFAULT_CHECKPOINT``).
+    """
+
+    data: Path = option(help="nuScenes root with commands/")
+    split: str = option("val", help="the commands' split (default %(default)s)")
+    radar_sweeps: int = option(
+        RADAR_SWEEPS, help="radar sweeps a frame (default %(default)s, as the model reads)"
+    )
+    checkpoint: Path | None = option(
+        None, help="a checkpoint (default: the bundled one, model.DEFAULT_CHECKPOINT)"
+    )
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``python -m bench.talk2car_recall``'s parser (:class:`Talk2CarRecallOptions`)."""
     p = argparse.ArgumentParser(prog="python -m bench.talk2car_recall", description=__doc__)
-    p.add_argument("--data", type=Path, required=True, help="nuScenes root with commands/")
-    p.add_argument("--split", default="val")
-    p.add_argument("--radar-sweeps", type=int, default=5)
-    p.add_argument("--checkpoint", type=Path, default=Path("checkpoints/tpcnet-small.pt"))
-    a = p.parse_args(argv)
+    add_options(p, Talk2CarRecallOptions)
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    a = from_args(Talk2CarRecallOptions, build_parser().parse_args(argv))
     torch.set_num_threads(1)
-    counts = detector_recall(a.data, a.split, a.radar_sweeps, a.checkpoint)
+    from model import DEFAULT_CHECKPOINT
+
+    checkpoint = DEFAULT_CHECKPOINT if a.checkpoint is None else a.checkpoint
+    counts = detector_recall(a.data, a.split, a.radar_sweeps, checkpoint)
     for key, (hit, n) in counts.items():
         print(
             f"{key:<10} referent detected within the top-1 distance: {hit}/{n} = {100 * hit / max(n, 1):.1f} %"

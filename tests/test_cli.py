@@ -9,7 +9,7 @@ from typing import Literal
 
 import pytest
 
-from scenes.utils.cli import add_options, from_args, option
+from scenes.utils.cli import add_options, from_args, option, report_errors
 
 Colour = Literal["red", "green"]
 
@@ -100,3 +100,45 @@ def test_groups_list_their_fields_in_field_order() -> None:
     assert groups["options"] == ["help", "name", "where", "tags", "verbose", "colours"]
     help_text = parser().format_help()
     assert help_text.index("\nnumbers:\n") < help_text.index("\nlooks:\n")
+
+
+@dataclass(frozen=True, kw_only=True)
+class Table:
+    rows: tuple[str, ...] = option(positional=True, metavar="ROW")
+    wide: bool = option(False, exclusive="shape")
+    tall: bool = option(False, exclusive="shape")
+
+
+def test_positional_fields_and_exclusive_switches(capsys: pytest.CaptureFixture[str]) -> None:
+    p = argparse.ArgumentParser(prog="table")
+    add_options(p, Table)
+    assert from_args(Table, p.parse_args(["a", "b", "--tall"])) == Table(rows=("a", "b"), tall=True)
+    assert from_args(Table, p.parse_args(["a"])) == Table(rows=("a",))
+    for argv, message in (
+        (["--wide"], "the following arguments are required: ROW"),
+        (["a", "--wide", "--tall"], "argument --tall: not allowed with argument --wide"),
+    ):
+        with pytest.raises(SystemExit) as exc:
+            p.parse_args(argv)
+        assert exc.value.code == 2
+        assert message in capsys.readouterr().err
+    assert "[--wide | --tall]" in p.format_usage()
+
+
+def test_report_errors_prints_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    def bad_value() -> int:
+        raise ValueError("labels.txt line 3:\n  field 'x' is not a number")
+
+    def missing_file() -> int:
+        return len((tmp_path / "nope.json").read_text())
+
+    assert report_errors(lambda: 0) == 0
+    assert report_errors(bad_value) == 2
+    assert capsys.readouterr().err == "error: labels.txt line 3: field 'x' is not a number\n"
+    assert report_errors(missing_file) == 2
+    assert (
+        capsys.readouterr().err == f"error: {tmp_path / 'nope.json'}: No such file or directory\n"
+    )
+    with pytest.raises(KeyError):  # not an expected failure: a traceback
+        report_errors(lambda: {}["k"])
+    assert report_errors(bad_value, (KeyError, ValueError), status=3) == 3

@@ -1,5 +1,5 @@
-"""Every command line README.md and docs/*.md show (``python -m <module> ...`` and ``python
-launch.py ...``) parses with its command's parser, without running the command; a synopsis
+"""Every command line README.md and docs/*.md show (``python -m <module> ...``, ``python
+launch.py ...`` and ``python bench/<name>.py ...``) parses with its command's parser, without running the command; a synopsis
 (``[--flag VALUE]``) names only flags and choices that exist. A command the docs show that is not
 listed here fails the test, so that a new one gets checked too. (``tests/test_evaluate_config.py``
 also checks what ``model.evaluate``'s lines parse to.)"""
@@ -28,8 +28,12 @@ PARSERS: dict[str, tuple[str, str]] = {
     "python -m model.class_prompts": ("model.evaluation.class_prompts", "_parser"),
     "python -m model.results_table": ("model.evaluation.results_table", "build_parser"),
     **{
-        f"python -m bench.{name}": (f"bench.{name}", "build_parser")
+        command: (f"bench.{name}", "build_parser")
         for name in (
+            "bench_synth",
+            "carry_accuracy",
+            "compare_nuscenes_devkit",
+            "compare_vod_devkit",
             "eval_throughput",
             "fit_accuracy",
             "floor",
@@ -42,8 +46,10 @@ PARSERS: dict[str, tuple[str, str]] = {
             "run_all",
             "sensor_stats",
             "soak",
+            "talk2car_recall",
             "train_throughput",
         )
+        for command in (f"python -m bench.{name}", f"python bench/{name}.py")
     },
 }
 """Each documented command and where its parser is made (module, function)."""
@@ -51,7 +57,9 @@ PARSERS: dict[str, tuple[str, str]] = {
 HELPERS = ("python -m tests.",)
 """Test helpers the docs mention (their own scripts, not the product's commands)."""
 
-COMMAND = re.compile(r"python (?:-m [a-z_][a-z_.]*[a-z_]|launch\.py)(?=[\s`]|$)")
+COMMAND = re.compile(
+    r"python (?:-m [a-z_][a-z0-9_.]*[a-z0-9_]|launch\.py|bench/[a-z0-9_]+\.py)(?=[\s`]|$)"
+)
 
 
 def documented_command_lines() -> list[tuple[str, str, str]]:

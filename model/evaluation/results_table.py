@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +36,7 @@ from model.evaluation.report_file import (
     ReportFileError,
     SubsetFigures,
 )
+from scenes.utils.cli import add_options, from_args, option, report_errors
 from scenes.utils.textfile import read_text_file
 
 CLASSES: tuple[str, ...] = tuple(MIN_OVERLAPS)
@@ -186,46 +186,62 @@ def grounding_splits_table(rows: Sequence[Row]) -> str:
     return _markdown(["Acc@0.25 / set F1 / exact", *SPLIT_NAMES], body)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """``python -m model.results_table``'s parser: positional rows and one table choice (a
-    mutually exclusive group, which no dataclass field describes)."""
-    parser = argparse.ArgumentParser(prog="python -m model.results_table", description=__doc__)
-    parser.add_argument("rows", nargs="+", metavar="NAME=PATH.json")
-    table = parser.add_mutually_exclusive_group()
-    table.add_argument("--by-type", action="store_true", help="3D mAP per prompt type")
-    table.add_argument("--by-depth", action="store_true", help="3D mAP per 10 m depth bin")
-    table.add_argument(
-        "--grounding",
-        action="store_true",
+@dataclass(frozen=True, kw_only=True)
+class ResultsTableCommand:
+    """``python -m model.results_table``'s command line: the rows and which table (at most one of
+    the switches; none: the overall table).
+
+    Attributes:
+        rows: ``NAME=PATH.json``, one per table row (:func:`load_row`).
+        by_type: Table III's shape (:func:`by_type_table`).
+        by_depth: Table IV's shape (:func:`by_depth_table`).
+        grounding: The per-prompt grounding metrics (:func:`grounding_table`).
+        grounding_splits: Those per prompt group and type (:func:`grounding_splits_table`).
+    """
+
+    rows: tuple[str, ...] = option(positional=True, metavar="NAME=PATH.json")
+    by_type: bool = option(False, exclusive="table", help="3D mAP per prompt type")
+    by_depth: bool = option(False, exclusive="table", help="3D mAP per 10 m depth bin")
+    grounding: bool = option(
+        False,
+        exclusive="table",
         help="per-prompt grounding metrics, model and baselines (class noun, oracle)",
     )
-    table.add_argument(
-        "--grounding-splits",
-        action="store_true",
+    grounding_splits: bool = option(
+        False,
+        exclusive="table",
         help="Acc@0.25 / set F1 / exact per prompt group and type, model and baselines",
     )
+
+    def table(self, rows: Sequence[Row]) -> str:
+        """The chosen table of ``rows``."""
+        if self.by_type:
+            return by_type_table(rows)
+        if self.by_depth:
+            return by_depth_table(rows)
+        if self.grounding:
+            return grounding_table(rows)
+        if self.grounding_splits:
+            return grounding_splits_table(rows)
+        return overall_table(rows)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """``python -m model.results_table``'s parser (:class:`ResultsTableCommand`)."""
+    parser = argparse.ArgumentParser(prog="python -m model.results_table", description=__doc__)
+    add_options(parser, ResultsTableCommand)
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    try:
-        rows = [load_row(spec) for spec in args.rows]
-        if args.by_type:
-            print(by_type_table(rows))
-        elif args.by_depth:
-            print(by_depth_table(rows))
-        elif args.grounding:
-            print(grounding_table(rows))
-        elif args.grounding_splits:
-            print(grounding_splits_table(rows))
-        else:
-            print(overall_table(rows))
-    except ResultsTableError as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    return 0
+    """``python -m model.results_table``; a bad results file is one ``error:`` line, exit 2."""
+    command = from_args(ResultsTableCommand, build_parser().parse_args(argv))
+
+    def run() -> int:
+        print(command.table([load_row(spec) for spec in command.rows]))
+        return 0
+
+    return report_errors(run, (ResultsTableError,))
 
 
 if __name__ == "__main__":

@@ -13,7 +13,13 @@ flag taking that many values at once (``nargs``). ``choices`` (for a field typed
 or ``str`` whose values a constant lists) and ``metavar`` pass to argparse as they are; help may
 name the default as ``%(default)s``, so that no help text restates it. A field without a default
 is a required flag. Fields with ``cli=False`` metadata have no flag; fields with a ``group`` title are
-listed under that argument group in ``--help`` (groups in the order their first field comes).
+listed under that argument group in ``--help`` (groups in the order their first field comes);
+fields with one ``exclusive`` title are switches of which a command line gives at most one (an
+argparse mutually exclusive group). A ``positional`` field is an argument without a flag (a
+``tuple[X, ...]`` one: one or more values).
+
+A command's ``main`` runs its work through :func:`report_errors`: an expected failure (bad input,
+a missing file) is one ``error: ...`` line (:func:`error_line`) and exit status 2, not a traceback.
 
 Why not ``tyro``: the commands' flags, help text and errors are relied on by scripts and docs
 (docs/DESIGN.md); tyro renames and re-formats them (``--flag/--no-flag`` pairs, its own help
@@ -26,6 +32,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import sys
 import types
 import typing
 from collections.abc import Callable, Sequence
@@ -46,6 +53,8 @@ def option(
     choices: Sequence[Any] | None = None,
     metavar: str | tuple[str, ...] | None = None,
     nargs: str | None = None,
+    exclusive: str | None = None,
+    positional: bool = False,
 ) -> Any:
     """A dataclass field with its command-line flag's settings.
 
@@ -62,6 +71,10 @@ def option(
         metavar: The flag's value name(s) in ``--help`` (a tuple for a fixed-length tuple).
         nargs: For a ``tuple[X, ...]``: the values given after one flag (``"+"``), instead of
             the flag repeated once per value.
+        exclusive: The title of a set of switches of which at most one may be given (fields
+            with the same title; a ``group`` is then ignored).
+        positional: An argument without a flag, named by the field (required unless it has a
+            default; a ``tuple[X, ...]``: one or more values, ``nargs="+"``).
     """
     meta = {
         "help": help,
@@ -73,6 +86,8 @@ def option(
         "choices": None if choices is None else tuple(choices),
         "metavar": metavar,
         "nargs": nargs,
+        "exclusive": exclusive,
+        "positional": positional,
     }
     if default_factory is not dataclasses.MISSING:
         return dataclasses.field(default_factory=default_factory, metadata=meta)
@@ -126,10 +141,17 @@ def add_options(parser: argparse.ArgumentParser, cls: type, only: tuple[str, ...
     """One flag per field of ``cls`` (in field order; ``only``: just these fields)."""
     hints = typing.get_type_hints(cls, include_extras=True)
     groups: dict[str, argparse._ArgumentGroup] = {}
+    exclusive: dict[str, argparse._MutuallyExclusiveGroup] = {}
     for f in dataclasses.fields(cls):
         if not f.metadata.get("cli", True) or (only and f.name not in only):
             continue
-        _add_option(_group(parser, groups, f.metadata.get("group")), f, hints[f.name])
+        title = f.metadata.get("exclusive")
+        if title is not None:
+            if title not in exclusive:
+                exclusive[title] = parser.add_mutually_exclusive_group()
+            _add_option(exclusive[title], f, hints[f.name])
+        else:
+            _add_option(_group(parser, groups, f.metadata.get("group")), f, hints[f.name])
 
 
 def _group(
@@ -145,10 +167,36 @@ def _group(
     return groups[title]
 
 
+def _add_positional(
+    parser: argparse.ArgumentParser | argparse._ArgumentGroup, f: dataclasses.Field, tp: Any
+) -> None:
+    """The flagless argument of field ``f`` (type ``tp``): one value of its type, or one or more
+    of a ``tuple[X, ...]``; optional (``?`` / ``*``) when the field has a default."""
+    required = f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+    base = _base(tp)
+    kw: dict[str, Any] = {}
+    if typing.get_origin(base) is tuple:
+        base = typing.get_args(base)[0]
+        kw["nargs"] = "+" if required else "*"
+    elif not required:
+        kw["nargs"] = "?"
+    if base in (int, float, Path):
+        kw["type"] = base
+    if not required:
+        kw["default"] = _default(f)
+    for key in ("help", "metavar", "choices"):
+        if f.metadata.get(key) is not None:
+            kw[key] = f.metadata[key]
+    parser.add_argument(f.name, **kw)
+
+
 def _add_option(
     parser: argparse.ArgumentParser | argparse._ArgumentGroup, f: dataclasses.Field, tp: Any
 ) -> None:
     """The flag of field ``f`` (type ``tp``) on ``parser`` (module docstring)."""
+    if f.metadata.get("positional"):
+        _add_positional(parser, f, tp)
+        return
     name = flag_name(f)
     kw: dict[str, Any] = {"dest": f.name}
     required = f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
@@ -224,6 +272,21 @@ def error_line(exc: BaseException) -> str:
     return " ".join(text.split()) or type(exc).__name__
 
 
+def report_errors(
+    run: Callable[[], int],
+    errors: tuple[type[BaseException], ...] = (ValueError, OSError),
+    status: int = 2,
+) -> int:
+    """``run()``'s exit status; when it raises one of ``errors``, that error as one ``error:``
+    line on stderr (:func:`error_line`) and ``status``. The one home of a command's
+    ``try: ... except: print(error); return 2``."""
+    try:
+        return run()
+    except errors as exc:
+        print(f"error: {error_line(exc)}", file=sys.stderr)
+        return status
+
+
 __all__ = [
     "add_options",
     "choices_of",
@@ -231,5 +294,6 @@ __all__ = [
     "flag_name",
     "from_args",
     "option",
+    "report_errors",
     "resumable_fields",
 ]
