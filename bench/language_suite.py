@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from collections import defaultdict
 from collections.abc import Sequence
@@ -36,7 +35,6 @@ from bench.language_cases import (
     SUITE_FILE,
     Case,
     Suite,
-    SuiteError,
     build_cases,
     check_fingerprint,
     ensure_scenes,
@@ -57,7 +55,7 @@ from bench.language_score import (
 from model import class_noun_prompt
 from scenes.language.resolve import referable
 from scenes.talk2radar.root import Talk2RadarRoot
-from scenes.utils.cli import add_options, from_args, option
+from scenes.utils.cli import add_options, from_args, option, report_errors
 from scenes.utils.durable import atomic_write_text
 from scenes.utils.text_policy import PROMPT, clean_text
 
@@ -196,28 +194,25 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    args = from_args(LanguageSuiteOptions, build_parser().parse_args(argv))
-    try:
-        suite = load_suite(args.suite)
-        root = ensure_scenes(suite, args.scenes)
-        if args.write_fingerprint:
-            write_fingerprint(args.suite, fingerprint(root))
-            print(f"{args.suite}: recorded the fingerprint of {args.scenes}")
-            return 0
-        from model import load_checkpoint
+def run(args: LanguageSuiteOptions) -> int:
+    """Run the suite as ``args`` says (or record its scenes' fingerprint) and print the table
+    (errors raise)."""
+    suite = load_suite(args.suite)
+    root = ensure_scenes(suite, args.scenes)
+    if args.write_fingerprint:
+        write_fingerprint(args.suite, fingerprint(root))
+        print(f"{args.suite}: recorded the fingerprint of {args.scenes}")
+        return 0
+    from model import load_checkpoint
 
-        model = load_checkpoint(args.checkpoint, device=args.device)
-        if args.threshold is None:
-            from model import operating_threshold
+    model = load_checkpoint(args.checkpoint, device=args.device)
+    if args.threshold is None:
+        from model import operating_threshold
 
-            threshold = operating_threshold(model)  # type: ignore[arg-type]
-        else:
-            threshold = float(args.threshold)
-        report = run_suite(model, suite, root, threshold)
-    except (SuiteError, OSError, ValueError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        threshold = operating_threshold(model)  # type: ignore[arg-type]
+    else:
+        threshold = float(args.threshold)
+    report = run_suite(model, suite, root, threshold)
     print(
         f"language suite {args.suite} ({len(suite.sentences)} sentences) on {args.scenes}; "
         f"checkpoint {args.checkpoint}; operating threshold {threshold:g}; "
@@ -228,6 +223,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         atomic_write_text(args.json, json.dumps(report.to_dict(), indent=1) + "\n")
         print(f"wrote {args.json}")
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m bench.language_suite``; a bad suite, root or checkpoint (SuiteError and the
+    others are ValueErrors) is one ``error:`` line, exit status 2."""
+    return report_errors(
+        lambda: run(from_args(LanguageSuiteOptions, build_parser().parse_args(argv)))
+    )
 
 
 if __name__ == "__main__":

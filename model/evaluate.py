@@ -50,11 +50,10 @@ from model.evaluation.files import (
 from model.evaluation.grounding import CandidateSource
 from model.evaluation.metrics import VodResult
 from model.evaluation.worker_watch import PredictionWorkerError
-from scenes.utils.cli import add_options, from_args, option
+from scenes.utils.cli import add_options, from_args, option, report_errors
 
 if TYPE_CHECKING:
     from model.evaluation.report import GroundingReport
-from scenes.talk2radar.kitti import LabelError
 
 DEFAULT_EVAL_DIR = Path("runs") / "eval"
 """Model mode's default output folder's parent (relative to the working directory)."""
@@ -348,19 +347,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     runner = _run_model_mode if cfg.mode() == "model" else _run_files_mode
     if cfg.talk2car is not None:
         runner = _run_talk2car_mode
-    try:
-        return runner(cfg)
-    except (EvaluationInputError, LabelError, ValueError, PredictionWorkerError) as exc:
-        print(f"error: {_one_line(str(exc))}", file=sys.stderr)
-        return 2
-    except OSError as exc:  # e.g. --json or --out in a folder that cannot be written
-        where = f"{exc.filename}: " if exc.filename else ""
-        print(f"error: {where}{_one_line(exc.strerror or str(exc))}", file=sys.stderr)
-        return 2
-
-
-def _one_line(text: str) -> str:
-    return " ".join(text.split()) or "unknown error"
+    return report_errors(lambda: runner(cfg), (ValueError, PredictionWorkerError, OSError))
 
 
 if __name__ == "__main__":

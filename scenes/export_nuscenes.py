@@ -25,7 +25,7 @@ from scenes.nuscenes.export import ExportReport, SourceFrame, SourcePrompt, expo
 from scenes.synth.radar import RadarConfig
 from scenes.talk2radar.layout import RootError
 from scenes.talk2radar.root import Talk2RadarRoot
-from scenes.utils.cli import add_options, from_args, option
+from scenes.utils.cli import add_options, from_args, option, report_errors
 
 __all__ = ["SPLITS", "ExportNuScenesCommand", "export", "main", "source_frames"]
 
@@ -125,17 +125,10 @@ def _parser() -> argparse.ArgumentParser:
 build_parser = _parser
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    args = from_args(ExportNuScenesCommand, _parser().parse_args(argv))
+def run(args: ExportNuScenesCommand) -> int:
+    """Export as ``args`` says and print what was written (errors raise)."""
     start = time.perf_counter()
-    try:
-        report = export(args.source, args.out, args.splits, args.seed, args.version)
-    except ValueError as exc:
-        print(f"error: {' '.join(str(exc).split())}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"error: {exc.filename or args.source}: {exc.strerror or exc}", file=sys.stderr)
-        return 2
+    report = export(args.source, args.out, args.splits, args.seed, args.version)
     commands = ", ".join(f"{k} {v}" for k, v in report.commands.items())
     skipped = ", ".join(f"{v} {k}" for k, v in report.skipped.items()) or "none"
     print(
@@ -143,6 +136,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"{time.perf_counter() - start:.1f} s; commands: {commands}; prompts left out: {skipped}"
     )
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m scenes.export_nuscenes``; a bad root is one ``error:`` line, exit status 2."""
+    args = from_args(ExportNuScenesCommand, _parser().parse_args(argv))
+    return report_errors(lambda: run(args))
 
 
 if __name__ == "__main__":

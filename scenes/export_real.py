@@ -73,7 +73,7 @@ from scenes.talk2radar.pointcloud import RADAR_FEATURES, read_points, write_poin
 from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.talk2radar.vod_writer import VodWriter
 from scenes.talk2radar.writer import LABEL_DECIMALS, SampleText, SensorFiles, Talk2RadarWriter
-from scenes.utils.cli import add_options, from_args, option
+from scenes.utils.cli import add_options, from_args, option, report_errors
 
 __all__ = ["RADAR_CHOICES", "SPLITS", "ExportReport", "export", "main", "source_frames"]
 
@@ -362,18 +362,11 @@ def _parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    args = from_args(ExportCommand, _parser().parse_args(argv))
-    try:
-        report = export(
-            args.source, args.t2r, args.vod, args.splits, args.radar, progress=not args.quiet
-        )
-    except ValueError as exc:
-        print(f"error: {' '.join(str(exc).split())}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        print(f"error: {exc.filename or args.source}: {exc.strerror or exc}", file=sys.stderr)
-        return 2
+def run(args: ExportCommand) -> int:
+    """Export as ``args`` says and print what was written (errors raise)."""
+    report = export(
+        args.source, args.t2r, args.vod, args.splits, args.radar, progress=not args.quiet
+    )
     counts = ", ".join(f"{k} {len(v)}" for k, v in report.splits.items())
     objects = ", ".join(f"{k} {v}" for k, v in report.objects.items())
     print(
@@ -388,6 +381,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         referents = ", ".join(f"{k} {v}" for k, v in report.referents.items())
         print(f"{args.t2r}: Talk2Radar referents: {referents}")
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m scenes.export_real``; a bad root is one ``error:`` line, exit status 2."""
+    args = from_args(ExportCommand, _parser().parse_args(argv))
+    return report_errors(lambda: run(args))
 
 
 if __name__ == "__main__":

@@ -66,7 +66,7 @@ from scenes.geometry.actors import CLASSES
 from scenes.geometry.calib import IMAGE_SIZE
 from scenes.geometry.projection import in_camera_view
 from scenes.talk2radar.root import LIDAR_FOLDER, RADAR_FOLDERS, RootError, Sample, Talk2RadarRoot
-from scenes.utils.cli import add_options, from_args, option
+from scenes.utils.cli import add_options, from_args, option, report_errors
 from scenes.utils.durable import atomic_write_text
 
 FOVS = ("camera", "all")
@@ -451,15 +451,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """``python -m model.class_prompts``; errors are one line on stderr with exit code 2."""
     argv = list(sys.argv[1:] if argv is None else argv)
     args = _parser().parse_args(argv)
-    try:
-        return run(args, argv)
-    except ValueError as exc:  # RootError, LabelError, CalibrationError, CheckpointError, ...
-        print(f"error: {' '.join(str(exc).split())}", file=sys.stderr)
-        return 2
-    except OSError as exc:
-        where = f"{exc.filename}: " if exc.filename else ""
-        print(f"error: {where}{' '.join((exc.strerror or str(exc)).split())}", file=sys.stderr)
-        return 2
+    return report_errors(lambda: run(args, argv))  # RootError, LabelError, CheckpointError, ...
 
 
 if __name__ == "__main__":

@@ -38,7 +38,7 @@ import numpy as np
 
 from model.evaluation.grounding import PromptBoxes, prompt_outcome
 from model.evaluation.predict import iterate_predictions
-from scenes.utils.cli import add_options, error_line, from_args, option
+from scenes.utils.cli import add_options, error_line, from_args, option, report_errors
 
 if TYPE_CHECKING:
     from model.tpcnet import TPCNet
@@ -285,34 +285,34 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    a = from_args(CalibrateConfig, build_parser().parse_args(argv))
-    from model.checkpoint import CheckpointError
-    from scenes.talk2radar.root import RootError
-
-    try:
-        cal = calibrate_file(
-            a.checkpoint,
-            a.data,
-            a.split,
-            a.limit,
-            a.min_prompts,
-            dry_run=a.dry_run,
-            talk2car=a.talk2car,
-        )
-        for t, f1, exact in cal.curve:
-            mark = "  <- chosen" if t == cal.threshold else ""
-            print(f"threshold {t:.3f}: set F1 {f1:5.1f}  exact-set {exact:5.1f}{mark}")
-        print(
-            f"operating threshold {cal.threshold:.3f} (set F1 {cal.set_f1:.1f}, exact-set "
-            f"{cal.exact_set:.1f} on {cal.prompts} prompts of {a.data} {a.split})"
-        )
-        if not a.dry_run:
-            print(f"wrote operating_threshold into {a.checkpoint}")
-    except (CheckpointError, RootError, ValueError, OSError, ImportError) as exc:
-        print(f"error: {error_line(exc)}", file=sys.stderr)
-        return 2
+def run(a: CalibrateConfig) -> int:
+    """Calibrate as ``a`` says and print the curve and the choice (errors raise)."""
+    cal = calibrate_file(
+        a.checkpoint,
+        a.data,
+        a.split,
+        a.limit,
+        a.min_prompts,
+        dry_run=a.dry_run,
+        talk2car=a.talk2car,
+    )
+    for t, f1, exact in cal.curve:
+        mark = "  <- chosen" if t == cal.threshold else ""
+        print(f"threshold {t:.3f}: set F1 {f1:5.1f}  exact-set {exact:5.1f}{mark}")
+    print(
+        f"operating threshold {cal.threshold:.3f} (set F1 {cal.set_f1:.1f}, exact-set "
+        f"{cal.exact_set:.1f} on {cal.prompts} prompts of {a.data} {a.split})"
+    )
+    if not a.dry_run:
+        print(f"wrote operating_threshold into {a.checkpoint}")
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """``python -m model.calibrate``; a bad checkpoint or root (CheckpointError, RootError: both
+    ValueErrors) is one ``error:`` line, exit status 2."""
+    a = from_args(CalibrateConfig, build_parser().parse_args(argv))
+    return report_errors(lambda: run(a), (ValueError, OSError, ImportError))
 
 
 if __name__ == "__main__":
