@@ -44,7 +44,7 @@ from scenes.geometry.actors import CLASSES  # noqa: E402
 from scenes.synth.generate import SynthSettings, generate_root  # noqa: E402
 from scenes.talk2radar.poses import FRAME_RATE, consecutive, lidar_motion, read_pose  # noqa: E402
 from scenes.talk2radar.root import Sample, Talk2RadarRoot  # noqa: E402
-from scenes.utils.cli import add_options, from_args, option  # noqa: E402
+from scenes.utils.cli import command_parser, option, run_command  # noqa: E402
 
 METHODS = (
     "in place",
@@ -182,15 +182,13 @@ class CarryAccuracyOptions:
 
 def build_parser() -> argparse.ArgumentParser:
     """``python -m bench.carry_accuracy``'s parser (:class:`CarryAccuracyOptions`)."""
-    p = argparse.ArgumentParser(
-        prog="python -m bench.carry_accuracy", description=__doc__.splitlines()[0]
+    return command_parser(
+        "python -m bench.carry_accuracy", __doc__.splitlines()[0], CarryAccuracyOptions
     )
-    add_options(p, CarryAccuracyOptions)
-    return p
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    args = from_args(CarryAccuracyOptions, build_parser().parse_args(argv))
+def _run(args: CarryAccuracyOptions) -> int:
+    """The command run as ``args`` says."""
     with tempfile.TemporaryDirectory() as tmp:
         root_path = args.data
         if root_path is None:
@@ -203,6 +201,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f"carry to the next frame (10 Hz) on {args.data or 'a generated sequence root'}:")
     print(table(errors))
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return run_command(build_parser(), CarryAccuracyOptions, _run, argv)
 
 
 if __name__ == "__main__":

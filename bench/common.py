@@ -62,7 +62,7 @@ from bench.report import (
     write_result,
 )
 from bench.workloads import WARM_UP_PROMPTS, SceneWorkload, synthetic_scenes, warm_up
-from scenes.utils.cli import add_options, from_args, option
+from scenes.utils.cli import command_parser, from_args, option
 
 DEFAULT_THREADS = 1
 """Torch intra-op threads of the benchmarks unless ``--threads`` says otherwise: the app's default
@@ -145,11 +145,8 @@ def bench_parser(
 ) -> argparse.ArgumentParser:
     """The parser of ``python -m <module>``: :class:`BenchOptions`' flags, then those of the
     benchmark's own ``options`` dataclass (its fields are ``run``'s keyword arguments)."""
-    parser = argparse.ArgumentParser(prog=f"python -m {module}", description=description)
-    add_options(parser, BenchOptions)
-    if options is not None:
-        add_options(parser, options)
-    return parser
+    own = () if options is None else (options,)
+    return command_parser(f"python -m {module}", description, BenchOptions, *own)
 
 
 def bench_main(

@@ -36,16 +36,21 @@ import json
 import subprocess
 import sys
 import tempfile
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from scenes.nuscenes.geometry import MODEL_TO_LIDAR, quaternion_matrix, transform
-from scenes.nuscenes.radar import RADAR_CHANNELS
-from scenes.nuscenes.root import NuScenesRoot
-from scenes.nuscenes.talk2car import commands_file, model_box_to_camera, read_commands
-from scenes.utils.cli import add_options, from_args, option
+_REPO = Path(__file__).resolve().parents[1]
+if str(_REPO) not in sys.path:  # run as a script: python bench/compare_nuscenes_devkit.py
+    sys.path.insert(0, str(_REPO))
+
+from scenes.nuscenes.geometry import MODEL_TO_LIDAR, quaternion_matrix, transform  # noqa: E402
+from scenes.nuscenes.radar import RADAR_CHANNELS  # noqa: E402
+from scenes.nuscenes.root import NuScenesRoot  # noqa: E402
+from scenes.nuscenes.talk2car import commands_file, model_box_to_camera, read_commands  # noqa: E402
+from scenes.utils.cli import command_parser, option, run_command  # noqa: E402
 
 DEVKIT_SCRIPT = r"""
 import json, sys
@@ -180,15 +185,13 @@ def compare(root_path: Path, devkit_python: Path, radar_sweeps: int) -> dict[str
 
 def build_parser() -> argparse.ArgumentParser:
     """``bench/compare_nuscenes_devkit.py``'s parser (:class:`CompareOptions`)."""
-    p = argparse.ArgumentParser(
-        prog="python bench/compare_nuscenes_devkit.py", description=__doc__.split("\n\n")[0]
+    return command_parser(
+        "python bench/compare_nuscenes_devkit.py", __doc__.split("\n\n")[0], CompareOptions
     )
-    add_options(p, CompareOptions)
-    return p
 
 
-def main(argv: list[str] | None = None) -> int:
-    opts = from_args(CompareOptions, build_parser().parse_args(argv))
+def _run(opts: CompareOptions) -> int:
+    """The command run as ``opts`` says."""
     diff = compare(opts.root, opts.devkit_python, opts.radar_sweeps)
     width = max(len(k) for k in diff)
     for k, v in diff.items():
@@ -196,6 +199,10 @@ def main(argv: list[str] | None = None) -> int:
     worst = max(diff.values())
     print(f"agreement within 1e-4: {'yes' if worst <= 1e-4 else 'NO'} (largest {worst:.2e})")
     return 0 if worst <= 1e-4 else 1
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return run_command(build_parser(), CompareOptions, _run, argv)
 
 
 if __name__ == "__main__":

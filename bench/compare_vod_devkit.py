@@ -35,6 +35,7 @@ import json
 import subprocess
 import sys
 import tempfile
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -44,7 +45,7 @@ _REPO = Path(__file__).resolve().parents[1]
 if str(_REPO) not in sys.path:
     sys.path.insert(0, str(_REPO))
 
-from scenes.utils.cli import add_options, from_args, option  # noqa: E402
+from scenes.utils.cli import command_parser, option, run_command  # noqa: E402
 
 _WORKER = Path(__file__).with_name("vod_devkit_worker.py")
 """The script the devkit's interpreter runs (:func:`bench.vod_devkit_worker.devkit_scores`)."""
@@ -222,15 +223,13 @@ class CompareVodOptions:
 
 def build_parser() -> argparse.ArgumentParser:
     """``bench/compare_vod_devkit.py``'s parser (:class:`CompareVodOptions`)."""
-    parser = argparse.ArgumentParser(
-        prog="python bench/compare_vod_devkit.py", description=__doc__.split("\n\n")[0]
+    return command_parser(
+        "python bench/compare_vod_devkit.py", __doc__.split("\n\n")[0], CompareVodOptions
     )
-    add_options(parser, CompareVodOptions)
-    return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    args = from_args(CompareVodOptions, build_parser().parse_args(argv))
+def _run(args: CompareVodOptions) -> int:
+    """The command run as ``args`` says."""
     from model import score_directories
 
     with tempfile.TemporaryDirectory(prefix="vodcmp") as tmp:
@@ -281,6 +280,10 @@ def main(argv: list[str] | None = None) -> int:
             print(f"  {name:<34}{worst[name]:>22.3e}")
         print(f"  overall max difference: {max(worst.values()):.3e} AP points")
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return run_command(build_parser(), CompareVodOptions, _run, argv)
 
 
 if __name__ == "__main__":

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scenes.utils.cli import add_options, from_args, option
+from scenes.utils.cli import command_parser, option, run_command
 
 _REPO = Path(__file__).resolve().parents[1]
 if str(_REPO) not in sys.path:
@@ -83,15 +83,13 @@ class FitAccuracyOptions:
 
 def build_parser() -> argparse.ArgumentParser:
     """``python -m bench.fit_accuracy``'s parser."""
-    p = argparse.ArgumentParser(
-        prog="python -m bench.fit_accuracy", description=__doc__.splitlines()[0]
+    return command_parser(
+        "python -m bench.fit_accuracy", __doc__.splitlines()[0], FitAccuracyOptions
     )
-    add_options(p, FitAccuracyOptions)
-    return p
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    args = from_args(FitAccuracyOptions, build_parser().parse_args(argv))
+def _run(args: FitAccuracyOptions) -> int:
+    """The command run as ``args`` says."""
     objects = cases(Talk2RadarRoot(args.data), args.samples)
     print(f"{len(objects)} objects of {args.data} (first {args.samples} samples), 3-35 m ahead")
     print(
@@ -111,6 +109,10 @@ def main(argv: Sequence[str] | None = None) -> int:
                 f"{100 * np.mean(got[:, 3] > 30):.0f} % |"
             )
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return run_command(build_parser(), FitAccuracyOptions, _run, argv)
 
 
 if __name__ == "__main__":

@@ -48,7 +48,7 @@ from model.evaluation.class_prompt_counts import (
 from scenes.geometry.actors import CLASSES
 from scenes.geometry.calib import IMAGE_SIZE
 from scenes.geometry.projection import in_camera_view
-from scenes.utils.cli import add_options, from_args, option
+from scenes.utils.cli import command_parser, from_args, option
 
 CONDITIONS = ("as is", "blind", "shifted sensor")
 """The detector conditions, in table order (module docstring)."""
@@ -210,11 +210,9 @@ class LabelledShiftOptions:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="python -m bench.labelled_shift", description=__doc__.split("\n")[0]
+    return command_parser(
+        "python -m bench.labelled_shift", __doc__.split("\n")[0], LabelledShiftOptions
     )
-    add_options(p, LabelledShiftOptions)
-    return p
 
 
 def main(argv: Sequence[str] | None = None) -> int:

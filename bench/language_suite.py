@@ -55,7 +55,7 @@ from bench.language_score import (
 from model import class_noun_prompt
 from scenes.language.resolve import referable
 from scenes.talk2radar.root import Talk2RadarRoot
-from scenes.utils.cli import add_options, from_args, option, report_errors
+from scenes.utils.cli import command_parser, option, run_command
 from scenes.utils.durable import atomic_write_text
 from scenes.utils.text_policy import PROMPT, clean_text
 
@@ -186,12 +186,11 @@ class LanguageSuiteOptions:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="python -m bench.language_suite",
-        description="Ground the hand-written language suite with a checkpoint; per-family figures.",
+    return command_parser(
+        "python -m bench.language_suite",
+        "Ground the hand-written language suite with a checkpoint; per-family figures.",
+        LanguageSuiteOptions,
     )
-    add_options(p, LanguageSuiteOptions)
-    return p
 
 
 def run(args: LanguageSuiteOptions) -> int:
@@ -228,9 +227,7 @@ def run(args: LanguageSuiteOptions) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m bench.language_suite``; a bad suite, root or checkpoint (SuiteError and the
     others are ValueErrors) is one ``error:`` line, exit status 2."""
-    return report_errors(
-        lambda: run(from_args(LanguageSuiteOptions, build_parser().parse_args(argv)))
-    )
+    return run_command(build_parser(), LanguageSuiteOptions, run, argv)
 
 
 if __name__ == "__main__":

@@ -37,7 +37,7 @@ from bench.common import (
     machine_info,
     read_result,
 )
-from scenes.utils.cli import add_options, from_args, option
+from scenes.utils.cli import command_parser, from_args, option
 from scenes.utils.durable import atomic_write_text
 from scenes.utils.textfile import read_text_file
 
@@ -343,11 +343,7 @@ class RunAllOptions:
 
 def build_parser() -> argparse.ArgumentParser:
     """``python -m bench.run_all``'s parser."""
-    parser = argparse.ArgumentParser(
-        prog="python -m bench.run_all", description=__doc__.splitlines()[0]
-    )
-    add_options(parser, RunAllOptions)
-    return parser
+    return command_parser("python -m bench.run_all", __doc__.splitlines()[0], RunAllOptions)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from scenes.utils.cli import add_options, from_args, option
+from scenes.utils.cli import command_parser, option, run_command
 
 _REPO = Path(__file__).resolve().parents[1]
 if str(_REPO) not in sys.path:
@@ -361,15 +361,13 @@ class SensorStatsOptions:
 
 def build_parser() -> argparse.ArgumentParser:
     """``python -m bench.sensor_stats``' parser."""
-    p = argparse.ArgumentParser(
-        prog="python -m bench.sensor_stats", description=__doc__.splitlines()[0]
+    return command_parser(
+        "python -m bench.sensor_stats", __doc__.splitlines()[0], SensorStatsOptions
     )
-    add_options(p, SensorStatsOptions)
-    return p
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    args = from_args(SensorStatsOptions, build_parser().parse_args(argv))
+def _run(args: SensorStatsOptions) -> int:
+    """The command run as ``args`` says."""
     t0 = time.perf_counter()
     stats = collect(args.worlds, args.seed)
     text = markdown(summary_rows(stats), args.worlds, args.seed, time.perf_counter() - t0)
@@ -378,6 +376,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         atomic_write_text(args.out, text)
         print(f"wrote {args.out}")
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return run_command(build_parser(), SensorStatsOptions, _run, argv)
 
 
 if __name__ == "__main__":

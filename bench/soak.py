@@ -41,7 +41,7 @@ from websockets.sync.client import connect
 
 from bench.common import REPO, RESULTS_DIR, BenchResult, Table, Target, machine_info, write_result
 from scenes.synth.generate import SynthSettings, generate_root
-from scenes.utils.cli import add_options, option
+from scenes.utils.cli import command_parser, option
 
 PROMPT = "the car ahead"
 SPLIT = "train"
@@ -311,9 +311,7 @@ class SoakOptions:
 
 def build_parser() -> argparse.ArgumentParser:
     """``python -m bench.soak``'s parser."""
-    p = argparse.ArgumentParser(prog="python -m bench.soak", description=__doc__.splitlines()[0])
-    add_options(p, SoakOptions)
-    return p
+    return command_parser("python -m bench.soak", __doc__.splitlines()[0], SoakOptions)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from scenes.datasets.nuscenes_frames import RADAR_SWEEPS
-from scenes.utils.cli import add_options, from_args, option
+from scenes.utils.cli import command_parser, option, run_command
 
 __all__ = ["Talk2CarRecallOptions", "build_parser", "detector_recall", "main"]
 
@@ -86,13 +86,11 @@ class Talk2CarRecallOptions:
 
 def build_parser() -> argparse.ArgumentParser:
     """``python -m bench.talk2car_recall``'s parser (:class:`Talk2CarRecallOptions`)."""
-    p = argparse.ArgumentParser(prog="python -m bench.talk2car_recall", description=__doc__)
-    add_options(p, Talk2CarRecallOptions)
-    return p
+    return command_parser("python -m bench.talk2car_recall", __doc__, Talk2CarRecallOptions)
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    a = from_args(Talk2CarRecallOptions, build_parser().parse_args(argv))
+def _run(a: Talk2CarRecallOptions) -> int:
+    """The command run as ``a`` says."""
     torch.set_num_threads(1)
     from model import DEFAULT_CHECKPOINT
 
@@ -103,6 +101,10 @@ def main(argv: Sequence[str] | None = None) -> int:
             f"{key:<10} referent detected within the top-1 distance: {hit}/{n} = {100 * hit / max(n, 1):.1f} %"
         )
     return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    return run_command(build_parser(), Talk2CarRecallOptions, _run, argv)
 
 
 if __name__ == "__main__":

@@ -29,8 +29,9 @@ layer order is docs/DESIGN.md's.
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from scenes.utils.lazy import lazy_exports
 
 if TYPE_CHECKING:
     from model.checkpoint import (
@@ -146,9 +147,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    if name in _EXPORTS:
-        value = getattr(importlib.import_module(_EXPORTS[name]), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'model' has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _EXPORTS)

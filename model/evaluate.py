@@ -50,7 +50,7 @@ from model.evaluation.files import (
 from model.evaluation.grounding import CandidateSource
 from model.evaluation.metrics import VodResult
 from model.evaluation.worker_watch import PredictionWorkerError
-from scenes.utils.cli import add_options, from_args, option, report_errors
+from scenes.utils.cli import command_parser, from_args, option, report_errors
 
 if TYPE_CHECKING:
     from model.evaluation.report import GroundingReport
@@ -194,15 +194,12 @@ class EvaluateConfig:
 
 def build_parser() -> argparse.ArgumentParser:
     """The command line of ``python -m model.evaluate``: :class:`EvaluateConfig`'s flags."""
-    parser = argparse.ArgumentParser(
-        prog="python -m model.evaluate",
-        description=(
-            "Official View-of-Delft evaluation (3D / BEV AP and AOS per class, entire annotated "
-            "area and driving corridor, 11-point AP with 40-point AP beside it)."
-        ),
+    return command_parser(
+        "python -m model.evaluate",
+        "Official View-of-Delft evaluation (3D / BEV AP and AOS per class, entire annotated area "
+        "and driving corridor, 11-point AP with 40-point AP beside it).",
+        EvaluateConfig,
     )
-    add_options(parser, EvaluateConfig)
-    return parser
 
 
 def parse_args(argv: Sequence[str] | None = None) -> EvaluateConfig:

@@ -6,9 +6,6 @@ docs/DESIGN.md. The names below are the ones other packages use most; those of t
 no more than the formats.
 """
 
-import importlib
-from typing import Any
-
 from scenes.geometry.actors import CLASSES, Actor
 from scenes.geometry.calib import (
     Calibration,
@@ -26,6 +23,7 @@ from scenes.talk2radar.root import (
     Talk2RadarWriter,
     format_id,
 )
+from scenes.utils.lazy import lazy_exports
 
 _LAZY = {
     "LRUCache": "scenes.utils.lru",
@@ -41,12 +39,7 @@ _LAZY = {
 """Exported name -> the module that defines it (loaded on first use)."""
 
 
-def __getattr__(name: str) -> Any:
-    if name in _LAZY:
-        value = getattr(importlib.import_module(_LAZY[name]), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module 'scenes' has no attribute {name!r}")
+__getattr__ = lazy_exports(__name__, _LAZY)
 
 
 __all__ = [

@@ -25,7 +25,7 @@ from scenes.nuscenes.export import ExportReport, SourceFrame, SourcePrompt, expo
 from scenes.synth.radar import RadarConfig
 from scenes.talk2radar.layout import RootError
 from scenes.talk2radar.root import Talk2RadarRoot
-from scenes.utils.cli import add_options, from_args, option, report_errors
+from scenes.utils.cli import command_parser, option, run_command
 
 __all__ = ["SPLITS", "ExportNuScenesCommand", "export", "main", "source_frames"]
 
@@ -112,14 +112,13 @@ class ExportNuScenesCommand:
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="python -m scenes.export_nuscenes",
-        description="Write a synthetic root (scenes.synth) as nuScenes and Talk2Car come: the 13 "
-        "tables, LIDAR_TOP and five radar files in their own frames, CAM_FRONT images and "
+    return command_parser(
+        "python -m scenes.export_nuscenes",
+        "Write a synthetic root (scenes.synth) as nuScenes and Talk2Car come: the 13 tables, "
+        "LIDAR_TOP and five radar files in their own frames, CAM_FRONT images and "
         "commands/{split}_commands.json from the single-referent prompts.",
+        ExportNuScenesCommand,
     )
-    add_options(p, ExportNuScenesCommand)
-    return p
 
 
 build_parser = _parser
@@ -140,8 +139,7 @@ def run(args: ExportNuScenesCommand) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m scenes.export_nuscenes``; a bad root is one ``error:`` line, exit status 2."""
-    args = from_args(ExportNuScenesCommand, _parser().parse_args(argv))
-    return report_errors(lambda: run(args))
+    return run_command(_parser(), ExportNuScenesCommand, run, argv)
 
 
 if __name__ == "__main__":

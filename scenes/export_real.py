@@ -73,7 +73,7 @@ from scenes.talk2radar.pointcloud import RADAR_FEATURES, read_points, write_poin
 from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.talk2radar.vod_writer import VodWriter
 from scenes.talk2radar.writer import LABEL_DECIMALS, SampleText, SensorFiles, Talk2RadarWriter
-from scenes.utils.cli import add_options, from_args, option, report_errors
+from scenes.utils.cli import command_parser, option, run_command
 
 __all__ = ["RADAR_CHOICES", "SPLITS", "ExportReport", "export", "main", "source_frames"]
 
@@ -352,14 +352,13 @@ class ExportCommand:
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="python -m scenes.export_real",
-        description="Write a synthetic root (scenes.synth) as the real releases come: a "
-        "Talk2Radar tree (one prompt per frame, label_2 = its referents, no sidecar) and a "
-        "View-of-Delft tree (label_2 = every annotated object of the frame, VoD class names).",
+    return command_parser(
+        "python -m scenes.export_real",
+        "Write a synthetic root (scenes.synth) as the real releases come: a Talk2Radar tree (one "
+        "prompt per frame, label_2 = its referents, no sidecar) and a View-of-Delft tree (label_2 "
+        "= every annotated object of the frame, VoD class names).",
+        ExportCommand,
     )
-    add_options(p, ExportCommand)
-    return p
 
 
 def run(args: ExportCommand) -> int:
@@ -385,8 +384,7 @@ def run(args: ExportCommand) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m scenes.export_real``; a bad root is one ``error:`` line, exit status 2."""
-    args = from_args(ExportCommand, _parser().parse_args(argv))
-    return report_errors(lambda: run(args))
+    return run_command(_parser(), ExportCommand, run, argv)
 
 
 if __name__ == "__main__":

@@ -36,7 +36,7 @@ from model.evaluation.report_file import (
     ReportFileError,
     SubsetFigures,
 )
-from scenes.utils.cli import add_options, from_args, option, report_errors
+from scenes.utils.cli import command_parser, option, run_command
 from scenes.utils.textfile import read_text_file
 
 CLASSES: tuple[str, ...] = tuple(MIN_OVERLAPS)
@@ -226,22 +226,20 @@ class ResultsTableCommand:
         return overall_table(rows)
 
 
+def run(command: ResultsTableCommand) -> int:
+    """Print the table ``command`` asks for (errors raise)."""
+    print(command.table([load_row(spec) for spec in command.rows]))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     """``python -m model.results_table``'s parser (:class:`ResultsTableCommand`)."""
-    parser = argparse.ArgumentParser(prog="python -m model.results_table", description=__doc__)
-    add_options(parser, ResultsTableCommand)
-    return parser
+    return command_parser("python -m model.results_table", __doc__, ResultsTableCommand)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m model.results_table``; a bad results file is one ``error:`` line, exit 2."""
-    command = from_args(ResultsTableCommand, build_parser().parse_args(argv))
-
-    def run() -> int:
-        print(command.table([load_row(spec) for spec in command.rows]))
-        return 0
-
-    return report_errors(run, (ResultsTableError,))
+    return run_command(build_parser(), ResultsTableCommand, run, argv, (ResultsTableError,))
 
 
 if __name__ == "__main__":

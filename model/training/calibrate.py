@@ -38,7 +38,7 @@ import numpy as np
 
 from model.evaluation.grounding import PromptBoxes, prompt_outcome
 from model.evaluation.predict import iterate_predictions
-from scenes.utils.cli import add_options, error_line, from_args, option, report_errors
+from scenes.utils.cli import command_parser, error_line, option, run_command
 
 if TYPE_CHECKING:
     from model.tpcnet import TPCNet
@@ -278,11 +278,7 @@ class CalibrateConfig:
 
 def build_parser() -> argparse.ArgumentParser:
     """``python -m model.calibrate``'s parser (:class:`CalibrateConfig`'s flags)."""
-    p = argparse.ArgumentParser(
-        prog="python -m model.calibrate", description=__doc__.split("\n")[0]
-    )
-    add_options(p, CalibrateConfig)
-    return p
+    return command_parser("python -m model.calibrate", __doc__.split("\n")[0], CalibrateConfig)
 
 
 def run(a: CalibrateConfig) -> int:
@@ -311,8 +307,9 @@ def run(a: CalibrateConfig) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """``python -m model.calibrate``; a bad checkpoint or root (CheckpointError, RootError: both
     ValueErrors) is one ``error:`` line, exit status 2."""
-    a = from_args(CalibrateConfig, build_parser().parse_args(argv))
-    return report_errors(lambda: run(a), (ValueError, OSError, ImportError))
+    return run_command(
+        build_parser(), CalibrateConfig, run, argv, (ValueError, OSError, ImportError)
+    )
 
 
 if __name__ == "__main__":

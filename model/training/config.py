@@ -24,7 +24,7 @@ from model.config import (
 )
 from model.training.data import DataSpecError, RootSpec, root_specs
 from scenes.language.prompts.sampling import FAMILIES, PromptConfig
-from scenes.utils.cli import add_options, from_args, option
+from scenes.utils.cli import command_parser, from_args, option
 
 AmpKind = Literal["none", "bf16"]
 """``--amp``: no autocast, or bfloat16 autocast of the forward passes (CUDA only)."""
@@ -346,10 +346,9 @@ training job running, 8 cached nuScenes scenes and 80 steps took 50 s with 1 thr
 def build_parser() -> argparse.ArgumentParser:
     """``python -m model.train``'s parser: :class:`TrainConfig`'s flags, then
     :class:`TrainCommand`'s."""
-    p = argparse.ArgumentParser(prog="python -m model.train", description=__doc__.split("\n")[0])
-    add_options(p, TrainConfig)
-    add_options(p, TrainCommand)
-    return p
+    return command_parser(
+        "python -m model.train", __doc__.split("\n")[0], TrainConfig, TrainCommand
+    )
 
 
 def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:

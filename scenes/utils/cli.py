@@ -18,8 +18,10 @@ fields with one ``exclusive`` title are switches of which a command line gives a
 argparse mutually exclusive group). A ``positional`` field is an argument without a flag (a
 ``tuple[X, ...]`` one: one or more values).
 
-A command's ``main`` runs its work through :func:`report_errors`: an expected failure (bad input,
-a missing file) is one ``error: ...`` line (:func:`error_line`) and exit status 2, not a traceback.
+A command's parser is :func:`command_parser` (its name, description and config classes) and its
+``main`` :func:`run_command` (parse into the config, run, report): an expected failure (bad input,
+a missing file) is one ``error: ...`` line (:func:`error_line`) and exit status 2, not a traceback
+(:func:`report_errors`).
 
 Why not ``tyro``: the commands' flags, help text and errors are relied on by scripts and docs
 (docs/DESIGN.md); tyro renames and re-formats them (``--flag/--no-flag`` pairs, its own help
@@ -37,7 +39,9 @@ import types
 import typing
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar
+
+C = TypeVar("C")
 
 
 def option(
@@ -272,6 +276,29 @@ def error_line(exc: BaseException) -> str:
     return " ".join(text.split()) or type(exc).__name__
 
 
+def command_parser(prog: str, description: str, *configs: type) -> argparse.ArgumentParser:
+    """The parser of command ``prog`` (e.g. ``"python -m scenes.export_real"``): the flags of
+    each class of ``configs`` in turn (:func:`add_options`)."""
+    parser = argparse.ArgumentParser(prog=prog, description=description)
+    for cls in configs:
+        add_options(parser, cls)
+    return parser
+
+
+def run_command(
+    parser: argparse.ArgumentParser,
+    config: type[C],
+    run: Callable[[C], int],
+    argv: Sequence[str] | None = None,
+    errors: tuple[type[BaseException], ...] = (ValueError, OSError),
+) -> int:
+    """A command's ``main``: ``argv`` (None: ``sys.argv[1:]``) parsed by ``parser`` into
+    ``config`` (:func:`from_args`; a usage error exits 2 as argparse does), then ``run(config)``'s
+    exit status, an error of ``errors`` reported as one line (:func:`report_errors`)."""
+    args = from_args(config, parser.parse_args(argv))
+    return report_errors(lambda: run(args), errors)
+
+
 def report_errors(
     run: Callable[[], int],
     errors: tuple[type[BaseException], ...] = (ValueError, OSError),
@@ -290,10 +317,12 @@ def report_errors(
 __all__ = [
     "add_options",
     "choices_of",
+    "command_parser",
     "error_line",
     "flag_name",
     "from_args",
     "option",
     "report_errors",
     "resumable_fields",
+    "run_command",
 ]
