@@ -188,6 +188,7 @@ def write_frame(
                 "unsensed_actor_ids": unseen,
                 "clutter": [c.to_json() for c in world.clutter],
                 **({"sensors": preset.meta()} if preset is not None else {}),
+                **({"classes": settings.classes} if settings.classes != "vod" else {}),
                 **({"sequence_frame": sequence_frame} if sequence_frame is not None else {}),
             },
         )
@@ -408,7 +409,7 @@ _FLAG_ORDER: tuple[tuple[type, tuple[str, ...]], ...] = (
     (SynthCommand, ("out", "frames")),
     (SynthSettings, ("seed", "weather", "sensors", "radar_scans", "prompts_per_world")),
     (SynthCommand, ("split_fractions",)),
-    (SynthSettings, ("phrasing", "language", "command_share")),
+    (SynthSettings, ("phrasing", "language", "command_share", "classes")),
     (SynthCommand, ("no_camera",)),
     (CameraConfig, ("image_scale", "ray_step")),
     (SynthSettings, ("sequence_length",)),

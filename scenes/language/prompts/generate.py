@@ -20,7 +20,7 @@ from scenes.language.prompts.features import DEFAULT_REGION, ReferableRegion, ac
 from scenes.language.prompts.noise import perturb
 from scenes.language.prompts.predicate import Predicate, analyse_features
 from scenes.language.prompts.render import Prompt, render_with_variants
-from scenes.language.prompts.sampling import PromptConfig, sample_predicate
+from scenes.language.prompts.sampling import PromptConfig, draw_anchor, sample_predicate
 
 __all__ = ["PromptConfig", "generate_prompts"]
 
@@ -97,7 +97,7 @@ def _generate_base(
     for _ in range(n * config.tries_per_prompt):
         if len(out) >= n:
             break
-        anchor = inside[int(rng.integers(len(inside)))]
+        anchor = draw_anchor(inside, rng, config)
         pred = sample_predicate(anchor, rng, config)
         if pred is None or pred in seen_pred:
             continue
