@@ -60,7 +60,7 @@ from scenes.language.prompts.families import (
 )
 from scenes.language.prompts.features import ActorFeatures, ReferableRegion, actor_features
 from scenes.language.prompts.nouns import nonsense, nouns_for
-from scenes.language.prompts.phrasing import CLASS_KEYS, PHRASINGS
+from scenes.language.prompts.phrasing import CLASS_KEYS, PHRASINGS, too_wide
 from scenes.language.prompts.predicate import Predicate, Resolution
 from scenes.language.prompts.render import Prompt, Style, render_with_variants
 from scenes.language.prompts.sampling import (
@@ -382,7 +382,12 @@ def generate_extended(
             misses = 0
         prompt = _SAMPLERS[family](sc)
         key = prompt.text.lower().rstrip(".!?") if prompt is not None else ""
-        if prompt is None or key in seen or len(prompt.text.split()) > config.max_words:
+        if (
+            prompt is None
+            or key in seen
+            or len(prompt.text.split()) > config.max_words
+            or too_wide(prompt.variants, config.classes)
+        ):
             misses += 1
             continue
         seen.add(key)

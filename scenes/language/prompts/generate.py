@@ -18,6 +18,7 @@ from scenes.language.prompts.commands import commands_for
 from scenes.language.prompts.extended import generate_extended
 from scenes.language.prompts.features import DEFAULT_REGION, ReferableRegion, actor_features
 from scenes.language.prompts.noise import perturb
+from scenes.language.prompts.phrasing import too_wide
 from scenes.language.prompts.predicate import Predicate, analyse_features
 from scenes.language.prompts.render import Prompt, render_with_variants
 from scenes.language.prompts.sampling import PromptConfig, draw_anchor, sample_predicate
@@ -120,7 +121,8 @@ def _generate_base(
             max_words=config.max_words,
         )
         key = text.lower().rstrip(".!?")
-        if key in seen_text or len(text.split()) > config.max_words:
+        wide = too_wide(variants, config.classes)
+        if key in seen_text or len(text.split()) > config.max_words or wide:
             continue
         seen_text.add(key)
         out.append(Prompt(text, res.ids, pred.tags, pred, variants))

@@ -391,6 +391,26 @@ CLASS_KEYS: dict[str | None, str] = {
 """Slot-name suffix of a predicate class (``None``: any class, "objects")."""
 
 
+WIDER_THAN_CLASS: dict[str, frozenset[str]] = {
+    "vod": frozenset(),
+    "nuscenes": frozenset(
+        {
+            variant_id("noun.car", "vehicle|vehicles"),
+            variant_id("noun.car", "motor vehicle|motor vehicles"),
+        }
+    ),
+}
+"""Per class set, the noun variants (ids) that say more than their class there: with trucks,
+buses and construction vehicles about, "the vehicle" is no longer only a car. A prompt using
+one is not generated for that set (:func:`too_wide`)."""
+
+
+def too_wide(variants: tuple[str, ...], classes: str) -> bool:
+    """Whether a prompt's variant ids use a noun wider than its class in the set ``classes``."""
+    wide = WIDER_THAN_CLASS[classes]
+    return bool(wide) and any(v in wide for v in variants)
+
+
 def phrase_slot(atom: Atom, cls_key: str) -> str:
     """The slot of an atom's post-noun phrase (an atom with a ``slot`` attribute names its own:
     the extended language's atoms, :mod:`scenes.language.prompts.families`)."""

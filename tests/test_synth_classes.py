@@ -1,0 +1,157 @@
+"""The synthetic world's class sets (issue 36, item 2): ``--classes vod`` (the default) writes
+exactly what it always wrote, and ``--classes nuscenes`` populates worlds with every road user of
+the nuScenes detection classes, with believable sizes, speeds, placement, LiDAR shapes and radar
+signatures, and prompts about them whose labels name them."""
+
+from __future__ import annotations
+
+import hashlib
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scenes.geometry.classes import NUSCENES
+from scenes.synth.frame import SynthSettings, world_streams
+from scenes.synth.generate import generate_root, main
+from scenes.synth.lidar import LidarConfig, simulate_lidar
+from scenes.synth.radar import RadarConfig
+from scenes.synth.sensors import sensor_set
+from scenes.synth.world import RayCaster, WorldConfig, generate_world
+from scenes.talk2radar.root import Talk2RadarRoot
+
+NEW_CLASSES = set(NUSCENES.names) - {"Car", "Pedestrian"}
+
+PINNED = {
+    "base": "c8282f9520aa063f5ced65bd39050fabe043ece8aba9d96ce8a46bb3f5201395",
+    "extended": "29a41405a5446b1946ad81343dfb001b54730987cb2298d2c7acff41dc55cd1f",
+}
+"""SHA-256 of two tiny default-class roots (every file's path and bytes), computed on the code
+before class sets reached the world (commit 8ef1a5a)."""
+
+
+def _digest(root: Path) -> str:
+    h = hashlib.sha256()
+    for f in sorted(p for p in root.rglob("*") if p.is_file()):
+        h.update(str(f.relative_to(root)).encode() + b"\0" + f.read_bytes())
+    return h.hexdigest()
+
+
+def test_the_default_class_set_writes_byte_for_byte_what_it_always_wrote(tmp_path):
+    generate_root(tmp_path / "base", 4, SynthSettings(seed=5, camera=None))
+    extended = SynthSettings(
+        seed=7,
+        camera=None,
+        prompts_per_world=3,
+        language="extended",
+        command_share=0.3,
+        phrasing="heldout",
+    )
+    generate_root(tmp_path / "extended", 6, extended)
+    assert _digest(tmp_path / "base") == PINNED["base"]
+    assert _digest(tmp_path / "extended") == PINNED["extended"]
+
+
+def _nuscenes_worlds(count: int, seed: int = 0):
+    config = WorldConfig(classes="nuscenes")
+    return [generate_world(world_streams(seed, i)["world"], i, config) for i in range(count)]
+
+
+@pytest.fixture(scope="module")
+def worlds():
+    return _nuscenes_worlds(30)
+
+
+def test_nuscenes_worlds_hold_every_road_user_at_believable_sizes_and_speeds(worlds):
+    counts: Counter[str] = Counter()
+    sizes: dict[str, list[np.ndarray]] = {}
+    for world in worlds:
+        for a in world.actors:
+            counts[a.cls] += 1
+            sizes.setdefault(a.cls, []).append(a.box[3:6])
+            if a.cls in ("TrafficCone", "Barrier"):
+                assert a.speed == 0.0
+        assert not any(c.cls in ("bicycle", "moped_scooter") for c in world.clutter)
+    assert set(counts) == set(NUSCENES.names), counts
+    for cls in NUSCENES.names:
+        mean = np.mean(sizes[cls], axis=0)
+        expected = np.array(NUSCENES.get(cls).mean_size)
+        assert np.all(np.abs(mean - expected) < 0.35 * expected), (cls, mean, expected)
+    speeds = {c: [a.speed for w in worlds for a in w.actors if a.cls == c] for c in NUSCENES.names}
+    assert max(speeds["Truck"]) > 3.0 and min(speeds["Truck"]) == 0.0  # moving and parked
+    assert max(speeds["Motorcycle"]) > 3.0 and min(speeds["Motorcycle"]) == 0.0
+    assert max(speeds["ConstructionVehicle"]) <= 1.5
+
+
+def test_trailers_follow_their_trucks_and_buses_stop_by_the_kerb(worlds):
+    towed = 0
+    for world in worlds:
+        trucks = [a for a in world.actors if a.cls == "Truck"]
+        for t in (a for a in world.actors if a.cls == "Trailer" and a.speed > 0):
+            tractor = min(trucks, key=lambda k: np.hypot(*(k.box[:2] - t.box[:2])))
+            gap = np.hypot(*(tractor.box[:2] - t.box[:2])) - (tractor.box[3] + t.box[3]) / 2
+            assert 0.0 < gap < 0.5 and abs(tractor.speed - t.speed) < 1e-9
+            # same heading up to the road's curvature between them
+            assert abs(np.sin(tractor.box[6] - t.box[6])) < 0.1
+            towed += 1
+    assert towed >= 1
+    # A bus at a stop stands in the kerb-side strip: outside the lanes' centres.
+    at_kerb = 0
+    for world in worlds:
+        road = world.road
+        for bus in (a for a in world.actors if a.cls == "Bus" and a.speed < 2.6):
+            s = bus.box[1] - road.offset  # straight roads only below
+            if road.curvature == 0.0:
+                side = road.right if s < 0 else road.left
+                lanes = np.abs(np.array(side.lane_centres) - s).min()
+                at_kerb += lanes > 0.5
+    assert at_kerb >= 1
+
+
+def test_the_lidar_sees_a_bus_as_a_bus_and_a_cone_as_a_cone(worlds):
+    lidar = LidarConfig()
+    checked = Counter()
+    for world in worlds[:12]:
+        scan = simulate_lidar(RayCaster(world), np.random.default_rng(0), lidar)
+        for i, a in enumerate(world.actors):
+            pts = scan.points[scan.owner == i, :3]
+            if a.cls not in ("Bus", "TrafficCone") or len(pts) < (50 if a.cls == "Bus" else 15):
+                continue
+            height = pts[:, 2].max() - (a.box[2] - a.box[5] / 2)
+            if a.cls == "Bus":  # a tall solid (no car reaches 2 m), wider than a car
+                assert height > 2.0 and np.ptp(pts[:, :2], axis=0).max() > 2.0, height
+            else:
+                spread = np.ptp(pts[:, :2], axis=0).max()
+                assert height < 1.5 and spread < 0.6, (height, spread)
+            checked[a.cls] += 1
+    assert checked["Bus"] >= 1 and checked["TrafficCone"] >= 1, checked
+
+
+def test_radar_signatures_rank_the_road_users():
+    for config in (RadarConfig(), sensor_set("nuscenes").radars[0].config):
+        side = {c: config.class_model(c).rcs_side for c in NUSCENES.names}
+        assert side["Bus"] > side["Truck"] > side["Car"] > side["Motorcycle"]
+        assert side["Motorcycle"] > side["Bicycle"] > side["TrafficCone"]
+        assert side["Pedestrian"] > side["TrafficCone"]
+    with pytest.raises(KeyError, match="Tram"):
+        RadarConfig().class_model("Tram")
+
+
+def test_a_nuscenes_root_labels_and_prompts_name_the_road_users(tmp_path):
+    out = tmp_path / "nus"
+    argv = ["--out", str(out), "--frames", "16", "--seed", "4", "--classes", "nuscenes"]
+    assert main([*argv, "--no-camera", "--quiet", "--split-fractions", "0", "0", "1"]) == 0
+    root = Talk2RadarRoot(out)
+    named = set()
+    for sid in root.ids("test"):
+        sample = root.load(sid)
+        meta = sample.meta
+        assert meta is not None
+        by_id = {a.actor_id: a for a in meta.actors}
+        classes = [o.name for o in sample.labels]  # the label_2 names, as written
+        assert classes == [by_id[i].cls for i in meta.referent_ids]
+        assert set(classes) <= set(NUSCENES.names)
+        named |= set(classes)
+    assert len(named & NEW_CLASSES) >= 3, named
+    assert '"classes": "nuscenes"' in (out / "synth_manifest.jsonl").read_text().splitlines()[0]
