@@ -155,3 +155,50 @@ def test_a_nuscenes_root_labels_and_prompts_name_the_road_users(tmp_path):
         named |= set(classes)
     assert len(named & NEW_CLASSES) >= 3, named
     assert '"classes": "nuscenes"' in (out / "synth_manifest.jsonl").read_text().splitlines()[0]
+
+
+def _set_digest(ids: frozenset[str]) -> str:
+    return hashlib.sha256("\n".join(sorted(ids)).encode()).hexdigest()
+
+
+def test_the_vod_wording_and_its_train_heldout_split_are_unmoved():
+    """The road users' words join the tables without moving a vod variant across the split
+    (the ids of every variant that is not only a road user's, of the command templates and of
+    the out-of-class nouns, as on 8ef1a5a); fails when a road-user text is added to a group's
+    ``more`` side or repeats a held-out-able text there as ``core``."""
+    from scenes.language.prompts.commands import COMMAND_HELDOUT, COMMAND_SLOTS, COMMAND_TRAIN
+    from scenes.language.prompts.nouns import HELDOUT_NOUNS
+    from scenes.language.prompts.phrasing import (
+        HELDOUT_VARIANTS,
+        ROAD_USER_SLOTS,
+        SLOTS,
+        TRAIN_VARIANTS,
+        variant_id,
+    )
+
+    def ids(slots: dict, names) -> set[str]:
+        return {variant_id(n, t) for n in names for t in slots[n].core + slots[n].more}
+
+    road_commands = [n for n in COMMAND_SLOTS if n.split("/")[1].split("_")[0] in _ROAD_USER_KEYS]
+    other_commands = [n for n in COMMAND_SLOTS if n not in road_commands]
+    new = ids(SLOTS, ROAD_USER_SLOTS) - ids(SLOTS, [n for n in SLOTS if n not in ROAD_USER_SLOTS])
+    new_commands = ids(COMMAND_SLOTS, road_commands) - ids(COMMAND_SLOTS, other_commands)
+    assert new and new_commands
+    assert _set_digest(HELDOUT_VARIANTS - new) == (
+        "0824bfc5e37d1f6ba57ee0df248a8ecdaf950161bc5d16bb8004d5c6b9d8dfd9"
+    )
+    assert _set_digest(TRAIN_VARIANTS - new) == (
+        "ef40194723b6d8fcb01f52f6065c4f775e3d0b27be1dbb087d534c37a4eee1bd"
+    )
+    assert _set_digest(COMMAND_HELDOUT - new_commands) == (
+        "e6fe1189ae3d71d6209ac6af5f8168209ec355ac43be19e22223fde021b3c5ad"
+    )
+    assert _set_digest(COMMAND_TRAIN - new_commands) == (
+        "1b6571a08948835bc8c6f28efe68ad1e622dabb8d279c1931e43df227722f226"
+    )
+    assert _set_digest(HELDOUT_NOUNS) == (
+        "8ab3a7d5e2df35f059c1da49b6c6199961299cbed3185e7ed0ffe6ee40c186b9"
+    )
+
+
+_ROAD_USER_KEYS = ("truck", "bus", "motorcycle", "traffic", "barrier")

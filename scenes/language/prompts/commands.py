@@ -99,9 +99,9 @@ COMMAND_SLOTS: dict[str, Slot] = {
     # the nuscenes class set's road users: core only, texts new to the group, so the vod
     # classes' train / held-out split does not move
     "command/truck": S(("keep a safe distance from {np}",)),
-    "command/bus": S(("mind {np}",)),
+    "command/bus": S(("give {np} some space",)),
     "command/bus_stationary": S(("let {np} pull out",)),
-    "command/motorcycle_moving": S(("let {np} go first",)),
+    "command/motorcycle_moving": S(("let {np} get ahead",)),
     "command/traffic_cone": S(("steer around {np}", "slow down near {np}")),
     "command/barrier": S(("steer around {np}", "slow down near {np}")),
     "command/road_vehicle_moving": S(
