@@ -34,6 +34,12 @@ Splits
 
 Weather: ``clear`` (default), ``rain``, ``fog``, or ``mixed`` (60 / 20 / 20 % per world).
 
+Class sets: ``--classes vod`` (default: cars, pedestrians, cyclists; byte for byte what the
+generator wrote before the option) or ``nuscenes`` (every road user of nuScenes' detection
+classes, :mod:`scenes.synth.world.road_users`, and prompts about them); ``label_2`` writes each
+referent's class name as :mod:`scenes.geometry.classes` spells it (``Truck``, ``TrafficCone``),
+the manifest and the sidecars' ``extra`` record ``"classes"`` when it is not ``vod``.
+
 Sequences
     ``--sequence-length N`` writes ``N`` consecutive 10 Hz frames of each world
     (:func:`scenes.synth.frame.synthesize_sequence`, :func:`scenes.synth.sequence.world_at`: actors

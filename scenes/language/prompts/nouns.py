@@ -7,6 +7,8 @@ stream (:data:`HELDOUT_NOUNS`), to measure nouns never trained on. Left out on p
 person may mean one: car-like vehicles (van, taxi, SUV, jeep, pickup, police car, ambulance,
 minivan, camper), two-wheelers a cyclist may ride (motorbike, motorcycle, scooter, moped,
 e-bike, tricycle), and people (child, jogger, skateboarder, wheelchair user, stroller, rider).
+A class set whose classes cover some of these things (the ``nuscenes`` set: buses, trucks,
+trailers, works machines, cones, barriers) leaves them out (:data:`COVERED`, :func:`nouns_for`).
 
 :func:`nonsense` draws text that names nothing: keyboard runs, made-up words, filler.
 """

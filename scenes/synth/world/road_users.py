@@ -299,7 +299,7 @@ def _single(cls: str) -> PlaceFn:
 
 
 NUSCENES_PLAN: tuple[Placement, ...] = (
-    Placement("works", (0, 1), _works),
+    Placement("works", (0, 2), _works),
     Placement("Bus", (0, 1), _bus),
     Placement("Truck", (0, 2), _truck),
     Placement("Trailer", (0, 1), _trailer),
