@@ -5,6 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from scenes.geometry.calib import LIDAR_HEIGHT
+from scenes.geometry.classes import PRESETS
 
 
 @dataclass(frozen=True)
@@ -32,3 +33,9 @@ class WorldConfig:
     far_fraction: float = 0.15
     lidar_height: float = LIDAR_HEIGHT
     classes: str = "vod"
+
+    def __post_init__(self) -> None:
+        if self.classes not in PRESETS:
+            raise ValueError(
+                f"WorldConfig: classes {self.classes!r} is not one of {tuple(PRESETS)}"
+            )

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from scenes.synth.world.actor_meshes import _corners, clothing
+from scenes.synth.world.actor_meshes import clothing, tapered_corners
 from scenes.synth.world.materials import Mat
 from scenes.synth.world.meshes import (
     TaggedMesh,
@@ -65,7 +65,7 @@ def truck_mesh(size: np.ndarray, tractor: bool, rng: np.random.Generator) -> Tag
     parts = [
         box_part([hl - cab_len, -hw, zb + 0.45], [hl, hw, cab_top - 0.9], paint),
         hexahedron_part(
-            _corners(
+            tapered_corners(
                 (hl - cab_len, hl),
                 (hl - cab_len, hl - 0.25),
                 hw,
@@ -209,7 +209,7 @@ def barrier_mesh(size: np.ndarray, rng: np.random.Generator) -> TaggedMesh:
     jersey barrier (a wall tapering upwards) or a plastic one with a reflective band on feet.
     Bounds = ``size``."""
     if rng.random() < 0.5:
-        corners = _corners((-0.3, 0.3), (-0.1, 0.1), 1.25, 1.25, (0.0, 0.9))
+        corners = tapered_corners((-0.3, 0.3), (-0.1, 0.1), 1.25, 1.25, (0.0, 0.9))
         return fit_to_box(TaggedMesh.concatenate([hexahedron_part(corners, Mat.CONCRETE)]), size)
     parts = [
         box_part([-0.05, -1.25, 0.35], [0.05, 1.25, 0.95], Mat.PAINT_LIGHT),

@@ -206,8 +206,8 @@ def _truck(road: Road, u: float, rng: np.random.Generator) -> list[Candidate]:
         else _parked("Truck", road, u, rng, "tractor")
     )
     size = _size("Trailer", rng)
-    assert tractor.size is not None
-    back = tractor.size[0] / 2 + size[0] / 2 + 0.2
+    tractor_length = tractor.size[0] if tractor.size is not None else 0.0  # always drawn above
+    back = tractor_length / 2 + size[0] / 2 + 0.2
     heading = float(np.cos(tractor.yaw_offset))  # +1 along +u, -1 against
     trailer = replace(
         tractor, cls="Trailer", u=tractor.u - np.sign(heading) * back, size=size, kind=""
