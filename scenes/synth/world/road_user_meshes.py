@@ -140,7 +140,7 @@ def construction_vehicle_mesh(size: np.ndarray, rng: np.random.Generator) -> Tag
             y_in, y_out = sorted((side * (hw - 0.7), side * hw))
             parts.append(box_part([-hl, y_in, zb], [hl * 0.45, y_out, zb + 0.8], Mat.METAL))
         parts.append(
-            box_part([-hl, -hw * 0.9, zb + 0.8], [hl * 0.3, hw * 0.9, zb + 1.9], Mat.PAINT_LIGHT)
+            box_part([-hl, -hw * 0.9, zb + 0.8], [hl * 0.3, hw * 0.9, zb + 1.9], Mat.WORKS_YELLOW)
         )
         parts.append(
             box_part(
@@ -148,12 +148,12 @@ def construction_vehicle_mesh(size: np.ndarray, rng: np.random.Generator) -> Tag
             )
         )
         boom_root, elbow = [hl * 0.3, -0.3, zb + 1.6], [hl * 0.8, -0.3, zb + h]
-        parts.append(cylinder_part(boom_root, elbow, 0.18, Mat.PAINT_LIGHT))
-        parts.append(cylinder_part(elbow, [hl - 0.3, -0.3, zb + 0.9], 0.14, Mat.PAINT_LIGHT))
+        parts.append(cylinder_part(boom_root, elbow, 0.18, Mat.WORKS_YELLOW))
+        parts.append(cylinder_part(elbow, [hl - 0.3, -0.3, zb + 0.9], 0.14, Mat.WORKS_YELLOW))
         parts.append(box_part([hl - 0.6, -0.7, zb + 0.3], [hl, 0.1, zb + 1.0], Mat.METAL))
     else:  # wheel loader
         parts.append(
-            box_part([-hl, -hw * 0.8, zb + 0.6], [hl * 0.45, hw * 0.8, zb + 1.8], Mat.PAINT_LIGHT)
+            box_part([-hl, -hw * 0.8, zb + 0.6], [hl * 0.45, hw * 0.8, zb + 1.8], Mat.WORKS_YELLOW)
         )
         parts.append(
             box_part([-hl * 0.4, -hw * 0.6, zb + 1.8], [hl * 0.15, hw * 0.6, zb + h], Mat.CAR_GLASS)
@@ -195,10 +195,10 @@ def cone_mesh(size: np.ndarray, rng: np.random.Generator) -> TaggedMesh:
     tall = rng.uniform(0.0, 1.0)
     parts = [
         box_part([-0.2, -0.2, 0.0], [0.2, 0.2, 0.04], Mat.RUBBER),
-        frustum_part([0.0, 0.0, 0.04], 0.45 * h, 0.16, 0.1, Mat.PAINT_LIGHT),
+        frustum_part([0.0, 0.0, 0.04], 0.45 * h, 0.16, 0.1, Mat.CONE_ORANGE),
         frustum_part([0.0, 0.0, 0.04 + 0.45 * h], 0.15 * h, 0.1, 0.08, Mat.SIGN),
         frustum_part(
-            [0.0, 0.0, 0.04 + 0.6 * h], (0.3 + 0.06 * tall) * h, 0.08, 0.02, Mat.PAINT_LIGHT
+            [0.0, 0.0, 0.04 + 0.6 * h], (0.3 + 0.06 * tall) * h, 0.08, 0.02, Mat.CONE_ORANGE
         ),
     ]
     return fit_to_box(TaggedMesh.concatenate(parts), size)
@@ -212,7 +212,7 @@ def barrier_mesh(size: np.ndarray, rng: np.random.Generator) -> TaggedMesh:
         corners = tapered_corners((-0.3, 0.3), (-0.1, 0.1), 1.25, 1.25, (0.0, 0.9))
         return fit_to_box(TaggedMesh.concatenate([hexahedron_part(corners, Mat.CONCRETE)]), size)
     parts = [
-        box_part([-0.05, -1.25, 0.35], [0.05, 1.25, 0.95], Mat.PAINT_LIGHT),
+        box_part([-0.05, -1.25, 0.35], [0.05, 1.25, 0.95], Mat.CONE_ORANGE),
         box_part([-0.06, -1.25, 0.6], [0.06, 1.25, 0.75], Mat.SIGN),
     ]
     for y in (-1.0, 1.0):
