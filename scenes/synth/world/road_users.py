@@ -45,6 +45,8 @@ from scenes.synth.world.clutter import Clutter
 from scenes.synth.world.meshes import TaggedMesh, rotation_z
 from scenes.synth.world.placement import (
     CANDIDATES,
+    EGO_FRONT,
+    LEAD_CAR_GAP,
     MARGIN,
     SIZES,
     Candidate,
@@ -163,10 +165,19 @@ def _kerb_s(side: Side, width: float) -> float:
 
 
 def _vehicle(cls: str, road: Road, u: float, rng: np.random.Generator, kind: str = "") -> Candidate:
-    """A vehicle in a lane, moving with the traffic (10 % stopped in it)."""
+    """A vehicle in a lane, moving with the traffic (10 % stopped in it); one drawn in the ego
+    lane with its rear closer than a bumper-to-bumper gap of ``LEAD_CAR_GAP`` is moved to such
+    a gap ahead of the ego, as the lead car is."""
     size = _size(cls, rng, kind)
     side = _pick_side(road, rng, 0.55)
-    s = _lane_centre(side, rng) + rng.normal(0, 0.12)
+    lane = int(rng.integers(0, len(side.lane_centres)))
+    s = side.lane_centres[lane] + rng.normal(0, 0.12)
+    if (
+        side is road.right
+        and lane == road.ego_lane
+        and u - size[0] / 2 < EGO_FRONT + LEAD_CAR_GAP[0]
+    ):
+        u = EGO_FRONT + size[0] / 2 + rng.uniform(*LEAD_CAR_GAP)
     speed = 0.0 if rng.random() < 0.1 else rng.uniform(3.0, 12.0)
     return Candidate(
         cls, u, s, _with_traffic(side) + rng.normal(0, 0.02), speed, size=size, kind=kind
