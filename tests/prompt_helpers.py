@@ -12,6 +12,7 @@ import re
 import numpy as np
 
 from scenes.geometry.actors import Actor
+from scenes.geometry.classes import NUSCENES
 from scenes.language.prompts.phrasing import SLOTS
 
 CAR = (4.5, 1.8, 1.6)
@@ -73,10 +74,27 @@ def random_world(rng: np.random.Generator, n: int) -> list[Actor]:
     return actors
 
 
-def random_worlds(seed: int, count: int) -> list[list[Actor]]:
-    """``count`` random worlds of 2..15 actors."""
+def random_road_user_world(rng: np.random.Generator, n: int) -> list[Actor]:
+    """Actors of the ``nuscenes`` class set (every class about as often, its mean size; cones
+    and barriers never move) on a few lanes and sidewalks, some parked."""
+    actors = []
+    for i in range(n):
+        obj = NUSCENES.classes[int(rng.integers(len(NUSCENES)))]
+        x = float(rng.uniform(-5.0, 62.0))
+        y = float(rng.choice([-7.0, -5.25, -1.75, 1.75, 5.25, 7.0]) + rng.normal(0, 0.3))
+        yaw = float(rng.choice([0.0, math.pi]) + rng.normal(0, 0.1))
+        still = obj.name in ("TrafficCone", "Barrier") or rng.random() < 0.35
+        s = 0.0 if still else float(rng.uniform(1.0, 12.0))
+        v = (s * math.cos(yaw), s * math.sin(yaw))
+        actors.append(make_actor(i, obj.name, x, y, yaw, v, obj.mean_size))
+    return actors
+
+
+def random_worlds(seed: int, count: int, classes: str = "vod") -> list[list[Actor]]:
+    """``count`` random worlds of 2..15 actors (of the ``vod`` or the ``nuscenes`` class set)."""
     rng = np.random.default_rng(seed)
-    return [random_world(rng, int(rng.integers(2, 16))) for _ in range(count)]
+    draw = random_world if classes == "vod" else random_road_user_world
+    return [draw(rng, int(rng.integers(2, 16))) for _ in range(count)]
 
 
 def flip_world(actors: list[Actor]) -> list[Actor]:

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 from model.training.config import parse_args as train_args
+from scenes.geometry.classes import NUSCENES
 from scenes.language.prompts import PromptConfig, as_command, generate_prompts
 from scenes.language.prompts.commands import (
     COMMAND_HELDOUT,
@@ -136,6 +137,42 @@ def test_templates_fit_the_referents_class_and_motion():
             variant_id("command/any", t)
             for t in COMMAND_SLOTS["command/any"].core + COMMAND_SLOTS["command/any"].more
         }
+
+
+def test_road_user_commands_fit_their_class_and_motion():
+    """The nuscenes class set's command templates: each drawn, each only where it fits."""
+    config = PromptConfig(command_share=1.0, phrasing="all", classes="nuscenes")
+    used = set()
+    for k, world in enumerate(random_worlds(5, 300, "nuscenes")):
+        by_id = {a.actor_id: a for a in world}
+        for p in generate_prompts(world, np.random.default_rng([5, k]), 6, config=config):
+            if not (p.variants and p.variants[-1].startswith("command:")):
+                continue
+            actor = by_id[p.referent_ids[0]]
+            template = _template_of(p.variants[-1])
+            used.add(template)
+            moving = actor.speed > 0.5
+            if template == "let {np} pull out":
+                assert actor.cls == "Bus" and not moving, p.text
+            if template in ("steer around {np}", "slow down near {np}"):
+                assert actor.cls in ("TrafficCone", "Barrier"), p.text
+            if re.match(r"overtake \{np\}$|pass \{np\}$", template):
+                assert moving and actor.cls not in ("TrafficCone", "Barrier", "Pedestrian"), p.text
+    new = {"give {np} some space", "let {np} pull out", "let {np} get ahead"}
+    new |= {"steer around {np}", "slow down near {np}"}
+    assert len(new & used) >= 3, new & used
+    # Where each may be drawn, exactly.
+    fits = {
+        "let {np} pull out": {("Bus", False)},
+        "let {np} get ahead": {("Motorcycle", True)},
+        "give {np} some space": {("Bus", False), ("Bus", True)},
+        "steer around {np}": {(c, m) for c in ("TrafficCone", "Barrier") for m in (False, True)},
+    }
+    for template, where in fits.items():
+        for cls in NUSCENES.names:
+            for moving in (False, True):
+                offered = {t for _, t in command_templates("all", cls, moving)}
+                assert (template in offered) == ((cls, moving) in where), (template, cls, moving)
 
 
 @pytest.mark.parametrize(

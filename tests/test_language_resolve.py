@@ -9,6 +9,7 @@ import math
 import pytest
 
 from scenes.geometry.actors import Actor
+from scenes.geometry.classes import NUSCENES
 from scenes.language.query import QueryError, parse_query
 from scenes.language.resolve import resolve
 
@@ -194,10 +195,56 @@ def test_crossing_angle_and_bearing() -> None:
     assert ids({"class": "Car"}, wide) == ()
 
 
+# Road users of the nuscenes class set: trucks 30 (parked left at x 15) and 31 (left at x 30,
+# driving away), 32 (right); cones 40, 41 in our lane and 42 on the right; a bus 50 pulling away
+# ahead-right; a motorcycle 60 riding away ahead, 61 parked on the right.
+def road_user(i: int, cls: str, x: float, y: float, vx: float = 0.0) -> Actor:
+    size = NUSCENES.get(cls).mean_size
+    return Actor(i, cls, [x, y, size[2] / 2, *size, 0.0], [vx, 0.0])
+
+
+ROAD_USERS = [
+    road_user(30, "Truck", 15.0, 5.0),
+    road_user(31, "Truck", 30.0, 5.5, vx=8.0),
+    road_user(32, "Truck", 25.0, -6.0),
+    road_user(40, "TrafficCone", 12.0, 0.3),
+    road_user(41, "TrafficCone", 15.0, -0.2),
+    road_user(42, "TrafficCone", 15.0, -4.0),
+    road_user(50, "Bus", 40.0, -4.5, vx=1.5),
+    road_user(60, "Motorcycle", 22.0, 0.0, vx=6.0),
+    road_user(61, "Motorcycle", 18.0, -5.0),
+]
+
+
+@pytest.mark.parametrize(
+    ("query", "expected"),
+    [
+        ({"class": "TrafficCone", "where": [{"op": "side", "side": "ahead"}]}, (40, 41)),
+        ({"class": "Truck", "where": [{"op": "side", "side": "left"}]}, (30, 31)),
+        (
+            {
+                "class": "Truck",
+                "where": [{"op": "side", "side": "left"}],
+                "rank": {"by": "nearest", "index": 2},
+            },
+            (31,),
+        ),
+        ({"class": "Truck", "where": [STILL, {"op": "side", "side": "right"}]}, (32,)),
+        ({"class": "Motorcycle", "where": [{"op": "heading", "heading": "away"}]}, (60,)),
+        ({"class": "Bus", "one": True}, (50,)),
+        ({"class": "Barrier"}, ()),
+    ],
+)
+def test_queries_over_the_road_users_of_the_nuscenes_set(query: dict, expected: tuple) -> None:
+    """'the cones in our lane', 'the trucks on the left', 'the second truck on the left', 'the
+    parked truck on the right', 'the motorcycle moving away from us', 'the bus'."""
+    assert ids(query, ROAD_USERS) == expected
+
+
 @pytest.mark.parametrize(
     ("query", "field"),
     [
-        ({"class": "Bus"}, "query.class"),
+        ({"class": "Tram"}, "query.class"),  # a Bus is a class (of the nuscenes set)
         ({"where": [{"op": "fly"}]}, "query.where[0]"),
         ({"where": [{"op": "side", "side": "up"}]}, "query.where[0].side"),
         ({"rank": {"by": "nearest", "index": 0}}, "query.rank.index"),

@@ -140,7 +140,7 @@ def test_duplicate_ids_and_bad_predicates_raise():
     with pytest.raises(ValueError, match="one atom per family"):
         Predicate("Car", (DepthAbout(10.0), DepthWithin(20.0)))
     with pytest.raises(ValueError, match="class"):
-        Predicate("Truck")
+        Predicate("Tram")  # a Truck is a class of the nuscenes set
     assert Predicate("Car", (DepthAbout(10.0), OnSide(Side.LEFT))) == Predicate(
         "Car", (OnSide(Side.LEFT), DepthAbout(10.0))
     )

@@ -9,6 +9,7 @@ referents must not come from the generator's semantics either.
 JSON form (every key optional unless said; unknown keys are errors)::
 
     Query  = {"class": "Car" | "Pedestrian" | "Cyclist" | null,   # null / absent: any class
+                                                # (or any class of a preset: "Truck", "Bus", ...)
               "where": [Cond, ...],                                # conjunction
               "rank": Rank,                                        # the one actor at a rank
               "except": {"where": [Cond, ...]} | {"rank": Rank},  # removed from the set
@@ -35,7 +36,7 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from scenes.geometry.actors import CLASSES
+from scenes.geometry.classes import ALL_CLASSES
 
 SIDES = ("left", "right", "ahead")
 HEADINGS = ("approaching", "away", "crossing")
@@ -242,7 +243,7 @@ def parse_query(data: object, at: str = "query") -> Query:
         return Query(out_of_class=noun)
     cls = d.get("class")
     if cls is not None:
-        cls = _choice(cls, CLASSES, f"{at}.class")
+        cls = _choice(cls, ALL_CLASSES, f"{at}.class")
     where = _where(d.get("where", []), f"{at}.where")
     rank = parse_rank(d["rank"], f"{at}.rank") if "rank" in d else None
     exclusion = None

@@ -140,7 +140,15 @@ STATIC_COLOURS = _rgb(
     (0.12, 0.12, 0.13),  # BIKE_FRAME (parked bicycles; ridden ones use BIKE_FRAMES)
     (0.14, 0.14, 0.16),  # CLOTHING_DARK (people use CLOTHES: near-infrared darkness is not colour)
 )
-"""Display RGB in ``[0, 1]`` per :class:`~scenes.synth.world.Mat` (before shading)."""
+"""Display RGB in ``[0, 1]`` per :class:`~scenes.synth.world.Mat` (before shading), up to
+``CLOTHING_DARK``; each gets a per-world tint."""
+ROAD_USER_COLOURS = _rgb(
+    (0.95, 0.40, 0.06),  # CONE_ORANGE
+    (0.93, 0.72, 0.10),  # WORKS_YELLOW
+)
+"""Display RGB of the materials after ``CLOTHING_DARK`` (the road users of the ``nuscenes``
+class set), untinted: a tint would draw from the world's camera stream and move every image of
+the default class set."""
 
 CAR_DARK = _rgb((0.07, 0.07, 0.08), (0.20, 0.21, 0.23), (0.10, 0.14, 0.32), (0.38, 0.06, 0.07))
 CAR_LIGHT = _rgb((0.90, 0.90, 0.88), (0.70, 0.72, 0.74), (0.55, 0.66, 0.80), (0.78, 0.13, 0.11))
@@ -228,6 +236,7 @@ def face_colours(
     and bicycle-frame colours from the palettes (the draws do not depend on the mesh).
     """
     static = STATIC_COLOURS * rng.uniform(0.92, 1.08, size=(len(STATIC_COLOURS), 1))
+    static = np.concatenate([static, ROAD_USER_COLOURS])
     if wet:
         static[list(WET_GROUND)] *= 0.78
     picks = rng.integers(0, 1 << 16, size=(n_actors, 4))

@@ -11,6 +11,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from scenes.geometry.calib import Calibration, vod_lidar_calibration, vod_radar_calibration
+from scenes.geometry.classes import PRESETS
 from scenes.geometry.projection import scale_calibration
 from scenes.language.prompts import LANGUAGES, PHRASINGS, Prompt, PromptConfig, generate_prompts
 from scenes.synth.camera import CameraConfig, render_image
@@ -73,6 +74,10 @@ class SynthSettings:
             or ``nuscenes`` (:data:`scenes.synth.sensors.NUSCENES`: its LiDAR replaces ``lidar``,
             its mounting height ``world.lidar_height``, its camera size ``camera.base_size``, and
             its five radars, merged in the LiDAR frame, replace ``radar``).
+        classes: The class set the world is populated for and the prompts name (``--classes``;
+            :data:`scenes.geometry.classes.PRESETS`): ``vod`` (the default: cars, pedestrians,
+            cyclists, ``world`` as given) or ``nuscenes`` (its 10 classes: ``world.classes``,
+            :mod:`scenes.synth.world.road_users`, and ``PromptConfig.classes``).
     """
 
     seed: int = option(0, help="base seed (default %(default)s)")
@@ -131,7 +136,20 @@ class SynthSettings:
         "LiDAR frame, 1600 x 900 CAM_FRONT; scenes.synth.sensors); default %(default)s",
     )
 
+    classes: str = option(
+        "vod",
+        choices=tuple(PRESETS),
+        help="class set of the world and the prompts: vod (cars, pedestrians, cyclists) or "
+        "nuscenes (cars, trucks, buses, trailers, construction vehicles, pedestrians, "
+        "motorcycles, bicycles, traffic cones, barriers; scenes.synth.world.road_users); "
+        "default %(default)s",
+    )
+
     def __post_init__(self) -> None:
+        if self.classes not in PRESETS:
+            raise SynthError(f"classes must be one of {list(PRESETS)}, got {self.classes!r}")
+        if self.world.classes != self.classes:
+            object.__setattr__(self, "world", replace(self.world, classes=self.classes))
         if self.sensors not in SENSOR_SETS:
             raise SynthError(f"sensors must be one of {list(SENSOR_SETS)}, got {self.sensors!r}")
         preset = _preset(self.sensors)
@@ -179,6 +197,7 @@ class SynthSettings:
             **({"language": self.language} if self.language != "base" else {}),
             **({"command_share": self.command_share} if self.command_share else {}),
             **({"sensors": self.sensors} if self.sensors != "vod" else {}),
+            **({"classes": self.classes} if self.classes != "vod" else {}),
         }
 
     def sensor_set(self) -> SensorSet | None:
@@ -355,6 +374,7 @@ def _sense(
                 phrasing=settings.phrasing,
                 language=settings.language,
                 command_share=settings.command_share,
+                classes=settings.classes,
             ),
         )
     )

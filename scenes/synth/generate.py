@@ -34,6 +34,12 @@ Splits
 
 Weather: ``clear`` (default), ``rain``, ``fog``, or ``mixed`` (60 / 20 / 20 % per world).
 
+Class sets: ``--classes vod`` (default: cars, pedestrians, cyclists; byte for byte what the
+generator wrote before the option) or ``nuscenes`` (every road user of nuScenes' detection
+classes, :mod:`scenes.synth.world.road_users`, and prompts about them); ``label_2`` writes each
+referent's class name as :mod:`scenes.geometry.classes` spells it (``Truck``, ``TrafficCone``),
+the manifest and the sidecars' ``extra`` record ``"classes"`` when it is not ``vod``.
+
 Sequences
     ``--sequence-length N`` writes ``N`` consecutive 10 Hz frames of each world
     (:func:`scenes.synth.frame.synthesize_sequence`, :func:`scenes.synth.sequence.world_at`: actors
@@ -188,6 +194,7 @@ def write_frame(
                 "unsensed_actor_ids": unseen,
                 "clutter": [c.to_json() for c in world.clutter],
                 **({"sensors": preset.meta()} if preset is not None else {}),
+                **({"classes": settings.classes} if settings.classes != "vod" else {}),
                 **({"sequence_frame": sequence_frame} if sequence_frame is not None else {}),
             },
         )
@@ -408,7 +415,7 @@ _FLAG_ORDER: tuple[tuple[type, tuple[str, ...]], ...] = (
     (SynthCommand, ("out", "frames")),
     (SynthSettings, ("seed", "weather", "sensors", "radar_scans", "prompts_per_world")),
     (SynthCommand, ("split_fractions",)),
-    (SynthSettings, ("phrasing", "language", "command_share")),
+    (SynthSettings, ("phrasing", "language", "command_share", "classes")),
     (SynthCommand, ("no_camera",)),
     (CameraConfig, ("image_scale", "ray_step")),
     (SynthSettings, ("sequence_length",)),

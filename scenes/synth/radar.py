@@ -69,6 +69,31 @@ class RadarClassModel:
     micro_doppler: float
 
 
+ROAD_USER_SIGNATURES: tuple[tuple[str, RadarClassModel], ...] = (
+    ("Truck", RadarClassModel(10.0, 20.0, 18.0, 0.05)),
+    ("Bus", RadarClassModel(12.0, 22.0, 20.0, 0.05)),
+    ("Trailer", RadarClassModel(8.0, 20.0, 18.0, 0.03)),
+    ("ConstructionVehicle", RadarClassModel(8.0, 15.0, 14.0, 0.1)),
+    ("Motorcycle", RadarClassModel(-3.0, 2.0, 6.0, 0.15)),
+    ("Bicycle", RadarClassModel(-11.0, -6.0, 6.0, 0.2)),
+    ("TrafficCone", RadarClassModel(-20.0, -20.0, 1.5, 0.0)),
+    ("Barrier", RadarClassModel(0.0, -12.0, 4.0, 0.0)),
+)
+"""Radar signatures of the ``nuscenes`` class set's road users beyond the car and the pedestrian
+(dBsm head-on, broadside; detections at 10 m; micro-Doppler): large flat metal sides make trucks,
+buses and trailers the strongest targets (+20 dBsm broadside, against a car's +8), a
+motorcycle lies between a car and a cyclist, a ridden bicycle is the ``vod`` cyclist, a plastic
+cone barely reflects (-20 dBsm), and a barrier reflects off its broad face (its heading, the
+thin axis, looks at that face) and little off its end."""
+
+
+def scaled_signatures(
+    signatures: tuple[tuple[str, RadarClassModel], ...], points: float
+) -> tuple[tuple[str, RadarClassModel], ...]:
+    """``signatures`` with ``points_at_10m`` times ``points`` (a sparser radar: the ARS-408)."""
+    return tuple((n, replace(m, points_at_10m=m.points_at_10m * points)) for n, m in signatures)
+
+
 @dataclass(frozen=True)
 class RadarConfig:
     """The radar's field of view, resolution and noise.
@@ -84,6 +109,7 @@ class RadarConfig:
         snr_offset: SNR (dB) of a 0 dBsm target at 10 m.
         snr_softness: Width (dB) of the detection sigmoid.
         car, pedestrian, cyclist: Class signatures.
+        road_users: Signatures of the other classes by name (:data:`ROAD_USER_SIGNATURES`).
         clutter_per_scan: Mean number of random clutter points per scan.
         ghost_prob: Probability that an actor detection has a multipath ghost.
         static_prob_scale: Factor on every static surface's detection probability (1: VoD's
@@ -114,10 +140,18 @@ class RadarConfig:
     ghost_prob: float = 0.05
     static_prob_scale: float = 1.0
     measures_elevation: bool = True
+    road_users: tuple[tuple[str, RadarClassModel], ...] = ROAD_USER_SIGNATURES
 
     def class_model(self, cls: str) -> RadarClassModel:
-        """The signature of class ``cls`` (one of :data:`scenes.geometry.actors.CLASSES`)."""
-        return {"Car": self.car, "Pedestrian": self.pedestrian, "Cyclist": self.cyclist}[cls]
+        """The signature of class ``cls`` (a class of any preset,
+        :data:`scenes.geometry.classes.ALL_CLASSES`); KeyError naming it when it has none."""
+        own = {"Car": self.car, "Pedestrian": self.pedestrian, "Cyclist": self.cyclist}
+        if cls in own:
+            return own[cls]
+        for name, model in self.road_users:
+            if name == cls:
+                return model
+        raise KeyError(f"radar: no signature for class {cls!r}")
 
     def without_noise(self) -> RadarConfig:
         """The same radar with exact positions, velocities and RCS, no clutter, no ghosts (tests)."""
@@ -133,6 +167,7 @@ class RadarConfig:
             car=replace(self.car, micro_doppler=0.0),
             pedestrian=replace(self.pedestrian, micro_doppler=0.0),
             cyclist=replace(self.cyclist, micro_doppler=0.0),
+            road_users=tuple((n, replace(m, micro_doppler=0.0)) for n, m in self.road_users),
         )
 
 

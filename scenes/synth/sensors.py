@@ -42,7 +42,14 @@ import numpy as np
 from scenes.geometry.calib import Calibration
 from scenes.geometry.projection import scale_calibration
 from scenes.synth.lidar import LidarConfig
-from scenes.synth.radar import RadarClassModel, RadarConfig, RadarScan, simulate_radar
+from scenes.synth.radar import (
+    ROAD_USER_SIGNATURES,
+    RadarClassModel,
+    RadarConfig,
+    RadarScan,
+    scaled_signatures,
+    simulate_radar,
+)
 from scenes.synth.weather import CLEAR, Weather
 from scenes.synth.world import RayCaster
 
@@ -183,6 +190,7 @@ _ARS408 = RadarConfig(
     car=RadarClassModel(0.0, 8.0, 2.0, 0.05),
     pedestrian=RadarClassModel(-13.0, -11.0, 1.0, 0.3),
     cyclist=RadarClassModel(-11.0, -6.0, 1.0, 0.2),
+    road_users=scaled_signatures(ROAD_USER_SIGNATURES, 0.2),
     clutter_per_scan=4.0,
     ghost_prob=0.03,
     static_prob_scale=0.05,

@@ -28,6 +28,11 @@ VoD's other classes (:data:`ABSENT_CLASSES`: ``motor``, ``truck``, ``ride_other`
 so they are never written; nor is ``DontCare``, which VoD does not use. An actor no sensor sees
 (the sidecar's ``extra["unsensed_actor_ids"]``) is not labelled: annotators label what the point
 clouds and the image show.
+
+A root of another class set (``python -m scenes.synth --classes nuscenes``) labels its actors
+with that set's names as :mod:`scenes.geometry.classes` writes them (``Truck``, ``Bus``,
+``Motorcycle``, ``Bicycle`` with its rider in the box, ``TrafficCone``, ...), not with VoD's
+names; its parked bicycles and mopeds are such actors, so only bicycle racks stay clutter.
 """
 
 from __future__ import annotations

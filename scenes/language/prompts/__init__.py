@@ -1,7 +1,8 @@
 """Talk2Radar-style referring prompts whose referents are known exactly.
 
 A prompt is generated from a :class:`Predicate`, a small conjunction over the actors of a frame:
-an optional class (``Car``, ``Pedestrian``, ``Cyclist``; ``None`` = any class, "objects"), at most
+an optional class (``Car``, ``Pedestrian``, ``Cyclist``, or any class of a preset of
+:mod:`scenes.geometry.classes` with ``PromptConfig.classes``; ``None`` = any class, "objects"), at most
 one atom per family (position :class:`OnSide`, motion :class:`MotionState`, heading
 :class:`HeadingIs`, speed :class:`SpeedAbout` / :class:`SpeedAbove` / :class:`SpeedBelow`, depth
 :class:`DepthAbout` / :class:`DepthBetween` / :class:`DepthWithin` / :class:`DepthBeyond`) and an

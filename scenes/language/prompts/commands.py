@@ -96,6 +96,14 @@ COMMAND_SLOTS: dict[str, Slot] = {
         ("stay behind {np} until it is safe to pass",),
         ("slow down and follow {np}", "let {np} ride on first"),
     ),
+    # the nuscenes class set's road users: core only, texts new to the group, so the vod
+    # classes' train / held-out split does not move
+    "command/truck": S(("keep a safe distance from {np}",)),
+    "command/bus": S(("give {np} some space",)),
+    "command/bus_stationary": S(("let {np} pull out",)),
+    "command/motorcycle_moving": S(("let {np} get ahead",)),
+    "command/traffic_cone": S(("steer around {np}", "slow down near {np}")),
+    "command/barrier": S(("steer around {np}", "slow down near {np}")),
     "command/road_vehicle_moving": S(
         ("overtake {np}", "pass {np}"),
         ("get past {np}", "overtake {np} when it is safe", "change lanes to get around {np}",
@@ -108,8 +116,25 @@ COMMAND_SLOTS: dict[str, Slot] = {
 COMMAND_TRAIN, COMMAND_HELDOUT = split_variants(COMMAND_SLOTS)
 """Ids (``command:text``) of the ``train`` and ``heldout`` command templates; disjoint."""
 
-_PRONOUN = {"Car": "it", "Pedestrian": "them", "Cyclist": "them"}
-_CLASS_KEY = {"Car": "car", "Pedestrian": "pedestrian", "Cyclist": "cyclist"}
+_PRONOUN = {
+    "Car": "it",
+    "Pedestrian": "them",
+    "Cyclist": "them",
+    **{c: "it" for c in ("Truck", "Bus", "Trailer", "ConstructionVehicle", "Motorcycle")},
+    **{c: "it" for c in ("Bicycle", "TrafficCone", "Barrier")},
+}
+_CLASS_KEY = {
+    "Car": "car",
+    "Pedestrian": "pedestrian",
+    "Cyclist": "cyclist",
+    "Truck": "truck",
+    "Bus": "bus",
+    "TrafficCone": "traffic_cone",
+    "Barrier": "barrier",
+    "Motorcycle": "motorcycle",
+}
+_ROAD_VEHICLES = ("Car", "Cyclist", "Truck", "Bus", "Motorcycle", "Bicycle")
+"""Classes a moving one of which can be overtaken ("overtake {np}")."""
 
 
 def command_slots(cls: str | None, moving: bool | None) -> tuple[str, ...]:
@@ -123,7 +148,7 @@ def command_slots(cls: str | None, moving: bool | None) -> tuple[str, ...]:
         names.append(f"command/{key}")
         if moving is not None:
             names.append(f"command/{key}_{'moving' if moving else 'stationary'}")
-        if moving and cls in ("Car", "Cyclist"):
+        if moving and cls in _ROAD_VEHICLES:
             names.append("command/road_vehicle_moving")
     return tuple(n for n in names if n in COMMAND_SLOTS)
 

@@ -26,6 +26,7 @@ from dataclasses import replace
 import numpy as np
 
 from scenes.geometry.actors import MOVING_SPEED, Actor
+from scenes.geometry.classes import PRESETS
 from scenes.language.prompts.atoms import (
     Atom,
     Extreme,
@@ -59,7 +60,7 @@ from scenes.language.prompts.families import (
 )
 from scenes.language.prompts.features import ActorFeatures, ReferableRegion, actor_features
 from scenes.language.prompts.nouns import nonsense, nouns_for
-from scenes.language.prompts.phrasing import CLASS_KEYS, PHRASINGS
+from scenes.language.prompts.phrasing import CLASS_KEYS, PHRASINGS, too_wide
 from scenes.language.prompts.predicate import Predicate, Resolution
 from scenes.language.prompts.render import Prompt, Style, render_with_variants
 from scenes.language.prompts.sampling import (
@@ -73,7 +74,7 @@ from scenes.language.prompts.scene_draw import DrawScene, fake_actor, sampled
 from scenes.language.prompts.tags import infer_tags
 from scenes.language.prompts.unsatisfiable import UNSATISFIABLE_FORMS
 
-_NOUNS = {p: nouns_for(p) for p in PHRASINGS}
+_NOUNS = {(p, c): nouns_for(p, c) for p in PHRASINGS for c in PRESETS}
 
 P_TRAVEL = 0.3
 """Share of attribute prompts with a heading or motion atom whose anchor travels along our axis
@@ -142,10 +143,10 @@ def _attribute(sc: DrawScene) -> Prompt | None:
 def _out_of_class(sc: DrawScene) -> Prompt | None:
     if sc.rng.random() < sc.cfg.p_nonsense:
         text = nonsense(sc.words)
-        if "class" in infer_tags(text):
+        if "class" in infer_tags(text, sc.cfg.classes):
             return None
-        return _prompt(text, (), (), infer_tags(text), None, "out_of_class", None)
-    nouns = _NOUNS[sc.cfg.phrasing]
+        return _prompt(text, (), (), infer_tags(text, sc.cfg.classes), None, "out_of_class", None)
+    nouns = _NOUNS[(sc.cfg.phrasing, sc.cfg.classes)]
     noun = nouns[int(sc.rng.integers(len(nouns)))]
     atoms: tuple[Atom, ...] = ()
     extreme = None
@@ -159,7 +160,7 @@ def _out_of_class(sc: DrawScene) -> Prompt | None:
     n = 1 if extreme is not None or sc.rng.random() < 0.6 else 2
     text, variants = render_plain(pred, n, sc.words, noun=noun, **_render(sc))
     variants = (f"ooc:{noun}", *variants)
-    return _prompt(text, variants, (), infer_tags(text), None, "out_of_class", None)
+    return _prompt(text, variants, (), infer_tags(text, sc.cfg.classes), None, "out_of_class", None)
 
 
 def _unsatisfiable(sc: DrawScene) -> Prompt | None:
@@ -238,7 +239,9 @@ def _exclusion(sc: DrawScene) -> Prompt | None:
         return None
     n_removed = len(res.ids) - len(out.ids)
     text, variants = render_exclusion(expr, len(res.ids), n_removed, sc.words, **_render(sc))
-    return _prompt(text, variants, out.ids, infer_tags(text), base, "exclusion", expr)
+    return _prompt(
+        text, variants, out.ids, infer_tags(text, sc.cfg.classes), base, "exclusion", expr
+    )
 
 
 def _ordinal(sc: DrawScene) -> Prompt | None:
@@ -263,7 +266,7 @@ def _ordinal(sc: DrawScene) -> Prompt | None:
     if not out.ids or not sc.ok(out):
         return None
     text, variants = render_ordinal(expr, sc.words, **_render(sc))
-    return _prompt(text, variants, out.ids, infer_tags(text), base, "ordinal", expr)
+    return _prompt(text, variants, out.ids, infer_tags(text, sc.cfg.classes), base, "ordinal", expr)
 
 
 def _reference(sc: DrawScene, r: ActorFeatures) -> Predicate | None:
@@ -312,7 +315,9 @@ def _relation(sc: DrawScene) -> Prompt | None:
     if not out.ids or not sc.ok(out):
         return None
     text, variants = render_relation(expr, len(out.ids), sc.words, **_render(sc))
-    return _prompt(text, variants, out.ids, infer_tags(text), target, "relation", expr)
+    return _prompt(
+        text, variants, out.ids, infer_tags(text, sc.cfg.classes), target, "relation", expr
+    )
 
 
 def _count(sc: DrawScene) -> Prompt | None:
@@ -377,7 +382,12 @@ def generate_extended(
             misses = 0
         prompt = _SAMPLERS[family](sc)
         key = prompt.text.lower().rstrip(".!?") if prompt is not None else ""
-        if prompt is None or key in seen or len(prompt.text.split()) > config.max_words:
+        if (
+            prompt is None
+            or key in seen
+            or len(prompt.text.split()) > config.max_words
+            or too_wide(prompt.variants, config.classes)
+        ):
             misses += 1
             continue
         seen.add(key)

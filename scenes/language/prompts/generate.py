@@ -18,9 +18,10 @@ from scenes.language.prompts.commands import commands_for
 from scenes.language.prompts.extended import generate_extended
 from scenes.language.prompts.features import DEFAULT_REGION, ReferableRegion, actor_features
 from scenes.language.prompts.noise import perturb
+from scenes.language.prompts.phrasing import too_wide
 from scenes.language.prompts.predicate import Predicate, analyse_features
 from scenes.language.prompts.render import Prompt, render_with_variants
-from scenes.language.prompts.sampling import PromptConfig, sample_predicate
+from scenes.language.prompts.sampling import PromptConfig, draw_anchor, sample_predicate
 
 __all__ = ["PromptConfig", "generate_prompts"]
 
@@ -97,7 +98,7 @@ def _generate_base(
     for _ in range(n * config.tries_per_prompt):
         if len(out) >= n:
             break
-        anchor = inside[int(rng.integers(len(inside)))]
+        anchor = draw_anchor(inside, rng, config)
         pred = sample_predicate(anchor, rng, config)
         if pred is None or pred in seen_pred:
             continue
@@ -120,7 +121,8 @@ def _generate_base(
             max_words=config.max_words,
         )
         key = text.lower().rstrip(".!?")
-        if key in seen_text or len(text.split()) > config.max_words:
+        wide = too_wide(variants, config.classes)
+        if key in seen_text or len(text.split()) > config.max_words or wide:
             continue
         seen_text.add(key)
         out.append(Prompt(text, res.ids, pred.tags, pred, variants))

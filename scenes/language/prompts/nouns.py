@@ -7,6 +7,8 @@ stream (:data:`HELDOUT_NOUNS`), to measure nouns never trained on. Left out on p
 person may mean one: car-like vehicles (van, taxi, SUV, jeep, pickup, police car, ambulance,
 minivan, camper), two-wheelers a cyclist may ride (motorbike, motorcycle, scooter, moped,
 e-bike, tricycle), and people (child, jogger, skateboarder, wheelchair user, stroller, rider).
+A class set whose classes cover some of these things (the ``nuscenes`` set: buses, trucks,
+trailers, works machines, cones, barriers) leaves them out (:data:`COVERED`, :func:`nouns_for`).
 
 :func:`nonsense` draws text that names nothing: keyboard runs, made-up words, filler.
 """
@@ -148,12 +150,33 @@ HELDOUT_NOUNS = _heldout_nouns()
 stream names only the others, ``all`` every one."""
 
 
-def nouns_for(phrasing: str) -> tuple[str, ...]:
-    """The out-of-class nouns a phrasing stream draws from (``train``, ``heldout`` or ``all``)."""
+COVERED: dict[str, frozenset[str]] = {
+    "vod": frozenset(),
+    "nuscenes": frozenset(
+        # buses and trucks of every kind, trailers, works machines (construction vehicles),
+        # cones, traffic barrels and barriers: the set's classes cover them or a person may mean
+        # one of them by it
+        ("bus", "school bus", "city bus", "double-decker bus", "minibus", "trolleybus", "coach",
+         "truck", "lorry", "semi-truck", "tractor-trailer", "dump truck", "fire truck",
+         "fire engine", "garbage truck", "tow truck", "delivery truck", "cement mixer", "tanker",
+         "trailer", "tractor", "forklift", "excavator", "bulldozer", "crane", "road roller",
+         "street sweeper", "snowplough", "traffic cone", "cone", "barrier", "road barrier",
+         "guardrail", "traffic barrel")
+    ),
+}  # fmt: skip
+"""Per class set, the out-of-class words (singular) its classes cover: left out of its
+out-of-class things (the ``vod`` set covers none of :data:`OUT_OF_CLASS`)."""
+
+
+def nouns_for(phrasing: str, classes: str = "vod") -> tuple[str, ...]:
+    """The out-of-class nouns a phrasing stream draws from (``train``, ``heldout`` or ``all``),
+    for the class set ``classes`` (its :data:`COVERED` words left out)."""
+    covered = COVERED[classes]
+    nouns = tuple(e for e in OUT_OF_CLASS if e.split("|")[0] not in covered)
     if phrasing == "all":
-        return OUT_OF_CLASS
+        return nouns
     heldout = phrasing == "heldout"
-    return tuple(e for e in OUT_OF_CLASS if (e in HELDOUT_NOUNS) == heldout)
+    return tuple(e for e in nouns if (e in HELDOUT_NOUNS) == heldout)
 
 
 _LETTERS = "abcdefghijklmnopqrstuvwxyz"

@@ -253,6 +253,71 @@ SLOTS: dict[str, Slot] = {
     ),
 }
 # fmt: on
+
+_PARKED = (*_STATIONARY, "parked", "{rel} {be} parked", "stopped")
+_STOPPED = (*_STATIONARY, "stopped", "standing still")
+# fmt: off
+ROAD_USER_SLOTS: dict[str, Slot] = {
+    # ---- the nuscenes class set's nouns (each its own split group) ---------------------------
+    "noun.truck": S(("truck|trucks", "lorry|lorries"),
+                    ("heavy goods vehicle|heavy goods vehicles", "goods vehicle|goods vehicles")),
+    "noun.bus": S(("bus|buses", "city bus|city buses"), ("coach|coaches", "transit bus|transit buses")),
+    "noun.trailer": S(("trailer|trailers", "semi-trailer|semi-trailers"),
+                      ("truck trailer|truck trailers",)),
+    "noun.construction_vehicle": S(
+        ("construction vehicle|construction vehicles", "work vehicle|work vehicles"),
+        ("construction machine|construction machines", "site vehicle|site vehicles"),
+    ),
+    "noun.motorcycle": S(("motorcycle|motorcycles", "motorbike|motorbikes"),
+                         ("motor bike|motor bikes", "powered two-wheeler|powered two-wheelers")),
+    "noun.bicycle": S(("bicycle|bicycles", "bike|bikes"), ("pushbike|pushbikes", "push bike|push bikes")),
+    "noun.traffic_cone": S(("traffic cone|traffic cones", "cone|cones"),
+                           ("road cone|road cones", "safety cone|safety cones")),
+    "noun.barrier": S(("barrier|barriers", "road barrier|road barriers"),
+                      ("traffic barrier|traffic barriers", "construction barrier|construction barriers")),
+    # ---- verbs and motion words: core only, each text new to its group or core there already,
+    # so the vod classes' train / held-out split does not move ------------------------------------
+    "verb/truck": S(("driving",)),
+    "verb/bus": S(("driving",)),
+    "verb/trailer": S(("travelling",)),
+    "verb/construction_vehicle": S(("driving",)),
+    "verb/motorcycle": S(("riding",)),
+    "verb/bicycle": S(("riding",)),
+    "verb/traffic_cone": S(("travelling",)),
+    "verb/barrier": S(("travelling",)),
+    "motion.stationary/truck": S(_PARKED),
+    "motion.stationary/bus": S((*_STATIONARY, "stopped", "waiting", "standing still")),
+    "motion.stationary/trailer": S(_PARKED),
+    "motion.stationary/construction_vehicle": S(_PARKED),
+    "motion.stationary/motorcycle": S(_STOPPED),
+    "motion.stationary/bicycle": S((*_STATIONARY, "parked", "{rel} {be} parked")),
+    "motion.stationary/traffic_cone": S(_STATIONARY),
+    "motion.stationary/barrier": S(_STATIONARY),
+    "adj.stationary/truck": S(("stationary", "static", "parked")),
+    "adj.stationary/bus": S(("stationary", "static", "stopped")),
+    "adj.stationary/trailer": S(("stationary", "static", "parked")),
+    "adj.stationary/construction_vehicle": S(("stationary", "static", "parked")),
+    "adj.stationary/motorcycle": S(("stationary", "static", "stopped")),
+    "adj.stationary/bicycle": S(("stationary", "static", "parked")),
+    "adj.stationary/traffic_cone": S(("stationary", "static")),
+    "adj.stationary/barrier": S(("stationary", "static")),
+    "adj.approaching/truck": S(("approaching", "oncoming")),
+    "adj.approaching/bus": S(("approaching", "oncoming")),
+    "adj.approaching/trailer": S(("approaching", "oncoming")),
+    "adj.approaching/construction_vehicle": S(("approaching",)),
+    "adj.approaching/motorcycle": S(("approaching", "oncoming")),
+    "adj.approaching/bicycle": S(("approaching",)),
+    "adj.approaching/traffic_cone": S(("approaching",)),
+    "adj.approaching/barrier": S(("approaching",)),
+    # ---- class-specific heading phrases (phrase_slot prefers them where they exist) -----------
+    "heading.away/bus": S((*SLOTS["heading.away"].core, "pulling away", "{rel} {be} pulling away")),
+}
+# fmt: on
+"""The slots of the ``nuscenes`` class set's road users beyond the car and the pedestrian
+(:data:`CLASS_KEYS`); part of :data:`SLOTS`. Their nouns are new groups with held-out variants of
+their own; every other text is ``core`` and either new to its group or core there already, so
+adding them leaves the ``vod`` classes' wording and split exactly as they were."""
+SLOTS.update(ROAD_USER_SLOTS)
 """Every slot's variants (module docstring)."""
 
 
@@ -314,8 +379,36 @@ CLASS_KEYS: dict[str | None, str] = {
     "Pedestrian": "pedestrian",
     "Cyclist": "cyclist",
     None: "any",
+    "Truck": "truck",
+    "Bus": "bus",
+    "Trailer": "trailer",
+    "ConstructionVehicle": "construction_vehicle",
+    "Motorcycle": "motorcycle",
+    "Bicycle": "bicycle",
+    "TrafficCone": "traffic_cone",
+    "Barrier": "barrier",
 }
 """Slot-name suffix of a predicate class (``None``: any class, "objects")."""
+
+
+WIDER_THAN_CLASS: dict[str, frozenset[str]] = {
+    "vod": frozenset(),
+    "nuscenes": frozenset(
+        {
+            variant_id("noun.car", "vehicle|vehicles"),
+            variant_id("noun.car", "motor vehicle|motor vehicles"),
+        }
+    ),
+}
+"""Per class set, the noun variants (ids) that say more than their class there: with trucks,
+buses and construction vehicles about, "the vehicle" is no longer only a car. A prompt using
+one is not generated for that set (:func:`too_wide`)."""
+
+
+def too_wide(variants: tuple[str, ...], classes: str) -> bool:
+    """Whether a prompt's variant ids use a noun wider than its class in the set ``classes``."""
+    wide = WIDER_THAN_CLASS[classes]
+    return bool(wide) and any(v in wide for v in variants)
 
 
 def phrase_slot(atom: Atom, cls_key: str) -> str:
@@ -329,7 +422,8 @@ def phrase_slot(atom: Atom, cls_key: str) -> str:
     if isinstance(atom, MotionState):
         return "motion.moving" if atom.moving else f"motion.stationary/{cls_key}"
     if isinstance(atom, HeadingIs):
-        return f"heading.{atom.heading.value}"
+        slot = f"heading.{atom.heading.value}"
+        return f"{slot}/{cls_key}" if f"{slot}/{cls_key}" in SLOTS else slot
     if isinstance(atom, SpeedAbout):
         return "speed.about"
     if isinstance(atom, SpeedAbove):

@@ -103,6 +103,14 @@ FAMILY_SLOTS: dict[str, Slot] = {
     "neg.stationary/cyclist": Slot(("not stopped", "{rel} {nbe} stopped", "not stationary",
                                     "{rel} {nbe} stationary")),
     "neg.stationary/any": Slot(("not stationary", "{rel} {nbe} stationary")),
+    **{f"neg.stationary/{k}": Slot(("not parked", "{rel} {nbe} parked", "not stationary",
+                                    "{rel} {nbe} stationary"))
+       for k in ("truck", "trailer", "construction_vehicle", "bicycle")},
+    **{f"neg.stationary/{k}": Slot(("not stopped", "{rel} {nbe} stopped", "not stationary",
+                                    "{rel} {nbe} stationary"))
+       for k in ("bus", "motorcycle")},
+    **{f"neg.stationary/{k}": Slot(("not stationary", "{rel} {nbe} stationary"))
+       for k in ("traffic_cone", "barrier")},
     "neg.heading.approaching": Slot(("not approaching {us}", "{rel} {nbe} approaching {us}",
                                      "not coming towards {us}", "{rel} {nbe} heading towards {us}",
                                      "not {verb} toward {us}", "{rel} {nbe} coming our way")),

@@ -24,7 +24,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-from scenes.geometry.actors import CLASSES, MOVING_SPEED, Actor
+from scenes.geometry.actors import MOVING_SPEED, Actor
+from scenes.geometry.classes import ALL_CLASSES
 from scenes.language.prompts.atoms import FAMILY_ORDER, SLACK_MOTION, Atom, Extreme
 from scenes.language.prompts.features import (
     DEFAULT_REGION,
@@ -46,8 +47,8 @@ class Predicate:
     extreme: Extreme | None = None
 
     def __post_init__(self) -> None:
-        if self.cls is not None and self.cls not in CLASSES:
-            raise ValueError(f"Predicate: class {self.cls!r} is not one of {CLASSES}")
+        if self.cls is not None and self.cls not in ALL_CLASSES:
+            raise ValueError(f"Predicate: class {self.cls!r} is not one of {ALL_CLASSES}")
         atoms = tuple(self.atoms)
         for a in atoms:
             if not isinstance(a, Atom):

@@ -9,12 +9,14 @@ and sometimes a superlative.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
 
 from scenes.geometry.actors import MOVING_SPEED
+from scenes.geometry.classes import PRESETS
 from scenes.language.prompts.atoms import (
     BASE_EXTREMES,
     Atom,
@@ -97,6 +99,11 @@ class PromptConfig:
             a driving command about their referent ("follow the car on the left",
             :mod:`scenes.language.prompts.commands`; the wording stream is ``phrasing``'s);
             referents kept. 0 draws nothing, so the prompts are those without the option.
+        classes: The class set the scene's actors are of and the prompts name
+            (:data:`scenes.geometry.classes.PRESETS`): ``vod`` draws as the generator always did;
+            another set draws each anchor's class uniformly among the classes present (so that
+            rare road users are talked about), imagines absent actors of its own classes and
+            leaves its classes' nouns out of the out-of-class things.
     """
 
     attribute_weights: tuple[float, float, float, float] = (0.1, 0.4, 0.35, 0.15)
@@ -118,8 +125,13 @@ class PromptConfig:
     p_nonsense: float = 0.1
     p_perturb: float = 0.0
     command_share: float = 0.0
+    classes: str = "vod"
 
     def __post_init__(self) -> None:
+        if self.classes not in PRESETS:
+            raise ValueError(
+                f"PromptConfig: classes={self.classes!r} is not one of {tuple(PRESETS)}"
+            )
         w = self.attribute_weights
         if len(w) != 4 or min(w) < 0 or not math.isclose(sum(w), 1.0, abs_tol=1e-6):
             raise ValueError(f"PromptConfig: attribute_weights must be 4 probabilities, got {w}")
@@ -149,6 +161,20 @@ class PromptConfig:
             )
         if self.phrasing not in PHRASINGS:
             raise ValueError(f"PromptConfig: phrasing={self.phrasing!r} is not one of {PHRASINGS}")
+
+
+def draw_anchor(
+    inside: Sequence[ActorFeatures], rng: np.random.Generator, cfg: PromptConfig
+) -> ActorFeatures:
+    """An anchor among the referable actors ``inside`` (non-empty): uniformly with the ``vod``
+    class set (one draw, as always); otherwise a class uniformly among those present, then one of
+    its actors uniformly (two draws)."""
+    if cfg.classes == "vod":
+        return inside[int(rng.integers(len(inside)))]
+    present = sorted({f.cls for f in inside})
+    cls = present[int(rng.integers(len(present)))]
+    of_cls = [f for f in inside if f.cls == cls]
+    return of_cls[int(rng.integers(len(of_cls)))]
 
 
 def depth_atom(f: ActorFeatures, rng: np.random.Generator) -> Atom | None:

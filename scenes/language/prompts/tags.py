@@ -114,6 +114,16 @@ _CLASS_WORDS = re.compile(
 )
 
 
+_ROAD_USER_WORDS = re.compile(
+    r"\b(?:lorr(?:y|ies)|coach(?:es)?|(?:semi-)?trailers?|construction (?:machine|vehicle)s?"
+    r"|motorcycles?|motor bikes?|pushbikes?|push bikes?|two-wheelers?|(?:traffic |road |safety )?"
+    r"cones?|barriers?)\b"
+)
+"""The nouns of the ``nuscenes`` class set's road users that :data:`_CLASS_WORDS` lacks: class
+words when ``infer_tags`` is told the text is about that set (with the ``vod`` set a lorry or a
+cone is an out-of-class thing, and its tags stay what they always were)."""
+
+
 _TRAVEL = re.compile(
     r"\b(?:same|opposite) (?:way|direction)\b|\bother way\b|\bdirection of travel\b"
     r"|\bgoing our way\b"
@@ -130,7 +140,7 @@ def is_count_question(text: str) -> bool:
     return _COUNT_QUESTION.search(text.lower()) is not None
 
 
-def infer_tags(text: str) -> frozenset[str]:
+def infer_tags(text: str, classes: str = "vod") -> frozenset[str]:
     """Prompt type tags from keywords; works on generated and real Talk2Radar prompts.
 
     Rules, applied in this order to the lower-cased text after "ego car" / "ego vehicle" /
@@ -152,7 +162,9 @@ def infer_tags(text: str) -> frozenset[str]:
     * position: left*, right, front, behind, beside, next to, ahead (not after a distance), lane,
       side, opposite.
     * class: car, vehicle, automobile, truck, van, bus, pedestrian, person, people, cyclist,
-      bicycle, bike, rider, ... (the ego vehicle excluded).
+      bicycle, bike, rider, ... (the ego vehicle excluded); with ``classes`` another set than
+      ``vod`` also the nouns of its road users (:data:`_ROAD_USER_WORDS`: lorry, coach, trailer,
+      motorcycle, cone, barrier, ...).
     """
     s = _EGO_PHRASE.sub(" ego ", text.lower())
     tags: set[str] = set()
@@ -176,6 +188,6 @@ def infer_tags(text: str) -> frozenset[str]:
         tags.add("motion")
     if _POSITION_WORDS.search(s):
         tags.add("position")
-    if _CLASS_WORDS.search(s):
+    if _CLASS_WORDS.search(s) or (classes != "vod" and _ROAD_USER_WORDS.search(s)):
         tags.add("class")
     return frozenset(tags)

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from scenes.geometry.actors import CLASSES
+from scenes.geometry.classes import class_set
 from scenes.language.prompts.atoms import (
     Atom,
     Heading,
@@ -80,7 +80,8 @@ def _unsat_contradiction(sc: DrawScene) -> Predicate | None:
         speed,
     ]
     atom = moving[int(rng.integers(len(moving)))]
-    cls = CLASSES[int(rng.integers(len(CLASSES)))]
+    names = class_set(sc.cfg.classes).names
+    cls = names[int(rng.integers(len(names)))]
     return Predicate(cls, (MotionState(False), atom))
 
 

@@ -34,6 +34,15 @@ Actors
     parked; pedestrians 0..2 m/s along sidewalks or crossing; cyclists 2..7 m/s). Actor boxes never
     overlap each other, the ego vehicle, or the trunks and poles.
 
+Class sets
+    ``WorldConfig.classes`` (``--classes``) picks the road users: ``vod`` (the default: cars,
+    pedestrians, cyclists, draw for draw as before class sets) or ``nuscenes`` (nuScenes' 10
+    detection classes: road works with cones, barriers and construction vehicles, buses at stops
+    or in lanes, trucks parked, moving or towing a trailer, parked trailers, ridden and parked
+    motorcycles, ridden bicycles, cars and pedestrians; the street clutter's parked bicycles and
+    mopeds become ``Bicycle`` and ``Motorcycle`` actors). :mod:`~scenes.synth.world.road_users`
+    holds the plans and the world facts of the new classes.
+
 Materials
     Each face carries a :class:`Mat` (LiDAR reflectivity, radar behaviour of static surfaces) and
     an owner (actor index, or -1 for static geometry). The sensors read both from :class:`RayHits`.
@@ -50,6 +59,8 @@ Modules (each imports only ones listed before it, and ``scenes.geometry.actors``
     :mod:`~scenes.synth.world.roadside` buildings, walls, hedges, lights, signs, bollards, trees;
     :mod:`~scenes.synth.world.clutter` parked bicycles, bicycle racks, mopeds;
     :mod:`~scenes.synth.world.placement` actor candidates, sizes and margins;
+    :mod:`~scenes.synth.world.road_user_meshes` trucks, buses, trailers, construction vehicles,
+    motorcycles, cones, barriers; :mod:`~scenes.synth.world.road_users` the plans per class set;
     :mod:`~scenes.synth.world.config` :class:`WorldConfig`; :mod:`~scenes.synth.world.scene` :class:`World`;
     :mod:`~scenes.synth.world.generate` :func:`generate_world`; :mod:`~scenes.synth.world.raycast`
     :class:`RayCaster`. This package re-exports their public names.

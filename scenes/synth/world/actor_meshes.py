@@ -51,7 +51,7 @@ def car_mesh(size: np.ndarray, rng: np.random.Generator) -> TaggedMesh:
     hl, hw = l / 2.0, w / 2.0
     nose, tail = rng.uniform(0.10, 0.25), rng.uniform(0.05, 0.15)
     body = hexahedron_part(
-        _corners(
+        tapered_corners(
             x_bottom=(-hl, hl),
             x_top=(-hl + tail, hl - nose),
             y_bottom=hw,
@@ -63,7 +63,7 @@ def car_mesh(size: np.ndarray, rng: np.random.Generator) -> TaggedMesh:
     rear = -hl + l * rng.uniform(0.08, 0.22)
     front = hl - l * rng.uniform(0.30, 0.38)
     cabin = hexahedron_part(
-        _corners(
+        tapered_corners(
             x_bottom=(rear, front),
             x_top=(rear + 0.15, front - rng.uniform(0.35, 0.6)),
             y_bottom=hw * 0.94,
@@ -86,7 +86,7 @@ def car_mesh(size: np.ndarray, rng: np.random.Generator) -> TaggedMesh:
     return fit_to_box(TaggedMesh.concatenate(parts), size)
 
 
-def _corners(
+def tapered_corners(
     x_bottom: tuple[float, float],
     x_top: tuple[float, float],
     y_bottom: float,

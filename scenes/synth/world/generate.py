@@ -7,18 +7,64 @@ import math
 
 import numpy as np
 
-from scenes.geometry.actors import CLASSES, Actor
+from scenes.geometry.actors import Actor
 from scenes.synth.world.clutter import Clutter, street_clutter
 from scenes.synth.world.config import WorldConfig
 from scenes.synth.world.footprint import Obstacle, overlaps_any
 from scenes.synth.world.meshes import TaggedMesh
-from scenes.synth.world.placement import CANDIDATES, EGO_FOOTPRINT, MARGIN, SIZES, actor_mesh
-from scenes.synth.world.road import make_road, road_mesh
+from scenes.synth.world.placement import EGO_FOOTPRINT, Candidate
+from scenes.synth.world.road import Road, make_road, road_mesh
+from scenes.synth.world.road_users import (
+    clutter_actors,
+    default_size,
+    margin_of,
+    plan,
+    road_user_mesh,
+)
 from scenes.synth.world.roadside import frontage, furniture
 from scenes.synth.world.scene import World
 
 DEFAULT_CONFIG = WorldConfig()
 """The default ranges (:class:`~scenes.synth.world.config.WorldConfig` as it is)."""
+
+
+def _fit(
+    group: list[Candidate],
+    road: Road,
+    ground_z: float,
+    taken: list[np.ndarray],
+    taken_margin: list[float],
+    rng: np.random.Generator,
+) -> list[tuple[Candidate, np.ndarray, np.ndarray]] | None:
+    """The group's members with their LiDAR-frame boxes ``(7,)`` and BEV footprints ``(5,)``, or
+    None when one overlaps what is taken (with its class's margin) or an earlier member. Sizes
+    not fixed by the placement are drawn here, member by member after its position."""
+    out: list[tuple[Candidate, np.ndarray, np.ndarray]] = []
+    for cand in group:
+        size = default_size(cand, rng)
+        xy = road.to_xy(cand.u, cand.s)
+        yaw = float(road.heading(cand.u)) + cand.yaw_offset
+        bev = np.array([xy[0], xy[1], size[0], size[1], yaw])
+        if overlaps_any(bev, margin_of(cand.cls), taken, taken_margin):
+            return None
+        if out and overlaps_any(bev, 0.0, [b for _, _, b in out], [0.0] * len(out)):
+            return None
+        z = ground_z + road.surface_height(cand.s) + size[2] / 2
+        yaw = float(np.mod(yaw + np.pi, 2 * np.pi) - np.pi)
+        out.append((cand, np.array([xy[0], xy[1], z, *size, yaw]), bev))
+    return out
+
+
+def _split_clutter(
+    static_parts: list[TaggedMesh], clutter: list[Clutter]
+) -> tuple[list[TaggedMesh], list[Clutter], list[tuple[str, np.ndarray, TaggedMesh]]]:
+    """The static parts without the clutter that becomes parked road users, the clutter left, and
+    those road users (:func:`scenes.synth.world.road_users.clutter_actors`); the clutter's parts
+    are the last ``len(clutter)`` static parts, in order."""
+    n = len(clutter)
+    head, tail = static_parts[: len(static_parts) - n], static_parts[len(static_parts) - n :]
+    parts, items, parked = clutter_actors(tail, clutter)
+    return head + parts, items, parked
 
 
 def generate_world(
@@ -40,36 +86,37 @@ def generate_world(
         static_parts += parts
         clutter += items
 
+    if config.classes != "vod":  # parked bicycles and mopeds are road users of the set
+        static_parts, clutter, parked = _split_clutter(static_parts, clutter)
+    else:
+        parked = []
+
     taken = [EGO_FOOTPRINT] + [np.array([o.x, o.y, o.l, o.w, o.yaw]) for o in obstacles]
     taken_margin = [0.5] + [0.1] * len(obstacles)
-    counts = {
-        "Car": int(rng.integers(config.cars[0], config.cars[1] + 1)),
-        "Pedestrian": int(rng.integers(config.pedestrians[0], config.pedestrians[1] + 1)),
-        "Cyclist": int(rng.integers(config.cyclists[0], config.cyclists[1] + 1)),
-    }
-    actors: list[Actor] = []
-    meshes: list[TaggedMesh] = []
-    for cls in CLASSES:
-        for _ in range(counts[cls]):
+    actors: list[Actor] = [
+        Actor(i, cls, box, np.zeros(2)) for i, (cls, box, _) in enumerate(parked)
+    ]
+    meshes: list[TaggedMesh] = [mesh for _, _, mesh in parked]
+    vod_counts = {"Car": config.cars, "Pedestrian": config.pedestrians, "Cyclist": config.cyclists}
+    placements = plan(config.classes, vod_counts)
+    counts = [int(rng.integers(p.counts[0], p.counts[1] + 1)) for p in placements]
+    for placement, count in zip(placements, counts, strict=True):
+        for _ in range(count):
             for _attempt in range(25):
                 far = rng.random() < config.far_fraction
                 u = rng.uniform(*(config.far_u if far else config.near_u))
-                cand = CANDIDATES[cls](road, u, rng)
-                size = np.array([rng.uniform(*r) for r in SIZES[cls]])
-                xy = road.to_xy(cand.u, cand.s)
-                yaw = float(road.heading(cand.u)) + cand.yaw_offset
-                bev = np.array([xy[0], xy[1], size[0], size[1], yaw])
-                margin = MARGIN[cls]
-                if overlaps_any(bev, margin, taken, taken_margin):
+                group = _fit(
+                    placement.place(road, u, rng), road, ground_z, taken, taken_margin, rng
+                )
+                if group is None:
                     continue
-                z = ground_z + road.surface_height(cand.s) + size[2] / 2
-                yaw = float(np.mod(yaw + np.pi, 2 * np.pi) - np.pi)
-                velocity = cand.speed * np.array([math.cos(yaw), math.sin(yaw)])
-                box = np.array([xy[0], xy[1], z, *size, yaw])
-                actors.append(Actor(len(actors), cls, box, velocity))
-                meshes.append(actor_mesh(cand, size, rng))
-                taken.append(bev)
-                taken_margin.append(margin)
+                for cand, box, bev in group:
+                    yaw = box[6]
+                    velocity = cand.speed * np.array([math.cos(yaw), math.sin(yaw)])
+                    actors.append(Actor(len(actors), cand.cls, box, velocity))
+                    meshes.append(road_user_mesh(cand, box[3:6], rng))
+                    taken.append(bev)
+                    taken_margin.append(margin_of(cand.cls))
                 break
     ego_speed = 0.0 if rng.random() < config.ego_stopped else rng.uniform(*config.ego_speed)
     return World(

@@ -34,6 +34,8 @@ class Mat(enum.IntEnum):
     SKIN = 18
     BIKE_FRAME = 19
     CLOTHING_DARK = 20
+    CONE_ORANGE = 21
+    WORKS_YELLOW = 22
 
 
 @dataclass(frozen=True)
@@ -78,6 +80,8 @@ MATERIALS: tuple[Material, ...] = (
     Material(0.50),  # SKIN
     Material(0.45, radar_rcs=-12.0, radar_prob=0.3),  # BIKE_FRAME (parked bicycles)
     Material(0.12, radar_rcs=-20.0, radar_prob=0.05),  # CLOTHING_DARK (dark coats, jeans)
+    Material(0.45, radar_rcs=-22.0, radar_prob=0.05),  # CONE_ORANGE (cones, plastic barriers)
+    Material(0.60, radar_rcs=-6.0, radar_prob=0.3),  # WORKS_YELLOW (construction vehicles)
 )
 """Material properties indexed by :class:`Mat`."""
 

@@ -151,6 +151,18 @@ def cylinder_part(p0: Sequence[float], p1: Sequence[float], radius: float, mat: 
     return _part(verts @ frame.T + np.asarray(p0, float), faces, mat)
 
 
+def frustum_part(
+    base: Sequence[float], height: float, r_bottom: float, r_top: float, mat: Mat
+) -> TaggedMesh:
+    """A vertical truncated cone (10-sided) standing on ``base`` (its bottom centre), radius
+    ``r_bottom`` at the bottom and ``r_top`` (``>= 0``) at ``height`` above: traffic cones."""
+    verts, faces = _unit_cylinder(10)
+    z = verts[:, 2]
+    radius = r_bottom + (r_top - r_bottom) * z
+    out = np.stack([verts[:, 0] * radius, verts[:, 1] * radius, z * height], axis=1)
+    return _part(out + np.asarray(base, float), faces, mat)
+
+
 def ellipsoid_part(centre: Sequence[float], radii: Sequence[float], mat: Mat) -> TaggedMesh:
     """An axis-aligned ellipsoid (80-face icosphere, scaled)."""
     verts, faces = _unit_sphere()

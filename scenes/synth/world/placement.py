@@ -30,23 +30,38 @@ drawn from ``LEAD_CAR_GAP`` (m) ahead of the ego."""
 
 
 @dataclass(frozen=True)
-class _Candidate:
+class Candidate:
+    """Where one actor goes, in road coordinates, before its overlap test.
+
+    Attributes:
+        cls: Its class name.
+        u, s: Abscissa and lateral offset (m, left +) of its box centre.
+        yaw_offset: Heading relative to the road heading at ``u`` (rad).
+        speed: Ground speed along the heading (m/s).
+        walking: A pedestrian in stride.
+        size: ``(l, w, h)`` when the placement drew it (groups whose members' positions depend on
+            their sizes); None: drawn afterwards from :data:`SIZES`.
+        kind: The shape variant for the mesh (``"ridden"``, ``"parked"``, ``"tractor"``; ``""``).
+    """
+
     cls: str
     u: float
     s: float
     yaw_offset: float  # relative to the road heading at u
     speed: float
     walking: bool = False
+    size: tuple[float, float, float] | None = None
+    kind: str = ""
 
 
-def _car_candidate(road: Road, u: float, rng: np.random.Generator) -> _Candidate:
+def _car_candidate(road: Road, u: float, rng: np.random.Generator) -> Candidate:
     r = rng.random()
     parking = [side for side in (road.right, road.left) if side.parking is not None]
     if parking and r < 0.3:
         side = parking[int(rng.integers(0, len(parking)))]
         s = sum(side.parking) / 2 + rng.normal(0, 0.1)
         flip = np.pi if (side.sign > 0) != (rng.random() < 0.15) else 0.0
-        return _Candidate("Car", u, s, flip + rng.normal(0, 0.03), 0.0)
+        return Candidate("Car", u, s, flip + rng.normal(0, 0.03), 0.0)
     if r < 0.65:
         lane = int(rng.integers(0, len(road.right.lane_centres)))
         if lane == road.ego_lane and u < LEAD_CAR_MIN_U:
@@ -55,40 +70,40 @@ def _car_candidate(road: Road, u: float, rng: np.random.Generator) -> _Candidate
             u = EGO_FRONT + 2.2 + rng.uniform(*LEAD_CAR_GAP)
         speed = 0.0 if rng.random() < 0.1 else rng.uniform(2.0, 15.0)
         s = road.right.lane_centres[lane] + rng.normal(0, 0.15)
-        return _Candidate("Car", u, s, rng.normal(0, 0.02), speed)
+        return Candidate("Car", u, s, rng.normal(0, 0.02), speed)
     lane = int(rng.integers(0, len(road.left.lane_centres)))
     s = road.left.lane_centres[lane] + rng.normal(0, 0.15)
     speed = 0.0 if rng.random() < 0.05 else rng.uniform(2.0, 15.0)
-    return _Candidate("Car", u, s, np.pi + rng.normal(0, 0.02), speed)
+    return Candidate("Car", u, s, np.pi + rng.normal(0, 0.02), speed)
 
 
-def _pedestrian_candidate(road: Road, u: float, rng: np.random.Generator) -> _Candidate:
+def _pedestrian_candidate(road: Road, u: float, rng: np.random.Generator) -> Candidate:
     r = rng.random()
     side = road.right if rng.random() < 0.5 else road.left
     if r < 0.25:  # crossing the carriageway
         s = rng.uniform(road.right.carriageway_edge + 0.5, road.left.carriageway_edge - 0.5)
         yaw = (np.pi / 2 if rng.random() < 0.5 else -np.pi / 2) + rng.normal(0, 0.15)
-        return _Candidate("Pedestrian", u, s, yaw, rng.uniform(0.8, 2.0), walking=True)
+        return Candidate("Pedestrian", u, s, yaw, rng.uniform(0.8, 2.0), walking=True)
     s = rng.uniform(side.sidewalk[0] + 0.4, side.sidewalk[1] - 0.4)
     if r < 0.65:  # walking along
         yaw = (0.0 if rng.random() < 0.5 else np.pi) + rng.normal(0, 0.1)
-        return _Candidate("Pedestrian", u, s, yaw, rng.uniform(0.6, 2.0), walking=True)
-    return _Candidate("Pedestrian", u, s, rng.uniform(-np.pi, np.pi), 0.0)
+        return Candidate("Pedestrian", u, s, yaw, rng.uniform(0.6, 2.0), walking=True)
+    return Candidate("Pedestrian", u, s, rng.uniform(-np.pi, np.pi), 0.0)
 
 
-def _cyclist_candidate(road: Road, u: float, rng: np.random.Generator) -> _Candidate:
+def _cyclist_candidate(road: Road, u: float, rng: np.random.Generator) -> Candidate:
     r = rng.random()
     speed = rng.uniform(2.0, 7.0)
     if r < 0.25:  # crossing (junctions, exits)
         s = rng.uniform(road.right.carriageway_edge + 1.0, road.left.carriageway_edge - 1.0)
         yaw = (np.pi / 2 if rng.random() < 0.5 else -np.pi / 2) + rng.normal(0, 0.1)
-        return _Candidate("Cyclist", u, s, yaw, min(speed, 5.0))
+        return Candidate("Cyclist", u, s, yaw, min(speed, 5.0))
     side = road.right if rng.random() < 0.6 else road.left
     with_traffic = 0.0 if side.sign < 0 else np.pi
     if r < 0.35:  # turning in or out at a junction, obliquely across the carriageway's edge
         s = side.carriageway_edge - side.sign * rng.uniform(0.8, 2.5)
         turn = rng.uniform(0.4, 1.1) * (1.0 if rng.random() < 0.5 else -1.0)
-        return _Candidate("Cyclist", u, s, with_traffic + turn, min(speed, 5.0))
+        return Candidate("Cyclist", u, s, with_traffic + turn, min(speed, 5.0))
     if side.bike_path is not None:
         a, b = side.bike_path
         s = rng.uniform(a + 0.4, b - 0.4)
@@ -105,7 +120,7 @@ def _cyclist_candidate(road: Road, u: float, rng: np.random.Generator) -> _Candi
         )
         s = edge - side.sign * rng.uniform(0.7, 1.1)
         yaw = with_traffic
-    return _Candidate("Cyclist", u, s, yaw + rng.normal(0, 0.05), speed)
+    return Candidate("Cyclist", u, s, yaw + rng.normal(0, 0.05), speed)
 
 
 CANDIDATES = {
@@ -117,7 +132,8 @@ SIZES = {"Car": CAR_SIZE, "Pedestrian": PEDESTRIAN_SIZE, "Cyclist": CYCLIST_SIZE
 MARGIN = {"Car": 0.8, "Pedestrian": 0.2, "Cyclist": 0.4}
 
 
-def actor_mesh(cand: _Candidate, size: np.ndarray, rng: np.random.Generator) -> TaggedMesh:
+def actor_mesh(cand: Candidate, size: np.ndarray, rng: np.random.Generator) -> TaggedMesh:
+    """The mesh of a car, pedestrian or cyclist candidate (box frame, bounds ``size``)."""
     if cand.cls == "Car":
         return car_mesh(size, rng)
     if cand.cls == "Pedestrian":
