@@ -8,14 +8,13 @@ import math
 import numpy as np
 
 from scenes.geometry.actors import CLASSES, Actor
-from scenes.synth.world.clutter import Clutter, street_clutter
 from scenes.synth.world.config import WorldConfig
-from scenes.synth.world.footprint import Obstacle, overlaps_any
+from scenes.synth.world.footprint import overlaps_any
 from scenes.synth.world.meshes import TaggedMesh
 from scenes.synth.world.placement import CANDIDATES, EGO_FOOTPRINT, MARGIN, SIZES, actor_mesh
 from scenes.synth.world.road import make_road, road_mesh
-from scenes.synth.world.roadside import frontage, furniture
 from scenes.synth.world.scene import World
+from scenes.synth.world.street import draw_roadside
 
 DEFAULT_CONFIG = WorldConfig()
 """The default ranges (:class:`~scenes.synth.world.config.WorldConfig` as it is)."""
@@ -27,18 +26,7 @@ def generate_world(
     """A random world (see the module docstring); all randomness comes from ``rng``."""
     ground_z = -config.lidar_height
     road = make_road(rng)
-    static_parts = [road_mesh(road, ground_z)]
-    obstacles: list[Obstacle] = []
-    clutter: list[Clutter] = []
-    for side in (road.right, road.left):
-        static_parts += frontage(road, side, ground_z, rng)
-        parts, obs = furniture(road, side, ground_z, rng)
-        static_parts += parts
-        obstacles += obs
-    for side in (road.right, road.left):
-        parts, items = street_clutter(road, side, ground_z, obstacles, rng)
-        static_parts += parts
-        clutter += items
+    roadside, obstacles = draw_roadside(road, ground_z, rng)
 
     taken = [EGO_FOOTPRINT] + [np.array([o.x, o.y, o.l, o.w, o.yaw]) for o in obstacles]
     taken_margin = [0.5] + [0.1] * len(obstacles)
@@ -72,13 +60,15 @@ def generate_world(
                 taken_margin.append(margin)
                 break
     ego_speed = 0.0 if rng.random() < config.ego_stopped else rng.uniform(*config.ego_speed)
+    if not config.street.is_default:  # drawn last: the actors stay those of the default street
+        roadside = roadside.with_density(config.street, actors, road, ground_z, rng)
     return World(
         world_id=world_id,
         road=road,
         lidar_height=config.lidar_height,
         ego_speed=float(ego_speed),
         actors=tuple(actors),
-        static_mesh=TaggedMesh.concatenate(static_parts),
+        static_mesh=TaggedMesh.concatenate([road_mesh(road, ground_z), *roadside.parts()]),
         actor_meshes=tuple(meshes),
-        clutter=tuple(clutter),
+        clutter=tuple(roadside.items()),
     )
