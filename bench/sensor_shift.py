@@ -25,6 +25,7 @@ is a gap of at most 10 points on every held-out rig. ``--quick``: 2 worlds (a sm
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
@@ -365,9 +366,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    return bench_main(
-        "bench.sensor_shift", run, argv, __doc__.splitlines()[0], options=SensorShiftOptions
-    )
+    try:
+        return bench_main(
+            "bench.sensor_shift", run, argv, __doc__.splitlines()[0], options=SensorShiftOptions
+        )
+    except ValueError as exc:  # a bad flag value (SensorShiftOptions), an unusable checkpoint
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":
