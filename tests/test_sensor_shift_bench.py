@@ -77,3 +77,25 @@ def test_bad_options_are_one_line_errors(tmp_path, capsys):
     assert main(["--worlds", "0", "--out-dir", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err[-1] == "error: --worlds must be >= 1, got 0"
+
+
+def test_the_level_reference_is_where_the_training_rigs_ground_is_found():
+    from bench.sensor_shift import LEVEL_REFERENCE
+    from scenes.geometry.calib import sensor_to_lidar
+    from scenes.geometry.ground import estimate_ground
+    from scenes.synth.frame import SynthSettings, synthesize
+
+    settings = SynthSettings(seed=38, camera=None)
+    r2l = sensor_to_lidar(*settings.calibrations())
+    found = [-estimate_ground(synthesize(settings, i, r2l).lidar.points, 1.7).c for i in range(4)]
+    assert float(np.median(found)) == pytest.approx(LEVEL_REFERENCE, abs=0.03)
+
+
+def test_levelled_heights_run_and_say_so(tmp_path, untrained_model, capsys):
+    model = untrained_model("referent", text_encoder="gru", operating_threshold=0.5)
+    ckpt = save_checkpoint(tmp_path / "random.pt", model, step=1)
+    argv = ["--checkpoint", str(ckpt), "--worlds", "1", "--setups", "lidar-low-pitched"]
+    assert main([*argv, "--level-ground", "--out-dir", str(tmp_path)]) == 0
+    assert "heights above the estimated ground" in capsys.readouterr().out
+    data = json.loads((tmp_path / "sensor_shift.json").read_text())["data"]
+    assert data["level_ground"] is True and len(data["setups"]) == 2

@@ -15,8 +15,10 @@ Mounting: the LiDAR moves on the car; the camera and the radar stay where they a
 ``dz`` metres higher than VoD's 1.70 m sees the ground ``dz`` further down, and the calibration
 written with it (:func:`lidar_calibration_at`) has the camera (and, through it, the radar) ``dz``
 lower in the LiDAR frame, so the radar points still land where the radar saw them. A pitched
-LiDAR reports its points in its own pitched frame while the labels stay level (an uncorrected
-mounting): the ground rises ahead of a sensor pitched nose down.
+LiDAR reports its points in its own pitched frame (the ground rises ahead of a sensor pitched nose
+down); :meth:`SensorSetup.boxes_in_lidar_frame` gives the actors' boxes in that frame, which
+``bench.sensor_shift`` scores against. A root written with such a rig keeps its labels, radar and
+camera in the car's level frame at the LiDAR's origin (its calibration does not know the pitch).
 
 The held-out rigs:
 
@@ -29,9 +31,8 @@ The held-out rigs:
 * ``radar-1scan``: one radar scan instead of five (the root's ``radar`` tree).
 * ``radar-sparse``: the five sparse 2D ARS-408-like radars of ``--sensors nuscenes``
   (:data:`scenes.synth.sensors.NUSCENES`) instead of the 4D radar, five scans each.
-* ``streets-sparse``: a third of the buildings, trees and street furniture, no clutter... (a
-  quarter of it); ``streets-dense``: twice the buildings, trees and furniture, three times the
-  clutter.
+* ``streets-sparse``: a third of the buildings, trees and street furniture, a quarter of the
+  clutter; ``streets-dense``: twice the buildings, trees and furniture, three times the clutter.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from scenes.geometry.calib import LIDAR_HEIGHT, Calibration
-from scenes.synth.lidar import LidarConfig
+from scenes.synth.lidar import LidarConfig, pitch_rotation
 from scenes.synth.radar import RadarConfig
 from scenes.synth.sensors import NUSCENES, RadarMount
 from scenes.synth.world.config import StreetDensity
@@ -82,6 +83,16 @@ class SensorSetup:
             raise ValueError(
                 f"{self.name}: beam_dropout must be in [0, 1), got {self.lidar.beam_dropout}"
             )
+
+    def boxes_in_lidar_frame(self, boxes: np.ndarray) -> np.ndarray:
+        """``(K, 7)`` boxes of the world (the car's level frame at the LiDAR's origin) in the
+        LiDAR's own frame: the centres turned by its pitch (yaw and sizes kept: a box stays
+        upright, as an annotator labelling in the sensor's frame along the ground would draw it,
+        to a fraction of a degree). The boxes themselves without a pitch."""
+        out = np.array(boxes, dtype=np.float64, copy=True).reshape(-1, 7)
+        if self.lidar.pitch_deg != 0.0 and len(out):
+            out[:, :3] = out[:, :3] @ pitch_rotation(self.lidar.pitch_deg)
+        return out
 
     def meta(self) -> dict:
         """What a sample's sidecar records (``extra["sensor_setup"]``)."""
