@@ -49,6 +49,7 @@ BENCHMARKS = (
     "model_size",
     "train_throughput",
     "soak",
+    "sensor_shift",
 )
 """Benchmarks of this package, in the order of the document (``bench/<name>.py``)."""
 MANUAL = ("floor_1thread", "eval_throughput", "eval_throughput_1thread")

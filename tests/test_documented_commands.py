@@ -44,6 +44,7 @@ PARSERS: dict[str, tuple[str, str]] = {
             "latency",
             "model_size",
             "run_all",
+            "sensor_shift",
             "sensor_stats",
             "soak",
             "talk2car_recall",

@@ -17,9 +17,11 @@ from scenes.language.prompts import LANGUAGES, PHRASINGS, Prompt, PromptConfig, 
 from scenes.synth.camera import CameraConfig, render_image
 from scenes.synth.lidar import LidarConfig, LidarScan, simulate_lidar
 from scenes.synth.radar import RadarConfig, RadarScan, simulate_radar
+from scenes.synth.randomise import DEFAULT_RANDOMISATION, sensor_stream
 from scenes.synth.sensors import SENSOR_SETS, SensorSet, simulate_radars
 from scenes.synth.sensors import sensor_set as _preset
 from scenes.synth.sequence import world_at
+from scenes.synth.setups import IN_DOMAIN, SETUPS, SensorSetup, lidar_calibration_at, sensor_setup
 from scenes.synth.weather import WEATHERS, Weather
 from scenes.synth.world import RayCaster, World, WorldConfig, generate_world
 from scenes.talk2radar.layout import RADAR_FOLDER_OF_SCANS
@@ -78,6 +80,11 @@ class SynthSettings:
             :data:`scenes.geometry.classes.PRESETS`): ``vod`` (the default: cars, pedestrians,
             cyclists, ``world`` as given) or ``nuscenes`` (its 10 classes: ``world.classes``,
             :mod:`scenes.synth.world.road_users`, and ``PromptConfig.classes``).
+        sensor_setup: A named rig of :data:`scenes.synth.setups.SETUPS` (``--sensor-setup``;
+            ``vod``: the rig above, unchanged): every world of the seed sensed through it (its
+            LiDAR, height, radar and street; ``radar-1scan`` makes ``radar_scans`` 1).
+        sensor_randomise: Each world sensed through a rig drawn by
+            :data:`scenes.synth.randomise.DEFAULT_RANDOMISATION` (``--sensor-randomise``).
     """
 
     seed: int = option(0, help="base seed (default %(default)s)")
@@ -145,11 +152,25 @@ class SynthSettings:
         "default %(default)s",
     )
 
+    sensor_setup: str = option(
+        IN_DOMAIN.name,
+        choices=tuple(SETUPS),
+        help="sense every world through this rig (scenes.synth.setups; held-out rigs of issue "
+        "38: other LiDARs, mounts, intensities, radars, street densities); default %(default)s",
+    )
+    sensor_randomise: bool = option(
+        False,
+        help="sense each world through a rig drawn at random (beams and pattern, mounting height "
+        "and pitch, dropout, intensity scale, range noise, radar density, noise and scans; "
+        "scenes.synth.randomise), never a held-out rig's values",
+    )
+
     def __post_init__(self) -> None:
         if self.classes not in PRESETS:
             raise SynthError(f"classes must be one of {list(PRESETS)}, got {self.classes!r}")
         if self.world.classes != self.classes:
             object.__setattr__(self, "world", replace(self.world, classes=self.classes))
+        self._check_rig()
         if self.sensors not in SENSOR_SETS:
             raise SynthError(f"sensors must be one of {list(SENSOR_SETS)}, got {self.sensors!r}")
         preset = _preset(self.sensors)
@@ -181,6 +202,38 @@ class SynthSettings:
                 f"sequence_length must be in [1, {MAX_SEQUENCE_LENGTH}], got {self.sequence_length}"
             )
 
+    def _check_rig(self) -> None:
+        """Refuse contradicting rig options; a single-scan set-up sets ``radar_scans`` to 1."""
+        if self.sensor_setup not in SETUPS:
+            raise SynthError(
+                f"sensor_setup must be one of {list(SETUPS)}, got {self.sensor_setup!r}"
+            )
+        named = self.sensor_setup != IN_DOMAIN.name
+        if (named or self.sensor_randomise) and self.sensors != "vod":
+            raise SynthError("--sensor-setup and --sensor-randomise change the vod sensors only")
+        if named and self.sensor_randomise:
+            raise SynthError("--sensor-setup and --sensor-randomise exclude each other")
+        if named and sensor_setup(self.sensor_setup).radar_scans == 1:
+            if self.radar_scans not in (1, 5):
+                raise SynthError(
+                    f"--sensor-setup {self.sensor_setup} has one radar scan, not {self.radar_scans}"
+                )
+            object.__setattr__(self, "radar_scans", 1)
+        if self.sensor_randomise and self.radar_scans < DEFAULT_RANDOMISATION.radar_scans[0]:
+            raise SynthError(
+                "--sensor-randomise needs --radar-scans 3 or 5 (it draws 2 scans or more)"
+            )
+
+    def world_setup(self, world_index: int) -> SensorSetup | None:
+        """The rig world ``world_index`` is sensed through: None for the default rig (the
+        configs as given), the named set-up, or the one drawn for this world."""
+        if self.sensor_randomise:
+            rng = sensor_stream(self.seed, world_index)
+            return DEFAULT_RANDOMISATION.draw(rng, self.radar_scans, self.lidar, self.radar)
+        if self.sensor_setup != IN_DOMAIN.name:
+            return replace(sensor_setup(self.sensor_setup), radar_scans=self.radar_scans)
+        return None
+
     def key(self) -> dict:
         """The settings recorded in (and compared with) the manifest."""
         return {
@@ -198,17 +251,29 @@ class SynthSettings:
             **({"command_share": self.command_share} if self.command_share else {}),
             **({"sensors": self.sensors} if self.sensors != "vod" else {}),
             **({"classes": self.classes} if self.classes != "vod" else {}),
+            **({"sensor_setup": self.sensor_setup} if self.sensor_setup != IN_DOMAIN.name else {}),
+            **({"sensor_randomise": True} if self.sensor_randomise else {}),
         }
 
     def sensor_set(self) -> SensorSet | None:
         """The sensor preset (None: ``vod``, the configs as given)."""
         return _preset(self.sensors)
 
-    def calibrations(self) -> tuple[Calibration, Calibration]:
+    def calibrations(self, setup: SensorSetup | None = None) -> tuple[Calibration, Calibration]:
         """The LiDAR and radar calibrations written: VoD's, with ``P2`` scaled to the camera
         image (:attr:`scenes.synth.camera.CameraConfig.image_scale`) where there is one; with
         ``--sensors nuscenes`` the preset's camera, and the radar calibration equal to the
-        LiDAR's: the merged radar cloud is in the LiDAR frame)."""
+        LiDAR's: the merged radar cloud is in the LiDAR frame). With a rig (``setup``, default
+        the named ``sensor_setup``) of another LiDAR height, the LiDAR's is moved to it
+        (:func:`scenes.synth.setups.lidar_calibration_at`: camera and radar stay on the car)."""
+        if setup is None and self.sensor_setup != IN_DOMAIN.name:
+            setup = sensor_setup(self.sensor_setup)
+        lidar, radar = self._base_calibrations()
+        if setup is not None:
+            lidar = lidar_calibration_at(lidar, setup.lidar_height)
+        return lidar, radar
+
+    def _base_calibrations(self) -> tuple[Calibration, Calibration]:
         preset = self.sensor_set()
         if preset is not None:
             scale = self.camera.image_scale if self.camera is not None else 1.0
@@ -246,6 +311,8 @@ class SynthFrame:
         times: Stage timings.
         image: ``(H, W, 3)`` uint8 camera image at ``t = 0`` (None without a camera, or when the
             world yielded no prompt and so is not written).
+        setup: The rig it was sensed through (:meth:`SynthSettings.world_setup`; None: the
+            settings' own).
     """
 
     world: World
@@ -256,6 +323,7 @@ class SynthFrame:
     sensed: tuple[int, ...]
     times: StageTimes
     image: np.ndarray | None = None
+    setup: SensorSetup | None = None
 
 
 def world_streams(seed: int, world_index: int) -> dict[str, np.random.Generator]:
@@ -319,15 +387,19 @@ def synthesize_sequence(
     ``SeedSequence([seed, world_index, k])``; the weather stays frame 0's.
     """
     rngs = world_streams(settings.seed, world_index)
+    setup = settings.world_setup(world_index)
+    world_config = settings.world
+    if setup is not None:
+        world_config = replace(world_config, lidar_height=setup.lidar_height, street=setup.street)
     t0 = time.perf_counter()
-    first = generate_world(rngs["world"], world_index, settings.world)
+    first = generate_world(rngs["world"], world_index, world_config)
     weather = _pick_weather(settings, rngs["weather"])
     built = time.perf_counter() - t0
     frames = []
     for k in range(length):
         world = first if k == 0 else world_at(first, k / FRAME_RATE)
         streams = rngs if k == 0 else frame_streams(settings.seed, world_index, k)
-        frame = _sense(settings, world, weather, streams, radar_to_lidar, camera_calib)
+        frame = _sense(settings, setup, world, weather, streams, radar_to_lidar, camera_calib)
         if k == 0:
             frame = replace(frame, times=replace(frame.times, world=built))
         frames.append(frame)
@@ -344,24 +416,28 @@ def frame_streams(seed: int, world_index: int, frame: int) -> dict[str, np.rando
 
 def _sense(
     settings: SynthSettings,
+    setup: SensorSetup | None,
     world: World,
     weather: Weather,
     rngs: dict[str, np.random.Generator],
     radar_to_lidar: np.ndarray,
     camera_calib: Calibration | None,
 ) -> SynthFrame:
-    """Sense one world (LiDAR, radar, prompts over the sensed actors, the camera image)."""
+    """Sense one world (LiDAR, radar, prompts over the sensed actors, the camera image) through
+    ``setup`` (None: the settings' sensors)."""
     t1 = time.perf_counter()
     caster = RayCaster(world)
-    lidar = simulate_lidar(caster, rngs["lidar"], settings.lidar, weather)
+    lidar_config = settings.lidar if setup is None else setup.lidar
+    lidar = simulate_lidar(caster, rngs["lidar"], lidar_config, weather)
     t2 = time.perf_counter()
     preset = settings.sensor_set()
-    if preset is None:
-        radar = simulate_radar(
-            caster, radar_to_lidar, rngs["radar"], settings.radar, weather, settings.radar_scans
-        )
+    scans = settings.radar_scans if setup is None else setup.radar_scans
+    mounts = preset.radars if preset is not None else () if setup is None else setup.radar_mounts
+    if mounts:
+        radar = simulate_radars(caster, mounts, rngs["radar"], weather, scans)
     else:
-        radar = simulate_radars(caster, preset.radars, rngs["radar"], weather, settings.radar_scans)
+        radar_config = settings.radar if setup is None else setup.radar
+        radar = simulate_radar(caster, radar_to_lidar, rngs["radar"], radar_config, weather, scans)
     t3 = time.perf_counter()
     sensed = sensed_actor_ids(lidar, radar, settings.min_lidar_points, settings.min_radar_points)
     candidates = [world.actors[i] for i in sensed]
@@ -386,4 +462,4 @@ def _sense(
         image = render_image(world, calib, size, weather, rngs["camera"], settings.camera)
     t5 = time.perf_counter()
     times = StageTimes(lidar=t2 - t1, radar=t3 - t2, prompts=t4 - t3, camera=t5 - t4)
-    return SynthFrame(world, weather, lidar, radar, prompts, sensed, times, image)
+    return SynthFrame(world, weather, lidar, radar, prompts, sensed, times, image, setup)

@@ -176,6 +176,7 @@ def write_frame(
     seen = {world.actors[i].actor_id for i in frame.sensed}
     unseen = [a.actor_id for a in world.actors if a.actor_id not in seen]
     preset = settings.sensor_set()
+    setup = frame.setup
     ids = []
     for k, prompt in enumerate(frame.prompts[:count]):
         referents = [by_id[i] for i in prompt.referent_ids]
@@ -187,7 +188,7 @@ def write_frame(
             weather=frame.weather.name,
             ego_velocity=world.ego_speed,
             world_id=world.world_id,
-            radar_scans=settings.radar_scans,
+            radar_scans=settings.radar_scans if setup is None else setup.radar_scans,
             extra={
                 "generator": "scenes.synth",
                 "seed": settings.seed,
@@ -195,6 +196,7 @@ def write_frame(
                 "clutter": [c.to_json() for c in world.clutter],
                 **({"sensors": preset.meta()} if preset is not None else {}),
                 **({"classes": settings.classes} if settings.classes != "vod" else {}),
+                **({"sensor_setup": setup.meta()} if setup is not None else {}),
                 **({"sequence_frame": sequence_frame} if sequence_frame is not None else {}),
             },
         )
@@ -333,6 +335,9 @@ def generate_root(
             ids = list(entry["ids"])
             skipped += 1
         else:
+            if settings.sensor_randomise:  # each world's LiDAR at its own height
+                lidar_calib, radar_calib = settings.calibrations(settings.world_setup(world_index))
+                radar_to_lidar = sensor_to_lidar(lidar_calib, radar_calib)
             drive = _prompted_frames(
                 synthesize_sequence(
                     settings, world_index, radar_to_lidar, lidar_calib, settings.sequence_length
@@ -414,6 +419,7 @@ class SynthCommand:
 _FLAG_ORDER: tuple[tuple[type, tuple[str, ...]], ...] = (
     (SynthCommand, ("out", "frames")),
     (SynthSettings, ("seed", "weather", "sensors", "radar_scans", "prompts_per_world")),
+    (SynthSettings, ("sensor_setup", "sensor_randomise")),
     (SynthCommand, ("split_fractions",)),
     (SynthSettings, ("phrasing", "language", "command_share", "classes")),
     (SynthCommand, ("no_camera",)),

@@ -67,6 +67,13 @@ class LidarConfig:
             HDL-64's calibrated intensities, which spread dark surfaces over much of 0..255).
         intensity_gain: Scale before clipping to 255 (bright targets saturate).
         intensity_noise: Standard deviation of the log-normal jitter of the intensity.
+        pitch_deg: The sensor's pitch on its mount, nose down positive (degrees): the rays are
+            cast turned by it about the y axis, and the points are reported in the sensor's own
+            (pitched) frame, as an uncorrected mounting would give them; 0: level.
+        intensity_scale: Factor on the intensity before clipping to 255 (another sensor's
+            intensity calibration; 1: as modelled above).
+        beam_dropout: Share of beams dead for the whole sweep (each beam drawn independently;
+            drawn after every other draw, so 0 leaves the random stream as it was).
     """
 
     upper_block: tuple[float, float] = (2.0, -8.33)
@@ -85,6 +92,14 @@ class LidarConfig:
     intensity_gamma: float = 0.6
     intensity_gain: float = 1.3
     intensity_noise: float = 0.55
+    pitch_deg: float = 0.0
+    intensity_scale: float = 1.0
+    beam_dropout: float = 0.0
+
+    @property
+    def beams(self) -> int:
+        """Beams in all (two blocks)."""
+        return 2 * self.beams_per_block
 
 
 @dataclass(frozen=True)
@@ -101,7 +116,7 @@ class LidarScan:
 
 
 def beam_elevations(config: LidarConfig = LidarConfig()) -> np.ndarray:
-    """``(64,)`` beam elevations in degrees, top to bottom."""
+    """``(config.beams,)`` beam elevations in degrees (sensor frame), top to bottom."""
     n = config.beams_per_block
     return np.concatenate(
         [np.linspace(*config.upper_block, n), np.linspace(*config.lower_block, n)]
@@ -129,6 +144,12 @@ def intensity_response(rho: np.ndarray, cos_inc: np.ndarray, config: LidarConfig
     return np.minimum(1.0, config.intensity_gain * shaded**config.intensity_gamma)
 
 
+def pitch_rotation(pitch_deg: float) -> np.ndarray:
+    """``(3, 3)`` sensor -> level frame of a sensor pitched ``pitch_deg`` nose down (about +y)."""
+    c, s = np.cos(np.deg2rad(pitch_deg)), np.sin(np.deg2rad(pitch_deg))
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
 def simulate_lidar(
     caster: RayCaster,
     rng: np.random.Generator,
@@ -136,9 +157,10 @@ def simulate_lidar(
     weather: Weather = CLEAR,
 ) -> LidarScan:
     """One LiDAR sweep of ``caster.world`` at ``t = 0`` (see the module docstring)."""
-    dirs = ray_directions(config)
+    dirs = ray_directions(config)  # the sensor's frame
     r_count = len(dirs)
-    hits = caster.cast(np.zeros((r_count, 3)), dirs, time=0.0)
+    cast = dirs if config.pitch_deg == 0.0 else dirs @ pitch_rotation(config.pitch_deg).T
+    hits = caster.cast(np.zeros((r_count, 3)), cast, time=0.0)
     # Random draws for every ray, in a fixed order, so the stream does not depend on the hits.
     speckle = rng.lognormal(0.0, config.speckle, r_count)
     drop_draw = rng.random(r_count)
@@ -165,6 +187,8 @@ def simulate_lidar(
     measured = dist + range_noise + LIDAR_DEPTH_JITTER[mat] * depth_draw
     keep &= (measured >= config.min_range) & (measured <= config.max_range)
     intensity = 255.0 * intensity_response(rho, cos_inc, config) * transmission * intensity_noise
+    if config.intensity_scale != 1.0:
+        intensity = intensity * config.intensity_scale
     owner = np.where(hit, hits.owner, -1)
 
     scatter = (scatter_draw < weather.backscatter_prob) & (
@@ -174,6 +198,9 @@ def simulate_lidar(
     intensity = np.where(scatter, scatter_intensity, intensity)
     owner = np.where(scatter, BACKSCATTER, owner)
     keep |= scatter
+    if config.beam_dropout > 0.0:  # whole beams dead (rays are beam-major)
+        dead = rng.random(config.beams) < config.beam_dropout
+        keep &= ~np.repeat(dead, r_count // config.beams)
 
     points = np.empty((int(keep.sum()), 4), dtype=np.float32)
     points[:, :3] = dirs[keep] * measured[keep, None]

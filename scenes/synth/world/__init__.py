@@ -58,6 +58,8 @@ Modules (each imports only ones listed before it, and ``scenes.geometry.actors``
     :mod:`~scenes.synth.world.footprint` BEV footprints and their overlap test;
     :mod:`~scenes.synth.world.roadside` buildings, walls, hedges, lights, signs, bollards, trees;
     :mod:`~scenes.synth.world.clutter` parked bicycles, bicycle racks, mopeds;
+    :mod:`~scenes.synth.world.street` the roadside as drawn per kind, and streets of other
+    densities (:class:`~scenes.synth.world.config.StreetDensity`, drawn after the actors);
     :mod:`~scenes.synth.world.placement` actor candidates, sizes and margins;
     :mod:`~scenes.synth.world.road_user_meshes` trucks, buses, trailers, construction vehicles,
     motorcycles, cones, barriers; :mod:`~scenes.synth.world.road_users` the plans per class set;

@@ -4,13 +4,13 @@ frontage, furniture and clutter, then the actors placed without overlaps, all fr
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
 from scenes.geometry.actors import Actor
-from scenes.synth.world.clutter import Clutter, street_clutter
 from scenes.synth.world.config import WorldConfig
-from scenes.synth.world.footprint import Obstacle, overlaps_any
+from scenes.synth.world.footprint import overlaps_any
 from scenes.synth.world.meshes import TaggedMesh
 from scenes.synth.world.placement import EGO_FOOTPRINT, Candidate
 from scenes.synth.world.road import Road, make_road, road_mesh
@@ -21,8 +21,8 @@ from scenes.synth.world.road_users import (
     plan,
     road_user_mesh,
 )
-from scenes.synth.world.roadside import frontage, furniture
 from scenes.synth.world.scene import World
+from scenes.synth.world.street import Roadside, draw_roadside
 
 DEFAULT_CONFIG = WorldConfig()
 """The default ranges (:class:`~scenes.synth.world.config.WorldConfig` as it is)."""
@@ -56,15 +56,16 @@ def _fit(
 
 
 def _split_clutter(
-    static_parts: list[TaggedMesh], clutter: list[Clutter]
-) -> tuple[list[TaggedMesh], list[Clutter], list[tuple[str, np.ndarray, TaggedMesh]]]:
-    """The static parts without the clutter that becomes parked road users, the clutter left, and
-    those road users (:func:`scenes.synth.world.road_users.clutter_actors`); the clutter's parts
-    are the last ``len(clutter)`` static parts, in order."""
-    n = len(clutter)
-    head, tail = static_parts[: len(static_parts) - n], static_parts[len(static_parts) - n :]
-    parts, items, parked = clutter_actors(tail, clutter)
-    return head + parts, items, parked
+    roadside: Roadside,
+) -> tuple[Roadside, list[tuple[str, np.ndarray, TaggedMesh]]]:
+    """The roadside without the clutter that becomes parked road users, and those road users
+    (:func:`scenes.synth.world.road_users.clutter_actors`), right side first."""
+    sides, parked = [], []
+    for parts, items in roadside.clutter:
+        kept_parts, kept_items, users = clutter_actors(list(parts), list(items))
+        sides.append((tuple(kept_parts), tuple(kept_items)))
+        parked += users
+    return replace(roadside, clutter=tuple(sides)), parked
 
 
 def generate_world(
@@ -73,21 +74,9 @@ def generate_world(
     """A random world (see the module docstring); all randomness comes from ``rng``."""
     ground_z = -config.lidar_height
     road = make_road(rng)
-    static_parts = [road_mesh(road, ground_z)]
-    obstacles: list[Obstacle] = []
-    clutter: list[Clutter] = []
-    for side in (road.right, road.left):
-        static_parts += frontage(road, side, ground_z, rng)
-        parts, obs = furniture(road, side, ground_z, rng)
-        static_parts += parts
-        obstacles += obs
-    for side in (road.right, road.left):
-        parts, items = street_clutter(road, side, ground_z, obstacles, rng)
-        static_parts += parts
-        clutter += items
-
+    roadside, obstacles = draw_roadside(road, ground_z, rng)
     if config.classes != "vod":  # parked bicycles and mopeds are road users of the set
-        static_parts, clutter, parked = _split_clutter(static_parts, clutter)
+        roadside, parked = _split_clutter(roadside)
     else:
         parked = []
 
@@ -119,13 +108,15 @@ def generate_world(
                     taken_margin.append(margin_of(cand.cls))
                 break
     ego_speed = 0.0 if rng.random() < config.ego_stopped else rng.uniform(*config.ego_speed)
+    if not config.street.is_default:  # drawn last: the actors stay those of the default street
+        roadside = roadside.with_density(config.street, actors, road, ground_z, rng)
     return World(
         world_id=world_id,
         road=road,
         lidar_height=config.lidar_height,
         ego_speed=float(ego_speed),
         actors=tuple(actors),
-        static_mesh=TaggedMesh.concatenate(static_parts),
+        static_mesh=TaggedMesh.concatenate([road_mesh(road, ground_z), *roadside.parts()]),
         actor_meshes=tuple(meshes),
-        clutter=tuple(clutter),
+        clutter=tuple(roadside.items()),
     )
