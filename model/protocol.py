@@ -45,7 +45,7 @@ class PredictionsView(Protocol):
 
     @property
     def classes(self) -> tuple[str, ...]:
-        """``K`` class names (``scenes.geometry.actors.CLASSES``)."""
+        """``K`` class names of the model's class set (``ModelConfig.class_set``)."""
         ...
 
     @property

@@ -129,7 +129,7 @@ def calibrate(
         answers = talk2car_answers(model, data, talk2car, split, limit, low)
         where = f"{Path(talk2car) / f'{split}_commands.json'}"
     else:
-        root = Talk2RadarRoot(data)
+        root = Talk2RadarRoot(data, classes=model.cfg.class_set)
         ids = root.ids(split)[: limit or None]
         answers = []
         for fp in iterate_predictions(model, root, ids, score_threshold=low):
