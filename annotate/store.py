@@ -69,8 +69,8 @@ from annotate.validation import (
     clean_prompt,
     validate,
 )
-from scenes.geometry.actors import CLASSES
 from scenes.geometry.calib import read_calib
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.talk2radar.kitti import ObjectLabel, labels_to_boxes
 from scenes.talk2radar.layout import (
     CALIB,
@@ -123,6 +123,8 @@ class AnnotationStore:
         radar_folder: Radar tree to write; default the one the root has, else ``radar_5frames``.
             A root that already has another radar tree is refused (readers would pick the other).
         validation: Rules checked before every save.
+        classes: The class set of the pairs' boxes (the served model's): an edit rewrites the
+            labels of its classes and keeps every other line of the label file.
         lock_timeout: Seconds to wait for another writer before :class:`StoreError`.
         clock: Returns the time written to the manifest (ISO 8601 text); default UTC now.
         splits: The splits a pair may be saved into (default :data:`DEFAULT_SPLITS`); names of
@@ -141,8 +143,10 @@ class AnnotationStore:
         lock_timeout: float = 30.0,
         clock: Callable[[], str] = _utc_now,
         splits: Sequence[str] | None = None,
+        classes: ClassSet = VOD,
     ) -> None:
         self.path = Path(root)
+        self.classes = classes
         self.splits: tuple[str, ...] = tuple(DEFAULT_SPLITS if splits is None else splits)
         for name in self.splits:
             _check_split_name(name)
@@ -328,8 +332,13 @@ class AnnotationStore:
         draft = clean_prompt(draft)
         with self.transactions.transaction(f"saving the edit of pair {sid}") as tx:
             splits, current = self._listed_version(sid, draft.base_version, "(deleted?); not saved")
-            sample = Talk2RadarRoot(self.path, radar=self.writer.radar_folder).load(sid)
-            kept = [lab for lab in self.files.read_labels(sid) if lab.name.lower() not in _METRIC]
+            root = Talk2RadarRoot(self.path, radar=self.writer.radar_folder, classes=self.classes)
+            sample = root.load(sid)
+            kept = [
+                lab
+                for lab in self.files.read_labels(sid)
+                if self.classes.label_class(lab.name) is None
+            ]
             text = self._text(draft, sample, kept)
             record = self._record(Action.EDIT, sid, current + 1, annotator, splits, draft, text)
             text = text.with_meta(pair_meta(draft, sample, record))
@@ -470,9 +479,6 @@ class AnnotationStore:
             raise SplitError(
                 f"unknown split {split!r}: {self.path} offers {', '.join(self.splits)}"
             )
-
-
-_METRIC = {c.lower() for c in CLASSES}
 
 
 def _journal(record: ManifestRecord) -> dict:

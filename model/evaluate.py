@@ -277,15 +277,19 @@ def _run_model_mode(cfg: EvaluateConfig) -> int:
             "--candidates labels needs --scene-labels VOD_ROOT (a Talk2Radar label_2 lists only "
             "the referents, which would give the answer away)"
         )
-    model = load_checkpoint(cfg.checkpoint, device=cfg.device)
-    classes = model.cfg.class_set  # the checkpoint's: labels are read into its classes
-    scene_labels = None if cfg.scene_labels is None else SceneLabels(cfg.scene_labels, classes)
-    root = Talk2RadarRoot(cfg.data, radar=radar, sidecar=scene_labels is None, classes=classes)
+    scene_labels = None if cfg.scene_labels is None else SceneLabels(cfg.scene_labels)
+    root = Talk2RadarRoot(cfg.data, radar=radar, sidecar=scene_labels is None)
     ids = root.ids(cfg.split)
     if cfg.limit:
         ids = ids[: cfg.limit]
     if not ids:
         raise EvaluationInputError(f"{cfg.data}: split {cfg.split!r} has no samples")
+    model = load_checkpoint(cfg.checkpoint, device=cfg.device)
+    classes = model.cfg.class_set  # the checkpoint's: the labels are read into its classes
+    if classes != root.classes:
+        root = Talk2RadarRoot(cfg.data, radar=radar, sidecar=root.sidecar, classes=classes)
+        if scene_labels is not None:
+            scene_labels = SceneLabels(cfg.scene_labels, classes)
     operating = operating_threshold(model) if cfg.threshold is None else cfg.threshold
     if cfg.candidates == "labels" and not model.takes_labelled_candidates:
         raise EvaluationInputError(

@@ -9,7 +9,6 @@ import numpy as np
 
 from model.evaluation.protocol import AREAS
 from model.evaluation.report_file import MAOS, MAP_3D, MAP_BEV, R40, class_key
-from scenes.geometry.actors import CLASSES
 
 
 @dataclass(frozen=True)
@@ -141,7 +140,7 @@ class VodResult:
         return (
             "Not scored, unknown class name: "
             + "; ".join(parts)
-            + f" (the classes are {', '.join(CLASSES)})"
+            + f" (the classes are {', '.join(c.name for c in self.entire_area.classes)})"
         )
 
     def format_table(self) -> str:

@@ -48,9 +48,9 @@ from torch.utils.data import Dataset
 from scenes.datasets import augment as aug
 from scenes.datasets.augment import AugmentConfig
 from scenes.geometry.actors import Actor
-from scenes.geometry.classes import ALL_CLASSES, VOD, ClassSet
 from scenes.geometry.boxes import match_by_centre
 from scenes.geometry.calib import IMAGE_SIZE, Calibration
+from scenes.geometry.classes import ALL_CLASSES, VOD, ClassSet
 from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.talk2radar.scene_labels import SceneLabels, fov_mask
 

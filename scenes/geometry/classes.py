@@ -35,6 +35,7 @@ __all__ = [
     "ClassSet",
     "ObjectClass",
     "class_set",
+    "object_class",
 ]
 
 
@@ -64,6 +65,11 @@ class ObjectClass:
             mapping; the first is the one a writer gives it.
         with_rider_only: A ``vehicle.bicycle`` maps onto the class only with the attribute
             ``cycle.with_rider`` (the VoD Cyclist: a parked bicycle is not one).
+        find_radius: BEV centre distance (m) within which the class-prompt evaluation's loose
+            rule counts a box as finding an object of the class (``model.class_prompts``).
+        neighbour: KITTI's neighbouring label name (lower case) the evaluator ignores rather than
+            counts as missed for this class (``van`` for a car, ``person_sitting`` for a
+            pedestrian), or None.
     """
 
     name: str
@@ -77,6 +83,8 @@ class ObjectClass:
     label_names: tuple[str, ...] = ()
     categories: tuple[str, ...] = ()
     with_rider_only: bool = False
+    find_radius: float = 1.0
+    neighbour: str | None = None
 
     def __post_init__(self) -> None:
         if not self.name or any(c.isspace() for c in self.name):
@@ -197,11 +205,11 @@ VOD = ClassSet(
     (
         ObjectClass(
             "Car", "car", "cars", (4.2, 1.8, 1.6), _AS_CAR, 2.0, (255, 150, 0),
-            categories=("vehicle.car",),
+            categories=("vehicle.car",), neighbour="van", find_radius=2.0,
         ),
         ObjectClass(
             "Pedestrian", "pedestrian", "pedestrians", (0.6, 0.6, 1.75), _AS_SMALL, 1.0,
-            (255, 70, 170), categories=_PEDESTRIANS,
+            (255, 70, 170), categories=_PEDESTRIANS, neighbour="person_sitting",
         ),
         ObjectClass(
             "Cyclist", "cyclist", "cyclists", (1.8, 0.6, 1.7), _AS_SMALL, 1.2, (70, 200, 255),
@@ -217,28 +225,29 @@ NUSCENES = ClassSet(
     (
         ObjectClass(
             "Car", "car", "cars", (4.63, 1.97, 1.74), _AS_CAR, 2.0, (255, 150, 0),
-            categories=("vehicle.car",),
+            categories=("vehicle.car",), neighbour="van", find_radius=2.0,
         ),
         ObjectClass(
             "Truck", "truck", "trucks", (6.93, 2.51, 2.84), _AS_CAR, 3.0, (230, 60, 40),
-            categories=("vehicle.truck",),
+            categories=("vehicle.truck",), find_radius=3.0,
         ),
         ObjectClass(
             "Bus", "bus", "buses", (10.5, 2.94, 3.47), _AS_CAR, 4.0, (250, 220, 40),
-            categories=("vehicle.bus.rigid", "vehicle.bus.bendy"),
+            categories=("vehicle.bus.rigid", "vehicle.bus.bendy"), find_radius=4.0,
         ),
         ObjectClass(
             "Trailer", "trailer", "trailers", (12.29, 2.90, 3.87), _AS_CAR, 4.0, (160, 110, 60),
-            categories=("vehicle.trailer",),
+            categories=("vehicle.trailer",), find_radius=4.0,
         ),
         ObjectClass(
             "ConstructionVehicle", "construction vehicle", "construction vehicles",
             (6.37, 2.85, 3.19), _AS_CAR, 3.0, (200, 170, 110),
             label_names=("construction_vehicle",), categories=("vehicle.construction",),
+            find_radius=3.0,
         ),
         ObjectClass(
             "Pedestrian", "pedestrian", "pedestrians", (0.73, 0.67, 1.77), _AS_SMALL, 1.0,
-            (255, 70, 170), categories=_PEDESTRIANS,
+            (255, 70, 170), categories=_PEDESTRIANS, neighbour="person_sitting",
         ),
         ObjectClass(
             "Motorcycle", "motorcycle", "motorcycles", (2.11, 0.77, 1.47), _AS_SMALL, 1.2,
@@ -252,7 +261,7 @@ NUSCENES = ClassSet(
         ObjectClass(
             "TrafficCone", "traffic cone", "traffic cones", (0.41, 0.41, 1.07), _AS_SMALL, 0.6,
             (255, 120, 60), heading=False, label_names=("traffic_cone",),
-            categories=("movable_object.trafficcone",),
+            categories=("movable_object.trafficcone",), find_radius=0.6,
         ),
         ObjectClass(
             "Barrier", "barrier", "barriers", (0.50, 2.53, 0.98), _AS_SMALL, 1.2, (180, 180, 200),
@@ -283,6 +292,15 @@ for _set in PRESETS.values():
     for _c in _set.classes:
         if MATCH_DISTANCE[_c.name] != _c.match_distance:
             raise ValueError(f"class {_c.name}: match_distance differs between the presets")
+
+
+def object_class(name: str) -> ObjectClass:
+    """The class called ``name`` in the first preset that has it (a name means one class in
+    every set: its words are the same); ValueError listing :data:`ALL_CLASSES` otherwise."""
+    for s in PRESETS.values():
+        if name in s:
+            return s.get(name)
+    raise ValueError(f"unknown class {name!r}: one of {ALL_CLASSES}")
 
 
 def class_set(name: str) -> ClassSet:

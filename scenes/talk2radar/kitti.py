@@ -15,7 +15,6 @@ from pathlib import Path
 
 import numpy as np
 
-from scenes.geometry.classes import VOD, ClassSet
 from scenes.geometry.calib import (
     IMAGE_SIZE,
     Calibration,
@@ -25,6 +24,7 @@ from scenes.geometry.calib import (
     boxes_camera_to_lidar,
     boxes_lidar_to_camera,
 )
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.utils.durable import atomic_write_text
 from scenes.utils.textfile import read_text_file
 

@@ -21,7 +21,6 @@ from pathlib import Path
 
 import numpy as np
 
-from scenes.geometry.classes import VOD, ClassSet
 from scenes.geometry.calib import (
     IMAGE_SIZE,
     Calibration,
@@ -29,6 +28,7 @@ from scenes.geometry.calib import (
     boxes_camera_to_lidar,
     read_calib,
 )
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.geometry.projection import in_annotated_area
 from scenes.talk2radar.kitti import ObjectLabel, read_label_file
 from scenes.talk2radar.layout import (
