@@ -279,3 +279,16 @@ def test_class_prompts_and_nouns_follow_the_set():
     assert class_noun_prompt(None) == "the objects"
     with pytest.raises(ValueError, match="no class noun for 'Tram'"):
         class_noun_prompt("Tram")
+
+
+@pytest.mark.slow
+def test_nuscenes_model_trains_under_torchrun(truck_root, tmp_path, torchrun):
+    out = tmp_path / "ddp"
+    args = ["-m", "model.train", "--classes", "nuscenes", "--grounding", "tpcnet"]
+    args += ["--data", str(truck_root), "--out", str(out), "--max-steps", "2"]
+    args += ["--batch-size", "1", "--val-every", "0", "--device", "cpu"]
+    log = tmp_path / "torchrun.log"
+    code = torchrun(args, log, timeout=300)
+    assert code == 0, log.read_text()[-3000:]
+    model = load_checkpoint(out / "last.pt")
+    assert model.checkpoint_metadata.step == 2 and model.cfg.class_set is NUSCENES
