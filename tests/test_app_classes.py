@@ -16,6 +16,7 @@ from app.annotate_tab.widgets import CHANGE_CLASS, NEW_BOX_CLASS
 from app.scene_view import CLASS_LEGEND
 from app.text import md_text
 from scenes.geometry.classes import NUSCENES, VOD
+from scenes.talk2radar.root import Talk2RadarRoot
 
 
 @pytest.fixture(scope="module")
@@ -72,6 +73,20 @@ def test_a_nuscenes_model_is_drawn_named_and_annotated_in_its_classes(
         assert panel.draft.boxes[0].cls == "Truck"
         client.click(CHANGE_CLASS, "TrafficCone")
         client.pump_until(lambda: panel.draft.boxes[0].cls == "TrafficCone", 5, "the relabel")
+        # the pair is saved with the set's class name and read back into the set
+        client.set("Pair prompt", "the traffic cone on the left")
+        client.set("Split", "test")
+        client.set("Annotator", "ada")
+        client.pump_until(lambda: panel.w.annotator.value == "ada", 5, "the annotator")
+        client.pump_until(lambda: bool(panel.draft.prompt), 5, "the prompt")
+        client.click("Save pair")
+        client.pump_until(
+            lambda: any(t.startswith("Saved pair") for t, _ in client.notifications), 10, "saved"
+        )
+        sid = next(t for t, _ in client.notifications if t.startswith("Saved pair")).split()[-1]
+        root = app.frames.root.path
+        assert Talk2RadarRoot(root, classes=NUSCENES).load(sid).classes == ("TrafficCone",)
+        assert Talk2RadarRoot(root).load(sid).classes == ()  # no vod class
 
         # answers: boxes of the model's classes, the heatmap coloured per its ten channels
         client.set("Score threshold", 0.0)

@@ -292,3 +292,21 @@ def test_nuscenes_model_trains_under_torchrun(truck_root, tmp_path, torchrun):
     assert code == 0, log.read_text()[-3000:]
     model = load_checkpoint(out / "last.pt")
     assert model.checkpoint_metadata.step == 2 and model.cfg.class_set is NUSCENES
+
+
+def test_nuscenes_categories_map_onto_the_served_set(nuscenes_training_root):
+    """A nuScenes root's annotations (a parked vehicle.truck added to every sample) as the app
+    reads them: with ``vod`` the truck is outside the set; with ``nuscenes`` it is a Truck and a
+    ridden bicycle a Bicycle (nuScenes' mapping), not a Cyclist."""
+    from collections import Counter
+
+    from app.served_nuscenes import NuScenesSource
+
+    root = nuscenes_training_root
+    vod = NuScenesSource(root, root / "commands")
+    nus = NuScenesSource(root, root / "commands", NUSCENES)
+    for sid in list(vod.nuscenes.samples)[:2]:
+        a, b = Counter(vod.load(sid).classes), Counter(nus.load(sid).classes)
+        assert a["Truck"] == 0 and b["Truck"] == 1
+        assert b["Bicycle"] == a["Cyclist"] and b["Car"] == a["Car"]
+        assert b["Pedestrian"] == a["Pedestrian"]
