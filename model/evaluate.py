@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
 from model.checkpoint import DEFAULT_CHECKPOINT
+from model.config import ClassSetName
 from model.evaluation.files import (
     EvaluationInputError,
     load_prediction_dir,
@@ -50,6 +51,7 @@ from model.evaluation.files import (
 from model.evaluation.grounding import CandidateSource
 from model.evaluation.metrics import VodResult
 from model.evaluation.worker_watch import PredictionWorkerError
+from scenes.geometry.classes import class_set
 from scenes.utils.cli import add_options, from_args, option
 
 if TYPE_CHECKING:
@@ -86,6 +88,12 @@ class EvaluateConfig:
         None,
         group=FILES_MODE,
         help="folder of prediction files <frame id>.txt (a missing file = no detections)",
+    )
+    classes: ClassSetName = option(
+        "vod",
+        group=FILES_MODE,
+        help="the class set scored, a row per class (vod: Car, Pedestrian, Cyclist; nuscenes: "
+        "the 10 detection classes); model mode scores the checkpoint's own",
     )
     data: Path | None = option(
         None, group=MODEL_MODE, help="Talk2Radar root, or a nuScenes root with --talk2car"
@@ -219,7 +227,9 @@ def parse_args(argv: Sequence[str] | None = None) -> EvaluateConfig:
 
 
 def _run_files_mode(cfg: EvaluateConfig) -> int:
-    scored = score_directories(cfg.labels, cfg.preds, devkit_offsets=not cfg.exact_overlaps)
+    scored = score_directories(
+        cfg.labels, cfg.preds, not cfg.exact_overlaps, class_set(cfg.classes)
+    )
     print(
         f"labels: {cfg.labels} ({len(scored.frame_ids)} frames); predictions: {cfg.preds}"
         + (

@@ -12,8 +12,9 @@ detector's heatmap channels. Two presets exist:
 
 Facts per class (:class:`ObjectClass`): the name (model, label files, tables), the words a person
 uses for it (the answer words of the app), the mean size ``(l, w, h)`` in metres, the evaluator's
-minimum overlaps, the centre distance of a match, the legend colour, whether it has a heading, and
-the label names and nuScenes categories that map onto it. The size statistics of the nuScenes
+minimum overlaps and KITTI's neighbouring label, the centre distances of a match (training's and
+the class-prompt evaluation's), the legend colour, whether it has a heading, and the label names
+and nuScenes categories that map onto it. The size statistics of the nuScenes
 classes are the training-set means nuScenes-based detectors publish as anchor sizes; those of the
 three VoD classes are the ones this project's synthetic world draws around. The detector has no
 size prior (it regresses ``log l, log w, log h`` directly), so the mean size is the synthetic
