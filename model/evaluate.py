@@ -182,6 +182,10 @@ class EvaluateConfig:
         if self.data is not None:
             if self.labels is not None or self.preds is not None:
                 raise ValueError("--data does not go with --labels/--preds")
+            if self.classes != "vod":
+                raise ValueError(
+                    "--classes goes with --labels/--preds; --data scores the checkpoint's class set"
+                )
             from scenes.datasets.nuscenes_frames import is_nuscenes_root
 
             if self.talk2car is None and is_nuscenes_root(self.data):
