@@ -50,7 +50,7 @@ from scenes.datasets.augment import AugmentConfig
 from scenes.geometry.actors import Actor
 from scenes.geometry.boxes import match_by_centre
 from scenes.geometry.calib import IMAGE_SIZE, Calibration
-from scenes.geometry.classes import ALL_CLASSES, VOD, ClassSet
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.talk2radar.scene_labels import SceneLabels, fov_mask
 
@@ -208,12 +208,13 @@ def scene_ids(root: Talk2RadarRoot, split: str) -> list[str]:
 
 
 def _objects_from_referents(
-    boxes: list[np.ndarray], labels: list[np.ndarray]
+    boxes: list[np.ndarray], labels: list[np.ndarray], num_classes: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The union of several samples' referent boxes of one frame (duplicates merged)."""
+    """The union of several samples' referent boxes of one frame (duplicates merged); labels
+    index a set of ``num_classes`` classes."""
     out_boxes: list[np.ndarray] = []
     out_labels: list[int] = []
-    limits = np.full(len(ALL_CLASSES), REFERENT_MATCH_DISTANCE)
+    limits = np.full(num_classes, REFERENT_MATCH_DISTANCE)
     for b, lab in zip(boxes, labels, strict=True):
         known = np.array(out_boxes).reshape(-1, 7)
         match = match_by_centre(b, lab, known, np.array(out_labels, dtype=np.int64), limits)
@@ -326,7 +327,7 @@ class FrameDataset(Dataset):
             region = AnnotatedRegion(objects.calib, size)
             boxes, labels = list(boxes), list(labels)
         else:
-            union = _objects_from_referents([r[0] for r in referents], ref_labels)
+            union = _objects_from_referents([r[0] for r in referents], ref_labels, len(names))
             boxes, labels = list(union[0]), list(union[1])
         limits = np.full(len(names), REFERENT_MATCH_DISTANCE)
         given = []

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 __all__ = [
     "ALL_CLASSES",
@@ -161,14 +162,16 @@ class ClassSet:
         """The :class:`ObjectClass` called ``name`` (ValueError when absent)."""
         return self.classes[self.index(name)]
 
+    @cached_property
+    def _by_label(self) -> dict[str, str]:
+        """Lower-case label name -> class name (built once; the readers and the evaluator ask
+        for every label of every frame)."""
+        return {n: c.name for c in self.classes for n in c.label_names}
+
     def label_class(self, label_name: str) -> str | None:
         """The class a label file's name (KITTI / View-of-Delft spelling, any case) maps onto,
         or None when it is outside the set (``rider``, ``DontCare``, a typo)."""
-        low = label_name.lower()
-        for c in self.classes:
-            if low in c.label_names:
-                return c.name
-        return None
+        return self._by_label.get(label_name.lower())
 
     def label_index(self, label_name: str) -> int:
         """The channel of :meth:`label_class` of ``label_name``, or ``-1`` outside the set."""
