@@ -236,7 +236,7 @@ class NuScenesServed:
         )
 
     def open_store(self) -> Talk2CarStore:
-        return Talk2CarStore(self.pairs_path, self.root.nuscenes)
+        return Talk2CarStore(self.pairs_path, self.root.nuscenes, classes=self.root.classes)
 
     def source_frame(self, sample: Sample) -> SourceFrame:
         return SourceFrame(
@@ -250,7 +250,8 @@ class NuScenesServed:
     def draft_issues(self, draft: Draft, sample: Sample) -> tuple[Issue, ...]:
         """A command refers to exactly one labelled annotation
         (:func:`annotate.talk2car.referred_annotation`)."""
-        return referred_annotation(draft, *self.root.nuscenes.annotation_boxes(sample.sample_id))[1]
+        found = self.root.nuscenes.annotation_boxes(sample.sample_id)
+        return referred_annotation(draft, *found, self.root.classes)[1]
 
     def frame_notes(self, sample: Sample) -> str:
         return self.root.notes(sample)
