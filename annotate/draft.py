@@ -25,6 +25,7 @@ import numpy as np
 
 from scenes.geometry.boxes import wrap_yaw
 from scenes.geometry.calib import LIDAR_HEIGHT
+from scenes.geometry.classes import object_class
 
 DEFAULT_SIZES: dict[str, tuple[float, float, float]] = {
     "Car": (4.2, 1.8, 1.5),
@@ -32,6 +33,16 @@ DEFAULT_SIZES: dict[str, tuple[float, float, float]] = {
     "Cyclist": (1.8, 0.7, 1.7),
 }
 """Typical ``(l, w, h)`` in metres of a new box of each class (about VoD's mean sizes)."""
+
+
+def _mean_size(cls: str) -> tuple[float, float, float]:
+    """A new box's size of a class without a :data:`DEFAULT_SIZES` entry: its class set's mean
+    size (:attr:`scenes.geometry.classes.ObjectClass.mean_size`); a pedestrian's for a name of
+    no class set."""
+    try:
+        return object_class(cls).mean_size
+    except ValueError:
+        return DEFAULT_SIZES["Pedestrian"]
 
 
 class DraftError(ValueError):
@@ -69,7 +80,7 @@ def default_box(
     ``ground_z`` defaults to the ground of a LiDAR mounted :data:`scenes.geometry.calib.LIDAR_HEIGHT` above
     it; classes without a typical size get the pedestrian's.
     """
-    length, width, height = DEFAULT_SIZES.get(cls, DEFAULT_SIZES["Pedestrian"])
+    length, width, height = DEFAULT_SIZES.get(cls) or _mean_size(cls)
     x, y, ground_z, yaw = _finite((x, y, ground_z, yaw), "default box")
     return (x, y, ground_z + height / 2.0, length, width, height, _wrap(yaw))
 

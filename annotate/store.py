@@ -69,8 +69,8 @@ from annotate.validation import (
     clean_prompt,
     validate,
 )
-from scenes.geometry.actors import CLASSES
 from scenes.geometry.calib import read_calib
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.talk2radar.kitti import ObjectLabel, labels_to_boxes
 from scenes.talk2radar.layout import (
     CALIB,
@@ -123,6 +123,7 @@ class AnnotationStore:
         radar_folder: Radar tree to write; default the one the root has, else ``radar_5frames``.
             A root that already has another radar tree is refused (readers would pick the other).
         validation: Rules checked before every save.
+        classes: The pairs' class set (the served model's); an edit keeps the other labels.
         lock_timeout: Seconds to wait for another writer before :class:`StoreError`.
         clock: Returns the time written to the manifest (ISO 8601 text); default UTC now.
         splits: The splits a pair may be saved into (default :data:`DEFAULT_SPLITS`); names of
@@ -141,8 +142,10 @@ class AnnotationStore:
         lock_timeout: float = 30.0,
         clock: Callable[[], str] = _utc_now,
         splits: Sequence[str] | None = None,
+        classes: ClassSet = VOD,
     ) -> None:
         self.path = Path(root)
+        self.classes = classes
         self.splits: tuple[str, ...] = tuple(DEFAULT_SPLITS if splits is None else splits)
         for name in self.splits:
             _check_split_name(name)
@@ -211,12 +214,12 @@ class AnnotationStore:
             return self.files.splits_of(sid)
 
     def open(self, sample_id: str | int) -> Draft:
-        """Reopen a listed sample as a draft for editing (its metric-class boxes and prompt)."""
+        """Reopen a listed sample as a draft for editing (its boxes of the class set, prompt)."""
         sid = format_id(sample_id)
         if not self.splits_of(sid):
             raise StoreError(f"sample {sid} is not listed in any split of {self.path} (deleted?)")
         calib = read_calib(sample_file(self.lidar_dir, CALIB, sid))
-        boxes, classes = labels_to_boxes(self.files.read_labels(sid), calib)
+        boxes, classes = labels_to_boxes(self.files.read_labels(sid), calib, self.classes)
         prompt = self.files.read_prompt(sid) or ""
         return Draft.from_boxes(
             boxes,
@@ -328,8 +331,9 @@ class AnnotationStore:
         draft = clean_prompt(draft)
         with self.transactions.transaction(f"saving the edit of pair {sid}") as tx:
             splits, current = self._listed_version(sid, draft.base_version, "(deleted?); not saved")
-            sample = Talk2RadarRoot(self.path, radar=self.writer.radar_folder).load(sid)
-            kept = [lab for lab in self.files.read_labels(sid) if lab.name.lower() not in _METRIC]
+            root = Talk2RadarRoot(self.path, radar=self.writer.radar_folder, classes=self.classes)
+            sample, labels = root.load(sid), self.files.read_labels(sid)
+            kept = [lab for lab in labels if self.classes.label_class(lab.name) is None]
             text = self._text(draft, sample, kept)
             record = self._record(Action.EDIT, sid, current + 1, annotator, splits, draft, text)
             text = text.with_meta(pair_meta(draft, sample, record))
@@ -470,9 +474,6 @@ class AnnotationStore:
             raise SplitError(
                 f"unknown split {split!r}: {self.path} offers {', '.join(self.splits)}"
             )
-
-
-_METRIC = {c.lower() for c in CLASSES}
 
 
 def _journal(record: ManifestRecord) -> dict:

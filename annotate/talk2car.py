@@ -45,6 +45,7 @@ from annotate.store import DEFAULT_SPLITS, SaveResult
 from annotate.validation import Issue, ValidationConfig, clean_prompt, validate
 from scenes.geometry.boxes import wrap_yaw
 from scenes.geometry.calib import boxes_2d, boxes_lidar_to_camera
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.nuscenes.classes import model_class
 from scenes.nuscenes.root import NuScenesError, NuScenesRoot
 from scenes.nuscenes.talk2car import (
@@ -70,6 +71,7 @@ def referred_annotation(
     boxes: np.ndarray,
     categories: tuple[str, ...],
     attributes: tuple[tuple[str, ...], ...],
+    classes: ClassSet = VOD,
 ) -> tuple[int | None, tuple[Issue, ...]]:
     """The index of the one annotation a draft refers to, or why it does not refer to exactly one.
 
@@ -79,6 +81,7 @@ def referred_annotation(
             (:meth:`scenes.nuscenes.root.NuScenesRoot.annotation_boxes`).
         categories: Their ``K`` nuScenes categories.
         attributes: Their ``K`` attribute tuples.
+        classes: The class set (the served model's) the categories map onto.
 
     Returns:
         ``(index, ())`` when the draft's one box is one annotation of the class set with the same
@@ -105,7 +108,7 @@ def referred_annotation(
         worst = diff.max(axis=1)
         index = int(np.argmin(worst))
         if worst[index] <= MATCH:
-            cls = model_class(categories[index], attributes[index])
+            cls = model_class(categories[index], attributes[index], classes)
             if cls is None:
                 why = f"its category {categories[index]} is outside the class set"
                 return None, (Issue("box[0]", f"box 1 cannot be a command's referent: {why}", 0),)
@@ -143,6 +146,8 @@ class Talk2CarStore:
         splits: The splits offered.
         validation: Rules checked before every save (default: the class set, the CAM_FRONT image
             size of the root's first sample).
+        classes: The class set (the served model's): a command's box is an annotation whose
+            category maps onto the draft box's class of this set.
     """
 
     def __init__(
@@ -151,13 +156,15 @@ class Talk2CarStore:
         root: NuScenesRoot,
         splits: tuple[str, ...] = DEFAULT_SPLITS,
         validation: ValidationConfig | None = None,
+        classes: ClassSet = VOD,
     ) -> None:
         self.path = Path(path)
+        self.classes = classes
         self.commands_dir = self.path / COMMANDS_FOLDER
         self.root = root
         self.splits = tuple(splits)
         if validation is None:
-            validation = ValidationConfig(image_size=_image_size(root))
+            validation = ValidationConfig(image_size=_image_size(root), classes=classes.names)
         self.validation = validation
         self.requests: RequestLog[SaveResult] = RequestLog()
         self._lock = threading.Lock()
@@ -263,7 +270,7 @@ class Talk2CarStore:
         calib = source.sample.calib
         report = validate(draft, self.validation, calib)
         boxes, categories, attributes = self.root.annotation_boxes(sample)
-        index, issues = referred_annotation(draft, boxes, categories, attributes)
+        index, issues = referred_annotation(draft, boxes, categories, attributes, self.classes)
         if issues:
             report = replace(report, issues=report.issues + issues)
         report.raise_if_invalid()

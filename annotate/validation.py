@@ -13,7 +13,8 @@ Errors:
   breaks; more than 500 characters);
 - no box and the "refers to nothing" flag not set; or the flag set while boxes remain;
 - a box with a non-finite value, a non-positive size or a size above ``max_size``;
-- a class outside the metric classes (``Car``, ``Pedestrian``, ``Cyclist``);
+- a class outside the allowed classes (``ValidationConfig.classes``: the served model's class
+  set; ``Car``, ``Pedestrian``, ``Cyclist`` by default);
 - a box centre outside the annotated range: ``x`` in ``[0, 51.2]``, ``|y| <= 25.6`` (the model's
   BEV grid) and ``z`` in ``[-5, 5]`` m, all configurable;
 - when a camera calibration is given and ``require_in_image`` is set: a box that does not project
@@ -36,9 +37,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from annotate.draft import Draft
-from scenes.geometry.actors import CLASSES
 from scenes.geometry.boxes import bev_iou
 from scenes.geometry.calib import IMAGE_SIZE, Calibration, boxes_2d, boxes_lidar_to_camera
+from scenes.geometry.classes import VOD
 from scenes.utils.text_policy import ANNOTATOR, PROMPT, TextPolicyError, TextRule, clean_text
 
 MIN_EVAL_HEIGHT_PX = 40.0
@@ -89,7 +90,7 @@ class ValidationConfig:
     y_max: float = 25.6
     z_range: tuple[float, float] = (-5.0, 5.0)
     max_size: float = 20.0
-    classes: tuple[str, ...] = CLASSES
+    classes: tuple[str, ...] = VOD.names
     require_in_image: bool = True
     image_size: tuple[int, int] = IMAGE_SIZE
     max_prompt_words: int = 30

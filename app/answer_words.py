@@ -3,7 +3,8 @@
 A grounding model that boxes something for every sentence looks as if it understood every
 sentence. The app says what it found instead: how many objects of which classes, the count
 itself when the prompt asks "how many", and, when nothing is boxed, that nothing here matches
-and which kinds of object the model can find at all (so "the bus" is answered honestly).
+and which kinds of object the model can find at all, worded from the served checkpoint's own
+class set (so "the bus" is answered honestly by a ``vod`` model, "the tram" by any).
 """
 
 from __future__ import annotations
@@ -11,20 +12,18 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Sequence
 
-from scenes.geometry.actors import CLASSES
+from scenes.geometry.classes import VOD, ClassSet, object_class
 from scenes.language.prompts import is_count_question
-
-CLASS_WORDS: dict[str, tuple[str, str]] = {
-    "Car": ("car", "cars"),
-    "Pedestrian": ("pedestrian", "pedestrians"),
-    "Cyclist": ("cyclist", "cyclists"),
-}
-"""Class name -> (singular, plural) as the answer says it."""
 
 
 def _noun(cls: str, count: int) -> str:
-    one, many = CLASS_WORDS.get(cls, (cls, cls))
-    return one if count == 1 else many
+    """The class's word (:attr:`scenes.geometry.classes.ObjectClass.noun` or ``plural``); an
+    unknown name as it is."""
+    try:
+        found = object_class(cls)
+    except ValueError:
+        return cls
+    return found.noun if count == 1 else found.plural
 
 
 def _join(parts: Sequence[str]) -> str:
@@ -34,12 +33,12 @@ def _join(parts: Sequence[str]) -> str:
     return ", ".join(parts[:-1]) + " and " + parts[-1]
 
 
-def answer_sentence(prompt: str, classes: Sequence[str], known: Sequence[str] = CLASSES) -> str:
+def answer_sentence(prompt: str, classes: Sequence[str], known: ClassSet = VOD) -> str:
     """One sentence for an answer of boxes of ``classes`` (one entry per box, in score order) to
-    ``prompt``; ``known``: the classes the model finds. Plain text (no markup)."""
+    ``prompt``; ``known``: the class set the model finds (the empty answer names its plurals:
+    "I find cars, pedestrians and cyclists"). Plain text (no markup)."""
     if not classes:
-        kinds = _join([_noun(c, 2) for c in known])
-        return f"No object here matches; I find {kinds}."
+        return f"No object here matches; I find {known.plural_list()}."
     counts = Counter(classes)
     parts = [f"{k} {_noun(c, k)}" for c, k in sorted(counts.items(), key=lambda x: -x[1])]
     n = len(classes)
@@ -49,4 +48,4 @@ def answer_sentence(prompt: str, classes: Sequence[str], known: Sequence[str] = 
     return f"{_join(parts)} {verb}."
 
 
-__all__ = ["CLASS_WORDS", "answer_sentence"]
+__all__ = ["answer_sentence"]

@@ -21,6 +21,8 @@ from collections.abc import Sequence
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from scenes.geometry.classes import PRESETS as CLASS_SETS
+
 RGB = tuple[int, int, int]
 
 HEIGHT_STOPS: tuple[RGB, ...] = (
@@ -45,12 +47,9 @@ VELOCITY_STOPS: tuple[RGB, ...] = (
 """Diverging radar map from ``-v_max`` (approaching, blue) over 0 (grey) to ``+v_max`` (red). The
 static returns (most of a radar cloud) are a quiet grey, so that moving objects stand out."""
 
-CLASS_COLORS: dict[str, RGB] = {
-    "Car": (255, 150, 0),
-    "Pedestrian": (255, 70, 170),
-    "Cyclist": (70, 200, 255),
-}
-"""Colour of each metric class (predicted boxes, labels, heatmap channels)."""
+CLASS_COLORS: dict[str, RGB] = {c.name: c.color for s in CLASS_SETS.values() for c in s.classes}
+"""Colour of each class of every class set (predicted boxes, labels, heatmap channels, the
+legend): :attr:`scenes.geometry.classes.ObjectClass.color` by name."""
 
 FALLBACK_COLOR: RGB = (200, 200, 200)
 """Colour of a class name that is not in :data:`CLASS_COLORS`."""
@@ -208,3 +207,24 @@ def height_legend(z_min: float, z_max: float) -> np.ndarray:
 def intensity_legend() -> np.ndarray:
     """Legend of :func:`intensity_colors`."""
     return colorbar_image(INTENSITY_STOPS, ["0", "64", "255"], "LiDAR intensity (sqrt scale)", "")
+
+
+def class_legend(names: Sequence[str], *, width: int = 320, font_size: int = 13) -> np.ndarray:
+    """The legend of the box colours: a swatch of :func:`class_color` and the name of each class
+    of ``names`` (the served model's class set), two to a row.
+
+    Returns:
+        ``(H, width, 3)`` uint8 RGB image (light text on a dark grey background).
+    """
+    margin, line, swatch = 8, font_size + 6, font_size
+    rows = (len(names) + 1) // 2
+    image = Image.new("RGB", (width, 2 * margin + rows * line), (37, 38, 43))
+    draw = ImageDraw.Draw(image)
+    font = _font(font_size)
+    column = (width - 2 * margin) // 2
+    for i, name in enumerate(names):
+        x = margin + (i % 2) * column
+        y = margin + (i // 2) * line
+        draw.rectangle([x, y + 2, x + swatch, y + 2 + swatch], fill=class_color(name))
+        draw.text((x + swatch + 6, y), name, fill=(230, 230, 230), font=font)
+    return np.asarray(image, dtype=np.uint8)

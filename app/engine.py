@@ -28,7 +28,8 @@ from typing import Any, Generic, Literal, TypeVar
 
 import numpy as np
 
-from model import GroundingModel, ModelSettings, PredictionsView
+from model import GroundingModel, ModelSettings, PredictionsView, model_classes
+from scenes.geometry.classes import ClassSet
 from scenes.talk2radar.root import Sample
 from scenes.utils.lru import LRUCache
 
@@ -194,6 +195,8 @@ class GroundingEngine(Generic[Features]):
     ) -> None:
         self.model = model
         self.modalities = model_modalities(model)
+        self.classes: ClassSet = model_classes(model)
+        """The model's class set (its legend, answer words and the Annotate tab's classes)."""
         self.feature_cache_size = max(1, feature_cache_size)
         self.workers = DaemonWorkers(workers, "talk2pc-model")
         self._model_lock = threading.Lock()

@@ -4,7 +4,7 @@ The head's heatmaps are ``(3, H, W)`` sigmoid scores on its BEV grid (:class:`mo
 the grid type the app reads; the model's ``BevGrid`` has it:
 ``heatmaps[c, iy, ix]``, row ``iy`` along +y, column ``ix`` along +x, LiDAR frame). One image
 shows all three classes: each cell takes the colour of its highest-scoring class
-(:data:`app.colors.CLASS_COLORS`) and an alpha of ``opacity * score``, so empty cells are clear.
+(:func:`app.colors.class_color` of the served model's classes) and an alpha of ``opacity * score``, so empty cells are clear.
 
 Placement: viser draws an image in its node's local XY plane with image columns along +x and
 rows (downwards) along +y, centred on the node's position. A ``[iy, ix]`` grid is therefore passed
@@ -23,7 +23,7 @@ import viser
 
 from app.colors import RGB, class_color
 from model import GridExtent
-from scenes.geometry.actors import CLASSES
+from scenes.geometry.classes import VOD
 
 GROUND_LIFT = 0.05
 """Metres between the ground estimate and the heatmap plane."""
@@ -61,7 +61,8 @@ def heatmap_rgba(
     Args:
         heatmaps: ``(C, H, W)`` scores in ``[0, 1]`` (values outside are clipped), ``[c, iy, ix]``.
         opacity: Global opacity in ``[0, 1]``; a cell's alpha is ``255 * opacity * max_c score``.
-        colors: ``C`` RGB colours; default: the class colours of :data:`scenes.geometry.actors.CLASSES`.
+        colors: ``C`` RGB colours; default: the class colours of the ``vod`` class set (a
+            three-channel stack).
 
     Returns:
         ``(H, W, 4)`` uint8 RGBA, row ``iy``, column ``ix`` (pass it to viser unchanged).
@@ -70,7 +71,7 @@ def heatmap_rgba(
     if heat.ndim != 3:
         raise ValueError(f"heatmaps must be (C, H, W), got shape {heat.shape}")
     palette = np.asarray(
-        colors if colors is not None else [class_color(c) for c in CLASSES], dtype=np.uint8
+        colors if colors is not None else [class_color(c) for c in VOD.names], dtype=np.uint8
     ).reshape(-1, 3)
     if len(palette) != heat.shape[0]:
         raise ValueError(f"{heat.shape[0]} heatmap channels but {len(palette)} colours")
@@ -86,9 +87,13 @@ class HeatmapView:
     :meth:`show` keeps the scores so that :meth:`set_opacity` can recolour without the model.
     """
 
-    def __init__(self, scene: viser.SceneApi, name: str = "/heatmap") -> None:
+    def __init__(
+        self, scene: viser.SceneApi, name: str = "/heatmap", classes: Sequence[str] = VOD.names
+    ) -> None:
         self.scene = scene
         self.name = name
+        self.colors = [class_color(c) for c in classes]
+        """A colour per heatmap channel: the served model's classes in channel order."""
         self._handle: viser.ImageHandle | None = None
         self._heatmaps: np.ndarray | None = None
         self._opacity = 0.7
@@ -104,7 +109,7 @@ class HeatmapView:
         self._heatmaps = np.asarray(heatmaps, dtype=np.float32)
         self._opacity = float(opacity)
         place = ground_placement(grid, ground_z)
-        rgba = heatmap_rgba(self._heatmaps, self._opacity)
+        rgba = heatmap_rgba(self._heatmaps, self._opacity, self.colors)
         self.clear_node()
         self._handle = self.scene.add_image(
             self.name,
@@ -122,7 +127,7 @@ class HeatmapView:
         """Recolour the shown heatmap with a new global opacity."""
         self._opacity = float(opacity)
         if self._handle is not None and self._heatmaps is not None:
-            self._handle.image = heatmap_rgba(self._heatmaps, self._opacity)
+            self._handle.image = heatmap_rgba(self._heatmaps, self._opacity, self.colors)
 
     @property
     def visible(self) -> bool:

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from model import LabelledBoxes
-from scenes.geometry.actors import CLASSES
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.talk2radar.root import Sample, Talk2RadarRoot
 from scenes.talk2radar.scene_labels import SceneLabels
 
@@ -26,11 +26,19 @@ class LabelledFrames:
         root: The served root.
         scene_labels: A View-of-Delft root with the frames' full labels, or None: then a root
             without prompts (a release opened directly) is its own, and a Talk2Radar root has none.
+        classes: The served model's class set: the labelled boxes are its classes' (the root
+            is read into the same set).
     """
 
-    def __init__(self, root: Talk2RadarRoot, scene_labels: str | Path | None = None) -> None:
+    def __init__(
+        self,
+        root: Talk2RadarRoot,
+        scene_labels: str | Path | None = None,
+        classes: ClassSet = VOD,
+    ) -> None:
         self.own = scene_labels is None and not root.has_prompts
-        self.labels = SceneLabels(scene_labels) if scene_labels is not None else None
+        self.classes = classes
+        self.labels = SceneLabels(scene_labels, classes) if scene_labels is not None else None
 
     @property
     def available(self) -> bool:
@@ -38,7 +46,8 @@ class LabelledFrames:
         return self.own or self.labels is not None
 
     def boxes(self, sample: Sample) -> LabelledBoxes | None:
-        """The metric-class labelled boxes of ``sample``'s frame (None: none known).
+        """The labelled boxes of ``sample``'s frame of the served model's classes (None: none
+        known).
 
         Raises:
             scenes.talk2radar.layout.RootError, scenes.talk2radar.kitti.LabelError: a missing or malformed label file.
@@ -46,10 +55,11 @@ class LabelledFrames:
         if self.labels is not None:
             if not self.labels.has(sample.sample_id):
                 return None
-            return LabelledBoxes(*self.labels.load(sample.sample_id).metric())
+            return LabelledBoxes(*self.labels.load(sample.sample_id).metric(), self.classes)
         if self.own:
-            labels = np.array([CLASSES.index(c) for c in sample.classes], dtype=np.int64)
-            return LabelledBoxes(sample.boxes, labels)
+            names = self.classes.names
+            labels = np.array([names.index(c) for c in sample.classes], dtype=np.int64)
+            return LabelledBoxes(sample.boxes, labels, self.classes)
         return None
 
 

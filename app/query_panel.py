@@ -42,6 +42,7 @@ from app.engine import MODALITY_LABELS, Answer, Modality, Predictions
 from app.heatmap_view import HeatmapView
 from app.navigation import Frame
 from app.text import md_text
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.talk2radar.root import Sample
 from scenes.utils.text_policy import PROMPT, TextPolicyError, clean_text, collapse_spaces
 
@@ -214,7 +215,9 @@ def answer_labels(pred: Predictions, gt_boxes: np.ndarray) -> tuple[np.ndarray, 
     return ious, labels
 
 
-def results_markdown(answer: Answer, ious: np.ndarray, latency_ms: float) -> str:
+def results_markdown(
+    answer: Answer, ious: np.ndarray, latency_ms: float, known: ClassSet = VOD
+) -> str:
     """The answer summary: the answer in words (:func:`app.answer_words.answer_sentence`), the
     latency breakdown and the best boxes with score and IoU.
 
@@ -222,12 +225,13 @@ def results_markdown(answer: Answer, ious: np.ndarray, latency_ms: float) -> str
         answer: The model's answer.
         ious: ``(K,)`` best 3D IoU of each box with the ground truth (NaN without ground truth).
         latency_ms: From the prompt's arrival at the server to the drawn answer.
+        known: The served model's class set (the empty answer's words).
     """
     pred = answer.predictions
     scores = np.asarray(pred.scores).reshape(-1)
     encode = "cached" if answer.cached else f"{answer.encode_ms:.0f} ms"
     lines = [
-        md_text(answer_sentence(answer.prompt, tuple(pred.classes))),
+        md_text(answer_sentence(answer.prompt, tuple(pred.classes), known)),
         "",
         f"**{len(scores)} box{'es' if len(scores) != 1 else ''}** in **{latency_ms:.0f} ms** "
         f"(ground {answer.ground_ms:.0f} ms, scene encoding {encode}"

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from contextlib import AbstractContextManager
 from dataclasses import dataclass, replace
 from typing import Literal, Protocol
@@ -30,6 +30,7 @@ import viser
 
 from app.boxes_view import BOX_EDGES
 from app.colors import (
+    class_legend,
     height_colors,
     height_legend,
     intensity_colors,
@@ -39,6 +40,7 @@ from app.colors import (
 )
 from scenes.geometry.boxes import box_corners
 from scenes.geometry.calib import LIDAR_HEIGHT, Calibration
+from scenes.geometry.classes import VOD
 
 log = logging.getLogger(__name__)
 
@@ -437,8 +439,16 @@ def lidar_legend(coloring: LidarColoring) -> np.ndarray:
     return intensity_legend() if coloring == "intensity" else height_legend(*HEIGHT_RANGE)
 
 
-def build_view_panel(gui: viser.GuiApi, settings: ViewSettings | None = None) -> ViewPanel:
-    """Add the View widgets to ``gui`` (in the current container) and return their handles."""
+CLASS_LEGEND = "Box colours"
+"""The label of the class legend (:func:`build_view_panel`) before the classes' names."""
+
+
+def build_view_panel(
+    gui: viser.GuiApi, settings: ViewSettings | None = None, classes: Sequence[str] = VOD.names
+) -> ViewPanel:
+    """Add the View widgets to ``gui`` (in the current container) and return their handles;
+    ``classes``: the served model's classes, whose colours the class legend shows (its label
+    names them: "Box colours: Car, Pedestrian, Cyclist")."""
     s = settings or ViewSettings()
     coloring_label = next(k for k, v in LIDAR_COLORING_LABELS.items() if v == s.lidar_coloring)
     camera = gui.add_button_group(
@@ -459,6 +469,7 @@ def build_view_panel(gui: viser.GuiApi, settings: ViewSettings | None = None) ->
         velocity_legend(s.velocity_range), label="Radar colours: compensated radial velocity"
     )
     lidar_legend_handle = gui.add_image(lidar_legend(s.lidar_coloring), label="LiDAR colours")
+    gui.add_image(class_legend(classes), label=f"{CLASS_LEGEND}: {', '.join(classes)}")
     return ViewPanel(
         lidar_coloring=lidar_coloring,
         show_lidar=show_lidar,

@@ -27,8 +27,9 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from annotate import AnnotationStore, Draft, SourceFrame
-from annotate.validation import Issue
+from annotate.validation import Issue, ValidationConfig
 from app.labelled import LabelledFrames
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.talk2radar.drives import Drives, find_drives
 from scenes.talk2radar.layout import RootError
 from scenes.talk2radar.root import Sample, Talk2RadarRoot
@@ -114,13 +115,22 @@ class Talk2RadarServed:
         root: The served root.
         pairs: ``--pairs`` (None: the root itself when it has prompts, else no saving).
         scene_labels: ``--scene-labels`` (:class:`app.labelled.LabelledFrames`).
+        classes: The served model's class set: labels are read into it, the labelled boxes and
+            the pairs saved are of its classes.
     """
 
     def __init__(
-        self, root: Talk2RadarRoot, pairs: Path | None = None, scene_labels: Path | None = None
+        self,
+        root: Talk2RadarRoot,
+        pairs: Path | None = None,
+        scene_labels: Path | None = None,
+        classes: ClassSet = VOD,
     ) -> None:
+        if root.classes != classes:  # the labels read into the served model's classes
+            root = Talk2RadarRoot(root.path, root.radar_folder, root.sidecar, classes)
         self.root = root
-        self.labelled = LabelledFrames(root, scene_labels)
+        self.classes = classes
+        self.labelled = LabelledFrames(root, scene_labels, classes)
         self.pairs_path = Path(pairs) if pairs is not None else default_pairs_root(root)
         self.named = pairs is not None or has_prompts(root)
 
@@ -132,7 +142,12 @@ class Talk2RadarServed:
         )
 
     def open_store(self) -> AnnotationStore:
-        return AnnotationStore(self.pairs_path, radar_folder=self.root.radar_folder)
+        return AnnotationStore(
+            self.pairs_path,
+            radar_folder=self.root.radar_folder,
+            validation=ValidationConfig(classes=self.classes.names),
+            classes=self.classes,
+        )
 
     def source_frame(self, sample: Sample) -> SourceFrame:
         return SourceFrame.from_root(self.root, sample.sample_id, sample=sample)
@@ -154,6 +169,7 @@ def serve_root(
     pairs: Path | None = None,
     scene_labels: Path | None = None,
     talk2car: Path | None = None,
+    classes: ClassSet = VOD,
 ) -> ServedRoot:
     """The :class:`ServedRoot` of ``root``: a :class:`Talk2RadarRoot`, an
     :class:`app.served_nuscenes.NuScenesSource`, or a path to either (a folder holding a
@@ -167,8 +183,10 @@ def serve_root(
     from scenes.datasets.nuscenes_frames import is_nuscenes_root
 
     if not isinstance(root, Talk2RadarRoot | NuScenesSource) and is_nuscenes_root(root):
-        root = NuScenesSource(root, talk2car)
+        root = NuScenesSource(root, talk2car, classes)
     if isinstance(root, NuScenesSource):
+        if root.classes != classes:  # its boxes: the served model's classes
+            root = NuScenesSource(root.path, root.talk2car, classes)
         if scene_labels is not None:
             raise RootError(
                 f"--scene-labels is for a Talk2Radar root; {root.path} is a nuScenes root "
@@ -181,5 +199,5 @@ def serve_root(
             f"v1.0-*/), not {root if isinstance(root, str | Path) else root.path}"
         )
     if not isinstance(root, Talk2RadarRoot):
-        root = Talk2RadarRoot(root)
-    return Talk2RadarServed(root, pairs, scene_labels)
+        root = Talk2RadarRoot(root, classes=classes)
+    return Talk2RadarServed(root, pairs, scene_labels, classes)

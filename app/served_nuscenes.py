@@ -33,7 +33,7 @@ from annotate.talk2car import Talk2CarStore, referred_annotation
 from annotate.validation import Issue
 from app.labelled import LabelledFrames
 from app.text import md_text
-from scenes.geometry.actors import CLASSES
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.nuscenes.classes import model_class
 from scenes.nuscenes.root import NuScenesRoot
 from scenes.nuscenes.talk2car import CommandFileError, Talk2CarCommand, read_commands
@@ -80,8 +80,13 @@ class NuScenesSource:
     """No Talk2Radar prompt folder: the annotations are the labelled boxes."""
     radar_folder = None
 
-    def __init__(self, path: str | Path, talk2car: str | Path | None = None) -> None:
+    def __init__(
+        self, path: str | Path, talk2car: str | Path | None = None, classes: ClassSet = VOD
+    ) -> None:
         self.nuscenes = NuScenesRoot(path)
+        self.classes = classes
+        """The served model's class set: an annotation is a sample's box when its category maps
+        onto one of these classes (:func:`scenes.nuscenes.classes.model_class`)."""
         self.path = self.nuscenes.path
         self.talk2car = Path(talk2car) if talk2car is not None else None
         self._split_ids: dict[str, list[str]] = {ALL: list(self.nuscenes.samples)}
@@ -158,8 +163,8 @@ class NuScenesSource:
         for i, (category, attributes) in enumerate(
             zip(frame.categories, frame.attributes, strict=True)
         ):
-            cls = model_class(category, attributes)
-            if cls in CLASSES:
+            cls = model_class(category, attributes, self.classes)
+            if cls is not None:
                 keep.append(i)
                 classes.append(cls)
         commands = self.commands(sample_id)
@@ -216,7 +221,7 @@ class NuScenesServed:
 
     def __init__(self, source: NuScenesSource, pairs: Path | None = None) -> None:
         self.root = source
-        self.labelled = LabelledFrames(source)  # type: ignore[arg-type]  # its own annotations
+        self.labelled = LabelledFrames(source, classes=source.classes)  # type: ignore[arg-type]
         path = source.path.resolve() if source.path.name in ("", ".", "..") else source.path
         self.pairs_path = (
             Path(pairs) if pairs is not None else path.with_name(path.name + PAIRS_SUFFIX)
@@ -231,7 +236,7 @@ class NuScenesServed:
         )
 
     def open_store(self) -> Talk2CarStore:
-        return Talk2CarStore(self.pairs_path, self.root.nuscenes)
+        return Talk2CarStore(self.pairs_path, self.root.nuscenes, classes=self.root.classes)
 
     def source_frame(self, sample: Sample) -> SourceFrame:
         return SourceFrame(
@@ -245,7 +250,8 @@ class NuScenesServed:
     def draft_issues(self, draft: Draft, sample: Sample) -> tuple[Issue, ...]:
         """A command refers to exactly one labelled annotation
         (:func:`annotate.talk2car.referred_annotation`)."""
-        return referred_annotation(draft, *self.root.nuscenes.annotation_boxes(sample.sample_id))[1]
+        found = self.root.nuscenes.annotation_boxes(sample.sample_id)
+        return referred_annotation(draft, *found, self.root.classes)[1]
 
     def frame_notes(self, sample: Sample) -> str:
         return self.root.notes(sample)

@@ -62,6 +62,7 @@ from app.navigation import (
 from app.scene_view import chase_pose
 from app.served import ServedRoot, serve_root
 from app.session import ClientSession, ExtraTab, SessionOptions
+from model import model_classes
 from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.utils.cli import option
 
@@ -218,7 +219,11 @@ class Talk2PCApp:
     ) -> None:
         self.config = cfg = config or AppConfig()
         self.served: ServedRoot = serve_root(
-            root, pairs=cfg.pairs_root, scene_labels=cfg.scene_labels, talk2car=cfg.talk2car
+            root,
+            pairs=cfg.pairs_root,
+            scene_labels=cfg.scene_labels,
+            talk2car=cfg.talk2car,
+            classes=model_classes(model),
         )
         """The kind of root served, chosen once (:mod:`app.served`)."""
         self.navigator = Navigator(

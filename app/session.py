@@ -132,7 +132,7 @@ class ClientSession:
         self.scene_view = SceneView(client.scene)
         self.pred_view = BoxesView(client.scene, "/pred", PRED_STYLE)
         self.gt_view = BoxesView(client.scene, "/gt", GT_STYLE)
-        self.heatmap_view = HeatmapView(client.scene, "/heatmap")
+        self.heatmap_view = HeatmapView(client.scene, "/heatmap", engine.classes.names)
         self.nav: NavigationPanel | None = None
         self.query: QueryPanel | None = None
         self.prompt_field: PromptField | None = None
@@ -211,7 +211,7 @@ class ClientSession:
             )
             self.prompt_field = PromptField(self.query.prompt)
         with tabs.add_tab("View", icon=viser.Icon.EYE):
-            self.view = build_view_panel(gui, self.scene_view.settings)
+            self.view = build_view_panel(gui, self.scene_view.settings, self.engine.classes.names)
         self.nav.wire(self.step, self.go_to)
         self._wire_query(self.query)
         self.camera = CameraPanel(gui, self.scene_view.settings.velocity_range)
@@ -473,7 +473,7 @@ class ClientSession:
         self.query.rerun.disabled = False
         latency = (time.perf_counter() - request.received) * 1000.0
         self.last_latency_ms = latency
-        self.query.results.content = results_markdown(answer, ious, latency)
+        self.query.results.content = results_markdown(answer, ious, latency, self.engine.classes)
         log.info(
             "client %s: %r on %s -> %d boxes in %.0f ms",
             self.client_id,

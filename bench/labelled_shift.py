@@ -45,7 +45,6 @@ from model.evaluation.class_prompt_counts import (
     count_prompt,
     other_label_boxes,
 )
-from scenes.geometry.actors import CLASSES
 from scenes.geometry.calib import IMAGE_SIZE
 from scenes.geometry.projection import in_camera_view
 from scenes.utils.cli import command_parser, from_args, option
@@ -109,14 +108,17 @@ def frame_counts(
     from model.core.labelled import LabelledBoxes
 
     gt_boxes = np.asarray(sample.boxes, dtype=np.float64).reshape(-1, 7)
-    labels = [CLASSES.index(c) for c in sample.classes]
+    classes = model.cfg.class_set
+    labels = [classes.index(c) for c in sample.classes]
     lidar, radar = sample.lidar, sample.radar
     if condition == "shifted sensor":
         rng = np.random.default_rng(int(sample.sample_id))
         lidar, radar = SensorShift().apply(lidar, radar, rng)
     blind = blind_detector(model) if condition == "blind" else contextlib.nullcontext()
     with blind:
-        features = model.encode_scene(lidar, radar, candidates=LabelledBoxes(gt_boxes, labels))
+        features = model.encode_scene(
+            lidar, radar, candidates=LabelledBoxes(gt_boxes, labels, classes)
+        )
 
     def counted(boxes: np.ndarray) -> np.ndarray:
         return (bev_range(boxes) <= max_range) & in_camera_view(boxes, sample.calib, IMAGE_SIZE)

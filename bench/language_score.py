@@ -3,7 +3,7 @@
 An answer is the boxes a model returns for a sentence (LiDAR frame ``(K, 7)``, class names and
 scores, down to the model's smallest returned score); its **set** is the boxes scoring at least the
 operating threshold (what the app shows). A box **matches** a referent of its class when their BEV
-centres lie within :data:`scenes.geometry.boxes.CENTRE_MATCH_DISTANCE` of each other, one to one, boxes
+centres lie within :data:`scenes.geometry.classes.MATCH_DISTANCE` of each other, one to one, boxes
 taken by score (:func:`scenes.geometry.boxes.match_by_centre`). Per case:
 
 - ``empty``: the set is empty;
@@ -23,8 +23,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scenes.geometry.actors import CLASSES
-from scenes.geometry.boxes import CENTRE_MATCH_DISTANCE, match_by_centre
+from scenes.geometry.boxes import match_by_centre
+from scenes.geometry.classes import ALL_CLASSES, MATCH_DISTANCE
 
 FIGURES = {
     "out_of_class": ("empty",),
@@ -76,9 +76,9 @@ def _matches(
 ) -> int:
     if len(order) == 0 or len(targets) == 0:
         return 0
-    labels = np.array([CLASSES.index(answer.classes[i]) for i in order])
-    target_labels = np.array([CLASSES.index(c) for c in target_cls])
-    limits = np.array([CENTRE_MATCH_DISTANCE[c] for c in CLASSES])
+    labels = np.array([ALL_CLASSES.index(answer.classes[i]) for i in order])
+    target_labels = np.array([ALL_CLASSES.index(c) for c in target_cls])
+    limits = np.array([MATCH_DISTANCE[c] for c in ALL_CLASSES])
     index = match_by_centre(answer.boxes[order], labels, targets, target_labels, limits)
     return int((index >= 0).sum())
 

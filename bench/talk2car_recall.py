@@ -31,7 +31,6 @@ def detector_recall(
     """``class -> (commands whose referent is detected, commands)`` plus ``"all"``."""
     from model.checkpoint import load_checkpoint
     from model.evaluation.talk2car.metrics import TOP1_DISTANCE
-    from scenes.geometry.actors import CLASSES
     from scenes.nuscenes.root import NuScenesRoot
     from scenes.nuscenes.talk2car import read_commands
 
@@ -52,7 +51,7 @@ def detector_recall(
         for command in cmds:
             referent = commands.referent[command.command_token]
             gaps = np.hypot(*(boxes[:, :2] - referent.box[:2]).T)
-            same = labels == CLASSES.index(referent.cls)
+            same = labels == model.cfg.class_set.index(referent.cls)
             hit = bool(((gaps < TOP1_DISTANCE[referent.cls]) & same).any())
             for key in ("all", referent.cls):
                 counts.setdefault(key, [0, 0])

@@ -7,6 +7,7 @@ What other packages may use (and the only names they import from ``model``)::
     DEFAULT_CHECKPOINT                                      CheckpointMeta (checkpoint metadata)
     TPCNet, SceneFeatures, Predictions, as_points           LabelledBoxes (labelled candidates)
     GroundingModel, PredictionsView, GridExtent, ModelSettings   (the typed protocol, no torch)
+    model_classes                            (a model's class set; vod for one without a config)
     operating_threshold(model), UNCALIBRATED_REFERENT       score_directories (the VoD metric)
 
 and, for the benchmarks that time or count parts on their own, the names in the second group of
@@ -60,7 +61,13 @@ if TYPE_CHECKING:
         static_max_relative,
     )
     from model.nets.text import load_minilm, tokenize
-    from model.protocol import GridExtent, GroundingModel, ModelSettings, PredictionsView
+    from model.protocol import (
+        GridExtent,
+        GroundingModel,
+        ModelSettings,
+        PredictionsView,
+        model_classes,
+    )
     from model.referent.heatmap import referent_heatmap
     from model.tpcnet import TPCNet, build_model
 
@@ -82,6 +89,7 @@ _EXPORTS = {
     "GroundingModel": "model.protocol",
     "ModelSettings": "model.protocol",
     "PredictionsView": "model.protocol",
+    "model_classes": "model.protocol",
     "UNCALIBRATED_REFERENT": "model.grounding.referent",
     "LabelledBoxes": "model.core.labelled",
     "TPCNet": "model.tpcnet",
@@ -135,6 +143,7 @@ __all__ = [
     "grounding_loss",
     "load_checkpoint",
     "load_minilm",
+    "model_classes",
     "operating_threshold",
     "preset",
     "read_checkpoint",

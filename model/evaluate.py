@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
 from model.checkpoint import DEFAULT_CHECKPOINT
+from model.config import ClassSetName
 from model.evaluation.files import (
     EvaluationInputError,
     load_prediction_dir,
@@ -50,6 +51,7 @@ from model.evaluation.files import (
 from model.evaluation.grounding import CandidateSource
 from model.evaluation.metrics import VodResult
 from model.evaluation.worker_watch import PredictionWorkerError
+from scenes.geometry.classes import class_set
 from scenes.utils.cli import command_parser, from_args, option, report_errors
 
 if TYPE_CHECKING:
@@ -85,6 +87,12 @@ class EvaluateConfig:
         None,
         group=FILES_MODE,
         help="folder of prediction files <frame id>.txt (a missing file = no detections)",
+    )
+    classes: ClassSetName = option(
+        "vod",
+        group=FILES_MODE,
+        help="the class set scored, a row per class (vod: Car, Pedestrian, Cyclist; nuscenes: "
+        "the 10 detection classes); model mode scores the checkpoint's own",
     )
     data: Path | None = option(
         None, group=MODEL_MODE, help="Talk2Radar root, or a nuScenes root with --talk2car"
@@ -173,6 +181,10 @@ class EvaluateConfig:
         if self.data is not None:
             if self.labels is not None or self.preds is not None:
                 raise ValueError("--data does not go with --labels/--preds")
+            if self.classes != "vod":
+                raise ValueError(
+                    "--classes goes with --labels/--preds; --data scores the checkpoint's class set"
+                )
             from scenes.datasets.nuscenes_frames import is_nuscenes_root
 
             if self.talk2car is None and is_nuscenes_root(self.data):
@@ -215,7 +227,9 @@ def parse_args(argv: Sequence[str] | None = None) -> EvaluateConfig:
 
 
 def _run_files_mode(cfg: EvaluateConfig) -> int:
-    scored = score_directories(cfg.labels, cfg.preds, devkit_offsets=not cfg.exact_overlaps)
+    scored = score_directories(
+        cfg.labels, cfg.preds, not cfg.exact_overlaps, class_set(cfg.classes)
+    )
     print(
         f"labels: {cfg.labels} ({len(scored.frame_ids)} frames); predictions: {cfg.preds}"
         + (
@@ -281,6 +295,11 @@ def _run_model_mode(cfg: EvaluateConfig) -> int:
     if not ids:
         raise EvaluationInputError(f"{cfg.data}: split {cfg.split!r} has no samples")
     model = load_checkpoint(cfg.checkpoint, device=cfg.device)
+    classes = model.cfg.class_set  # the checkpoint's: the labels are read into its classes
+    if classes != root.classes:
+        root = Talk2RadarRoot(cfg.data, radar=radar, sidecar=root.sidecar, classes=classes)
+        if scene_labels is not None:
+            scene_labels = SceneLabels(cfg.scene_labels, classes)
     operating = operating_threshold(model) if cfg.threshold is None else cfg.threshold
     if cfg.candidates == "labels" and not model.takes_labelled_candidates:
         raise EvaluationInputError(

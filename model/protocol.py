@@ -11,6 +11,8 @@ from typing import Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
+from scenes.geometry.classes import VOD, ClassSet
+
 
 class GridExtent(Protocol):
     """The BEV extent of a heatmap grid (:class:`model.core.grid.BevGrid` has it), metres,
@@ -45,7 +47,7 @@ class PredictionsView(Protocol):
 
     @property
     def classes(self) -> tuple[str, ...]:
-        """``K`` class names (``scenes.geometry.actors.CLASSES``)."""
+        """``K`` class names of the model's class set (``ModelConfig.class_set``)."""
         ...
 
     @property
@@ -65,6 +67,11 @@ class ModelSettings(Protocol):
         """``"both"``, ``"lidar"`` or ``"radar"``: the sensors the model was built for."""
         ...
 
+    @property
+    def class_set(self) -> ClassSet:
+        """The classes the model detects and names (:func:`model_classes` reads it)."""
+        ...
+
 
 Features = TypeVar("Features")
 """A model's encoded scene (:class:`model.core.features.SceneFeatures`); callers only keep it."""
@@ -75,8 +82,8 @@ class GroundingModel(Protocol[Features]):
     """A grounding model (:class:`model.tpcnet.TPCNet` satisfies it): ``encode_scene`` once per
     scene, ``ground`` once per prompt.
 
-    A model without ``cfg`` (or with None) counts as a two-sensor model with no threshold of its
-    own (the app's :func:`app.engine.initial_threshold` and ``model_modalities`` read it). A
+    A model without ``cfg`` (or with None) counts as a two-sensor model of the ``vod`` class set
+    (:func:`model_classes`) with no threshold of its own (the app's :func:`app.engine.initial_threshold` and ``model_modalities`` read it). A
     model may also say ``takes_labelled_candidates`` (``encode_scene(..., candidates=...)``: the
     frame's labelled boxes as the only possible answers); one that does not, does not take them.
     """
@@ -89,3 +96,11 @@ class GroundingModel(Protocol[Features]):
     def ground(
         self, features: Features, prompt: str, score_threshold: float | None = None
     ) -> PredictionsView: ...
+
+
+def model_classes(model: object) -> ClassSet:
+    """The class set a model detects and names (``model.cfg.class_set``,
+    :mod:`scenes.geometry.classes`); ``vod`` for a model without a config or without one there
+    (a test's fake)."""
+    found = getattr(getattr(model, "cfg", None), "class_set", None)
+    return found if isinstance(found, ClassSet) else VOD

@@ -173,7 +173,8 @@ class TPCNet(nn.Module):
             radar: ``(M, 7)`` radar points in the LiDAR frame; ignored by a LiDAR-only model.
             candidates: Referent path only: the frame's labelled boxes, among which the referent
                 stage then chooses instead of the detector's proposals (each with its label's
-                class and a certain score, :data:`model.core.labelled.LABELLED_SCORE`).
+                class and a certain score, :data:`model.core.labelled.LABELLED_SCORE`), of the
+                model's class set (``cfg.class_set``).
 
         Returns:
             :class:`SceneFeatures` with ``lr_i`` of shape ``(1, C_i, H_i, W_i)``.
@@ -182,6 +183,11 @@ class TPCNet(nn.Module):
             raise ValueError(
                 "labelled candidates need a referent-path model; the paper's path ranks "
                 "its own heatmap peaks"
+            )
+        if candidates is not None and candidates.classes.name != self.cfg.class_set.name:
+            raise ValueError(
+                f"labelled candidates of the {candidates.classes.name!r} class set given to a "
+                f"model of the {self.cfg.class_set.name!r} class set"
             )
         lidar_t = self.scene.clouds(None if lidar is None else [lidar], 1, "lidar")
         radar_t = self.scene.clouds(None if radar is None else [radar], 1, "radar")

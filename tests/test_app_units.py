@@ -60,6 +60,7 @@ from app.scene_view import (
     ring_segments,
 )
 from model.checkpoint_meta import CheckpointMeta
+from scenes.geometry.classes import NUSCENES
 from scenes.talk2radar.layout import VELODYNE, sample_file
 from scenes.talk2radar.root import RootError, Talk2RadarRoot
 from scenes.utils.text_policy import collapse_spaces
@@ -275,7 +276,14 @@ def test_the_answer_is_said_in_words() -> None:
     assert answer_sentence("How many pedestrians are there?", both[::2]) == (
         "2: 2 pedestrians (boxed)."
     )
-    assert answer_sentence("x", (), known=("Car",)) == "No object here matches; I find cars."
+    # item 4 (issue 36): the empty answer is worded from the served checkpoint's class set
+    assert answer_sentence("the tram", (), known=NUSCENES) == (
+        "No object here matches; I find cars, trucks, buses, trailers, construction vehicles, "
+        "pedestrians, motorcycles, bicycles, traffic cones and barriers."
+    )
+    assert answer_sentence("the trucks", ("Truck", "Truck", "TrafficCone"), NUSCENES) == (
+        "2 trucks and 1 traffic cone match."
+    )
 
 
 # ---------------------------------------------------------------------------- engine inputs

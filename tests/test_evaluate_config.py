@@ -100,6 +100,10 @@ def test_parses_to_what_the_parser_before_gave(args: str) -> None:
         (["--labels", "a"], "--labels and --preds go together"),
         (["--data", "r", "--preds", "b"], "--data does not go with --labels/--preds"),
         (
+            ["--data", "r", "--classes", "nuscenes"],
+            "--classes goes with --labels/--preds; --data scores the checkpoint's class set",
+        ),
+        (
             ["--data", "r", "--candidates", "x"],
             "argument --candidates: invalid choice: 'x' (choose from 'detector', 'labels')",
         ),
@@ -115,6 +119,6 @@ def test_mode_errors_are_usage_errors(argv, message, capsys) -> None:
 
 def test_help_keeps_its_groups() -> None:
     groups = {g.title: [a.dest for a in g._group_actions] for g in build_parser()._action_groups}
-    assert groups["score prediction files"] == ["labels", "preds"]
+    assert groups["score prediction files"] == ["labels", "preds", "classes"]
     assert groups["ground a split with a checkpoint, then score it"][0] == "data"
     assert groups["options"] == ["help", "json", "exact_overlaps"]

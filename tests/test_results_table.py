@@ -6,7 +6,6 @@ import pytest
 
 from model.evaluation.grounding import SPLIT_NAMES
 from model.evaluation.results_table import (
-    CLASSES,
     PROMPT_TYPES,
     ResultsTableError,
     by_depth_table,
@@ -17,6 +16,9 @@ from model.evaluation.results_table import (
     main,
     overall_table,
 )
+from scenes.geometry.classes import VOD
+
+CLASSES = VOD.names
 
 
 def _scores(base: float) -> dict[str, float]:

@@ -37,7 +37,6 @@ from app.annotate_tab.panel import AnnotationPanel, Part
 from app.annotate_tab.referents import ReferentPicker
 from app.annotate_tab.view import box_at, box_tag, ground_hit, screen_axes, wxyz_to_yaw
 from app.query_panel import submitted_prompt
-from scenes.geometry.actors import CLASSES
 
 
 class DraftEdits:
@@ -192,7 +191,7 @@ class DraftEdits:
         """*Change class*: relabel the selected box as ``cls`` (one undo step). The only way a
         placed box changes class; *New box class* never does."""
         p = self.panel
-        if cls not in CLASSES:  # a forged message
+        if cls not in p.classes:  # a forged message
             return
         with p.session.lock:
             if p.selected is None:
@@ -204,21 +203,22 @@ class DraftEdits:
 
     def cycle_class(self, step: int = 1) -> None:
         """Relabel the selected box as the next (``step=1``) or previous class of
-        :data:`scenes.CLASSES` (key C / Shift+C)."""
+        the served model's class set (key C / Shift+C)."""
         p = self.panel
         with p.session.lock:
             if p.selected is None:
                 p.notify("No box selected", "Select a box first (click it, or keys N / Shift+N).")
                 return
             current = p.editor.draft.get(p.selected).cls
-            index = CLASSES.index(current) if current in CLASSES else -step
-            self.change_class(CLASSES[(index + step) % len(CLASSES)])
+            classes = p.classes
+            index = classes.index(current) if current in classes else -step
+            self.change_class(classes[(index + step) % len(classes)])
 
     def set_new_class(self, cls: str) -> None:
-        """*New box class* set from the keyboard (keys 1, 2, 3); placed boxes keep theirs."""
+        """*New box class* set from the keyboard (keys 1, 2, 3, ...); placed boxes keep theirs."""
         p = self.panel
         with p.session.lock:
-            if cls in CLASSES:
+            if cls in p.classes:
                 p.w.cls.value = cls
 
     def select_step(self, step: int) -> None:
@@ -404,7 +404,7 @@ class DraftEdits:
                 return
             pred = answer.predictions
             boxes, classes, duplicates = proposals(
-                pred.boxes, pred.classes, p.editor.draft.box_array
+                pred.boxes, pred.classes, p.editor.draft.box_array, allowed=p.classes
             )
             if not len(boxes):
                 p.notify(

@@ -32,13 +32,14 @@ from __future__ import annotations
 import html
 import logging
 import threading
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import viser
 
-from app.annotate_tab.widgets import PAIR_PROMPT
+from app.annotate_tab.widgets import PAIR_PROMPT, class_key
 from app.text import md_text
+from scenes.geometry.classes import VOD
 
 log = logging.getLogger(__name__)
 
@@ -70,10 +71,12 @@ SEQUENCE = "Sequences (splits with pose files)"
 REVIEW = "Review"
 
 
-def _keys() -> tuple[Key, ...]:
+def keys_of(classes: Sequence[str] = VOD.names) -> tuple[Key, ...]:
+    """Every key of the Annotate tab for a model of ``classes``: a key per class of the set
+    (:func:`app.annotate_tab.widgets.class_key`: 1, 2, 3, ...) sets *New box class*."""
     out = [
-        Key(f"new_class_{i}", str(i + 1), None, f"New box class: {c}", str(i + 1), PLACE)
-        for i, c in enumerate(("Car", "Pedestrian", "Cyclist"))
+        Key(f"new_class_{i}", class_key(i), None, f"New box class: {c}", class_key(i), PLACE)
+        for i, c in enumerate(classes)
     ]
     out += [
         Key("add_ready", "A", None, "Add the chosen labelled object", "A", PLACE),
@@ -122,8 +125,9 @@ def _keys() -> tuple[Key, ...]:
     return tuple(out)
 
 
-KEYS: tuple[Key, ...] = _keys()
-"""Every key of the Annotate tab (what :func:`register_keys` registers and the help lists)."""
+KEYS: tuple[Key, ...] = keys_of()
+"""Every key of the Annotate tab of a ``vod`` model (what :func:`register_keys` registers and the
+help lists by default; :func:`keys_of` for another class set)."""
 
 MOVE_STEP, MOVE_FAR = 0.1, 1.0
 """Metres one arrow key moves the selected box (with Shift: :data:`MOVE_FAR`)."""
@@ -137,7 +141,7 @@ TEXT_KEYS: tuple[tuple[str, str], ...] = (
 page's, not hotkeys)."""
 
 
-def keys_markdown(extra: tuple[Key, ...] = ()) -> str:
+def keys_markdown(extra: tuple[Key, ...] = (), keys: tuple[Key, ...] = KEYS) -> str:
     """The help panel: every key of :data:`KEYS` (and ``extra``, e.g. a sequence player's) by
     section, then the keys that act in text fields."""
     rows: dict[str, list[tuple[str, str]]] = {}
@@ -145,7 +149,7 @@ def keys_markdown(extra: tuple[Key, ...] = ()) -> str:
         "move_forward": "Up / Down / Left / Right",
         "move_forward_far": "Shift+arrows",
     }
-    for k in (*KEYS, *extra):
+    for k in (*keys, *extra):
         if k.action.startswith("move_") and k.action not in arrows:
             continue
         if k.action == "delete" and k.key == "backspace":
@@ -220,10 +224,12 @@ def add_prompt_key(gui: viser.GuiApi) -> viser.GuiHtmlHandle:
     return gui.add_html(FOCUS_PROMPT_HTML)
 
 
-def add_help_folder(gui: viser.GuiApi, extra: tuple[Key, ...] = ()) -> viser.GuiFolderHandle:
+def add_help_folder(
+    gui: viser.GuiApi, extra: tuple[Key, ...] = (), keys: tuple[Key, ...] = KEYS
+) -> viser.GuiFolderHandle:
     """The *Keys* folder (collapsed): :func:`keys_markdown`."""
     with gui.add_folder("Keys", expand_by_default=False) as folder:
-        gui.add_markdown(keys_markdown(extra))
+        gui.add_markdown(keys_markdown(extra, keys))
     return folder
 
 
@@ -279,9 +285,12 @@ class HelpWindow:
     """The list of keys (key H) in a floating window of one browser (see the module docstring):
     :meth:`toggle` opens or closes it, its button closes it."""
 
-    def __init__(self, gui: viser.GuiApi, extra: tuple[Key, ...] = ()) -> None:
+    def __init__(
+        self, gui: viser.GuiApi, extra: tuple[Key, ...] = (), keys: tuple[Key, ...] = KEYS
+    ) -> None:
         self.gui = gui
         self.extra = extra
+        self.keys = keys
         self.window: viser.PanelHandle | None = None
         self._lock = threading.Lock()
 
@@ -296,7 +305,7 @@ class HelpWindow:
     def _open(self) -> None:
         window = self.gui.add_panel()
         with window.add_tab(HELP_TITLE, icon=viser.Icon.KEYBOARD):
-            self.gui.add_markdown(keys_markdown(self.extra))
+            self.gui.add_markdown(keys_markdown(self.extra, self.keys))
             close = self.gui.add_button(HELP_CLOSE)
         close.on_click(lambda _event: self.close())
         window.float(x=16, y=16, width=460, height=460)  # top left: the view stays in sight

@@ -14,7 +14,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from app.session import SessionOptions
-from scenes.geometry.actors import CLASSES
 from scenes.geometry.boxes import wrap_yaw
 from scenes.talk2radar.root import Sample
 
@@ -54,5 +53,6 @@ def frame_labelled(options: SessionOptions, sample: Sample) -> Labelled | None:
     if found is None or not len(found):
         return None
     boxes = np.asarray(found.boxes, dtype=np.float64).reshape(-1, 7)  # type: ignore[attr-defined]
-    classes = tuple(CLASSES[int(i)] for i in found.labels)  # type: ignore[attr-defined]
+    names = found.classes.names  # type: ignore[attr-defined]
+    classes = tuple(names[int(i)] for i in found.labels)  # type: ignore[attr-defined]
     return Labelled(boxes, classes)

@@ -137,7 +137,9 @@ class AnnotationPanel:
         self.selected: int | None = None
         self.frame: DraftFrame | None = None
         self.view = DraftView(session.client.scene)
-        self.w: AnnotationWidgets = build_annotation_widgets(session.client.gui)
+        self.classes: tuple[str, ...] = session.engine.classes.names
+        """The served model's classes: what the class controls offer, keys and C cycle."""
+        self.w: AnnotationWidgets = build_annotation_widgets(session.client.gui, self.classes)
         self.pair_ids: tuple[str, ...] = ()
         """The sample ids listed in *Pair*, in order."""
         self.ready_boxes: np.ndarray = np.zeros((0, 7))
@@ -309,7 +311,9 @@ class AnnotationPanel:
                 if labelled is not None
                 else (sample.boxes, sample.classes)
             )
-            boxes, classes, _ = proposals(*source, draft.box_array, limit=10**6)
+            boxes, classes, _ = proposals(
+                *source, draft.box_array, limit=10**6, allowed=self.classes
+            )
             order = np.argsort(np.hypot(boxes[:, 0], boxes[:, 1]), kind="stable")
             boxes, classes = boxes[order], tuple(classes[i] for i in order)
         else:

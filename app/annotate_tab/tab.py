@@ -18,6 +18,7 @@ from app.annotate_tab.keys import (
     add_help_folder,
     add_key_owner,
     add_prompt_key,
+    keys_of,
     register_keys,
 )
 from app.annotate_tab.pairs import PairActions
@@ -27,7 +28,6 @@ from app.annotate_tab.review import ReviewPanel
 from app.annotate_tab.sequence import SequencePanel
 from app.annotate_tab.widgets import NEW_PAIR, REDO, UNDO
 from app.session import ClientSession
-from scenes.geometry.actors import CLASSES
 
 
 def build_annotation_tab(session: ClientSession, hub: AnnotationHub) -> AnnotationPanel:
@@ -170,7 +170,7 @@ def _register_keys(
         "undo": edits.undo,
         "redo": edits.redo,
         "new_pair": edits.new_pair,
-        "help": HelpWindow(gui).toggle,
+        "help": HelpWindow(gui, keys=keys_of(panel.classes)).toggle,
         "play": sequence.toggle_play,
         "drive_previous": lambda: sequence.step(-1),
         "drive_next": lambda: sequence.step(1),
@@ -180,9 +180,10 @@ def _register_keys(
         # approve, reject: the review panel's, bound to each pair shown (ReviewPanel.open)
         "fix": review.save_fix,
     }
-    for i, cls in enumerate(CLASSES):
+    for i, cls in enumerate(panel.classes):
         actions[f"new_class_{i}"] = lambda cls=cls: edits.set_new_class(cls)
-    register_keys(gui, actions, panel.guarded)
+    keys = keys_of(panel.classes)
+    register_keys(gui, actions, panel.guarded, keys)
     add_prompt_key(gui)
     add_key_owner(gui)
-    add_help_folder(gui)
+    add_help_folder(gui, keys=keys)

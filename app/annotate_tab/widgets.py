@@ -15,7 +15,7 @@ import viser
 
 from annotate import DEFAULT_SPLITS
 from app.annotate_tab.formatting import NO_BOX, NO_PAIRS, NO_READY
-from scenes.geometry.actors import CLASSES
+from scenes.geometry.classes import VOD
 
 SPLITS = DEFAULT_SPLITS
 """Splits offered when saving (the store's default, ``train``, is selected); the store refuses any
@@ -82,7 +82,17 @@ NEW_BOX_CLASS, CHANGE_CLASS = "New box class", "Change class"
 """Labels of the two class controls: the next box's class, and the selected box's relabel."""
 
 
-def build_annotation_widgets(gui: viser.GuiApi) -> AnnotationWidgets:
+def class_key(index: int) -> str:
+    """The key that sets *New box class* to class ``index`` of the set: 1 to 9, then 0 (a set
+    of at most ten classes)."""
+    if not 0 <= index < 10:
+        raise ValueError(f"class keys go to 10 classes, not {index + 1}")
+    return str((index + 1) % 10)
+
+
+def build_annotation_widgets(
+    gui: viser.GuiApi, classes: tuple[str, ...] = VOD.names
+) -> AnnotationWidgets:
     """Add the Annotate tab's widgets to ``gui`` (in the current container).
 
     Order: what is used on every pair first, so that *Save pair* and the reason it is disabled
@@ -91,7 +101,8 @@ def build_annotation_widgets(gui: viser.GuiApi) -> AnnotationWidgets:
 
     Two controls, never one, for classes: *New box class* is the class of the next box placed
     and nothing else (choosing it never touches a placed box); *Change class* (shown while a box
-    is selected) relabels the selected box, one undo step.
+    is selected) relabels the selected box, one undo step. Both offer exactly ``classes``: the
+    served model's class set, in its order.
     """
     status = gui.add_markdown("Loading...")
     back = gui.add_button("Back to the draft's frame", icon=viser.Icon.ARROW_BACK, visible=False)
@@ -111,18 +122,19 @@ def build_annotation_widgets(gui: viser.GuiApi) -> AnnotationWidgets:
         hint="A click on the ground places a box of the class below; a click on a draft box "
         "selects it; a click on a ready-made box adds it",
     )
+    digits = ", ".join(class_key(i) for i in range(len(classes)))
     cls = gui.add_dropdown(
         NEW_BOX_CLASS,
-        CLASSES,
-        initial_value=CLASSES[0],
-        hint="The class of the next box a ground click places (keys 1, 2, 3). It never changes "
-        "a placed box: Change class (Boxes) relabels the selected one",
+        classes,
+        initial_value=classes[0],
+        hint=f"The class of the next box a ground click places (keys {digits}). It never "
+        "changes a placed box: Change class (Boxes) relabels the selected one",
     )
     with gui.add_folder("Boxes"):
         box = gui.add_dropdown("Box", (NO_BOX,), initial_value=NO_BOX)
         relabel = gui.add_button_group(
             CHANGE_CLASS,
-            CLASSES,
+            classes,
             visible=False,
             hint="Relabel the selected box (one undo step; key C cycles its class)",
         )

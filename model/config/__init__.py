@@ -12,6 +12,9 @@ Every option the paper's ablations compare is a field here, not a fork of the co
   fusion, table IX); ``text_fusion.graph_k``: the roll step ``K`` per stage (default 8, 4, 2).
 - ``head.anchor``: ``"corner"``, ``"edge"`` or ``"center"`` (table VII), see :mod:`model.head.detector`.
 - ``text.encoder``: ``"minilm"`` (frozen, pretrained) or ``"gru"`` (Bi-GRU from scratch, table IX).
+- ``head.classes`` (override ``classes=``): the class set, ``"vod"`` (Car, Pedestrian, Cyclist;
+  the default and the shipped checkpoint's) or ``"nuscenes"`` (nuScenes' 10 detection classes),
+  :mod:`scenes.geometry.classes`; every part of the model follows it (``ModelConfig.class_set``).
 - ``grounding``: ``"tpcnet"`` (the paper: DGGF conditions the BEV on the sentence and the C3D-RECHead
   heatmap ranks the referred boxes) or ``"referent"`` (Talk2PC: a text-agnostic C3D-RECHead proposes
   every object and :mod:`model.referent.stage` scores each candidate against the prompt's tokens;
@@ -52,6 +55,7 @@ from model.config.sections import (
     RADAR_FEATURES,
     AnchorKind,
     BackboneConfig,
+    ClassSetName,
     FpnConfig,
     FusionConfig,
     FusionKind,
@@ -77,6 +81,7 @@ __all__ = [
     "RADAR_FEATURES",
     "AnchorKind",
     "BackboneConfig",
+    "ClassSetName",
     "ConfigError",
     "FpnConfig",
     "FusionConfig",

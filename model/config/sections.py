@@ -9,6 +9,8 @@ from typing import Any, Literal
 from model.config.errors import ConfigError, check_choice, check_positive_ints
 from model.config.serial import ABSENT, apply_overrides, from_plain, to_plain
 from model.core.grid import BevGrid
+from scenes.geometry.classes import PRESETS as CLASS_PRESETS
+from scenes.geometry.classes import ClassSet, class_set
 
 Modalities = Literal["lidar", "radar", "both"]
 FusionKind = Literal["baca", "bi_mhca", "lidar_query", "radar_query", "conv_gate"]
@@ -17,6 +19,11 @@ TextEncoderKind = Literal["minilm", "gru"]
 GroundingKind = Literal["referent", "tpcnet"]
 AnchorKind = Literal["corner", "edge", "center"]
 PresetName = Literal["small", "paper"]
+ClassSetName = Literal["vod", "nuscenes"]
+"""The class-set presets (:data:`scenes.geometry.classes.PRESETS`: checked equal at import)."""
+
+if set(typing.get_args(ClassSetName)) != set(CLASS_PRESETS):
+    raise ImportError(f"ClassSetName {typing.get_args(ClassSetName)} != {tuple(CLASS_PRESETS)}")
 
 ANCHORS: tuple[str, ...] = typing.get_args(AnchorKind)
 """Anchor kinds of :attr:`HeadConfig.anchor`."""
@@ -294,6 +301,9 @@ class HeadConfig:
         gaussian_overlap: ``min_overlap`` of CenterPoint's Gaussian radius.
         top_k: Peaks taken from the heatmap (over all classes) before the score threshold and NMS.
         heatmap_bias: Initial bias of the heatmap logits (-2.19 = logit of about 0.1).
+        classes: The class set's name (:data:`scenes.geometry.classes.PRESETS`: ``vod``, the
+            default, or ``nuscenes``): one heatmap channel per class, in the set's order. A
+            config stored before the field existed reads as ``vod``.
     """
 
     anchor: AnchorKind = "corner"
@@ -305,6 +315,7 @@ class HeadConfig:
     gaussian_overlap: float = 0.1
     top_k: int = 500
     heatmap_bias: float = -2.19
+    classes: ClassSetName = field(default="vod", metadata={ABSENT: "vod"})
 
     def __post_init__(self) -> None:
         if self.anchor not in ANCHORS:
@@ -327,11 +338,21 @@ class HeadConfig:
             )
         if self.top_k < 1:
             raise ValueError(f"HeadConfig.top_k must be >= 1, got {self.top_k}")
+        check_choice("HeadConfig", "classes", self.classes, tuple(CLASS_PRESETS))
+
+    @property
+    def class_set(self) -> ClassSet:
+        """The :class:`scenes.geometry.classes.ClassSet` called :attr:`classes`."""
+        return class_set(self.classes)
 
 
 @dataclass(frozen=True)
 class ModelConfig:
-    """The whole TPCNet configuration."""
+    """The whole TPCNet configuration.
+
+    Its class set is the head's (:attr:`HeadConfig.classes`, the override ``classes=``):
+    the referent stage grounds over the detector's classes.
+    """
 
     modalities: Modalities = "both"
     pillars: PillarConfig = field(default_factory=PillarConfig)
@@ -368,6 +389,12 @@ class ModelConfig:
                     f"width {c}",
                     "fusion.heads",
                 )
+
+    @property
+    def class_set(self) -> ClassSet:
+        """The classes the model detects and grounds (``head.classes``), in the order of the
+        heatmap's channels."""
+        return self.head.class_set
 
     @property
     def head_grid(self) -> BevGrid:

@@ -125,6 +125,7 @@ ALIASES: dict[str, str] = {
     "graph_k": "text_fusion.graph_k",
     "anchor": "head.anchor",
     "text_encoder": "text.encoder",
+    "classes": "head.classes",
 }
 """Short override names accepted by :func:`apply_overrides` (and ``build_model``)."""
 

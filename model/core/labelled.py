@@ -29,14 +29,14 @@ only the labelled boxes can be the answer.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from model.core.anchors import anchor_points
 from model.core.grid import BevGrid
-from scenes.geometry.actors import CLASSES
 from scenes.geometry.boxes import bev_iou
+from scenes.geometry.classes import VOD, ClassSet
 
 
 @dataclass(frozen=True)
@@ -45,19 +45,24 @@ class LabelledBoxes:
 
     Attributes:
         boxes: ``(K, 7)`` float64 ``x, y, z, l, w, h, yaw``, LiDAR frame.
-        labels: ``(K,)`` int64 indices into :data:`scenes.geometry.actors.CLASSES`.
+        labels: ``(K,)`` int64 indices into ``classes``.
+        classes: The class set the labels index (a model refuses labelled boxes of another set
+            than its own).
     """
 
     boxes: np.ndarray
     labels: np.ndarray
+    classes: ClassSet = field(default=VOD)
 
     def __post_init__(self) -> None:
         boxes = np.asarray(self.boxes, dtype=np.float64).reshape(-1, 7)
         labels = np.asarray(self.labels, dtype=np.int64).reshape(-1)
         if len(labels) != len(boxes):
             raise ValueError(f"{len(boxes)} labelled boxes but {len(labels)} labels")
-        if len(labels) and (labels.min() < 0 or labels.max() >= len(CLASSES)):
-            raise ValueError(f"labels must index {CLASSES}, got {sorted(set(labels.tolist()))}")
+        if len(labels) and (labels.min() < 0 or labels.max() >= len(self.classes)):
+            raise ValueError(
+                f"labels must index {self.classes.names}, got {sorted(set(labels.tolist()))}"
+            )
         if not np.all(np.isfinite(boxes)):
             raise ValueError("labelled boxes must be finite")
         if np.any(boxes[:, 3:6] <= 0):
@@ -72,7 +77,7 @@ class LabelledBoxes:
 def anchor_scores(
     heat: np.ndarray, boxes: np.ndarray, labels: np.ndarray, grid: BevGrid, anchor: str
 ) -> np.ndarray:
-    """Detector score ``(K,)`` of each box: the 3x3 maximum of its class heatmap ``heat (3, H, W)``
+    """Detector score ``(K,)`` of each box: the 3x3 maximum of its class heatmap ``heat (C, H, W)``
     (sigmoid, on ``grid``) around the cell of its anchor point; 0 outside the grid."""
     b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
     if len(b) == 0:

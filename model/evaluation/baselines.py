@@ -24,16 +24,12 @@ import numpy as np
 
 from model.evaluation.grounding import CLASS_TAG, PromptBoxes
 from scenes.geometry.actors import Actor
+from scenes.geometry.classes import object_class
 from scenes.language.prompts import DEFAULT_REGION, ActorFeatures, ReferableRegion
 from scenes.talk2radar.root import SampleMeta
 
-CLASS_NOUNS: dict[str | None, str] = {
-    "Car": "the cars",
-    "Pedestrian": "the pedestrians",
-    "Cyclist": "the cyclists",
-    None: "the objects",
-}
-"""The class-noun prompt per named class (None: no class named)."""
+NO_CLASS_NOUN = "the objects"
+"""The class-noun prompt of a prompt that names no class."""
 
 
 def named_class(tags: Iterable[str], referent_classes: Sequence[str]) -> str | None:
@@ -46,10 +42,15 @@ def named_class(tags: Iterable[str], referent_classes: Sequence[str]) -> str | N
 
 
 def class_noun_prompt(cls: str | None) -> str:
-    """ "the cars", "the pedestrians", "the cyclists", or "the objects" for None."""
-    if cls not in CLASS_NOUNS:
-        raise ValueError(f"no class noun for {cls!r} (expected one of {tuple(CLASS_NOUNS)})")
-    return CLASS_NOUNS[cls]
+    """ "the " and the class's plural (:attr:`scenes.geometry.classes.ObjectClass.plural`:
+    "the cars", "the pedestrians", "the cyclists", "the trucks", "the traffic cones", ...), or
+    "the objects" for None; ValueError for a name of no class set."""
+    if cls is None:
+        return NO_CLASS_NOUN
+    try:
+        return f"the {object_class(cls).plural}"
+    except ValueError as exc:
+        raise ValueError(f"no class noun for {cls!r}: {exc}") from None
 
 
 def unsensed_ids(meta: SampleMeta, source: str = "<meta>") -> frozenset[int]:

@@ -13,24 +13,25 @@ from dataclasses import dataclass
 import numpy as np
 
 from model.evaluation.metrics import MIN_OVERLAPS
-from scenes.geometry.actors import CLASSES
 from scenes.geometry.boxes import bev_iou, iou3d
 from scenes.geometry.calib import (
     Calibration,
     CameraBoxes,
     boxes_camera_to_lidar,
 )
+from scenes.geometry.classes import VOD, ClassSet, object_class
 from scenes.talk2radar.kitti import ObjectLabel
 
-CLASS_PROMPTS: dict[str, str] = {
-    "Cyclist": "the cyclists",
-    "Pedestrian": "the pedestrians",
-    "Car": "the cars",
-}
-"""The prompt asked for each metric class, in the order they are asked."""
 
-CENTRE_RADIUS: dict[str, float] = {"Car": 2.0, "Pedestrian": 1.0, "Cyclist": 1.0}
-"""BEV centre distance (m) within which the loose rule counts a box as finding an object."""
+def class_prompts(classes: ClassSet = VOD) -> dict[str, str]:
+    """The prompt asked for each class of ``classes`` ("the " and its plural), in the order they
+    are asked: the set's channel order reversed (``vod``: the cyclists, the pedestrians, the
+    cars, as this evaluation has always asked them)."""
+    return {c.name: f"the {c.plural}" for c in reversed(classes.classes)}
+
+
+CLASS_PROMPTS: dict[str, str] = class_prompts(VOD)
+"""The ``vod`` class set's :func:`class_prompts` (the shipped checkpoint's)."""
 
 TARGET_RECALL = 70.0
 """Issue 14: share (percent) of the cyclists, pedestrians and cars within 30 m to find."""
@@ -42,8 +43,6 @@ OTHER_OBJECT_BEV_IOU = 0.1
 """A false box whose BEV IoU with a non-metric labelled object (a parked bicycle, a rider, a
 moped...) exceeds this is counted as a box *on* that object (:attr:`PromptCount.false_on_other`)."""
 
-METRIC_NAMES = frozenset(c.lower() for c in CLASSES)
-"""Label names (lower case) of the metric classes; every other label is never a target."""
 
 RULES = ("iou", "centre")
 """Matching rules: official 3D IoU, loose BEV centre distance."""
@@ -55,10 +54,12 @@ def bev_range(boxes: np.ndarray) -> np.ndarray:
     return np.hypot(b[:, 0], b[:, 1])
 
 
-def other_label_boxes(labels: Sequence[ObjectLabel], calib: Calibration) -> np.ndarray:
-    """LiDAR-frame boxes ``(K, 7)`` of the labels that are not of a metric class (``bicycle``,
-    ``rider``, ``moped_scooter``, ...; matched case-insensitively, as ``labels_to_boxes``)."""
-    other = [lab for lab in labels if lab.name.lower() not in METRIC_NAMES]
+def other_label_boxes(
+    labels: Sequence[ObjectLabel], calib: Calibration, classes: ClassSet = VOD
+) -> np.ndarray:
+    """LiDAR-frame boxes ``(K, 7)`` of the labels outside ``classes`` (with ``vod``:
+    ``bicycle``, ``rider``, ``moped_scooter``, ...; mapped as ``labels_to_boxes`` maps them)."""
+    other = [lab for lab in labels if classes.label_class(lab.name) is None]
     if not other:
         return np.zeros((0, 7))
     cam = CameraBoxes(
@@ -83,7 +84,8 @@ def assign_matches(
         pred_scores: ``(P,)``; boxes are taken in descending score order (stable).
         gt_boxes: ``(G, 7)`` ground-truth boxes of class ``cls``, LiDAR frame.
         rule: ``iou`` (3D IoU strictly above ``MIN_OVERLAPS[cls].box3d``, the largest first) or
-            ``centre`` (BEV centre distance ``<= CENTRE_RADIUS[cls]``, the nearest first).
+            ``centre`` (BEV centre distance ``<=`` the class's
+            :attr:`scenes.geometry.classes.ObjectClass.find_radius`, the nearest first).
 
     Returns:
         ``(P,)`` int: the matched ground-truth index of each answer box, ``-1`` for none.
@@ -99,7 +101,7 @@ def assign_matches(
     elif rule == "centre":
         dist = np.linalg.norm(p[:, None, :2] - g[None, :, :2], axis=-1)
         quality = -dist
-        ok = dist <= CENTRE_RADIUS[cls]
+        ok = dist <= object_class(cls).find_radius
     else:
         raise ValueError(f"rule must be one of {RULES}, got {rule!r}")
     free = np.ones(len(g), dtype=bool)

@@ -1,21 +1,25 @@
 """Class prompts on a fully labelled root: ``python -m model.class_prompts --data ROOT``.
 
-For every frame the model is asked :data:`CLASS_PROMPTS` ("the cyclists", "the pedestrians",
-"the cars") on one encoded scene (``encode_scene`` once, ``ground`` three times). The boxes scoring
+For every frame the model is asked the class prompts of its class set
+(:func:`model.evaluation.class_prompt_counts.class_prompts`: "the cyclists", "the pedestrians",
+"the cars" for ``vod``; one per class, "the trucks", "the traffic cones", ..., for ``nuscenes``)
+on one encoded scene (``encode_scene`` once, ``ground`` once per class). The boxes scoring
 at least the operating threshold (:func:`model.evaluation.predict.operating_threshold`, or ``--threshold``)
 are the answer. Per prompt:
 
 - **targets**: the ground-truth objects of the prompt's class in the *counted region*: BEV distance
   of the box centre from the LiDAR origin ``<= max_range`` (``sqrt(x^2 + y^2)``, LiDAR frame) and,
   with ``fov="camera"`` (default), inside the camera image (:func:`in_camera_view`), because
-  View-of-Delft annotates only the camera's field of view. Only the metric classes (Car,
-  Pedestrian, Cyclist) are ever targets; VoD's other labels (``bicycle``, ``rider``,
-  ``moped_scooter``, ``truck``, ...) are not, so a box on a parked bicycle is a false box.
+  View-of-Delft annotates only the camera's field of view. Only the model's classes (Car,
+  Pedestrian, Cyclist for ``vod``) are ever targets; the other labels (with ``vod``: VoD's
+  ``bicycle``, ``rider``, ``moped_scooter``, ``truck``, ...) are not, so a box on a parked
+  bicycle is a false box.
 - **found**: targets matched one-to-one by an answer box of the prompt's class, greedily in
   descending score order, each box taking the free ground-truth box of that class with the largest
   3D IoU strictly above the official minimum overlap (:data:`model.evaluation.metrics.MIN_OVERLAPS`: 0.5 Car,
   0.25 Pedestrian / Cyclist). The looser **found (centre)** figure matches the same way by BEV
-  centre distance within :data:`CENTRE_RADIUS` (1 m; 2 m for cars), the nearest first.
+  centre distance within the class's ``find_radius`` (:mod:`scenes.geometry.classes`: 1 m; 2 m
+  for cars), the nearest first.
 - **false boxes**: answer boxes in the counted region that match no ground-truth box of the
   prompt's class (a box of another class, a duplicate, a box on nothing or on a non-metric object).
 
@@ -51,18 +55,17 @@ from model.checkpoint import DEFAULT_CHECKPOINT
 from model.checkpoint_meta import CheckpointMeta
 from model.evaluation.class_prompt_counts import (
     CLASS_PROMPTS,
-    METRIC_NAMES,
     TARGET_FALSE_PER_PROMPT,
     TARGET_RECALL,
     ClassSummary,
     PromptCount,
     bev_range,
+    class_prompts,
     count_prompt,
     other_label_boxes,
 )
 from model.evaluation.class_prompt_frames import distinct_scenes, image_size_of, root_frame_ids
-from model.protocol import GroundingModel
-from scenes.geometry.actors import CLASSES
+from model.protocol import GroundingModel, model_classes
 from scenes.geometry.calib import IMAGE_SIZE
 from scenes.geometry.projection import in_camera_view
 from scenes.talk2radar.root import LIDAR_FOLDER, RADAR_FOLDERS, RootError, Sample, Talk2RadarRoot
@@ -193,6 +196,7 @@ class ClassPromptReport:
         sweep: ``(threshold, per class, pooled)`` for each ``config.sweep`` threshold.
         other_labels: Non-metric label names -> count over the frames (never targets).
         seconds: Wall time of loading and the model calls.
+        prompts: Class -> the prompt asked (:func:`class_prompts` of the model's class set).
     """
 
     config: ScoringConfig
@@ -202,11 +206,12 @@ class ClassPromptReport:
     sweep: tuple[tuple[float, dict[str, ClassSummary], ClassSummary], ...] = ()
     other_labels: dict[str, int] = field(default_factory=dict)
     seconds: float = 0.0
+    prompts: dict[str, str] = field(default_factory=lambda: dict(CLASS_PROMPTS))
 
     def to_dict(self) -> dict[str, Any]:
         return {
             "config": asdict(self.config),
-            "prompts": dict(CLASS_PROMPTS),
+            "prompts": dict(self.prompts),
             "frames": len(self.frames),
             "per_class": {k: asdict(v) for k, v in self.per_class.items()},
             "overall": asdict(self.overall),
@@ -237,7 +242,7 @@ class ClassPromptReport:
             f"{'prompt':<17}{'targets':>8}{'found':>7}{'recall':>8}{'false/prompt':>13}"
             f"{'wrong cls':>10}{'on other':>9}{'found(c)':>9}{'recall(c)':>10}{'false(c)/pr':>12}",
         ]
-        rows = [(CLASS_PROMPTS[c], s) for c, s in self.per_class.items()]
+        rows = [(self.prompts[c], s) for c, s in self.per_class.items()]
         for name, s in [*rows, ("all three", self.overall)]:
             n = max(s.prompts, 1)
             lines.append(
@@ -258,9 +263,7 @@ class ClassPromptReport:
         if self.sweep:
             lines.append("threshold sweep: recall % / false boxes per prompt")
             lines.append(
-                f"{'threshold':<11}"
-                + "".join(f"{c:>14}" for c in CLASS_PROMPTS)
-                + f"{'pooled':>14}"
+                f"{'threshold':<11}" + "".join(f"{c:>14}" for c in self.prompts) + f"{'pooled':>14}"
             )
             for t, pc, o in ((cfg.threshold, self.per_class, self.overall), *self.sweep):
                 cells = [f"{s.recall:.1f} / {s.false_per_prompt:.2f}" for s in (*pc.values(), o)]
@@ -287,18 +290,19 @@ def score_frame(model: GroundingModel, sample: Sample, config: ScoringConfig) ->
     thresholds = config.resolved()
     gt_boxes = np.asarray(sample.boxes, dtype=np.float64).reshape(-1, 7)
     gt_counted = counted(gt_boxes)
-    other_boxes = other_label_boxes(sample.labels, sample.calib)
+    classes = model_classes(model)
+    other_boxes = other_label_boxes(sample.labels, sample.calib, classes)
     labelled = None
     if config.candidates == "labels":
         from model.core.labelled import LabelledBoxes
 
-        labelled = LabelledBoxes(gt_boxes, [CLASSES.index(c) for c in sample.classes])
+        labelled = LabelledBoxes(gt_boxes, [classes.index(c) for c in sample.classes], classes)
     if labelled is None:
         features = model.encode_scene(sample.lidar, sample.radar)
     else:  # a referent-path model (TPCNet.encode_scene); the protocol has no candidates
         features = model.encode_scene(sample.lidar, sample.radar, candidates=labelled)  # type: ignore[call-arg]
     per_threshold: list[list[PromptCount]] = [[] for _ in thresholds]
-    for cls, prompt in CLASS_PROMPTS.items():
+    for cls, prompt in class_prompts(classes).items():
         pred = model.ground(features, prompt, score_threshold=min(thresholds))
         scores = np.asarray(pred.scores, dtype=np.float64).reshape(-1)
         boxes = np.asarray(pred.boxes, dtype=np.float64).reshape(-1, 7)
@@ -323,15 +327,16 @@ def score_frame(model: GroundingModel, sample: Sample, config: ScoringConfig) ->
 
 
 def summarize(
-    frames: Sequence[FrameResult], config: ScoringConfig
+    frames: Sequence[FrameResult],
+    config: ScoringConfig,
+    prompts: dict[str, str] = CLASS_PROMPTS,
 ) -> tuple[dict[str, ClassSummary], ClassSummary, tuple]:
-    """Per-class and pooled totals at the operating threshold, and the sweep's."""
+    """Per-class (each class of ``prompts``, the :func:`class_prompts` asked) and pooled totals
+    at the operating threshold, and the sweep's."""
     out = []
     for k in range(1 + len(config.sweep)):
         counts = [c for f in frames for c in f.counts[k]]
-        per_class = {
-            cls: ClassSummary.of([c for c in counts if c.cls == cls]) for cls in CLASS_PROMPTS
-        }
+        per_class = {cls: ClassSummary.of([c for c in counts if c.cls == cls]) for cls in prompts}
         out.append((per_class, ClassSummary.of(counts)))
     sweep = tuple((t, pc, o) for t, (pc, o) in zip(config.sweep, out[1:], strict=True))
     return out[0][0], out[0][1], sweep
@@ -344,24 +349,29 @@ def score_root(
     config: ScoringConfig,
     progress: bool = False,
 ) -> ClassPromptReport:
-    """Score the class prompts on the given frames of ``root`` (eval mode, no gradients)."""
+    """Score the class prompts of the model's class set on the given frames of ``root`` (eval
+    mode, no gradients; the root read into that class set)."""
     from tqdm import tqdm
 
     if isinstance(model, torch.nn.Module):
         model.eval()
     frames = []
     others: dict[str, int] = {}
+    classes = model_classes(model)
     start = time.perf_counter()
     with torch.no_grad():
         for sid in tqdm(ids, desc="class prompts", unit="frame", disable=not progress):
             sample = root.load(sid)
             frames.append(score_frame(model, sample, config))
             for lab in sample.labels:
-                if lab.name.lower() not in METRIC_NAMES:
+                if classes.label_class(lab.name) is None:
                     others[lab.name] = others.get(lab.name, 0) + 1
-    per_class, overall, sweep = summarize(frames, config)
+    prompts = class_prompts(classes)
+    per_class, overall, sweep = summarize(frames, config, prompts)
     seconds = time.perf_counter() - start
-    return ClassPromptReport(config, tuple(frames), per_class, overall, sweep, others, seconds)
+    return ClassPromptReport(
+        config, tuple(frames), per_class, overall, sweep, others, seconds, prompts
+    )
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -406,6 +416,8 @@ def run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     if not ids:
         raise RootError(f"{command.data}: split {command.split!r} has no frames")
     model = load_checkpoint(command.checkpoint, device=command.device)
+    if root.classes != model_classes(model):  # the labels read into the checkpoint's classes
+        root = Talk2RadarRoot(root.path, radar=root.radar_folder, classes=model_classes(model))
     config = given
     if given.threshold is None:
         config = replace(given, threshold=float(operating_threshold(model)))

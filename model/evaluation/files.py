@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from model.evaluation.metrics import VodResult, evaluate_frames
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.talk2radar.kitti import LabelError, ObjectLabel, parse_label_line, read_label_file
 from scenes.talk2radar.layout import ID_WIDTH, format_id, is_frame_id
 from scenes.utils.textfile import read_text_file
@@ -151,15 +152,18 @@ def load_prediction_dir(
 
 
 def score_directories(
-    labels: str | Path, preds: str | Path, devkit_offsets: bool = True
+    labels: str | Path,
+    preds: str | Path,
+    devkit_offsets: bool = True,
+    classes: ClassSet = VOD,
 ) -> ScoredDirectories:
-    """Score the prediction folder ``preds`` against the label folder ``labels``
-    (``devkit_offsets``: see :func:`model.evaluation.metrics.evaluate_frames`)."""
+    """Score the prediction folder ``preds`` against the label folder ``labels``, a row per
+    class of ``classes`` (``devkit_offsets``: see :func:`model.evaluation.metrics.evaluate_frames`)."""
     gt = load_label_dir(labels)
     frame_ids = tuple(sorted(gt))
     dt, missing = load_prediction_dir(preds, frame_ids)
     return ScoredDirectories(
-        result=evaluate_frames(gt, dt, devkit_offsets=devkit_offsets),
+        result=evaluate_frames(gt, dt, devkit_offsets=devkit_offsets, classes=classes),
         frame_ids=frame_ids,
         missing_predictions=missing,
     )

@@ -65,6 +65,7 @@ exact-set share is the share of such prompts answered with no box)."""
 
 
 def _min_overlap(cls: str, source: str) -> float:
+    """The class's official 3D minimum overlap (any class set's class)."""
     if cls not in MIN_OVERLAPS:
         raise ValueError(f"{source}: unknown class {cls!r} (expected one of {tuple(MIN_OVERLAPS)})")
     return MIN_OVERLAPS[cls].box3d

@@ -27,17 +27,21 @@ from model.evaluation.protocol import (
     unknown_class_counts,
 )
 from model.evaluation.results import APValue, AreaResult, ClassResult, VodResult
-from scenes.geometry.actors import CLASSES
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.talk2radar.kitti import ObjectLabel
 
 
 def evaluate_area(
-    frames: Sequence[PreparedFrame], corridor: bool, classes: Sequence[str] = CLASSES
+    frames: Sequence[PreparedFrame], corridor: bool, classes: ClassSet = VOD
 ) -> AreaResult:
-    """Evaluate prepared frames in one area (corridor or not)."""
+    """Evaluate prepared frames in one area (corridor or not): one row per class of
+    ``classes``."""
     results = []
-    for cls in classes:
-        states = [(gt_states(f.gt, cls, corridor), dt_states(f.dt, cls, corridor)) for f in frames]
+    for cls in classes.names:
+        states = [
+            (gt_states(f.gt, cls, corridor, classes), dt_states(f.dt, cls, corridor, classes))
+            for f in frames
+        ]
         # Frames where nothing of this class can count contribute nothing: skip them.
         keep = [i for i, (g, d) in enumerate(states) if np.any(g != -1) or np.any(d == 0)]
         sub_frames = [frames[i] for i in keep]
@@ -61,6 +65,7 @@ def evaluate_frames(
     gt: Mapping[str, Sequence[ObjectLabel]],
     dt: Mapping[str, Sequence[ObjectLabel]],
     devkit_offsets: bool = True,
+    classes: ClassSet = VOD,
 ) -> VodResult:
     """Score detections against ground truth with the official VoD protocol.
 
@@ -71,6 +76,8 @@ def evaluate_frames(
         devkit_offsets: Apply the devkit's offsets (detections' ``rotation_y`` + 0.01 rad and 2D
             boxes + 0.01 px, for the overlaps only), so that numbers match the devkit's. False:
             overlaps of the boxes exactly as written.
+        classes: The class set scored, one row per class (its label names mapped onto it by
+            :meth:`scenes.geometry.classes.ClassSet.label_class`); default ``vod``.
 
     Returns:
         :class:`VodResult` for the entire annotated area and the driving corridor.
@@ -83,13 +90,14 @@ def evaluate_frames(
         shown = ", ".join(extra[:5]) + (f" and {len(extra) - 5} more" if len(extra) > 5 else "")
         raise ValueError(f"detections for {len(extra)} frame(s) without ground truth: {shown}")
     content = tuple((f, tuple(gt[f]), tuple(dt.get(f, ()))) for f in sorted(gt))
-    return _evaluate_content(content, devkit_offsets)
+    return _evaluate_content(content, devkit_offsets, classes)
 
 
 @lru_cache(maxsize=64)
 def _evaluate_content(
     content: tuple[tuple[str, tuple[ObjectLabel, ...], tuple[ObjectLabel, ...]], ...],
     devkit_offsets: bool,
+    classes: ClassSet = VOD,
 ) -> VodResult:
     """:func:`evaluate_frames` of ``(frame id, ground truth, detections)`` triples. Labels are
     frozen values and the result too, so an evaluation asked for again (a report rescored from
@@ -99,11 +107,11 @@ def _evaluate_content(
     gt = {f: g for f, g, _ in content}
     dt = {f: d for f, _, d in content if d}
     return VodResult(
-        entire_area=evaluate_area(frames, corridor=False),
-        roi=evaluate_area(frames, corridor=True),
+        entire_area=evaluate_area(frames, corridor=False, classes=classes),
+        roi=evaluate_area(frames, corridor=True, classes=classes),
         num_frames=len(frames),
-        unknown_gt_classes=unknown_class_counts(gt),
-        unknown_dt_classes=unknown_class_counts(dt),
+        unknown_gt_classes=unknown_class_counts(gt, classes),
+        unknown_dt_classes=unknown_class_counts(dt, classes),
     )
 
 

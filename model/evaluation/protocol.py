@@ -74,7 +74,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scenes.geometry.actors import CLASSES
+from scenes.geometry.classes import PRESETS, VOD, ClassSet
 from scenes.talk2radar.kitti import ObjectLabel
 
 NUM_SAMPLE_POINTS = 41
@@ -100,7 +100,6 @@ overlaps; reproduced by default (``devkit_offsets=True``)."""
 DONT_CARE = "DontCare"
 """Ground-truth name of KITTI's don't-care regions (compared case-sensitively; VoD has none)."""
 
-_NEIGHBOURS = {"car": "van", "pedestrian": "person_sitting"}
 
 KNOWN_OTHER_CLASSES: frozenset[str] = frozenset(
     {
@@ -129,15 +128,17 @@ the metric, but counted in :attr:`VodResult.unknown_gt_classes` / ``unknown_dt_c
 reported, so that it cannot silently change a score."""
 
 
-def unknown_class_counts(frames: Mapping[str, Sequence[ObjectLabel]]) -> dict[str, int]:
-    """Class names of ``frames`` (frame id -> labels) that are neither metric classes nor
+def unknown_class_counts(
+    frames: Mapping[str, Sequence[ObjectLabel]], classes: ClassSet = VOD
+) -> dict[str, int]:
+    """Class names of ``frames`` (frame id -> labels) that map onto no class of ``classes``
+    (:meth:`scenes.geometry.classes.ClassSet.label_class`) and are not
     :data:`KNOWN_OTHER_CLASSES` (case-insensitive), with their number of objects, by name."""
-    metric = {c.lower() for c in CLASSES}
     counts: dict[str, int] = {}
     for labels in frames.values():
         for lab in labels:
             low = lab.name.lower()
-            if low not in metric and low not in KNOWN_OTHER_CLASSES:
+            if classes.label_class(lab.name) is None and low not in KNOWN_OTHER_CLASSES:
                 counts[lab.name] = counts.get(lab.name, 0) + 1
     return dict(sorted(counts.items()))
 
@@ -163,11 +164,13 @@ class MinOverlaps:
 
 
 MIN_OVERLAPS: dict[str, MinOverlaps] = {
-    "Car": MinOverlaps(image=0.7, bev=0.5, box3d=0.5),
-    "Pedestrian": MinOverlaps(image=0.5, bev=0.25, box3d=0.25),
-    "Cyclist": MinOverlaps(image=0.5, bev=0.25, box3d=0.25),
+    c.name: MinOverlaps(*c.min_overlaps) for s in PRESETS.values() for c in s.classes
 }
-"""The devkit's reported (second) overlap table."""
+"""The devkit's reported (second) overlap table (Car 0.7 / 0.5 / 0.5, Pedestrian and Cyclist
+0.5 / 0.25 / 0.25), by class name over every class set: each class's
+:attr:`scenes.geometry.classes.ObjectClass.min_overlaps` (the other classes are scored like the
+VoD class they resemble: large vehicles as Car, two-wheelers as Cyclist, cones and barriers as
+Pedestrian)."""
 
 AREAS: tuple[str, ...] = ("entire_area", "roi")
 """Result names of the two areas: the entire annotated area and the driving corridor."""
@@ -243,14 +246,21 @@ def _lower(names: np.ndarray) -> np.ndarray:
     return np.array([str(n).lower() for n in names], dtype=object)
 
 
-def gt_states(gt: FrameObjects, cls: str, corridor: bool) -> np.ndarray:
-    """Ground-truth states ``(G,)`` int: 0 counts, 1 ignored, -1 another class."""
+def _of_class(names: Sequence[str], cls: str, classes: ClassSet) -> np.ndarray:
+    """``(N,)`` bool: the label names that map onto class ``cls`` of ``classes`` (for ``vod``
+    the class name itself, case-insensitive, as the devkit compares)."""
+    return np.array([classes.label_class(str(n)) == cls for n in names], dtype=bool)
+
+
+def gt_states(gt: FrameObjects, cls: str, corridor: bool, classes: ClassSet = VOD) -> np.ndarray:
+    """Ground-truth states ``(G,)`` int: 0 counts, 1 ignored, -1 another class (``cls`` a class
+    of ``classes``; KITTI's neighbour class, :attr:`scenes.geometry.classes.ObjectClass.
+    neighbour`, a van for a car, is ignored rather than missed)."""
     if len(gt) == 0:
         return np.zeros(0, dtype=np.int64)
     names = _lower(gt.names)
-    wanted = cls.lower()
-    valid = names == wanted
-    neighbour = names == _NEIGHBOURS.get(wanted, "\0")
+    valid = _of_class(gt.names, cls, classes)
+    neighbour = names == (classes.get(cls).neighbour or "\0")
     height = gt.bbox[:, 3] - gt.bbox[:, 1]
     ignore = (gt.occluded > MAX_OCCLUSION) | (height <= MIN_HEIGHT_PX)
     if corridor:
@@ -261,7 +271,7 @@ def gt_states(gt: FrameObjects, cls: str, corridor: bool) -> np.ndarray:
     return states
 
 
-def dt_states(dt: FrameObjects, cls: str, corridor: bool) -> np.ndarray:
+def dt_states(dt: FrameObjects, cls: str, corridor: bool, classes: ClassSet = VOD) -> np.ndarray:
     """Detection states ``(D,)`` int: 0 counts, 1 ignored (too small or outside the corridor,
     whatever the class), -1 another class."""
     if len(dt) == 0:
@@ -269,6 +279,6 @@ def dt_states(dt: FrameObjects, cls: str, corridor: bool) -> np.ndarray:
     ignored = np.abs(dt.bbox[:, 3] - dt.bbox[:, 1]) < MIN_HEIGHT_PX
     if corridor:
         ignored |= ~_in_corridor(dt.boxes)
-    states = np.where(_lower(dt.names) == cls.lower(), 0, -1).astype(np.int64)
+    states = np.where(_of_class(dt.names, cls, classes), 0, -1).astype(np.int64)
     states[ignored] = 1
     return states

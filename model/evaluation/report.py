@@ -67,7 +67,9 @@ from model.evaluation.report_file import (
     BaselineName,
 )
 from model.evaluation.worker_watch import DEFAULT_LIVENESS, Liveness
-from scenes.geometry.actors import CLASSES, Actor
+from model.protocol import model_classes
+from scenes.geometry.actors import Actor
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.language.prompts import infer_tags
 from scenes.talk2radar.kitti import ObjectLabel, format_label_line, parse_label_line
 from scenes.talk2radar.root import Sample, Talk2RadarRoot
@@ -141,11 +143,12 @@ class GroundingReport:
     grounding: GroundingMetrics | None = None
     baselines: Mapping[BaselineName, BaselineResult] = field(default_factory=dict)
     notes: Mapping[BaselineName, str] = field(default_factory=dict)
+    classes: ClassSet = VOD
 
     def rescored(self, predictions: Mapping[str, list[ObjectLabel]]) -> GroundingReport:
         """The same report with other predictions for the same frames (e.g. read back from the
         written files, as the official devkit would read them); grounding and baselines kept."""
-        fresh = build_report(self.ground_truth, predictions, self.tags, self.seconds)
+        fresh = build_report(self.ground_truth, predictions, self.tags, self.seconds, self.classes)
         return replace(fresh, grounding=self.grounding, baselines=self.baselines, notes=self.notes)
 
     def to_dict(self) -> dict:
@@ -204,6 +207,7 @@ def breakdown_by_type(
     gt: Mapping[str, list[ObjectLabel]],
     dt: Mapping[str, list[ObjectLabel]],
     tags: Mapping[str, frozenset[str]],
+    classes: ClassSet = VOD,
 ) -> dict[str, tuple[int, VodResult]]:
     """Score the frames of each prompt type separately (types with no frame are left out)."""
     out = {}
@@ -212,7 +216,11 @@ def breakdown_by_type(
         if frames:
             out[kind] = (
                 len(frames),
-                evaluate_frames({f: gt[f] for f in frames}, {f: dt.get(f, []) for f in frames}),
+                evaluate_frames(
+                    {f: gt[f] for f in frames},
+                    {f: dt.get(f, []) for f in frames},
+                    classes=classes,
+                ),
             )
     return out
 
@@ -221,6 +229,7 @@ def breakdown_by_depth(
     gt: Mapping[str, list[ObjectLabel]],
     dt: Mapping[str, list[ObjectLabel]],
     bins: Sequence[tuple[float, float]] = DEPTH_BINS,
+    classes: ClassSet = VOD,
 ) -> dict[str, tuple[int, VodResult]]:
     """Score ground truth and detections restricted to each depth bin ``[lo, hi)``."""
     out = {}
@@ -228,7 +237,7 @@ def breakdown_by_depth(
         gt_bin = {f: [g for g in labs if lo <= _depth(g) < hi] for f, labs in gt.items()}
         dt_bin = {f: [d for d in labs if lo <= _depth(d) < hi] for f, labs in dt.items()}
         count = sum(len(v) for v in gt_bin.values())
-        out[f"{lo:g}-{hi:g}"] = (count, evaluate_frames(gt_bin, dt_bin))
+        out[f"{lo:g}-{hi:g}"] = (count, evaluate_frames(gt_bin, dt_bin, classes=classes))
     return out
 
 
@@ -265,7 +274,8 @@ class SceneLabelCandidates:
     scene_labels: SceneLabels
 
     def __call__(self, sample: Sample) -> LabelledBoxes:
-        return LabelledBoxes(*self.scene_labels.load(sample.sample_id).metric())
+        objects = self.scene_labels.load(sample.sample_id)
+        return LabelledBoxes(*objects.metric(), objects.classes)
 
 
 def evaluate_predictions(
@@ -315,8 +325,14 @@ def evaluate_predictions(
             "candidates 'labels' need the frames' full labels (--scene-labels VOD_ROOT): a "
             "Talk2Radar label_2 lists only the referents"
         )
+    classes = model_classes(model)
+    if root.classes != classes or (scene_labels is not None and scene_labels.classes != classes):
+        raise ValueError(
+            f"{root.path}: labels read into the {root.classes.name!r} class set given to a "
+            f"model of the {classes.name!r} class set (open the root with the model's)"
+        )
     if scene_labels is not None and root.sidecar:
-        root = Talk2RadarRoot(root.path, radar=root.radar_folder, sidecar=False)
+        root = Talk2RadarRoot(root.path, radar=root.radar_folder, sidecar=False, classes=classes)
 
     gt: dict[str, list[ObjectLabel]] = {}
     dt: dict[str, list[ObjectLabel]] = {}
@@ -361,7 +377,7 @@ def evaluate_predictions(
             if scene_labels is not None:
                 boxes, labels = scene_labels.load(sid).metric()
                 objects = [
-                    Actor(i, CLASSES[int(lab)], box, np.zeros(2))
+                    Actor(i, classes.names[int(lab)], box, np.zeros(2))
                     for i, (box, lab) in enumerate(zip(boxes, labels, strict=True))
                 ]
                 oracle = oracle_boxes(objects, cls)
@@ -373,7 +389,7 @@ def evaluate_predictions(
                 oracle = oracle_boxes(sample.meta.actors, cls, exclude=skip)
             base["oracle"].labels[sid] = _labels(oracle, decode, sample)
             base["oracle"].outcomes.append(prompt_outcome(sid, tags[sid], oracle, referents, op))
-    report = build_report(gt, dt, tags, tuple(seconds))
+    report = build_report(gt, dt, tags, tuple(seconds), classes)
     found: dict[BaselineName, BaselineResult] = {}
     notes: dict[BaselineName, str] = {}
     if baselines:
@@ -385,7 +401,7 @@ def evaluate_predictions(
         for name in BASELINES:
             if name not in notes:
                 found[name] = BaselineResult(
-                    result=evaluate_frames(gt, base[name].labels),
+                    result=evaluate_frames(gt, base[name].labels, classes=classes),
                     grounding=grounding_metrics(base[name].outcomes, op),
                 )
     return replace(
@@ -401,14 +417,17 @@ def build_report(
     dt: Mapping[str, list[ObjectLabel]],
     tags: Mapping[str, frozenset[str]],
     seconds: Sequence[float] = (),
+    classes: ClassSet = VOD,
 ) -> GroundingReport:
-    """Score ``dt`` against ``gt`` overall, per prompt type and per depth bin."""
+    """Score ``dt`` against ``gt`` overall, per prompt type and per depth bin, one row per
+    class of ``classes`` (the model's class set)."""
     return GroundingReport(
-        result=evaluate_frames(gt, dt),
-        by_type=breakdown_by_type(gt, dt, tags),
-        by_depth=breakdown_by_depth(gt, dt),
+        result=evaluate_frames(gt, dt, classes=classes),
+        by_type=breakdown_by_type(gt, dt, tags, classes),
+        by_depth=breakdown_by_depth(gt, dt, classes=classes),
         predictions=dict(dt),
         ground_truth=dict(gt),
         tags=dict(tags),
         seconds=tuple(seconds),
+        classes=classes,
     )

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 from model.evaluation.protocol import AREAS
-from scenes.geometry.actors import CLASSES
+from scenes.geometry.classes import NUSCENES, VOD
 
 BaselineName = Literal["class_noun", "oracle"]
 """A baseline: the class-noun prompt, the language-blind oracle (JSON keys under ``baselines``)."""
@@ -75,6 +75,14 @@ class ReportFileError(ValueError):
     """A results file that is missing, unreadable or lacks a field (the message names it)."""
 
 
+def _report_classes(data: object) -> tuple[str, ...]:
+    """The class names an area's figures hold: the ``nuscenes`` set's when it has a figure of
+    each of them, else the ``vod`` set's (whose missing figure :func:`_num` then names)."""
+    if isinstance(data, dict) and all(class_key(c, "3d") in data for c in NUSCENES.names):
+        return NUSCENES.names
+    return VOD.names
+
+
 def _field(mapping: object, key: str, where: str) -> object:
     if not isinstance(mapping, Mapping) or key not in mapping:
         raise ReportFileError(f"{where}: missing field {key!r}")
@@ -100,7 +108,7 @@ class AreaFigures:
     @classmethod
     def read(cls, data: object, where: str) -> AreaFigures:
         return cls(
-            {c: _num(data, class_key(c, "3d"), where) for c in CLASSES},
+            {c: _num(data, class_key(c, "3d"), where) for c in _report_classes(data)},
             _num(data, MAP_3D, where),
             _num(data, MAOS, where),
             _num(data, MAP_3D + R40, where),

@@ -9,7 +9,6 @@ import numpy as np
 
 from model.evaluation.protocol import AREAS
 from model.evaluation.report_file import MAOS, MAP_3D, MAP_BEV, R40, class_key
-from scenes.geometry.actors import CLASSES
 
 
 @dataclass(frozen=True)
@@ -141,25 +140,26 @@ class VodResult:
         return (
             "Not scored, unknown class name: "
             + "; ".join(parts)
-            + f" (the classes are {', '.join(CLASSES)})"
+            + f" (the classes are {', '.join(c.name for c in self.entire_area.classes)})"
         )
 
     def format_table(self) -> str:
         """A plain-text summary: class x {3D, BEV, AOS} x {entire area, corridor}, R11 / R40."""
         lines = []
         titles = {"entire_area": "Entire annotated area", "roi": "Driving corridor"}
-        header = f"{'':<12}{'#GT':>5}  {'3D R11 / R40':>15}  {'BEV R11 / R40':>15}  {'AOS R11 / R40':>15}"
+        w = max([12, *(len(c.name) + 1 for c in self.entire_area.classes)])  # the name column
+        header = f"{'':<{w}}{'#GT':>5}  {'3D R11 / R40':>15}  {'BEV R11 / R40':>15}  {'AOS R11 / R40':>15}"
         for name in AREAS:
             res = self.area(name)
             lines.append(f"{titles[name]} ({self.num_frames} frames)")
             lines.append(header)
             for c in res.classes:
                 lines.append(
-                    f"{c.name:<12}{c.num_gt:>5}  {_pair(c.ap_3d.r11, c.ap_3d.r40)}  "
+                    f"{c.name:<{w}}{c.num_gt:>5}  {_pair(c.ap_3d.r11, c.ap_3d.r40)}  "
                     f"{_pair(c.ap_bev.r11, c.ap_bev.r40)}  {_pair(c.aos.r11, c.aos.r40)}"
                 )
             lines.append(
-                f"{'mean':<12}{'':>5}  {_pair(res.map_3d, res.map_3d_r40)}  "
+                f"{'mean':<{w}}{'':>5}  {_pair(res.map_3d, res.map_3d_r40)}  "
                 f"{_pair(res.map_bev, res.map_bev_r40)}  {_pair(res.maos, res.maos_r40)}"
             )
             lines.append("")

@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from model.evaluation.grounding import SPLIT_NAMES
-from model.evaluation.metrics import AREAS, MIN_OVERLAPS
+from model.evaluation.metrics import AREAS
 from model.evaluation.report import PROMPT_TYPES, ROW_NAMES
 from model.evaluation.report_file import (
     BY_DEPTH,
@@ -36,11 +36,9 @@ from model.evaluation.report_file import (
     ReportFileError,
     SubsetFigures,
 )
+from scenes.geometry.classes import VOD
 from scenes.utils.cli import command_parser, option, run_command
 from scenes.utils.textfile import read_text_file
-
-CLASSES: tuple[str, ...] = tuple(MIN_OVERLAPS)
-"""The classes the mAP averages, in the official order."""
 
 ResultsTableError = ReportFileError
 """A results file that is missing, unreadable or lacks a field (the message names it)."""
@@ -80,18 +78,32 @@ def _markdown(head: Sequence[str], body: Sequence[Sequence[str]]) -> str:
     return "\n".join(lines)
 
 
+def _classes(rows: Sequence[Row]) -> tuple[str, ...]:
+    """The classes of the rows' reports (the first row's order; a class only another row has
+    after them): a column each, "-" in a row without it."""
+    names: dict[str, None] = {}
+    for row in rows:
+        figures = row.report.need(AREAS[0])
+        assert isinstance(figures, AreaFigures)
+        names.update(dict.fromkeys(figures.ap_3d))
+    return tuple(names)
+
+
 def overall_table(rows: Sequence[Row]) -> str:
-    """Table I's shape: per-class 3D AP, mAP and mAOS (11 points) for both areas, R40 mAP."""
+    """Table I's shape: per-class 3D AP (a column per class of the rows' class sets), mAP and
+    mAOS (11 points) for both areas, R40 mAP."""
+    classes = _classes(rows)
+    short = [c[:3] if c in VOD.names else c for c in classes]  # Car, Ped, Cyc as before
     head = ["model", "frames"]
-    head += [f"EAA {c[:3]}" for c in CLASSES] + ["**EAA mAP**", "EAA mAOS", "EAA mAP R40"]
-    head += [f"DCA {c[:3]}" for c in CLASSES] + ["DCA mAP", "DCA mAOS"]
+    head += [f"EAA {c}" for c in short] + ["**EAA mAP**", "EAA mAOS", "EAA mAP R40"]
+    head += [f"DCA {c}" for c in short] + ["DCA mAP", "DCA mAOS"]
     body = []
     for row in rows:
         cells = [row.name, str(row.report.need(NUM_FRAMES))]
         for area in AREAS:
             scores = row.report.need(area)
             assert isinstance(scores, AreaFigures)
-            cells += [f"{scores.ap_3d[c]:.2f}" for c in CLASSES]
+            cells += [f"{scores.ap_3d[c]:.2f}" if c in scores.ap_3d else "-" for c in classes]
             m = f"{scores.map_3d:.2f}"
             cells += [f"**{m}**" if area == "entire_area" else m]
             cells += [f"{scores.maos:.2f}"]

@@ -33,7 +33,6 @@ from model.nets.text import TextFeatures
 from model.referent.heatmap import ReferentCanvas
 from model.referent.scene_candidates import describe_candidates, stack_candidates
 from model.referent.stage import CandidateBatch, ReferentStage, SceneEmbeddings, referent_loss
-from scenes.geometry.actors import CLASSES
 
 UNCALIBRATED_REFERENT = 0.5
 """Operating threshold of a referent-path checkpoint that was never calibrated: a referent
@@ -56,6 +55,7 @@ class ReferentGrounding(GroundingHead):
             2 * neck_channels,
             2 * first if cfg.uses_lidar else None,
             2 * first if cfg.uses_radar else None,
+            len(cfg.class_set),
         )
         self._kept_scene: (
             tuple[weakref.ref[SceneCandidates], tuple, CandidateBatch, SceneEmbeddings] | None
@@ -103,6 +103,7 @@ class ReferentGrounding(GroundingHead):
             radar if self.cfg.uses_radar else None,
             context=self.cfg.referent.context,
             subsets=self.cfg.referent.subset_ranks,
+            num_classes=len(self.cfg.class_set),
         )
 
     def refer(self, cands: SceneCandidates | list[SceneCandidates], text: TextFeatures) -> Tensor:
@@ -271,7 +272,7 @@ class ReferentGrounding(GroundingHead):
             boxes=objects.boxes[order],
             scores=probs[order],
             labels=labels,
-            classes=tuple(CLASSES[i] for i in labels),
+            classes=tuple(self.cfg.class_set.names[i] for i in labels),
             heatmaps=heatmaps,
             grid=scene.head_grid,
             prompt=prompt,

@@ -143,9 +143,9 @@ class SceneEncoder(nn.Module):
         return self.head_grid.contains(anchor_points(boxes, self.cfg.head.anchor))
 
     def anchor_scores(self, heat: np.ndarray, boxes: np.ndarray, labels: np.ndarray) -> np.ndarray:
-        """``(K,)``: the detector's sigmoid heatmap ``heat (3, H, W)`` read at each box's anchor
+        """``(K,)``: the detector's sigmoid heatmap ``heat (C, H, W)`` read at each box's anchor
         cell in its class's channel (:func:`model.core.labelled.anchor_scores`); boxes ``(K,
-        7)`` LiDAR frame, ``labels (K,)`` indices into ``CLASSES``."""
+        7)`` LiDAR frame, ``labels (K,)`` indices into the model's class set."""
         return anchor_scores(heat, boxes, labels, self.head_grid, self.cfg.head.anchor)
 
     def detection_targets(
@@ -153,7 +153,7 @@ class SceneEncoder(nn.Module):
     ) -> BatchTargets:
         """The detector's training targets of a batch: item ``b``'s boxes ``(K_b, 7)`` (LiDAR
         frame) with their class names (:func:`model.head.targets.draw_targets` on the head
-        grid), collated, on the CPU."""
+        grid; names outside the model's class set are ignored), collated, on the CPU."""
         return collate_targets(
             [
                 draw_targets(b, c, self.head_grid, self.cfg.head)

@@ -29,8 +29,7 @@ import torch.nn.functional as F
 from model.config import HeadConfig
 from model.core.anchors import cell_centres
 from model.core.grid import BevGrid
-from model.head.detector import NUM_CLASSES, REGRESSION_CHANNELS, HeadOutput
-from scenes.geometry.actors import CLASSES
+from model.head.detector import REGRESSION_CHANNELS, HeadOutput
 from scenes.geometry.boxes import paired_bev_iou, wrap_yaw
 
 
@@ -41,8 +40,8 @@ class Detections:
     Attributes:
         boxes: ``(K, 7)`` float64 ``x, y, z, l, w, h, yaw``, LiDAR frame, z at the geometric centre.
         scores: ``(K,)`` float64 sigmoid scores.
-        labels: ``(K,)`` int64 class indices into ``CLASSES``.
-        classes: ``K`` class names (``CLASSES[label]``).
+        labels: ``(K,)`` int64 class indices into the model's class set.
+        classes: ``K`` class names (``class_set.names[label]``).
     """
 
     boxes: np.ndarray
@@ -162,7 +161,7 @@ def _decode_one(
     threshold: float,
     limit: int,
 ) -> Detections:
-    """Decode one item: ``heatmap (3, H, W)`` logits and ``regression (8, H, W)``; at most
+    """Decode one item: ``heatmap (C, H, W)`` logits and ``regression (8, H, W)``; at most
     ``limit`` boxes."""
     _, H, W = heatmap.shape
     scores = torch.sigmoid(heatmap.float())
@@ -184,6 +183,10 @@ def _decode_one(
     rows, cols = cells_np // W, cells_np % W
     centres = cell_centres(grid, cols, rows) + reg[:, 0:2]
     yaw = wrap_yaw(np.arctan2(reg[:, 6], reg[:, 7]))
+    class_set = cfg.class_set
+    headless = np.array([not c.heading for c in class_set.classes])
+    if headless.any():  # a symmetric class (a traffic cone) has no heading: yaw 0
+        yaw = np.where(headless[labels], 0.0, yaw)
     boxes = np.concatenate([centres, reg[:, 2:3], np.exp(reg[:, 3:6]), yaw[:, None]], axis=1)
     scores_np = top_scores.detach().cpu().numpy().astype(np.float64)
 
@@ -192,7 +195,7 @@ def _decode_one(
         boxes=boxes[sel],
         scores=scores_np[sel],
         labels=labels[sel],
-        classes=tuple(CLASSES[i] for i in labels[sel]),
+        classes=tuple(class_set.names[i] for i in labels[sel]),
     )
 
 
@@ -207,9 +210,10 @@ def decode(
     """Decode a batch of head outputs into boxes.
 
     Args:
-        out: ``heatmap (B, 3, H, W)`` logits and ``regression (B, 8, H, W)`` on ``grid``.
+        out: ``heatmap (B, C, H, W)`` logits and ``regression (B, 8, H, W)`` on ``grid``.
         grid: The head's BEV grid; ``grid.shape`` must equal ``(H, W)``.
-        cfg: Head configuration (top-K, threshold, NMS IoU, cap).
+        cfg: Head configuration (top-K, threshold, NMS IoU, cap; its class set: ``C`` classes,
+            channel ``k`` its class ``k``).
         score_threshold: Overrides ``cfg.score_threshold`` when given.
         limit: Keep at most this many boxes (when below ``cfg.max_detections``): the first
             ``limit`` of the full result, found without visiting the boxes after them.
@@ -218,8 +222,13 @@ def decode(
         One :class:`Detections` per batch item (LiDAR frame boxes).
     """
     hm, reg = out.heatmap, out.regression
-    if hm.dim() != 4 or hm.shape[1] != NUM_CLASSES:
-        raise ValueError(f"decode: heatmap must be (B, {NUM_CLASSES}, H, W), got {tuple(hm.shape)}")
+    class_set = cfg.class_set
+    n = len(class_set)
+    if hm.dim() != 4 or hm.shape[1] != n:
+        raise ValueError(
+            f"decode: heatmap must be (B, {n}, H, W) for the {class_set.name!r} class set, "
+            f"got {tuple(hm.shape)}"
+        )
     if reg.dim() != 4 or reg.shape[1] != REGRESSION_CHANNELS:
         raise ValueError(
             f"decode: regression must be (B, {REGRESSION_CHANNELS}, H, W), got {tuple(reg.shape)}"

@@ -3,9 +3,10 @@
 The head turns the fused BEV feature map ``(B, C, H, W)`` (rows ``iy`` along +y, columns ``ix``
 along +x; see :mod:`model.core.grid`) into
 
-- ``heatmap (B, 3, H, W)``: raw logits, one channel per class in the order of
-  :data:`scenes.geometry.actors.CLASSES` (Car, Pedestrian, Cyclist). A box's heatmap peaks at its *anchor
-  point* (below), not at its centre;
+- ``heatmap (B, C, H, W)``: raw logits, one channel per class of the head's class set in its
+  order (``HeadConfig.class_set``, :mod:`scenes.geometry.classes`; ``C = 3`` for ``vod``: Car,
+  Pedestrian, Cyclist; 10 for ``nuscenes``). A box's heatmap peaks at its *anchor point* (below),
+  not at its centre;
 - ``regression (B, 8, H, W)``: read at the anchor cell, the channels are
   ``(dx, dy, z, log l, log w, log h, sin yaw, cos yaw)``. ``(dx, dy)`` is the offset **in metres**
   (LiDAR-frame axes) from the anchor cell's centre to the box centre; ``z`` is the box's geometric
@@ -30,10 +31,10 @@ network must learn is where the peak is; when it hesitates between two equally n
 peaks decode to (nearly) the same box and rotated NMS keeps one.
 
 Architecture (after CenterPoint's CenterHead, spec section 3.7): a shared 3x3 conv + BN + ReLU,
-then a heatmap branch (3x3 conv + BN + ReLU, 3x3 conv to 3 channels with bias -2.19, i.e. an initial
+then a heatmap branch (3x3 conv + BN + ReLU, 3x3 conv to ``C`` channels with bias -2.19, i.e. an initial
 sigmoid of about 0.1) and one branch per regression group (offset 2, z 1, log size 3, sin/cos 2),
 each 3x3 conv + BN + ReLU then a 3x3 conv, concatenated to 8 channels. The regression is shared by
-the three classes. CenterPoint's deformable convolutions (DCN) are replaced by plain convolutions:
+the classes. CenterPoint's deformable convolutions (DCN) are replaced by plain convolutions:
 no compiled extensions in this project.
 """
 
@@ -47,10 +48,6 @@ from torch import Tensor, nn
 
 from model.config import HeadConfig
 from model.nets.folding import batchnorm_affine
-from scenes.geometry.actors import CLASSES
-
-NUM_CLASSES = len(CLASSES)
-"""Heatmap channels: Car, Pedestrian, Cyclist."""
 
 REGRESSION_CHANNELS = 8
 """``(dx, dy, z, log l, log w, log h, sin yaw, cos yaw)``."""
@@ -64,7 +61,7 @@ class HeadOutput:
     """Raw outputs of :class:`C3DRecHead` on the head's BEV grid.
 
     Attributes:
-        heatmap: ``(B, 3, H, W)`` logits (before sigmoid), channels Car, Pedestrian, Cyclist.
+        heatmap: ``(B, C, H, W)`` logits (before sigmoid), one channel per class of the set.
         regression: ``(B, 8, H, W)`` ``(dx, dy, z, log l, log w, log h, sin yaw, cos yaw)``;
             ``(dx, dy)`` in metres from the anchor cell's centre to the box centre, LiDAR frame.
     """
@@ -85,8 +82,8 @@ class C3DRecHead(nn.Module):
     """The C3D-RECHead (fig. 7): shared conv, heatmap branch, regression branches.
 
     Args:
-        cfg: Head configuration.
-        in_channels: Channels ``C`` of the input BEV feature map.
+        cfg: Head configuration (its class set gives the heatmap's channels).
+        in_channels: Channels of the input BEV feature map.
     """
 
     def __init__(self, cfg: HeadConfig, in_channels: int) -> None:
@@ -97,7 +94,7 @@ class C3DRecHead(nn.Module):
         ch = cfg.head_channels
         self.shared = _conv_bn_relu(in_channels, ch)
         self.heatmap = nn.Sequential(
-            _conv_bn_relu(ch, ch), nn.Conv2d(ch, NUM_CLASSES, 3, padding=1)
+            _conv_bn_relu(ch, ch), nn.Conv2d(ch, len(cfg.class_set), 3, padding=1)
         )
         nn.init.constant_(self.heatmap[-1].bias, cfg.heatmap_bias)
         self.regression = nn.ModuleDict(
@@ -114,7 +111,7 @@ class C3DRecHead(nn.Module):
             x: ``(B, C, H, W)`` BEV features on the head's grid.
 
         Returns:
-            :class:`HeadOutput` with ``heatmap (B, 3, H, W)`` and ``regression (B, 8, H, W)``.
+            :class:`HeadOutput` with ``heatmap (B, C, H, W)`` and ``regression (B, 8, H, W)``.
         """
         if x.dim() != 4:
             raise ValueError(

@@ -19,7 +19,7 @@ For every ground-truth box (LiDAR frame, ``x, y, z, l, w, h, yaw``) of a metric 
 The flat cell index of the anchor cell is ``iy * W + ix`` (row-major over the ``(H, W)`` canvas),
 which is what :func:`model.head.losses.grounding_loss` gathers the regression map with.
 
-Box classes outside :data:`scenes.geometry.actors.CLASSES` are ignored: they stay in the arrays (so index
+Box classes outside the model's class set (``ModelConfig.class_set``) are ignored: they stay in the arrays (so index
 ``k`` still means input box ``k``) with ``label = -1`` and ``mask = False``.
 """
 
@@ -36,8 +36,7 @@ from torch import Tensor
 from model.config import HeadConfig
 from model.core.anchors import anchor_points, cell_centres
 from model.core.grid import BevGrid
-from model.head.detector import NUM_CLASSES, REGRESSION_CHANNELS
-from scenes.geometry.actors import CLASSES
+from model.head.detector import REGRESSION_CHANNELS
 
 
 @dataclass(frozen=True)
@@ -45,14 +44,14 @@ class Targets:
     """Targets of one sample on the head grid ``(H, W)``.
 
     Attributes:
-        heatmap: ``(3, H, W)`` float32 Gaussian heatmaps, peak 1 at each anchor cell.
+        heatmap: ``(C, H, W)`` float32 (``C`` classes) Gaussian heatmaps, peak 1 at each anchor cell.
         indices: ``(K,)`` int64 flat anchor-cell index ``iy * W + ix`` (0 where ``mask`` is False).
         anchor_offsets: ``(K, 2)`` float32 anchor point minus anchor-cell centre, metres
             (in ``[-cell/2, cell/2)``; zero where ``mask`` is False).
         regression: ``(K, 8)`` float32 ``(dx, dy, z, log l, log w, log h, sin yaw, cos yaw)``
             (zero where ``mask`` is False).
         mask: ``(K,)`` bool, True for metric-class boxes whose anchor lies in the grid.
-        labels: ``(K,)`` int64 class index into ``CLASSES``, -1 for ignored classes.
+        labels: ``(K,)`` int64 class index into the class set, -1 for ignored classes.
         anchors: ``(K, 2)`` float64 anchor points ``(x, y)``, LiDAR frame, metres.
     """
 
@@ -70,7 +69,7 @@ class BatchTargets:
     """Targets of a batch, padded to the largest box count ``Kmax`` (padding has ``mask`` False).
 
     Attributes:
-        heatmap: ``(B, 3, H, W)`` float32.
+        heatmap: ``(B, C, H, W)`` float32.
         indices: ``(B, Kmax)`` int64 flat anchor-cell indices.
         anchor_offsets: ``(B, Kmax, 2)`` float32, metres.
         regression: ``(B, Kmax, 8)`` float32.
@@ -167,9 +166,11 @@ def draw_targets(
 
     Args:
         boxes: ``(K, 7)`` ``x, y, z, l, w, h, yaw``, LiDAR frame, z at the geometric centre.
-        classes: ``K`` class names; names outside ``CLASSES`` are ignored.
+        classes: ``K`` class names; names outside ``cfg.class_set`` are ignored.
         grid: The head's BEV grid (the grid of the feature map the head runs on).
-        cfg: Head configuration (anchor kind, Gaussian radius parameters).
+        cfg: Head configuration (anchor kind, Gaussian radius parameters, the class set: heatmap
+            channel ``k`` is its class ``k``; a class without heading,
+            :attr:`scenes.geometry.classes.ObjectClass.heading`, gets the yaw target 0).
 
     Returns:
         :class:`Targets` on ``grid.shape``.
@@ -180,12 +181,16 @@ def draw_targets(
     boxes = _check_boxes(boxes, classes)
     K = len(boxes)
     H, W = grid.shape
-    heatmap = np.zeros((NUM_CLASSES, H, W), dtype=np.float32)
+    class_set = cfg.class_set
+    heatmap = np.zeros((len(class_set), H, W), dtype=np.float32)
     indices = np.zeros(K, dtype=np.int64)
     anchor_offsets = np.zeros((K, 2), dtype=np.float32)
     regression = np.zeros((K, REGRESSION_CHANNELS), dtype=np.float32)
     mask = np.zeros(K, dtype=bool)
-    labels = np.array([CLASSES.index(c) if c in CLASSES else -1 for c in classes], dtype=np.int64)
+    labels = np.array(
+        [class_set.index(c) if c in class_set else -1 for c in classes], dtype=np.int64
+    )
+    headless = np.array([not c.heading for c in class_set.classes] + [False])
     if K == 0:
         return Targets(heatmap, indices, anchor_offsets, regression, mask, labels, np.zeros((0, 2)))
 
@@ -203,6 +208,8 @@ def draw_targets(
         indices[k] = rows[k] * W + cols[k]
         anchor_offsets[k] = anchors[k] - centres[k]
         x, y, z, l, w, h, yaw = boxes[k]
+        if headless[labels[k]]:
+            yaw = 0.0
         regression[k] = (
             x - centres[k, 0],
             y - centres[k, 1],

@@ -5,9 +5,13 @@ class and a detection score; at inference the candidates are the text-agnostic C
 decoded detections, in training the frame's actors (slightly jittered) plus the detector's own
 false positives. For each candidate this module computes, as pure numpy functions:
 
-- :func:`geometry_features` ``(K, GEOMETRY_FEATURES)``: class one-hot, detection score, centre,
-  size, heading, nearest-edge depth (``min x`` of the BEV corners, the depth the prompts speak of),
-  bearing, range, lateral offset;
+- :func:`geometry_features` ``(K, geometry_feature_width(C))``: class one-hot over the model's
+  ``C`` classes, detection score, centre, size, heading, nearest-edge depth (``min x`` of the BEV
+  corners, the depth the prompts speak of), bearing, range, lateral offset. The one-hot's first
+  three columns are columns 0 to 2 and a fourth and further class's come after the explicit
+  geometry (columns 17, 18, ...: :func:`class_columns`), so that every other column has one index
+  whatever the class set, and a three-class (``vod``) model reads the layout its checkpoints were
+  trained on;
 - :func:`lidar_evidence` ``(K, LIDAR_EVIDENCE)``: LiDAR points inside the box (count, intensity,
   height spread);
 - :func:`radar_evidence` ``(K, RADAR_EVIDENCE)``: radar points inside the box footprint grown by
@@ -36,6 +40,10 @@ from model.referent.point_pairs import box_point_pairs
 from scenes.geometry.boxes import bev_corners
 
 GEOMETRY_FEATURES = 17
+"""Width of :func:`geometry_features` of a set of at most three classes (``vod``);
+:func:`geometry_feature_width` in general."""
+FIRST_CLASS_COLUMNS = 3
+"""Class one-hot columns before the score column (the first three classes')."""
 LIDAR_EVIDENCE = 4
 RADAR_EVIDENCE = 10
 RADAR_MARGIN = 0.5
@@ -52,6 +60,19 @@ RADAR_MEDIAN_VC, RADAR_SLOPE_X, RADAR_SLOPE_Y = 4, 7, 8
 and the points' displacement over the ``time`` field along x and y."""
 
 
+def class_columns(num_classes: int) -> np.ndarray:
+    """``(C,)`` int64: the column of each class's one-hot in :func:`geometry_features` of a set
+    of ``num_classes`` classes (module docstring: 0, 1, 2, then 17, 18, ...)."""
+    first = np.arange(min(num_classes, FIRST_CLASS_COLUMNS))
+    later = GEOMETRY_FEATURES + np.arange(max(0, num_classes - FIRST_CLASS_COLUMNS))
+    return np.concatenate([first, later]).astype(np.int64)
+
+
+def geometry_feature_width(num_classes: int) -> int:
+    """Width of :func:`geometry_features` of a set of ``num_classes`` classes (17 up to three)."""
+    return GEOMETRY_FEATURES + max(0, num_classes - FIRST_CLASS_COLUMNS)
+
+
 def _boxes(boxes: np.ndarray) -> np.ndarray:
     return np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
 
@@ -64,26 +85,35 @@ def nearest_depth(boxes: np.ndarray) -> np.ndarray:
     return bev_corners(b)[:, :, 0].min(axis=1)
 
 
-def geometry_features(boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray) -> np.ndarray:
+def geometry_features(
+    boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray, num_classes: int = 3
+) -> np.ndarray:
     """Explicit geometry of ``K`` candidates.
 
     Args:
         boxes: ``(K, 7)`` LiDAR frame.
-        labels: ``(K,)`` class indices into :data:`scenes.geometry.actors.CLASSES`.
+        labels: ``(K,)`` class indices into the model's class set.
         scores: ``(K,)`` detection scores in ``[0, 1]``.
+        num_classes: ``C``, the size of the model's class set (3: ``vod``).
 
     Returns:
-        ``(K, GEOMETRY_FEATURES)`` float32: one-hot class (3), score, x, y, z, log l, log w, log h,
-        sin yaw, cos yaw, nearest-edge depth, bearing (rad), range, ``|y|``, nearest-edge depth
-        minus centre x (how deep the box reaches).
+        ``(K, geometry_feature_width(C))`` float32: one-hot class (the first three), score, x, y,
+        z, log l, log w, log h, sin yaw, cos yaw, nearest-edge depth, bearing (rad), range,
+        ``|y|``, nearest-edge depth minus centre x (how deep the box reaches), then the one-hot
+        of the classes after the third (:func:`class_columns`).
     """
     b = _boxes(boxes)
     k = len(b)
-    out = np.zeros((k, GEOMETRY_FEATURES), dtype=np.float32)
+    out = np.zeros((k, geometry_feature_width(num_classes)), dtype=np.float32)
     if k == 0:
         return out
     labels = np.asarray(labels, dtype=np.int64).reshape(k)
-    out[np.arange(k), labels] = 1.0
+    if labels.min() < 0 or labels.max() >= num_classes:
+        raise ValueError(
+            f"geometry_features: labels must index {num_classes} classes, got "
+            f"{sorted(set(labels.tolist()))}"
+        )
+    out[np.arange(k), class_columns(num_classes)[labels]] = 1.0
     depth = nearest_depth(b)
     rng = np.hypot(b[:, 0], b[:, 1])
     out[:, 3] = np.asarray(scores, dtype=np.float64).reshape(k)
@@ -231,6 +261,8 @@ __all__ = [
     "GEOMETRY_FEATURES",
     "LIDAR_EVIDENCE",
     "RADAR_EVIDENCE",
+    "class_columns",
+    "geometry_feature_width",
     "geometry_features",
     "lidar_evidence",
     "nearest_depth",

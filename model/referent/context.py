@@ -28,7 +28,8 @@ about):
   itself is no rival), plus the objectness mass of each class.
 
 Frames and units: LiDAR frame (x forward, y left), metres; distances are divided by
-:data:`RELATION_SCALE`. ``K = 0`` gives ``(0, CONTEXT_FEATURES)``.
+:data:`RELATION_SCALE`. ``K = 0`` gives ``(0, context_width(C))``; ``C`` classes give ``C``
+relation blocks (:data:`CONTEXT_FEATURES` for the three of ``vod``).
 """
 
 from __future__ import annotations
@@ -39,7 +40,7 @@ import numpy as np
 from numba import njit
 
 from model.referent.candidates import nearest_depth
-from scenes.geometry.actors import CLASSES
+from scenes.geometry.classes import VOD, ClassSet
 
 OBJECT_SCORE = 0.3
 OBJECT_WIDTH = 0.05
@@ -56,8 +57,19 @@ RANK_FEATURES = RANK_ORDERS * (1 + len(BUMPS)) + 1
 REFERENCES = ("nearest", "farthest", "leftmost", "rightmost", "closest")
 PER_REFERENCE = 8
 """dx, dy, distance, depth beyond the far edge, own weight, rank / 4, bump 0, bump 1."""
-RELATION_FEATURES = len(CLASSES) * (len(REFERENCES) * PER_REFERENCE + 1)
+PER_CLASS = len(REFERENCES) * PER_REFERENCE + 1
+"""Relation columns per class: its references, then its objectness mass."""
+RELATION_FEATURES = len(VOD) * PER_CLASS
+"""Relation columns of a three-class (``vod``) model; ``C * PER_CLASS`` for ``C`` classes."""
 CONTEXT_FEATURES = RANK_FEATURES + RELATION_FEATURES
+"""Width of :func:`context_features` of a three-class (``vod``) model; :func:`context_width`."""
+
+
+def context_width(num_classes: int) -> int:
+    """Width of :func:`context_features` of a model of ``num_classes`` classes."""
+    return RANK_FEATURES + num_classes * PER_CLASS
+
+
 RANK_NAMES = ("nearest", "farthest", "leftmost", "rightmost", "nearest_all", "farthest_all")
 """The orderings of the rank block, in order."""
 
@@ -68,10 +80,11 @@ def rank_columns(order: str) -> slice:
     return slice(i * (1 + len(BUMPS)), (i + 1) * (1 + len(BUMPS)))
 
 
-def relation_columns(cls: str, reference: str) -> slice:
-    """Columns of the relation to class ``cls``'s ``reference`` (:data:`REFERENCES`): dx, dy,
-    distance, depth beyond its far edge, own weight, rank / 4, bump 0, bump 1."""
-    start = RANK_FEATURES + CLASSES.index(cls) * (len(REFERENCES) * PER_REFERENCE + 1)
+def relation_columns(cls: str, reference: str, classes: ClassSet = VOD) -> slice:
+    """Columns of the relation to class ``cls``'s ``reference`` (:data:`REFERENCES`) for a model
+    of ``classes``: dx, dy, distance, depth beyond its far edge, own weight, rank / 4, bump 0,
+    bump 1."""
+    start = RANK_FEATURES + classes.index(cls) * PER_CLASS
     start += REFERENCES.index(reference) * PER_REFERENCE
     return slice(start, start + PER_REFERENCE)
 
@@ -207,21 +220,24 @@ def _relation(out, i, base, x, y, depth, labels, w, a, rx, ry, redge, to_ref):  
     rank_code_into(out, i, base + 5, rank, (0, 1))
 
 
-def context_features(boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray) -> np.ndarray:
+def context_features(
+    boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray, num_classes: int = 3
+) -> np.ndarray:
     """Ranks and relations of ``K`` candidates (module docstring), in one compiled pass (numba,
     cached beside this file; float64 arithmetic).
 
     Args:
         boxes: ``(K, 7)`` LiDAR frame.
-        labels: ``(K,)`` class indices into :data:`scenes.geometry.actors.CLASSES`.
+        labels: ``(K,)`` class indices into the model's class set.
         scores: ``(K,)`` detection scores in ``[0, 1]``.
+        num_classes: ``C``, the size of the model's class set (3: ``vod``).
 
     Returns:
-        ``(K, CONTEXT_FEATURES)`` float32.
+        ``(K, context_width(C))`` float32.
     """
     b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
     k = len(b)
-    out = np.zeros((k, CONTEXT_FEATURES), dtype=np.float64)
+    out = np.zeros((k, context_width(num_classes)), dtype=np.float64)
     if k == 0:
         return out.astype(np.float32)
     labels = np.ascontiguousarray(np.asarray(labels, dtype=np.int64).reshape(k))
@@ -229,16 +245,18 @@ def context_features(boxes: np.ndarray, labels: np.ndarray, scores: np.ndarray) 
     depth = nearest_depth(b)
     _context(
         np.ascontiguousarray(b[:, 0]), np.ascontiguousarray(b[:, 1]), depth, labels, w,
-        len(CLASSES), out,
+        num_classes, out,
     )  # fmt: skip
     return out.astype(np.float32)
 
 
 __all__ = [
     "CONTEXT_FEATURES",
+    "PER_CLASS",
     "RANK_NAMES",
     "REFERENCES",
     "context_features",
+    "context_width",
     "objectness",
     "rank_code_into",
     "rank_columns",

@@ -56,6 +56,7 @@ def describe_candidates(
     *,
     context: bool,
     subsets: bool,
+    num_classes: int = 3,
 ) -> SceneCandidates:
     """Everything the referent stage reads about ``K`` candidates of one scene.
 
@@ -70,6 +71,7 @@ def describe_candidates(
             (``ReferentConfig.context``).
         subsets: Then append :func:`model.referent.subsets.subset_features` (text-free, so
             computed once per scene rather than per prompt; ``ReferentConfig.subset_ranks``).
+        num_classes: The size of the model's class set (3: ``vod``); ``labels`` index it.
 
     Returns:
         :class:`model.core.candidates.SceneCandidates`; the pooled parts are differentiable in ``maps``.
@@ -84,9 +86,11 @@ def describe_candidates(
 
     centres = t(boxes[:, :2])
     anchors = t(anchor_points(boxes, anchor)) if len(boxes) else centres
-    geometry = geometry_features(boxes, labels, scores)
+    geometry = geometry_features(boxes, labels, scores, num_classes)
     if context:
-        geometry = np.concatenate([geometry, context_features(boxes, labels, scores)], axis=1)
+        geometry = np.concatenate(
+            [geometry, context_features(boxes, labels, scores, num_classes)], axis=1
+        )
     geometry = t(geometry)
     fused = _pooled(maps.fused, grid, centres, anchors)
     lidar = radar = None
@@ -102,7 +106,9 @@ def describe_candidates(
         )
     if subsets:
         padding = torch.zeros((1, len(boxes)), dtype=torch.bool, device=device)
-        sub = subset_features(geometry[None], None if radar is None else radar[None], padding)
+        sub = subset_features(
+            geometry[None], None if radar is None else radar[None], padding, num_classes
+        )
         geometry = torch.cat([geometry, sub[0].to(dtype)], dim=1)
     return SceneCandidates(boxes, labels, scores, geometry, fused, lidar, radar)
 

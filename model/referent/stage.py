@@ -40,10 +40,10 @@ from torch import Tensor, nn
 
 from model.config import ReferentConfig
 from model.nets.numerals import NUMERIC_FEATURES
-from model.referent.candidates import GEOMETRY_FEATURES, LIDAR_EVIDENCE, RADAR_EVIDENCE
+from model.referent.candidates import LIDAR_EVIDENCE, RADAR_EVIDENCE, geometry_feature_width
 from model.referent.compare import COMPARE_FEATURES, compare_features
-from model.referent.context import CONTEXT_FEATURES
-from model.referent.subsets import SUBSET_FEATURES
+from model.referent.context import context_width
+from model.referent.subsets import subset_width
 
 
 @dataclass(frozen=True)
@@ -52,8 +52,8 @@ class CandidateBatch:
 
     Attributes:
         geometry: ``(N, K, G)`` explicit geometry, ``G`` = :func:`geometry_width` (with the
-            context features of :mod:`model.referent.context` after the first
-            ``GEOMETRY_FEATURES`` when ``ReferentConfig.context``, then those of
+            context features of :mod:`model.referent.context` after the explicit geometry
+            (:func:`model.referent.candidates.geometry_feature_width`) when ``ReferentConfig.context``, then those of
             :mod:`model.referent.subsets` when ``ReferentConfig.subset_ranks``).
         fused: ``(N, K, C_f)`` fused BEV features pooled at the box (centre and anchor).
         lidar: ``(N, K, C_l + LIDAR_EVIDENCE)`` or None for a radar-only model.
@@ -90,23 +90,24 @@ class SceneEmbeddings:
     radar: Tensor | None
 
 
-def geometry_width(cfg: ReferentConfig) -> int:
-    """Width of :attr:`CandidateBatch.geometry` for a stage of ``cfg``: the explicit geometry,
-    then the context features with ``context``, then the subset ranks and picked references
-    (:mod:`model.referent.subsets`) with ``subset_ranks``."""
+def geometry_width(cfg: ReferentConfig, num_classes: int = 3) -> int:
+    """Width of :attr:`CandidateBatch.geometry` for a stage of ``cfg`` over ``num_classes``
+    classes (3: ``vod``): the explicit geometry, then the context features with ``context``,
+    then the subset ranks and picked references (:mod:`model.referent.subsets`) with
+    ``subset_ranks``."""
     return (
-        GEOMETRY_FEATURES
-        + (CONTEXT_FEATURES if cfg.context else 0)
-        + (SUBSET_FEATURES if cfg.subset_ranks else 0)
+        geometry_feature_width(num_classes)
+        + (context_width(num_classes) if cfg.context else 0)
+        + (subset_width(num_classes) if cfg.subset_ranks else 0)
     )
 
 
-def geometry_input_width(cfg: ReferentConfig) -> int:
+def geometry_input_width(cfg: ReferentConfig, num_classes: int = 3) -> int:
     """Width of the geometry the stage embeds: :func:`geometry_width`, plus the prompt's number
     comparisons (:mod:`model.referent.compare`) with ``numeric_compare``. The embedding's input
     is ordered geometry, context, comparisons, subsets (the order the fields were added in, so
     that a checkpoint without the later ones widens with zero columns at the end)."""
-    return geometry_width(cfg) + (COMPARE_FEATURES if cfg.numeric_compare else 0)
+    return geometry_width(cfg, num_classes) + (COMPARE_FEATURES if cfg.numeric_compare else 0)
 
 
 def _mlp(inp: int, dim: int) -> nn.Sequential:
@@ -122,6 +123,8 @@ class ReferentStage(nn.Module):
         fused_dim: Width of :attr:`CandidateBatch.fused`.
         lidar_dim: BEV channels pooled from the LiDAR branch (None: no LiDAR).
         radar_dim: BEV channels pooled from the radar branch (None: no radar).
+        num_classes: The size of the model's class set (3: ``vod``): the class evidence's
+            width (the one-hot and the per-class context and subset blocks).
     """
 
     def __init__(
@@ -131,16 +134,19 @@ class ReferentStage(nn.Module):
         fused_dim: int,
         lidar_dim: int | None,
         radar_dim: int | None,
+        num_classes: int = 3,
     ) -> None:
         super().__init__()
         d = cfg.dim
         self.cfg = cfg
-        self.geometry = _mlp(geometry_input_width(cfg), d)
+        self.num_classes = num_classes
+        width = geometry_input_width(cfg, num_classes)
+        self.geometry = _mlp(width, d)
         self.fused = _mlp(fused_dim, d)
         self.lidar = _mlp(lidar_dim + LIDAR_EVIDENCE, d) if lidar_dim is not None else None
         self.radar = _mlp(radar_dim + RADAR_EVIDENCE, d) if radar_dim is not None else None
         self.sensor_gate = nn.Linear(d, 2 * d)
-        self.geometry_gate = nn.Linear(d, geometry_input_width(cfg)) if cfg.text_gate else None
+        self.geometry_gate = nn.Linear(d, width) if cfg.text_gate else None
         if self.geometry_gate is not None:
             nn.init.zeros_(self.geometry_gate.weight)
             nn.init.zeros_(self.geometry_gate.bias)
@@ -192,7 +198,7 @@ class ReferentStage(nn.Module):
         if self.cfg.numeric_compare:
             compared = compare_features(geometry, cands.radar, numbers, text_padding)
             if self.cfg.subset_ranks:  # geometry_input_width's order: the subsets come last
-                split = geometry.shape[-1] - SUBSET_FEATURES
+                split = geometry.shape[-1] - subset_width(self.num_classes)
                 parts = [geometry[..., :split], compared, geometry[..., split:]]
             else:
                 parts = [geometry, compared]

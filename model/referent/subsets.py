@@ -40,7 +40,7 @@ import torch
 from numba import njit
 from torch import Tensor
 
-from model.referent.candidates import DEPTH_COLUMN, DEPTH_SCALE, LATERAL_SCALE
+from model.referent.candidates import DEPTH_COLUMN, DEPTH_SCALE, LATERAL_SCALE, class_columns
 from model.referent.compare import candidate_speed
 from model.referent.context import (
     BUMPS,
@@ -50,7 +50,7 @@ from model.referent.context import (
     rank_code_into,
     softmax_into,
 )
-from scenes.geometry.actors import CLASSES, MOVING_SPEED
+from scenes.geometry.actors import MOVING_SPEED
 from scenes.language.prompts.atoms import AHEAD_MAX_BEARING_DEG, LANE_HALF_WIDTH
 
 SPEED_TAU = 0.5
@@ -75,9 +75,18 @@ SUBSET_ORDERS = (
 PICKED = ("fastest", "slowest", "moving", "stationary", "left", "ahead", "right")
 PER_PICKED = 8
 """dx, dy, distance, depth beyond the far edge, own weight, rank / 4, bump 0, bump 1."""
-SUBSET_FEATURES = (
-    len(SUBSET_ORDERS) * (1 + len(BUMPS)) + 1 + len(CLASSES) * len(PICKED) * PER_PICKED
-)
+SUBSET_RANK_FEATURES = len(SUBSET_ORDERS) * (1 + len(BUMPS)) + 1
+"""The subset ranks' columns and the moving probability (the same for every class set)."""
+SUBSET_FEATURES = SUBSET_RANK_FEATURES + 3 * len(PICKED) * PER_PICKED
+"""Width of :func:`subset_features` of a three-class (``vod``) model; :func:`subset_width`."""
+
+
+def subset_width(num_classes: int) -> int:
+    """Width of :func:`subset_features` of a model of ``num_classes`` classes (a block of picked
+    references per class)."""
+    return SUBSET_RANK_FEATURES + num_classes * len(PICKED) * PER_PICKED
+
+
 _X_COLUMN, _Y_COLUMN, _SCORE_COLUMN = 4, 5, 3
 
 
@@ -194,8 +203,10 @@ def _one_scene(  # pragma: no cover - compiled; its Python body is what numba co
                 rank_code_into(out, i, base + 5, rank, (0, 1))
 
 
-def subset_features(geometry: Tensor, radar: Tensor | None, padding: Tensor) -> Tensor:
-    """The module docstring's features, ``(N, K, SUBSET_FEATURES)``, each row its own scene
+def subset_features(
+    geometry: Tensor, radar: Tensor | None, padding: Tensor, num_classes: int = 3
+) -> Tensor:
+    """The module docstring's features, ``(N, K, subset_width(C))``, each row its own scene
     (:func:`model.referent.scene_candidates.describe_candidates` calls it once per scene).
 
     Text-free and without gradient (the inputs it reads, the geometry and the radar evidence,
@@ -207,9 +218,13 @@ def subset_features(geometry: Tensor, radar: Tensor | None, padding: Tensor) -> 
             (:func:`model.referent.candidates.geometry_features` first).
         radar: ``(N, K, C_r + RADAR_EVIDENCE)`` or None.
         padding: ``(N, K)`` bool, True at padding.
+        num_classes: ``C``, the size of the model's class set (3: ``vod``); the one-hot is read
+            from :func:`model.referent.candidates.class_columns`.
     """
     n, k = padding.shape
-    out = np.zeros((n, k, SUBSET_FEATURES), dtype=np.float64)
+    width = subset_width(num_classes)
+    onehot_columns = class_columns(num_classes)
+    out = np.zeros((n, k, width), dtype=np.float64)
     if k:
         g = geometry.detach().cpu().double().numpy()
         speed = candidate_speed(None if radar is None else radar.detach(), geometry.detach())
@@ -220,9 +235,9 @@ def subset_features(geometry: Tensor, radar: Tensor | None, padding: Tensor) -> 
             if not len(idx):
                 continue
             part = g[row, idx]
-            scene = np.zeros((len(idx), SUBSET_FEATURES))
+            scene = np.zeros((len(idx), width))
             _one_scene(
-                np.ascontiguousarray(part[:, : len(CLASSES)]),
+                np.ascontiguousarray(part[:, onehot_columns]),
                 part[:, _X_COLUMN] * DEPTH_SCALE,
                 part[:, _Y_COLUMN] * LATERAL_SCALE,
                 part[:, DEPTH_COLUMN] * DEPTH_SCALE,
@@ -234,4 +249,4 @@ def subset_features(geometry: Tensor, radar: Tensor | None, padding: Tensor) -> 
     return torch.from_numpy(out).to(device=geometry.device, dtype=geometry.dtype)
 
 
-__all__ = ["PICKED", "SUBSET_FEATURES", "SUBSET_ORDERS", "subset_features"]
+__all__ = ["PICKED", "SUBSET_FEATURES", "SUBSET_ORDERS", "subset_features", "subset_width"]

@@ -31,6 +31,7 @@ import sys
 import traceback
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -129,7 +130,7 @@ def calibrate(
         answers = talk2car_answers(model, data, talk2car, split, limit, low)
         where = f"{Path(talk2car) / f'{split}_commands.json'}"
     else:
-        root = Talk2RadarRoot(data)
+        root = Talk2RadarRoot(data, classes=model.cfg.class_set)
         ids = root.ids(split)[: limit or None]
         answers = []
         for fp in iterate_predictions(model, root, ids, score_threshold=low):
@@ -165,7 +166,13 @@ def talk2car_answers(
     root, commands = open_talk2car(data, talk2car, split)
     answers = []
     for p in iterate_command_predictions(
-        model, root, commands, model_class, score_threshold, progress=False, limit=limit
+        model,
+        root,
+        commands,
+        partial(model_class, classes=model.cfg.class_set),  # the model's class set
+        score_threshold,
+        progress=False,
+        limit=limit,
     ):
         a = p.answer
         source = p.command.command_token

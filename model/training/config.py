@@ -15,6 +15,7 @@ import torch
 
 from model.config import (
     AnchorKind,
+    ClassSetName,
     FusionKind,
     GroundingKind,
     Modalities,
@@ -123,6 +124,12 @@ class TrainConfig:
     text_fusion: TextFusionKind | None = option(None)
     anchor: AnchorKind | None = option(None)
     text_encoder: TextEncoderKind | None = option(None)
+    classes: ClassSetName = option(
+        "vod",
+        help="the class set the model detects and grounds (scenes.geometry.classes): vod (Car, "
+        "Pedestrian, Cyclist) or nuscenes (nuScenes' 10 detection classes); labels of other "
+        "classes are no targets",
+    )
     grounding: GroundingKind = option(
         "referent",
         help="referent: text-agnostic detector + referent stage (default); tpcnet: the paper's "
@@ -290,6 +297,10 @@ class TrainConfig:
         if self.grounding not in get_args(GroundingKind):
             kinds = " or ".join(get_args(GroundingKind))
             raise TrainingError(f"--grounding must be {kinds}, got {self.grounding!r}")
+        if self.classes not in get_args(ClassSetName):
+            raise TrainingError(
+                f"--classes must be one of {get_args(ClassSetName)}, got {self.classes!r}"
+            )
         if Path(self.out).exists() and not Path(self.out).is_dir():
             raise TrainingError(f"--out {self.out} is a file; give a run folder")
 
@@ -312,7 +323,9 @@ class TrainConfig:
 
     def model_overrides(self) -> dict[str, str]:
         """The ``build_model`` overrides given on the command line."""
-        names = ("modalities", "fusion", "text_fusion", "anchor", "text_encoder", "grounding")
+        names = (
+            "modalities", "fusion", "text_fusion", "anchor", "text_encoder", "grounding", "classes"
+        )  # fmt: skip
         return {n: getattr(self, n) for n in names if getattr(self, n) is not None}
 
 

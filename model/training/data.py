@@ -32,6 +32,7 @@ from torch.utils.data import Dataset
 
 from scenes.datasets.frames import FrameDataset, FrameItem
 from scenes.datasets.nuscenes_frames import NuScenesFrames, is_nuscenes_root, open_talk2car
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.talk2radar.scene_labels import SceneLabels
 
 NO_SCENE_LABELS = "none"
@@ -125,13 +126,16 @@ TrainingFrames = FrameDataset | NuScenesFrames
 """One root's training frames: a Talk2Radar root's, or a nuScenes root's commanded samples."""
 
 
-def frame_dataset(spec: RootSpec, split: str, **kwargs: object) -> TrainingFrames:
-    """The frames of one root's ``split`` (its source chosen as the module says)."""
+def frame_dataset(
+    spec: RootSpec, split: str, classes: ClassSet = VOD, **kwargs: object
+) -> TrainingFrames:
+    """The frames of one root's ``split`` (its source chosen as the module says); a Talk2Radar
+    root's labels read into ``classes`` (the model's class set)."""
     if spec.talk2car is not None:
         root, commands = open_talk2car(spec.path, spec.talk2car, split)
         return NuScenesFrames(root, commands, **kwargs)  # type: ignore[arg-type]
-    labels = None if spec.scene_labels is None else SceneLabels(spec.scene_labels)
-    return FrameDataset(spec.path, split, scene_labels=labels, **kwargs)  # type: ignore[arg-type]
+    labels = None if spec.scene_labels is None else SceneLabels(spec.scene_labels, classes)
+    return FrameDataset(spec.path, split, scene_labels=labels, classes=classes, **kwargs)  # type: ignore[arg-type]
 
 
 class MixedFrames(Dataset):

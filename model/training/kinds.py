@@ -49,6 +49,7 @@ from model.training.steps import (
 from scenes.datasets.augment import AugmentConfig
 from scenes.datasets.frames import SensorAugment
 from scenes.datasets.grounding import GroundingDataset
+from scenes.geometry.classes import class_set
 from scenes.talk2radar.root import Talk2RadarRoot
 
 TrainingData = GroundingDataset | MixedFrames
@@ -102,7 +103,7 @@ def _augment(cfg: TrainConfig) -> AugmentConfig:
 def training_frames(cfg: TrainConfig, spec: RootSpec, **kwargs: object) -> TrainingFrames:
     """One root's training frames (``kwargs``: :func:`model.training.data.frame_dataset`'s),
     the first ``--scene-limit`` only with ``--freeze-scene`` (the scenes cached)."""
-    frames = frame_dataset(spec, cfg.train_split, **kwargs)
+    frames = frame_dataset(spec, cfg.train_split, class_set(cfg.classes), **kwargs)
     if cfg.freeze_scene and cfg.scene_limit:
         frames.limit(cfg.scene_limit)
     return frames

@@ -64,11 +64,11 @@ from model.training.state import (
 )
 from model.training.steps import TrainStep
 from model.training.stop_signal import StopRequest, TrainingInterrupted
-from scenes.geometry.actors import CLASSES
+from scenes.geometry.classes import VOD, ClassSet, class_set
 from scenes.talk2radar.kitti import read_label_file
 from scenes.talk2radar.layout import LABEL, sample_dir, sample_file, split_file
 from scenes.talk2radar.root import Talk2RadarRoot
-from scenes.talk2radar.scene_labels import SceneLabels, class_index
+from scenes.talk2radar.scene_labels import SceneLabels
 from scenes.utils.durable import append_json_line
 
 
@@ -115,9 +115,10 @@ def validate(model: torch.nn.Module, cfg: TrainConfig, root: Talk2RadarRoot) -> 
     }
 
 
-def check_labels(spec: RootSpec, split: str) -> None:
-    """Refuse a training root none of whose ``split`` frames has a label of :data:`CLASSES` (its
-    ``label_2``, or its scene labels' where given): it would train to nothing and report mAP 0."""
+def check_labels(spec: RootSpec, split: str, classes: ClassSet = VOD) -> None:
+    """Refuse a training root none of whose ``split`` frames has a label of ``classes`` (the
+    model's class set; its ``label_2``, or its scene labels' where given): it would train to
+    nothing and report mAP 0."""
     if spec.talk2car is not None:
         return  # a nuScenes root: NuScenesFrames refuses a split without a referred command
     root = Talk2RadarRoot(spec.path, radar=None)
@@ -127,12 +128,12 @@ def check_labels(spec: RootSpec, split: str) -> None:
     scene = None if spec.scene_labels is None else SceneLabels(spec.scene_labels)
     for sid in ids:
         path = sample_file(root.lidar_dir, LABEL, sid) if scene is None else scene.label_path(sid)
-        if path.is_file() and any(class_index(x.name) >= 0 for x in read_label_file(path)):
+        if path.is_file() and any(classes.label_index(x.name) >= 0 for x in read_label_file(path)):
             return
     folder = sample_dir(root.lidar_dir if scene is None else scene.tree, LABEL)
     raise TrainingError(
         f"{folder}: no label of the {len(ids)} samples of split {split!r} has a "
-        f"{', '.join(CLASSES)} box: nothing to train on"
+        f"{', '.join(classes.names)} box ({classes.name!r} class set): nothing to train on"
     )
 
 
@@ -259,7 +260,9 @@ def set_up(cfg: TrainConfig, resume: bool, stop: StopRequest) -> Run:
     root = None
     if specs[0].talk2car is None:
         sidecar = specs[0].scene_labels is None
-        root = Talk2RadarRoot(specs[0].path, radar=radar_folder, sidecar=sidecar)
+        root = Talk2RadarRoot(
+            specs[0].path, radar=radar_folder, sidecar=sidecar, classes=class_set(cfg.classes)
+        )
     elif cfg.val_every:
         raise TrainingError(
             f"--data {specs[0].path} is a nuScenes root: validation during training reads a "
@@ -268,7 +271,7 @@ def set_up(cfg: TrainConfig, resume: bool, stop: StopRequest) -> Run:
             "at the end)"
         )
     for spec in specs:
-        check_labels(spec, cfg.train_split)
+        check_labels(spec, cfg.train_split, class_set(cfg.classes))
     dataset = kind.dataset(cfg, specs, root)
     referent_cfg = ReferentTrainConfig(cfg.prompt_draw())
     model, saved, state = start_model(cfg, resume, rank, world, device)

@@ -43,8 +43,9 @@ from model.training.referent_step import (
     in_grid_actors,
 )
 from scenes.datasets.frames import FrameDataset
-from scenes.geometry.actors import CLASSES, Actor
-from scenes.geometry.boxes import CENTRE_MATCH_DISTANCE, match_by_centre
+from scenes.geometry.actors import Actor
+from scenes.geometry.boxes import match_by_centre
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.language.prompts import PromptConfig
 
 
@@ -71,15 +72,20 @@ class CachedScene:
     labelled: CachedScene | None = None
 
 
-def match_detections(boxes: np.ndarray, labels: np.ndarray, actors: Sequence[Actor]) -> np.ndarray:
+def match_detections(
+    boxes: np.ndarray, labels: np.ndarray, actors: Sequence[Actor], classes: ClassSet = VOD
+) -> np.ndarray:
     """Actor id ``(K,)`` of each detection (-1: none): detections in the given (score) order take
-    the nearest free actor of their class within :data:`scenes.geometry.boxes.CENTRE_MATCH_DISTANCE` of
-    the BEV centre (:func:`scenes.geometry.boxes.match_by_centre`)."""
+    the nearest free actor of their class within its class's
+    :attr:`scenes.geometry.classes.ObjectClass.match_distance` of the BEV centre
+    (:func:`scenes.geometry.boxes.match_by_centre`); ``labels`` and the actors' classes index
+    ``classes`` (the model's; actors of other classes match nothing)."""
+    actors = [a for a in actors if a.cls in classes]
     if not actors:
         return np.full(len(boxes), -1, dtype=np.int64)
     targets = np.stack([a.box for a in actors])
-    target_labels = np.array([CLASSES.index(a.cls) for a in actors], dtype=np.int64)
-    limits = np.array([CENTRE_MATCH_DISTANCE[c] for c in CLASSES])
+    target_labels = np.array([classes.index(a.cls) for a in actors], dtype=np.int64)
+    limits = np.array(classes.match_distances)
     index = match_by_centre(boxes, labels, targets, target_labels, limits)
     ids = np.array([a.actor_id for a in actors], dtype=np.int64)
     return np.where(index >= 0, ids[np.maximum(index, 0)], -1)
@@ -126,7 +132,9 @@ def scene_views(
     actor is in the grid."""
     kept = in_grid_actors(actors, model) if labelled else []
     boxes = np.stack([a.box for a in kept]) if kept else None
-    views = (None, LabelledBoxes(boxes, [CLASSES.index(a.cls) for a in kept])) if kept else (None,)
+    classes = model.cfg.class_set
+    labels = [classes.index(a.cls) for a in kept]
+    views = (None, LabelledBoxes(boxes, labels, classes)) if kept else (None,)
     lidar_t = model.scene.clouds([lidar], 1, "lidar")
     radar_t = model.scene.clouds([radar], 1, "radar")
     with torch.no_grad():
@@ -217,7 +225,7 @@ def cache_scenes(
         for i in tqdm(range(len(dataset)), desc="cache scenes", disable=not progress):
             item = dataset[i]
             objects, view = scene_views(model, item.lidar, item.radar, item.actors, labelled)
-            ids = match_detections(objects.boxes, objects.labels, item.actors)
+            ids = match_detections(objects.boxes, objects.labels, item.actors, model.cfg.class_set)
             rng = np.random.default_rng((seed, 11, i))
             prompts = frame_prompts(item, rng, prompts_per_scene, pcfg, label_prompts)
             extra = None if view is None else _cached(*view, prompts, int((view[1] >= 0).sum()))

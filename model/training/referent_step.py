@@ -50,8 +50,7 @@ from model.nets.text import (
 from model.tpcnet import TPCNet
 from model.training.config import PromptDraw
 from scenes.datasets.frames import AnnotatedRegion, FrameItem
-from scenes.geometry.actors import CLASSES, Actor
-from scenes.geometry.boxes import CENTRE_MATCH_DISTANCE
+from scenes.geometry.actors import Actor
 from scenes.geometry.calib import Calibration
 from scenes.language.prompts import Prompt, PromptConfig, generate_prompts
 
@@ -93,11 +92,13 @@ class ReferentLoss:
 
 
 def in_grid_actors(actors: Sequence[Actor], model: TPCNet) -> list[Actor]:
-    """Actors of the metric classes whose anchor point lies in the head grid."""
+    """Actors of the model's classes (``model.cfg.class_set``) whose anchor point lies in the
+    head grid."""
     if not actors:
         return []
     inside = model.scene.anchors_in_grid(np.stack([a.box for a in actors]))
-    return [a for a, ok in zip(actors, inside, strict=True) if ok and a.cls in CLASSES]
+    classes = model.cfg.class_set
+    return [a for a, ok in zip(actors, inside, strict=True) if ok and a.cls in classes]
 
 
 def training_candidates(
@@ -117,7 +118,8 @@ def training_candidates(
         detection).
     """
     boxes = np.stack([a.box for a in actors]) if actors else np.zeros((0, 7))
-    labels = np.array([CLASSES.index(a.cls) for a in actors], dtype=np.int64)
+    classes = model.cfg.class_set
+    labels = np.array([classes.index(a.cls) for a in actors], dtype=np.int64)
     ids = np.array([a.actor_id for a in actors], dtype=np.int64)
     if len(boxes):
         boxes = boxes.copy()
@@ -127,8 +129,8 @@ def training_candidates(
     scores = model.scene.anchor_scores(heat, boxes, labels)
     false = []
     for i, (box, lab) in enumerate(zip(detections_boxes, detections_labels, strict=True)):
-        same = [a for a in actors if CLASSES.index(a.cls) == lab]
-        limit = CENTRE_MATCH_DISTANCE[CLASSES[lab]]
+        same = [a for a in actors if classes.index(a.cls) == lab]
+        limit = classes.classes[lab].match_distance
         if all(np.hypot(*(a.box[:2] - box[:2])) > limit for a in same):
             false.append(i)
     false = false[: cfg.max_false]

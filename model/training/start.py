@@ -54,16 +54,32 @@ stage's geometry input (wider with ``ReferentConfig.context`` and ``numeric_comp
 text gate's outputs (as many as those inputs); any other shape mismatch is not copied."""
 
 
+def check_class_set(payload: dict, path: str, wanted: str) -> None:
+    """Refuse a checkpoint (a checked payload) of another class set than ``wanted``: its heatmap,
+    class evidence and per-class context have other channels, and copying the rest would
+    mislabel every class. One line, naming the file."""
+    head = payload["config"].get("head") if isinstance(payload["config"], dict) else None
+    stored = head.get("classes", "vod") if isinstance(head, dict) else "vod"
+    if stored != wanted:
+        raise TrainingError(
+            f"{path}: a checkpoint of the {stored!r} class set cannot start a {wanted!r} model "
+            f"(--classes {wanted}); give a {wanted!r} checkpoint or train from scratch"
+        )
+
+
 def init_from(model: torch.nn.Module, path: str, prefixes: tuple[str, ...] = ()) -> int:
     """Copy every weight of the checkpoint at ``path`` whose name and shape match ``model``'s
     (e.g. the sensor branches, fusion, neck and head of a paper-path checkpoint into a referent
     model), only names starting with one of ``prefixes`` when given; a weight of
     :data:`WIDENABLE` that grew (the referent stage's geometry input with
     ``ReferentConfig.context`` or ``numeric_compare`` switched on, and its text gate) is copied
-    into its first entries, the new ones zero (:func:`widened`). Returns how many tensors were copied."""
+    into its first entries, the new ones zero (:func:`widened`). Returns how many tensors were
+    copied. A checkpoint of another class set is refused (:func:`check_class_set`)."""
     from model.checkpoint import read_checkpoint
 
-    state = read_checkpoint(path)["state_dict"]
+    payload = read_checkpoint(path)
+    check_class_set(payload, path, model.cfg.class_set.name)
+    state = payload["state_dict"]
     own = model.state_dict()
     same = {}
     for k, v in state.items():

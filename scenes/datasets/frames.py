@@ -47,9 +47,10 @@ from torch.utils.data import Dataset
 
 from scenes.datasets import augment as aug
 from scenes.datasets.augment import AugmentConfig
-from scenes.geometry.actors import CLASSES, Actor
+from scenes.geometry.actors import Actor
 from scenes.geometry.boxes import match_by_centre
 from scenes.geometry.calib import IMAGE_SIZE, Calibration
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.talk2radar.scene_labels import SceneLabels, fov_mask
 
@@ -207,12 +208,13 @@ def scene_ids(root: Talk2RadarRoot, split: str) -> list[str]:
 
 
 def _objects_from_referents(
-    boxes: list[np.ndarray], labels: list[np.ndarray]
+    boxes: list[np.ndarray], labels: list[np.ndarray], num_classes: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """The union of several samples' referent boxes of one frame (duplicates merged)."""
+    """The union of several samples' referent boxes of one frame (duplicates merged); labels
+    index a set of ``num_classes`` classes."""
     out_boxes: list[np.ndarray] = []
     out_labels: list[int] = []
-    limits = np.full(len(CLASSES), REFERENT_MATCH_DISTANCE)
+    limits = np.full(num_classes, REFERENT_MATCH_DISTANCE)
     for b, lab in zip(boxes, labels, strict=True):
         known = np.array(out_boxes).reshape(-1, 7)
         match = match_by_centre(b, lab, known, np.array(out_labels, dtype=np.int64), limits)
@@ -238,6 +240,8 @@ class FrameDataset(Dataset):
             the camera's field of view as the annotated region.
         source: ``"sidecar"``, ``"labels"`` or ``"auto"`` (labels when ``scene_labels`` is given
             or the root has no ``meta/`` folder, as a release; else the sidecar).
+        classes: The model's class set: the labels source reads labels of these classes (a
+            sidecar's actors are every actor, whatever its class; the model keeps its own).
 
     Raises:
         ValueError: The split has no scene, or (sidecar source) a scene has no sidecar listing
@@ -253,8 +257,20 @@ class FrameDataset(Dataset):
         seed: int = 0,
         scene_labels: SceneLabels | None = None,
         source: str = "auto",
+        classes: ClassSet = VOD,
     ) -> None:
-        root = root if isinstance(root, Talk2RadarRoot) else Talk2RadarRoot(root)
+        root = root if isinstance(root, Talk2RadarRoot) else Talk2RadarRoot(root, classes=classes)
+        if root.classes != classes:
+            raise ValueError(
+                f"{root.path}: a root read into the {root.classes.name!r} class set given to a "
+                f"{classes.name!r} dataset"
+            )
+        if scene_labels is not None and scene_labels.classes != classes:
+            raise ValueError(
+                f"{scene_labels.root}: scene labels read into the {scene_labels.classes.name!r} "
+                f"class set given to a {classes.name!r} dataset"
+            )
+        self.classes = classes
         if source not in ("auto", "sidecar", "labels"):
             raise ValueError(f"source must be auto, sidecar or labels, got {source!r}")
         if source == "auto":
@@ -264,7 +280,9 @@ class FrameDataset(Dataset):
             raise ValueError("scene labels are for the labels source")
         self.source = source
         if source == "labels":
-            root = Talk2RadarRoot(root.path, radar=root.radar_folder, sidecar=False)
+            root = Talk2RadarRoot(
+                root.path, radar=root.radar_folder, sidecar=False, classes=classes
+            )
         self.root = root
         self.split = split
         self.sensors = sensors
@@ -299,7 +317,8 @@ class FrameDataset(Dataset):
         for sid in group[1:]:
             boxes, classes = self.root.load_referents(sid)
             referents.append((boxes, classes, self.root.load_prompt(sid)))
-        ref_labels = [np.array([CLASSES.index(c) for c in r[1]], dtype=np.int64) for r in referents]
+        names = self.classes.names
+        ref_labels = [np.array([names.index(c) for c in r[1]], dtype=np.int64) for r in referents]
         region = None
         if self.scene_labels is not None:
             objects = self.scene_labels.load(group[0])
@@ -308,9 +327,9 @@ class FrameDataset(Dataset):
             region = AnnotatedRegion(objects.calib, size)
             boxes, labels = list(boxes), list(labels)
         else:
-            union = _objects_from_referents([r[0] for r in referents], ref_labels)
+            union = _objects_from_referents([r[0] for r in referents], ref_labels, len(names))
             boxes, labels = list(union[0]), list(union[1])
-        limits = np.full(len(CLASSES), REFERENT_MATCH_DISTANCE)
+        limits = np.full(len(names), REFERENT_MATCH_DISTANCE)
         given = []
         for sid, (ref_boxes, _, prompt), ref_lab in zip(group, referents, ref_labels, strict=True):
             match = match_by_centre(
@@ -326,7 +345,7 @@ class FrameDataset(Dataset):
             if prompt is not None:
                 given.append(GivenPrompt(sid, prompt, tuple(ids)))
         actors = tuple(
-            Actor(i, CLASSES[int(lab)], box, np.zeros(2))
+            Actor(i, names[int(lab)], box, np.zeros(2))
             for i, (box, lab) in enumerate(zip(boxes, labels, strict=True))
         )
         return first, actors, tuple(given), region

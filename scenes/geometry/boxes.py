@@ -209,11 +209,6 @@ def iou3d(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return _pairwise(a, b, with_height=True)
 
 
-CENTRE_MATCH_DISTANCE: dict[str, float] = {"Car": 2.0, "Pedestrian": 1.0, "Cyclist": 1.2}
-"""A detection whose BEV centre lies within this distance (m) of a same-class actor's is that actor
-(training's candidate matching, the language suite's scoring)."""
-
-
 def match_by_centre(
     boxes: np.ndarray,
     labels: np.ndarray,

@@ -10,28 +10,34 @@ detector's heatmap channels. Two presets exist:
   motorcycle, bicycle, traffic_cone, barrier). Names are single tokens (they are written into
   KITTI-style label files, whose fields are separated by spaces).
 
-Facts per class: the name (model, label files, tables), the words a person uses for it (the answer
-words of the app) and the mean size ``(l, w, h)`` in metres. The size statistics of the nuScenes
+Facts per class (:class:`ObjectClass`): the name (model, label files, tables), the words a person
+uses for it (the answer words of the app), the mean size ``(l, w, h)`` in metres, the evaluator's
+minimum overlaps and KITTI's neighbouring label, the centre distances of a match (training's and
+the class-prompt evaluation's), the legend colour, whether it has a heading, and the label names
+and nuScenes categories that map onto it. The size statistics of the nuScenes
 classes are the training-set means nuScenes-based detectors publish as anchor sizes; those of the
-three VoD classes are the ones this project's synthetic world draws around.
-
-Further facts (anchor and size priors of the detector, the evaluator's minimum overlaps, legend
-colours, label-name and category mappings) join these dataclasses as the parts that use them follow
-the class set; each fact has one home, here.
+three VoD classes are the ones this project's synthetic world draws around. The detector has no
+size prior (it regresses ``log l, log w, log h`` directly), so the mean size is the synthetic
+world's and the documentation's. Each fact has one home, here.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 __all__ = [
     "ALL_CLASSES",
+    "MATCH_DISTANCE",
     "NUSCENES",
     "PRESETS",
     "VOD",
+    "WITH_RIDER",
     "ClassSet",
     "ObjectClass",
     "class_set",
+    "object_class",
 ]
 
 
@@ -44,18 +50,58 @@ class ObjectClass:
         noun: The singular word for it in an answer ("construction vehicle").
         plural: The plural word ("construction vehicles").
         mean_size: ``(l, w, h)`` mean box size in metres.
+        min_overlaps: The evaluator's minimum overlaps ``(image 2D, BEV, 3D)`` of a match (a match
+            needs strictly more). The VoD / KITTI table has three rows; the other classes take the
+            row of the class they are scored like: large vehicles (truck, bus, trailer,
+            construction vehicle) as Car ``(0.7, 0.5, 0.5)``, two-wheelers (motorcycle, bicycle)
+            as Cyclist and small objects (traffic cone, barrier) as Pedestrian
+            ``(0.5, 0.25, 0.25)``.
+        match_distance: Metres within which a detection's BEV centre is this class's actor
+            (training's candidate matching, the language suite's scoring).
+        color: ``(r, g, b)`` of the app's legend, boxes and heatmap channel.
+        heading: Whether the class has a heading: False for a rotationally symmetric object
+            (a traffic cone), whose yaw target is 0 and whose decoded yaw is 0.
+        label_names: Lower-case label-file names (KITTI / View-of-Delft) that map onto the class;
+            its own name (lower case) always does.
+        categories: nuScenes categories that map onto the class, by nuScenes' own detection
+            mapping; the first is the one a writer gives it.
+        with_rider_only: A ``vehicle.bicycle`` maps onto the class only with the attribute
+            ``cycle.with_rider`` (the VoD Cyclist: a parked bicycle is not one).
+        find_radius: BEV centre distance (m) within which the class-prompt evaluation's loose
+            rule counts a box as finding an object of the class (``model.class_prompts``).
+        neighbour: KITTI's neighbouring label name (lower case) the evaluator ignores rather than
+            counts as missed for this class (``van`` for a car, ``person_sitting`` for a
+            pedestrian), or None.
     """
 
     name: str
     noun: str
     plural: str
     mean_size: tuple[float, float, float]
+    min_overlaps: tuple[float, float, float]
+    match_distance: float
+    color: tuple[int, int, int]
+    heading: bool = True
+    label_names: tuple[str, ...] = ()
+    categories: tuple[str, ...] = ()
+    with_rider_only: bool = False
+    find_radius: float = 1.0
+    neighbour: str | None = None
 
     def __post_init__(self) -> None:
         if not self.name or any(c.isspace() for c in self.name):
             raise ValueError(f"class name {self.name!r} must be one non-empty token")
         if len(self.mean_size) != 3 or min(self.mean_size) <= 0:
             raise ValueError(f"class {self.name}: mean_size must be 3 positive lengths")
+        if len(self.min_overlaps) != 3 or not all(0 <= m < 1 for m in self.min_overlaps):
+            raise ValueError(f"class {self.name}: min_overlaps must be 3 values in [0, 1)")
+        if len(self.color) != 3 or not all(0 <= c <= 255 for c in self.color):
+            raise ValueError(f"class {self.name}: color must be 3 values in [0, 255]")
+        if self.match_distance <= 0:
+            raise ValueError(f"class {self.name}: match_distance must be positive")
+        object.__setattr__(
+            self, "label_names", tuple(dict.fromkeys((self.name.lower(), *self.label_names)))
+        )
 
 
 @dataclass(frozen=True)
@@ -74,11 +120,28 @@ class ClassSet:
         names = [c.name for c in self.classes]
         if not names or len(set(names)) != len(names):
             raise ValueError(f"class set {self.name!r}: names must be unique and non-empty")
+        seen: dict[str, str] = {}
+        for c in self.classes:
+            for key in (*c.label_names, *c.categories):
+                if seen.setdefault(key, c.name) != c.name:
+                    raise ValueError(
+                        f"class set {self.name!r}: {key!r} maps onto {seen[key]} and {c.name}"
+                    )
 
     @property
     def names(self) -> tuple[str, ...]:
         """The class names in channel order."""
         return tuple(c.name for c in self.classes)
+
+    @property
+    def match_distances(self) -> tuple[float, ...]:
+        """:attr:`ObjectClass.match_distance` in channel order (metres)."""
+        return tuple(c.match_distance for c in self.classes)
+
+    @property
+    def plurals(self) -> tuple[str, ...]:
+        """The plural words in channel order ("cars", "pedestrians", "cyclists")."""
+        return tuple(c.plural for c in self.classes)
 
     def __len__(self) -> int:
         return len(self.classes)
@@ -99,45 +162,149 @@ class ClassSet:
         """The :class:`ObjectClass` called ``name`` (ValueError when absent)."""
         return self.classes[self.index(name)]
 
+    @cached_property
+    def _by_label(self) -> dict[str, str]:
+        """Lower-case label name -> class name (built once; the readers and the evaluator ask
+        for every label of every frame)."""
+        return {n: c.name for c in self.classes for n in c.label_names}
 
-def _c(name: str, noun: str, plural: str, size: tuple[float, float, float]) -> ObjectClass:
-    return ObjectClass(name=name, noun=noun, plural=plural, mean_size=size)
+    def label_class(self, label_name: str) -> str | None:
+        """The class a label file's name (KITTI / View-of-Delft spelling, any case) maps onto,
+        or None when it is outside the set (``rider``, ``DontCare``, a typo)."""
+        return self._by_label.get(label_name.lower())
+
+    def label_index(self, label_name: str) -> int:
+        """The channel of :meth:`label_class` of ``label_name``, or ``-1`` outside the set."""
+        cls = self.label_class(label_name)
+        return -1 if cls is None else self.names.index(cls)
+
+    def category_class(self, category: str, attributes: Sequence[str] = ()) -> str | None:
+        """The class a nuScenes object of ``category`` (with its attribute names) maps onto, or
+        None outside the set."""
+        for c in self.classes:
+            if category in c.categories:
+                return None if c.with_rider_only and WITH_RIDER not in attributes else c.name
+        return None
+
+    def plural_list(self) -> str:
+        """The plurals as prose: "cars, pedestrians and cyclists"."""
+        words = self.plurals
+        return words[0] if len(words) == 1 else ", ".join(words[:-1]) + " and " + words[-1]
 
 
-_CAR = _c("Car", "car", "cars", (4.2, 1.8, 1.6))
-_PEDESTRIAN = _c("Pedestrian", "pedestrian", "pedestrians", (0.6, 0.6, 1.75))
-_CYCLIST = _c("Cyclist", "cyclist", "cyclists", (1.8, 0.6, 1.7))
+WITH_RIDER = "cycle.with_rider"
+"""The nuScenes attribute of a bicycle being ridden (:attr:`ObjectClass.with_rider_only`)."""
 
-VOD = ClassSet("vod", (_CAR, _PEDESTRIAN, _CYCLIST))
-"""The Talk2Radar / View-of-Delft metric classes."""
+_AS_CAR = (0.7, 0.5, 0.5)
+_AS_SMALL = (0.5, 0.25, 0.25)
+_PEDESTRIANS = (
+    "human.pedestrian.adult",
+    "human.pedestrian.child",
+    "human.pedestrian.construction_worker",
+    "human.pedestrian.police_officer",
+)
+
+VOD = ClassSet(
+    "vod",
+    (
+        ObjectClass(
+            "Car", "car", "cars", (4.2, 1.8, 1.6), _AS_CAR, 2.0, (255, 150, 0),
+            categories=("vehicle.car",), neighbour="van", find_radius=2.0,
+        ),
+        ObjectClass(
+            "Pedestrian", "pedestrian", "pedestrians", (0.6, 0.6, 1.75), _AS_SMALL, 1.0,
+            (255, 70, 170), categories=_PEDESTRIANS, neighbour="person_sitting",
+        ),
+        ObjectClass(
+            "Cyclist", "cyclist", "cyclists", (1.8, 0.6, 1.7), _AS_SMALL, 1.2, (70, 200, 255),
+            categories=("vehicle.bicycle",), with_rider_only=True,
+        ),
+    ),
+)  # fmt: skip
+"""The Talk2Radar / View-of-Delft metric classes (label names matched case-insensitively; nuScenes:
+cars, the four walking-person categories, ridden bicycles)."""
 
 NUSCENES = ClassSet(
     "nuscenes",
     (
-        _c("Car", "car", "cars", (4.63, 1.97, 1.74)),
-        _c("Truck", "truck", "trucks", (6.93, 2.51, 2.84)),
-        _c("Bus", "bus", "buses", (10.5, 2.94, 3.47)),
-        _c("Trailer", "trailer", "trailers", (12.29, 2.90, 3.87)),
-        _c(
-            "ConstructionVehicle",
-            "construction vehicle",
-            "construction vehicles",
-            (6.37, 2.85, 3.19),
+        ObjectClass(
+            "Car", "car", "cars", (4.63, 1.97, 1.74), _AS_CAR, 2.0, (255, 150, 0),
+            categories=("vehicle.car",), neighbour="van", find_radius=2.0,
         ),
-        _c("Pedestrian", "pedestrian", "pedestrians", (0.73, 0.67, 1.77)),
-        _c("Motorcycle", "motorcycle", "motorcycles", (2.11, 0.77, 1.47)),
-        _c("Bicycle", "bicycle", "bicycles", (1.70, 0.60, 1.28)),
-        _c("TrafficCone", "traffic cone", "traffic cones", (0.41, 0.41, 1.07)),
-        _c("Barrier", "barrier", "barriers", (0.50, 2.53, 0.98)),
+        ObjectClass(
+            "Truck", "truck", "trucks", (6.93, 2.51, 2.84), _AS_CAR, 3.0, (230, 60, 40),
+            categories=("vehicle.truck",), find_radius=3.0,
+        ),
+        ObjectClass(
+            "Bus", "bus", "buses", (10.5, 2.94, 3.47), _AS_CAR, 4.0, (250, 220, 40),
+            categories=("vehicle.bus.rigid", "vehicle.bus.bendy"), find_radius=4.0,
+        ),
+        ObjectClass(
+            "Trailer", "trailer", "trailers", (12.29, 2.90, 3.87), _AS_CAR, 4.0, (160, 110, 60),
+            categories=("vehicle.trailer",), find_radius=4.0,
+        ),
+        ObjectClass(
+            "ConstructionVehicle", "construction vehicle", "construction vehicles",
+            (6.37, 2.85, 3.19), _AS_CAR, 3.0, (200, 170, 110),
+            label_names=("construction_vehicle",), categories=("vehicle.construction",),
+            find_radius=3.0,
+        ),
+        ObjectClass(
+            "Pedestrian", "pedestrian", "pedestrians", (0.73, 0.67, 1.77), _AS_SMALL, 1.0,
+            (255, 70, 170), categories=_PEDESTRIANS, neighbour="person_sitting",
+        ),
+        ObjectClass(
+            "Motorcycle", "motorcycle", "motorcycles", (2.11, 0.77, 1.47), _AS_SMALL, 1.2,
+            (150, 90, 255), label_names=("motor", "moped_scooter"),
+            categories=("vehicle.motorcycle",),
+        ),
+        ObjectClass(
+            "Bicycle", "bicycle", "bicycles", (1.70, 0.60, 1.28), _AS_SMALL, 1.2, (70, 200, 255),
+            label_names=("cyclist",), categories=("vehicle.bicycle",),
+        ),
+        ObjectClass(
+            "TrafficCone", "traffic cone", "traffic cones", (0.41, 0.41, 1.07), _AS_SMALL, 0.6,
+            (255, 120, 60), heading=False, label_names=("traffic_cone",),
+            categories=("movable_object.trafficcone",), find_radius=0.6,
+        ),
+        ObjectClass(
+            "Barrier", "barrier", "barriers", (0.50, 2.53, 0.98), _AS_SMALL, 1.2, (180, 180, 200),
+            categories=("movable_object.barrier",),
+        ),
     ),
-)
-"""nuScenes' 10 detection classes (the categories map onto them by nuScenes' own mapping)."""
+)  # fmt: skip
+"""nuScenes' 10 detection classes, the categories mapped as nuScenes' detection benchmark maps them
+(both buses to bus; the walking persons to pedestrian; a bicycle with or without rider to bicycle;
+animals, strollers, wheelchairs, personal mobility, debris, pushable objects, bicycle racks and
+emergency vehicles to none). A View-of-Delft ``Cyclist`` (rider and bicycle in one box) and a
+parked ``bicycle`` are a Bicycle; ``motor`` and ``moped_scooter`` a Motorcycle."""
 
 PRESETS: dict[str, ClassSet] = {s.name: s for s in (VOD, NUSCENES)}
 """The class sets by name: what ``--classes`` accepts."""
 
 ALL_CLASSES: tuple[str, ...] = tuple(dict.fromkeys(n for s in PRESETS.values() for n in s.names))
 """Every class name of every preset (an :class:`~scenes.geometry.actors.Actor` may be any)."""
+
+
+MATCH_DISTANCE: dict[str, float] = {
+    c.name: c.match_distance for s in PRESETS.values() for c in s.classes
+}
+""":attr:`ObjectClass.match_distance` by class name, over every preset (a name means one class
+in every set that has it: checked below)."""
+
+for _set in PRESETS.values():
+    for _c in _set.classes:
+        if MATCH_DISTANCE[_c.name] != _c.match_distance:
+            raise ValueError(f"class {_c.name}: match_distance differs between the presets")
+
+
+def object_class(name: str) -> ObjectClass:
+    """The class called ``name`` in the first preset that has it (a name means one class in
+    every set: its words are the same); ValueError listing :data:`ALL_CLASSES` otherwise."""
+    for s in PRESETS.values():
+        if name in s:
+            return s.get(name)
+    raise ValueError(f"unknown class {name!r}: one of {ALL_CLASSES}")
 
 
 def class_set(name: str) -> ClassSet:

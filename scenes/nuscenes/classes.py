@@ -1,18 +1,20 @@
-"""nuScenes' 23 categories and the model's classes: the one place the mapping lives.
+"""nuScenes' 23 categories and 8 attributes, and their mapping onto a class set.
 
-:data:`CATEGORY_CLASS` maps each category to one of :data:`scenes.geometry.actors.CLASSES`
-(``Car``, ``Pedestrian``, ``Cyclist``) or to None (outside the class set). ``vehicle.bicycle`` is a
-``Cyclist`` only with the attribute ``cycle.with_rider`` (:func:`model_class`): a parked bicycle
-is not a road user the Talk2Radar classes name. Objects outside the class set are reported by
-the readers (counts and reasons), never silently dropped. A later issue makes the class set
-configurable (nuScenes' 10 detection classes); this mapping stays here.
+The mapping itself is a fact of each class (:attr:`scenes.geometry.classes.ObjectClass.
+categories`, the one home); :func:`model_class` applies a set's (default ``vod``: ``Car``,
+``Pedestrian``, ``Cyclist``; ``nuscenes``: the 10 detection classes by nuScenes' own mapping) and
+:data:`CATEGORY_CLASS` is ``vod``'s table. ``vehicle.bicycle`` is a VoD ``Cyclist`` only with the
+attribute ``cycle.with_rider``: a parked bicycle is not a road user the Talk2Radar classes name
+(a nuScenes ``bicycle`` it is). Objects outside the class set are reported by the readers
+(counts and reasons), never silently dropped.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 
-from scenes.geometry.actors import CLASSES
+from scenes.geometry.classes import PRESETS, VOD, ClassSet
+from scenes.geometry.classes import WITH_RIDER as _WITH_RIDER
 
 __all__ = [
     "ATTRIBUTES",
@@ -20,6 +22,7 @@ __all__ = [
     "CATEGORY_CLASS",
     "CLASS_CATEGORY",
     "WITH_RIDER",
+    "category_classes",
     "model_class",
 ]
 
@@ -62,39 +65,45 @@ ATTRIBUTES: tuple[str, ...] = (
 )
 """The 8 attributes of nuScenes v1.0."""
 
-WITH_RIDER = "cycle.with_rider"
-"""The attribute that makes a ``vehicle.bicycle`` a Cyclist."""
+WITH_RIDER = _WITH_RIDER
+"""The attribute that makes a ``vehicle.bicycle`` a VoD Cyclist."""
 
-CATEGORY_CLASS: dict[str, str | None] = {
-    **dict.fromkeys(CATEGORIES, None),
-    "vehicle.car": "Car",
-    "human.pedestrian.adult": "Pedestrian",
-    "human.pedestrian.child": "Pedestrian",
-    "human.pedestrian.construction_worker": "Pedestrian",
-    "human.pedestrian.police_officer": "Pedestrian",
-    "vehicle.bicycle": "Cyclist",
-}
-"""Category -> model class (``vehicle.bicycle`` only with :data:`WITH_RIDER`: see
+
+def category_classes(classes: ClassSet = VOD) -> dict[str, str | None]:
+    """Category -> class of ``classes`` (None outside the set), by the set's own mapping
+    (:attr:`scenes.geometry.classes.ObjectClass.categories`; a ``vod`` Cyclist also needs
+    :data:`WITH_RIDER`: see :func:`model_class`)."""
+    out: dict[str, str | None] = dict.fromkeys(CATEGORIES, None)
+    for c in classes.classes:
+        out.update(dict.fromkeys(c.categories, c.name))
+    return out
+
+
+CATEGORY_CLASS: dict[str, str | None] = category_classes(VOD)
+"""Category -> ``vod`` class (``vehicle.bicycle`` only with :data:`WITH_RIDER`: see
 :func:`model_class`), None outside the class set."""
 
 CLASS_CATEGORY: dict[str, str] = {
-    "Car": "vehicle.car",
-    "Pedestrian": "human.pedestrian.adult",
-    "Cyclist": "vehicle.bicycle",
+    c.name: c.categories[0] for s in PRESETS.values() for c in s.classes if c.categories
 }
-"""Model class -> the category a writer gives it (a Cyclist also gets :data:`WITH_RIDER`)."""
+"""Class (of any class set) -> the category a writer gives it (its first; a ``vod`` Cyclist also
+gets :data:`WITH_RIDER`)."""
 
-assert set(CLASS_CATEGORY) == set(CLASSES)
+if set(CATEGORY_CLASS.values()) - {None} != set(VOD.names) or not set(CATEGORIES) >= {
+    cat for s in PRESETS.values() for c in s.classes for cat in c.categories
+}:
+    raise ImportError("scenes.geometry.classes maps categories this module does not list")
 
 
-def model_class(category: str, attributes: Sequence[str] = ()) -> str | None:
-    """The model class of a nuScenes object, or None when it is outside the class set.
+def model_class(
+    category: str, attributes: Sequence[str] = (), classes: ClassSet = VOD
+) -> str | None:
+    """The class of ``classes`` (the model's; default ``vod``) of a nuScenes object, or None
+    when it is outside the set (:meth:`scenes.geometry.classes.ClassSet.category_class`).
 
     Args:
         category: A category name (``vehicle.car``; unknown names give None).
         attributes: The annotation's attribute names (``cycle.with_rider``, ...).
+        classes: The class set.
     """
-    cls = CATEGORY_CLASS.get(category)
-    if cls == "Cyclist" and WITH_RIDER not in attributes:
-        return None
-    return cls
+    return classes.category_class(category, attributes)

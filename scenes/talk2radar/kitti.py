@@ -15,7 +15,6 @@ from pathlib import Path
 
 import numpy as np
 
-from scenes.geometry.actors import CLASSES
 from scenes.geometry.calib import (
     IMAGE_SIZE,
     Calibration,
@@ -25,6 +24,7 @@ from scenes.geometry.calib import (
     boxes_camera_to_lidar,
     boxes_lidar_to_camera,
 )
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.utils.durable import atomic_write_text
 from scenes.utils.textfile import read_text_file
 
@@ -152,15 +152,17 @@ def write_label_file(path: str | Path, labels: Sequence[ObjectLabel], decimals: 
 
 
 def labels_to_boxes(
-    labels: Sequence[ObjectLabel], calib: Calibration
+    labels: Sequence[ObjectLabel], calib: Calibration, classes: ClassSet = VOD
 ) -> tuple[np.ndarray, tuple[str, ...]]:
-    """Metric-class labels -> LiDAR-frame boxes ``(K, 7)`` and class names.
+    """Labels of ``classes`` -> LiDAR-frame boxes ``(K, 7)`` and class names.
 
-    Class names are matched case-insensitively to :data:`scenes.geometry.actors.CLASSES` and returned in
-    canonical spelling; other classes (``bicycle``, ``rider``, ...) are left out.
+    Label names are mapped onto the class set by :meth:`scenes.geometry.classes.ClassSet.
+    label_class` (case-insensitive; with ``vod`` the three names, with ``nuscenes`` also VoD's
+    ``truck``, ``motor``, ``moped_scooter``, ``bicycle``, ...) and returned as the set's class
+    names; labels of other classes (``rider``, ``DontCare``, ...) are left out:
+    :func:`outside_class_counts` counts them.
     """
-    canonical = {c.lower(): c for c in CLASSES}
-    keep = [lab for lab in labels if lab.name.lower() in canonical]
+    keep = [lab for lab in labels if classes.label_class(lab.name) is not None]
     if not keep:
         return np.zeros((0, 7)), ()
     cam = CameraBoxes(
@@ -169,7 +171,17 @@ def labels_to_boxes(
         rotation_y=np.array([lab.rotation_y for lab in keep]),
     )
     boxes = boxes_camera_to_lidar(cam, calib)
-    return boxes, tuple(canonical[lab.name.lower()] for lab in keep)
+    return boxes, tuple(str(classes.label_class(lab.name)) for lab in keep)
+
+
+def outside_class_counts(labels: Sequence[ObjectLabel], classes: ClassSet = VOD) -> dict[str, int]:
+    """Label names of ``labels`` outside ``classes`` (``DontCare`` aside), with their number of
+    objects: what :func:`labels_to_boxes` leaves out, for the readers to report."""
+    counts: dict[str, int] = {}
+    for lab in labels:
+        if lab.name != "DontCare" and classes.label_class(lab.name) is None:
+            counts[lab.name] = counts.get(lab.name, 0) + 1
+    return dict(sorted(counts.items()))
 
 
 def boxes_to_labels(

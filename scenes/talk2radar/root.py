@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from scenes.geometry.calib import Calibration, read_calib, sensor_to_lidar, transform_points
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.talk2radar.imagefile import label_image_size, read_image, warn_principal_point
 from scenes.talk2radar.kitti import ObjectLabel, labels_to_boxes, read_label_file
 from scenes.talk2radar.layout import (
@@ -81,8 +82,8 @@ class Sample:
         sample_id: 5-digit frame id.
         lidar: ``(N, 4)`` float32 ``x, y, z, intensity``, LiDAR frame.
         radar: ``(M, 7)`` float32 ``x, y, z, rcs, v_r, v_r_compensated, time``, LiDAR frame.
-        boxes: ``(K, 7)`` float64 referred boxes of the metric classes, LiDAR frame.
-        classes: ``K`` class names (Car, Pedestrian, Cyclist).
+        boxes: ``(K, 7)`` float64 referred boxes of the root's class set, LiDAR frame.
+        classes: ``K`` class names of that set (Car, Pedestrian, Cyclist for ``vod``).
         prompt: The sentence, or None where the root has no prompt folder.
         calib: LiDAR calibration (LiDAR -> camera).
         radar_calib: Radar calibration (radar -> camera), or None without a radar tree.
@@ -152,10 +153,21 @@ class Talk2RadarRoot:
         sidecar: Whether to read Talk2PC's ``meta/`` sidecars. False: nothing under ``meta/`` is
             ever touched and :attr:`Sample.meta` is None, as on a real release (training and
             evaluation on labels alone).
+        classes: The class set a ``label_2`` is read into (:attr:`Sample.boxes`,
+            :meth:`load_referents`; default ``vod``): its label names are mapped by
+            :meth:`scenes.geometry.classes.ClassSet.label_class`, the others are left out
+            (:attr:`Sample.labels` keeps every line).
     """
 
-    def __init__(self, path: str | Path, radar: str | None = "auto", sidecar: bool = True) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        radar: str | None = "auto",
+        sidecar: bool = True,
+        classes: ClassSet = VOD,
+    ) -> None:
         self.path = Path(path)
+        self.classes = classes
         self.sidecar = sidecar
         self.lidar_dir = self.path / LIDAR_FOLDER
         if not self.lidar_dir.is_dir():
@@ -321,11 +333,12 @@ class Talk2RadarRoot:
         return None
 
     def load_referents(self, sample_id: str | int) -> tuple[np.ndarray, tuple[str, ...]]:
-        """The metric-class boxes ``(K, 7)`` (LiDAR frame) and class names of a sample's
-        ``label_2``, without reading its point clouds."""
+        """The boxes ``(K, 7)`` (LiDAR frame) and class names of a sample's ``label_2`` of the
+        root's class set (``classes``), without reading its point clouds."""
         sid = format_id(sample_id)
         calib = read_calib(self._file(self.lidar_dir, CALIB, sid))
-        return labels_to_boxes(read_label_file(self._file(self.lidar_dir, LABEL, sid)), calib)
+        labels = read_label_file(self._file(self.lidar_dir, LABEL, sid))
+        return labels_to_boxes(labels, calib, self.classes)
 
     def load(self, sample_id: str | int) -> Sample:
         """Load one sample; every error names the offending file."""
@@ -341,7 +354,7 @@ class Talk2RadarRoot:
                 np.float32
             )
         labels = tuple(read_label_file(self._file(self.lidar_dir, LABEL, sid)))
-        boxes, classes = labels_to_boxes(labels, calib)
+        boxes, classes = labels_to_boxes(labels, calib, self.classes)
         return Sample(
             sample_id=sid,
             lidar=lidar,

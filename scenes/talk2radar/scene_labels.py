@@ -21,7 +21,6 @@ from pathlib import Path
 
 import numpy as np
 
-from scenes.geometry.actors import CLASSES
 from scenes.geometry.calib import (
     IMAGE_SIZE,
     Calibration,
@@ -29,6 +28,7 @@ from scenes.geometry.calib import (
     boxes_camera_to_lidar,
     read_calib,
 )
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.geometry.projection import in_annotated_area
 from scenes.talk2radar.kitti import ObjectLabel, read_label_file
 from scenes.talk2radar.layout import (
@@ -52,8 +52,9 @@ class FrameObjects:
     Attributes:
         boxes: ``(K, 7)`` float64 ``x, y, z, l, w, h, yaw`` (z at the geometric centre).
         names: ``K`` class names as written in the file (VoD spelling).
-        labels: ``(K,)`` int64: index into :data:`scenes.geometry.actors.CLASSES` for the three metric
-            classes (matched case-insensitively), ``-1`` for every other class.
+        labels: ``(K,)`` int64: index into the reader's class set (``vod`` by default: the three
+            metric classes, matched case-insensitively; :meth:`scenes.geometry.classes.ClassSet.
+            label_index`), ``-1`` for every other class.
         calib: The frame's LiDAR calibration (LiDAR -> camera), for :func:`fov_mask`.
     """
 
@@ -61,12 +62,13 @@ class FrameObjects:
     names: tuple[str, ...]
     labels: np.ndarray
     calib: Calibration
+    classes: ClassSet = VOD
 
     def __len__(self) -> int:
         return len(self.names)
 
     def metric(self) -> tuple[np.ndarray, np.ndarray]:
-        """``boxes (K', 7)`` and ``labels (K',)`` of the three metric classes only."""
+        """``boxes (K', 7)`` and ``labels (K',)`` of the class set's classes only."""
         keep = self.labels >= 0
         return self.boxes[keep], self.labels[keep]
 
@@ -77,16 +79,19 @@ class FrameObjects:
         return self.boxes[keep.reshape(-1)] if len(self.names) else self.boxes
 
 
-def class_index(name: str) -> int:
-    """Index of ``name`` in :data:`scenes.geometry.actors.CLASSES` (case-insensitive), or ``-1``."""
-    lowered = [c.lower() for c in CLASSES]
-    return lowered.index(name.lower()) if name.lower() in lowered else -1
+def class_index(name: str, classes: ClassSet = VOD) -> int:
+    """Index of the class label name ``name`` maps onto in ``classes`` (case-insensitive), or
+    ``-1`` (:meth:`scenes.geometry.classes.ClassSet.label_index`)."""
+    return classes.label_index(name)
 
 
-def objects_from_labels(labels: list[ObjectLabel], calib: Calibration) -> FrameObjects:
-    """:class:`FrameObjects` of parsed ``label_2`` lines (camera frame) under ``calib``."""
+def objects_from_labels(
+    labels: list[ObjectLabel], calib: Calibration, classes: ClassSet = VOD
+) -> FrameObjects:
+    """:class:`FrameObjects` of parsed ``label_2`` lines (camera frame) under ``calib``, their
+    labels indexing ``classes``."""
     if not labels:
-        return FrameObjects(np.zeros((0, 7)), (), np.zeros(0, dtype=np.int64), calib)
+        return FrameObjects(np.zeros((0, 7)), (), np.zeros(0, dtype=np.int64), calib, classes)
     cam = CameraBoxes(
         location=np.array([lab.location for lab in labels], dtype=np.float64),
         dimensions_hwl=np.array([lab.dimensions_hwl for lab in labels], dtype=np.float64),
@@ -95,8 +100,9 @@ def objects_from_labels(labels: list[ObjectLabel], calib: Calibration) -> FrameO
     return FrameObjects(
         boxes=boxes_camera_to_lidar(cam, calib),
         names=tuple(lab.name for lab in labels),
-        labels=np.array([class_index(lab.name) for lab in labels], dtype=np.int64),
+        labels=np.array([classes.label_index(lab.name) for lab in labels], dtype=np.int64),
         calib=calib,
+        classes=classes,
     )
 
 
@@ -104,11 +110,13 @@ class SceneLabels:
     """Reader of a View-of-Delft root's full frame labels (``<root>/lidar/training/label_2``).
 
     A VoD release opened directly is its own scene-labels root; a Talk2Radar root is paired with
-    the VoD release its frames come from (same frame ids).
+    the VoD release its frames come from (same frame ids). ``classes``: the class set the labels
+    are read into (:class:`FrameObjects`).
     """
 
-    def __init__(self, root: str | Path) -> None:
+    def __init__(self, root: str | Path, classes: ClassSet = VOD) -> None:
         self.root = Path(root)
+        self.classes = classes
         self.tree = self.root / LIDAR_FOLDER
         if not sample_dir(self.tree, LABEL).is_dir():
             raise RootError(
@@ -141,7 +149,7 @@ class SceneLabels:
             raise RootError(f"{path}: no scene label file for frame {sid}")
         if not calib_path.is_file():
             raise RootError(f"{calib_path}: no calibration file for frame {sid}")
-        return objects_from_labels(read_label_file(path), read_calib(calib_path))
+        return objects_from_labels(read_label_file(path), read_calib(calib_path), self.classes)
 
 
 CELL_PROBE = (1.0, 1.0, 1.0)

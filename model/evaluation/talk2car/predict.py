@@ -3,7 +3,7 @@
 Each nuScenes sample a command refers to is read once (``NuScenesRoot.frame``) and encoded once
 (``model.encode_scene``); each of its commands is then answered on it (``model.ground``), and the
 class-noun prompt of the referent's class beside it (the class-noun baseline,
-:data:`model.evaluation.baselines.CLASS_NOUNS`). Boxes are in the model frame; the predictions
+:func:`model.evaluation.baselines.class_noun_prompt`). Boxes are in the model frame; the predictions
 file (:func:`predictions_json`) turns them into the command file's CAM_FRONT camera frame with
 ``scenes.nuscenes.talk2car.model_box_to_camera`` (the conversion's one home) and adds each box's
 2D box projected into CAM_FRONT (:func:`projected_2d_box`, Talk2Car's ``[x, y, w, h]``).

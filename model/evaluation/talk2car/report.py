@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import numpy as np
@@ -125,7 +126,8 @@ def run_talk2car(
 
     root, commands = open_talk2car(data, talk2car, split)
     model = load_checkpoint(checkpoint, device=device)
-    predictions = list(iterate_command_predictions(model, root, commands, model_class, limit=limit))
+    classes = partial(model_class, classes=model.cfg.class_set)  # the checkpoint's class set
+    predictions = list(iterate_command_predictions(model, root, commands, classes, limit=limit))
     if not predictions:
         raise ValueError(
             f"{Path(talk2car) / f'{split}_commands.json'}: no command with a referent in the "
