@@ -19,7 +19,10 @@ are the same in every rig), in memory, without a camera, and a checkpoint (defau
   averaged over the prompts; beside it the class prompts' pooled recall.
 
 The gap column is the pooled detection recall minus the in-domain one (points); the issue's target
-is a gap of at most 10 points on every held-out rig. ``--quick``: 2 worlds (a smoke run).
+is a gap of at most 10 points on every held-out rig. A pitched LiDAR is scored against the actors'
+boxes in its own frame (:meth:`scenes.synth.setups.SensorSetup.boxes_in_lidar_frame`).
+``--level-ground`` runs the model with heights above the ground it estimates from each cloud
+(:attr:`model.config.PillarConfig.ground`). ``--quick``: 2 worlds (a smoke run).
 """
 
 from __future__ import annotations
