@@ -370,8 +370,8 @@ def run(
         tables=(table,),
         findings=(
             f"Checkpoint `{checkpoint}` at operating threshold {threshold:g}; the set-ups are "
-            "scenes/synth/setups.py's (`python -m scenes.synth --sensor-setup NAME` writes one "
-            "as a root).",
+            "scenes/synth/setups.py's (`python -m scenes.synth --out DIR --frames N "
+            "--sensor-setup lidar-128` writes one as a root).",
         ),
         data={
             "checkpoint": str(checkpoint),
