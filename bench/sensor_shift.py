@@ -370,7 +370,7 @@ def run(
         tables=(table,),
         findings=(
             f"Checkpoint `{checkpoint}` at operating threshold {threshold:g}; the set-ups are "
-            "scenes/synth/setups.py's (`python -m scenes.synth --out DIR --frames N "
+            "scenes/synth/setups.py's (`python -m scenes.synth --out DIR --frames 50 "
             "--sensor-setup lidar-128` writes one as a root).",
         ),
         data={
