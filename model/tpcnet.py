@@ -28,6 +28,7 @@ from collections.abc import Sequence
 from dataclasses import replace
 from typing import Any
 
+import numpy as np
 import torch
 from torch import Tensor, nn
 
@@ -52,6 +53,7 @@ from model.grounding.referent import ReferentGrounding
 from model.grounding.scene_encoder import SceneEncoder
 from model.head.detector import HeadOutput
 from model.nets.text import build_text_encoder, validate_prompt
+from scenes.geometry.ground import GroundPlane, estimate_ground, level_points, unlevel_boxes
 
 CHECKPOINT_NAMES = {
     "lidar": "scene.lidar",
@@ -189,10 +191,37 @@ class TPCNet(nn.Module):
                 f"labelled candidates of the {candidates.classes.name!r} class set given to a "
                 f"model of the {self.cfg.class_set.name!r} class set"
             )
+        plane = None
+        if self.cfg.pillars.ground == "estimated" and lidar is not None:
+            lidar, radar, candidates, plane = self._levelled(lidar, radar, candidates)
         lidar_t = self.scene.clouds(None if lidar is None else [lidar], 1, "lidar")
         radar_t = self.scene.clouds(None if radar is None else [radar], 1, "radar")
         with torch.no_grad():
-            return self.grounding.encode(self.scene, lidar_t, radar_t, candidates)
+            features = self.grounding.encode(self.scene, lidar_t, radar_t, candidates)
+        if plane is None or features.objects is None:
+            return features
+        height = self.cfg.pillars.ground_height
+        objects = replace(
+            features.objects, boxes=unlevel_boxes(features.objects.boxes, plane, height)
+        )
+        return replace(features, objects=objects)
+
+    def _levelled(
+        self,
+        lidar: PointsLike,
+        radar: PointsLike | None,
+        candidates: LabelledBoxes | None,
+    ) -> tuple[np.ndarray, np.ndarray | None, LabelledBoxes | None, GroundPlane]:
+        """The clouds and labelled boxes with heights above the ground estimated from ``lidar``
+        (``cfg.pillars.ground == "estimated"``), and that plane."""
+        height = self.cfg.pillars.ground_height
+        lidar_np = _numpy(lidar)
+        plane = estimate_ground(lidar_np, height)
+        radar_np = None if radar is None else level_points(_numpy(radar), plane, height)
+        if candidates is not None:
+            boxes = level_points(candidates.boxes, plane, height)
+            candidates = LabelledBoxes(boxes, candidates.labels, candidates.classes)
+        return level_points(lidar_np, plane, height), radar_np, candidates, plane
 
     def ground(
         self, features: SceneFeatures, prompt: str, score_threshold: float | None = None
@@ -255,6 +284,13 @@ __all__ = [
     "as_points",
     "head_class",
 ]
+
+
+def _numpy(points: PointsLike) -> np.ndarray:
+    """A cloud as a float32 array (a tensor moved to the CPU)."""
+    if isinstance(points, Tensor):
+        return points.detach().cpu().numpy().astype(np.float32, copy=False)
+    return np.asarray(points, dtype=np.float32)
 
 
 def build_model(preset: str = "small", **overrides: Any) -> TPCNet:

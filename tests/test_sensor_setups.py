@@ -215,3 +215,12 @@ def test_contradicting_rig_options_are_one_line_errors(tmp_path, capsys):
     )
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "--radar-scans 3 or 5" in err
+
+
+def test_a_pitched_lidars_targets_are_the_boxes_in_its_own_frame():
+    boxes = np.array([[20.0, 1.0, -0.85, 4.0, 1.8, 1.5, 0.4]])
+    pitched = SETUPS["lidar-low-pitched"].boxes_in_lidar_frame(boxes)
+    s, c = np.sin(np.radians(2.0)), np.cos(np.radians(2.0))
+    np.testing.assert_allclose(pitched[0, :3], [20.0 * c + 0.85 * s, 1.0, 20.0 * s - 0.85 * c])
+    np.testing.assert_array_equal(pitched[0, 3:], boxes[0, 3:])
+    np.testing.assert_array_equal(SETUPS["lidar-128"].boxes_in_lidar_frame(boxes), boxes)

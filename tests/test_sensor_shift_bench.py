@@ -80,7 +80,7 @@ def test_bad_options_are_one_line_errors(tmp_path, capsys):
 
 
 def test_the_level_reference_is_where_the_training_rigs_ground_is_found():
-    from bench.sensor_shift import LEVEL_REFERENCE
+    from model.config import PillarConfig
     from scenes.geometry.calib import sensor_to_lidar
     from scenes.geometry.ground import estimate_ground
     from scenes.synth.frame import SynthSettings, synthesize
@@ -88,7 +88,7 @@ def test_the_level_reference_is_where_the_training_rigs_ground_is_found():
     settings = SynthSettings(seed=38, camera=None)
     r2l = sensor_to_lidar(*settings.calibrations())
     found = [-estimate_ground(synthesize(settings, i, r2l).lidar.points, 1.7).c for i in range(4)]
-    assert float(np.median(found)) == pytest.approx(LEVEL_REFERENCE, abs=0.03)
+    assert float(np.median(found)) == pytest.approx(PillarConfig().ground_height, abs=0.03)
 
 
 def test_levelled_heights_run_and_say_so(tmp_path, untrained_model, capsys):

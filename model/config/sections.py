@@ -24,6 +24,7 @@ ClassSetName = Literal["vod", "nuscenes"]
 
 if set(typing.get_args(ClassSetName)) != set(CLASS_PRESETS):
     raise ImportError(f"ClassSetName {typing.get_args(ClassSetName)} != {tuple(CLASS_PRESETS)}")
+GroundKind = Literal["sensor", "estimated"]
 
 ANCHORS: tuple[str, ...] = typing.get_args(AnchorKind)
 """Anchor kinds of :attr:`HeadConfig.anchor`."""
@@ -49,6 +50,15 @@ class PillarConfig:
         lidar_scale: Fixed per-feature scale applied to the raw LiDAR features (x, y, z, intensity)
             before the PFN; intensity arrives in 0..255 as VoD, hence 1/255.
         radar_scale: Same for radar (x, y, z, rcs, v_r, v_r_compensated, time).
+        ground: What the points' heights are measured from at inference (``encode_scene``):
+            ``sensor`` (the LiDAR's origin, as given) or ``estimated`` (issue 38: the ground
+            plane estimated from the LiDAR cloud, :func:`scenes.geometry.ground.estimate_ground`,
+            put ``ground_height`` below the origin; both clouds and labelled candidates are
+            levelled on it and the answer boxes moved back: a sensor mounted at another height
+            or pitched then gives the detector the heights it was trained on). Referent path
+            only; training clouds are used as given.
+        ground_height: Where ``estimated`` puts the ground (m below the origin): where the
+            estimate finds it on the training rig's streets.
     """
 
     grid: BevGrid = field(default_factory=BevGrid)
@@ -59,8 +69,16 @@ class PillarConfig:
     radar_max_points: int = 10
     lidar_scale: tuple[float, ...] = (1.0, 1.0, 1.0, 1.0 / 255.0)
     radar_scale: tuple[float, ...] = (1.0, 1.0, 1.0, 0.1, 0.2, 0.2, 1.0)
+    ground: GroundKind = field(default="sensor", metadata={ABSENT: "sensor"})
+    ground_height: float = field(default=1.65, metadata={ABSENT: 1.65})
 
     def __post_init__(self) -> None:
+        check_choice("PillarConfig", "ground", self.ground, typing.get_args(GroundKind))
+        if not 0.0 < self.ground_height < 5.0:
+            raise ConfigError(
+                f"PillarConfig.ground_height must be in (0, 5) m, got {self.ground_height}",
+                "ground_height",
+            )
         if self.z_max <= self.z_min:
             raise ConfigError(
                 f"PillarConfig.z_max ({self.z_max}) must exceed z_min ({self.z_min})", "z_max"
@@ -368,6 +386,12 @@ class ModelConfig:
     def __post_init__(self) -> None:
         check_choice("ModelConfig", "modalities", self.modalities, typing.get_args(Modalities))
         check_choice("ModelConfig", "grounding", self.grounding, typing.get_args(GroundingKind))
+        if self.pillars.ground != "sensor" and self.grounding != "referent":
+            raise ConfigError(
+                "ModelConfig.pillars.ground 'estimated' needs grounding='referent' (the paper's "
+                "path decodes its boxes inside ground())",
+                "pillars.ground",
+            )
         strides = self.backbone.cumulative_strides
         if self.fpn.output_stride not in strides:
             raise ConfigError(

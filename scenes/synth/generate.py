@@ -40,6 +40,14 @@ classes, :mod:`scenes.synth.world.road_users`, and prompts about them); ``label_
 referent's class name as :mod:`scenes.geometry.classes` spells it (``Truck``, ``TrafficCone``),
 the manifest and the sidecars' ``extra`` record ``"classes"`` when it is not ``vod``.
 
+Sensor rigs (issue 38)
+    ``--sensor-setup NAME`` senses every world through a named rig of :mod:`scenes.synth.setups`
+    (held-out LiDARs, mounts, intensities, radars and street densities; the same actors as the
+    default rig of the seed), ``--sensor-randomise`` each world through a rig drawn by
+    :mod:`scenes.synth.randomise` (each world's LiDAR calibration at its drawn height). Either
+    records the rig in the sidecar's ``extra["sensor_setup"]``; without them the output is that
+    of the generator before them, byte for byte (``tests/test_synth_pinned.py``).
+
 Sequences
     ``--sequence-length N`` writes ``N`` consecutive 10 Hz frames of each world
     (:func:`scenes.synth.frame.synthesize_sequence`, :func:`scenes.synth.sequence.world_at`: actors

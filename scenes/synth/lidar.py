@@ -29,6 +29,12 @@ Intensity
     reflectivity-like value as the calibrated intensities of View-of-Delft's HDL-64, whose
     field-of-view points have p10 / p50 / p90 of about 40 / 108 / 215 (issue 14).
 
+Other rigs (:mod:`scenes.synth.setups`, :mod:`scenes.synth.randomise`)
+    The beams' count and pattern, the azimuth step, a pitch of the mount (``pitch_deg``: rays cast
+    turned, points reported in the pitched sensor's frame), an intensity scale and dead beams
+    are :class:`LidarConfig` fields; their defaults leave the sweep (and its random stream) as
+    described above.
+
 The output ``(N, 4)`` float32 ``x, y, z, intensity`` is in the LiDAR frame.
 """
 
