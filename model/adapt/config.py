@@ -168,7 +168,9 @@ class AdaptConfig:
             try:
                 parts = [float(v) for v in values.split(":")]
             except ValueError:
-                raise AdaptError(f"--class-threshold {given!r}: thresholds must be numbers") from None
+                raise AdaptError(
+                    f"--class-threshold {given!r}: thresholds must be numbers"
+                ) from None
             if len(parts) not in (1, 2) or not all(0.0 < v < 1.0 for v in parts):
                 raise AdaptError(
                     f"--class-threshold {given!r}: one or two thresholds in (0, 1) expected"

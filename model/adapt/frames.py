@@ -51,11 +51,10 @@ class UnlabelledFrames:
 
     def __init__(self, path: str | Path, radar: str = "auto", split: str = "", max_frames: int = 0):
         try:
-            self.root = Talk2RadarRoot(path, radar=None if radar == "none" else radar, sidecar=False)
-            if split:
-                ids = self.root.ids(split)
-            else:
-                ids = self.root.frame_ids()
+            self.root = Talk2RadarRoot(
+                path, radar=None if radar == "none" else radar, sidecar=False
+            )
+            ids = self.root.ids(split) if split else self.root.frame_ids()
             distinct: dict[tuple[object, ...], str] = {}
             for sid in ids:
                 distinct.setdefault(self.root.frame_key(sid), sid)

@@ -59,7 +59,12 @@ class FrameMemory:
         return len(self.boxes)
 
     def to_arrays(self) -> dict[str, np.ndarray]:
-        return {"boxes": self.boxes, "labels": self.labels, "scores": self.scores, "misses": self.misses}
+        return {
+            "boxes": self.boxes,
+            "labels": self.labels,
+            "scores": self.scores,
+            "misses": self.misses,
+        }
 
     @staticmethod
     def from_arrays(data: Mapping[str, np.ndarray]) -> FrameMemory:
@@ -160,11 +165,17 @@ class FrameTargets:
     ignore: np.ndarray
 
 
-def partition(memory: FrameMemory, plan: RoundPlan) -> FrameTargets:
-    """The memory split into pseudo-labels and ignored boxes at ``plan`` (module docstring)."""
+def positive_mask(memory: FrameMemory, plan: RoundPlan) -> np.ndarray:
+    """``(K,)`` bool: the remembered boxes that are pseudo-labels at ``plan``: seen this round,
+    confident for their class, within the round's range (module docstring)."""
     near = np.hypot(memory.boxes[:, 0], memory.boxes[:, 1]) <= plan.max_range
     confident = select(memory.labels, memory.scores, plan.positive)
-    positive = confident & near & (memory.misses == 0)
+    return confident & near & (memory.misses == 0)
+
+
+def partition(memory: FrameMemory, plan: RoundPlan) -> FrameTargets:
+    """The memory split into pseudo-labels and ignored boxes at ``plan`` (module docstring)."""
+    positive = positive_mask(memory, plan)
     return FrameTargets(memory.boxes[positive], memory.labels[positive], memory.boxes[~positive])
 
 
@@ -174,5 +185,6 @@ __all__ = [
     "FrameTargets",
     "ensemble",
     "partition",
+    "positive_mask",
     "select",
 ]

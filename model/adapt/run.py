@@ -36,7 +36,14 @@ from tqdm import tqdm
 from model.adapt.augment import draw_view
 from model.adapt.config import AdaptConfig, AdaptError, RoundPlan
 from model.adapt.frames import SensorFrame, UnlabelledFrames
-from model.adapt.pseudo import FrameMemory, FrameTargets, ensemble, partition, select
+from model.adapt.pseudo import (
+    FrameMemory,
+    FrameTargets,
+    ensemble,
+    partition,
+    positive_mask,
+    select,
+)
 from model.adapt.state import (
     LAST_FILE,
     REPORT_FILE,
@@ -128,7 +135,8 @@ def set_up(cfg: AdaptConfig) -> AdaptRun:
         optimizer.load_state_dict(files.optimizer)
     if files.rng is not None:
         set_rng_state(files.rng)
-    torch.manual_seed(cfg.seed) if files.rng is None else None
+    else:
+        torch.manual_seed(cfg.seed)
     return AdaptRun(cfg, frames, model, params, optimizer, files, out)
 
 
@@ -152,8 +160,14 @@ def label_frames(run: AdaptRun, plan: RoundPlan) -> dict[str, Any]:
     cfg, files = run.cfg, run.files
     floor = min(plan.negative.values())
     merged = {"matched": 0, "added": 0, "missed": 0, "dropped": 0}
-    bar = tqdm(range(len(run.frames)), desc=f"round {plan.index + 1} labels", unit="frame",
-               disable=cfg.quiet, dynamic_ncols=True, leave=False)
+    bar = tqdm(
+        range(len(run.frames)),
+        desc=f"round {plan.index + 1} labels",
+        unit="frame",
+        disable=cfg.quiet,
+        dynamic_ncols=True,
+        leave=False,
+    )
     for i in bar:
         frame = run.frames[i]
         boxes, labels, scores = detect_frames(run.model, [frame], floor)[0]
@@ -178,21 +192,16 @@ def count_targets(memory: dict[str, FrameMemory], plan: RoundPlan) -> dict[str, 
     ignored = dict.fromkeys(CLASSES, 0)
     score_sum = dict.fromkeys(CLASSES, 0.0)
     for m in memory.values():
-        t = partition(m, plan)
-        pos_scores = m.scores[np.isin(np.arange(len(m)), _positive_rows(m, plan))]
-        for label, score in zip(t.labels, pos_scores, strict=True):
-            positive[CLASSES[label]] += 1
-            score_sum[CLASSES[label]] += float(score)
-        for label in m.labels[np.setdiff1d(np.arange(len(m)), _positive_rows(m, plan))]:
-            ignored[CLASSES[label]] += 1
-    mean = {c: (score_sum[c] / positive[c] if positive[c] else None) for c in CLASSES}
+        mask = positive_mask(m, plan)
+        for label, score, kept in zip(m.labels, m.scores, mask, strict=True):
+            name = CLASSES[label]
+            if kept:
+                positive[name] += 1
+                score_sum[name] += float(score)
+            else:
+                ignored[name] += 1
+    mean = {c: (round(score_sum[c] / positive[c], 4) if positive[c] else None) for c in CLASSES}
     return {"pseudo_labels": positive, "ignored": ignored, "mean_score": mean}
-
-
-def _positive_rows(memory: FrameMemory, plan: RoundPlan) -> np.ndarray:
-    near = np.hypot(memory.boxes[:, 0], memory.boxes[:, 1]) <= plan.max_range
-    confident = select(memory.labels, memory.scores, plan.positive)
-    return np.flatnonzero(confident & near & (memory.misses == 0))
 
 
 def step_indices(n: int, batch: int, seed: int, round_index: int, step: int) -> list[int]:
@@ -214,7 +223,9 @@ def train_step(run: AdaptRun, plan: RoundPlan, step: int) -> LossTerms:
             global_step, cfg.rounds * cfg.steps_per_round, cfg.lr, cfg.warmup_steps
         )
     items = []
-    for b, index in enumerate(step_indices(len(run.frames), cfg.batch_size, cfg.seed, plan.index, step)):
+    for b, index in enumerate(
+        step_indices(len(run.frames), cfg.batch_size, cfg.seed, plan.index, step)
+    ):
         frame = run.frames[index]
         rng = np.random.default_rng((cfg.seed, 31, plan.index, step, b))
         view = draw_view(rng, cfg.flip_probability, cfg.max_rotation, cfg.scale_range)
@@ -300,8 +311,9 @@ def adapt(cfg: AdaptConfig) -> list[dict[str, Any]]:
     run = set_up(cfg)
     total = cfg.rounds * cfg.steps_per_round
     done = run.progress.round * cfg.steps_per_round + run.progress.step_in_round
-    bar = tqdm(total=total, initial=done, desc="adapt", unit="step", disable=cfg.quiet,
-               dynamic_ncols=True)
+    bar = tqdm(
+        total=total, initial=done, desc="adapt", unit="step", disable=cfg.quiet, dynamic_ncols=True
+    )
     with StopRequest() as stop, stop.deferred():
         while run.progress.round < cfg.rounds:
             if cfg.stop_after_round and run.progress.round >= cfg.stop_after_round:
@@ -309,7 +321,7 @@ def adapt(cfg: AdaptConfig) -> list[dict[str, Any]]:
             r = run.progress.round
             plan = cfg.round_plan(r)
             if run.progress.labelled_round < r:
-                run.files.report = run.files.report[:r] + [label_frames(run, plan)]
+                run.files.report = [*run.files.report[:r], label_frames(run, plan)]
                 run.progress.labelled_round = r
                 run.save()
             run.targets = {sid: partition(m, plan) for sid, m in run.files.memory.items()}
@@ -326,8 +338,11 @@ def adapt(cfg: AdaptConfig) -> list[dict[str, Any]]:
                 terms = train_step(run, plan, run.progress.step_in_round)
                 run.progress.step_in_round += 1
                 steps = entry["steps"]
-                for key, value in (("loss", terms.total), ("heatmap", terms.heatmap),
-                                   ("regression", terms.regression)):
+                for key, value in (
+                    ("loss", terms.total),
+                    ("heatmap", terms.heatmap),
+                    ("regression", terms.regression),
+                ):
                     entry[key] = (entry[key] * steps + value.item()) / (steps + 1)
                 entry["steps"] = steps + 1
                 bar.update(1)

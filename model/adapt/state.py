@@ -28,9 +28,10 @@ import torch
 
 from model.adapt.config import AdaptConfig, AdaptError
 from model.adapt.pseudo import FrameMemory
-from model.checkpoint import CheckpointError, checkpoint_payload, check_payload
+from model.checkpoint import CheckpointError, check_payload, checkpoint_payload
 from model.checkpoint_meta import CheckpointMeta, portable_path
 from model.tpcnet import TPCNet
+from model.training.state import same_folder
 from scenes.utils.durable import atomic_file
 
 STATE_FILE = "adapt_state.pt"
@@ -118,7 +119,7 @@ def load_state(out: Path, cfg: AdaptConfig) -> RunFiles | None:
         raise AdaptError(f"{path}: format_version {data.get('format_version')!r}, expected 1")
     ours, theirs = cfg.settings(), data["settings"]
     for key in ours:
-        if key in ("out",):
+        if key == "out" or (key in ("data", "init") and same_folder(ours[key], theirs.get(key))):
             continue
         if key in theirs and theirs[key] != ours[key]:
             raise AdaptError(
