@@ -17,7 +17,7 @@ from model.adapt.__main__ import main
 from model.adapt.augment import View
 from model.adapt.config import AdaptConfig, AdaptError
 from model.adapt.frames import UnlabelledFrames
-from model.adapt.pseudo import FrameMemory, ensemble, partition, select
+from model.adapt.pseudo import FrameMemory, ensemble, partition, seat_on_ground, select
 from model.adapt.run import step_indices
 from model.checkpoint import load_checkpoint, save_checkpoint
 from model.training.referent_step import in_bev_footprint
@@ -76,6 +76,21 @@ def test_memory_keeps_the_surer_box_and_drops_one_missed_too_often():
     assert stats.missed == 1 and memory.misses.tolist() == [1]
     memory, stats = ensemble(memory, np.zeros((0, 7)), np.zeros(0), np.zeros(0), 0.1, 1)
     assert stats.dropped == 1 and len(memory) == 0
+
+
+def test_pseudo_labels_rest_on_the_ground_the_new_sensor_sees():
+    rng = np.random.default_rng(1)
+    ground = np.c_[rng.uniform([-20, -20], [20, 20], (20000, 2)), rng.normal(-1.84, 0.01, 20000)]
+    lidar = np.c_[ground, np.zeros(len(ground))].astype(np.float32)
+    h = 1.6
+    boxes = np.array([[8.0, 2.0, -1.84 + h / 2 + dz, 4.0, 1.8, h, 0.3] for dz in (0.1, -0.12, 0.6)])
+    seated = seat_on_ground(boxes, lidar)
+    assert seated[:2, 2] == pytest.approx(-1.84 + h / 2, abs=0.02)  # a floating or sunk box
+    assert seated[2, 2] == boxes[2, 2]  # a move past MAX_SEAT_SHIFT is not made
+    assert np.array_equal(seated[:, [0, 1, 3, 4, 5, 6]], boxes[:, [0, 1, 3, 4, 5, 6]])
+    far = boxes.copy()
+    far[:, 0] = 60.0  # no points around: the box stays
+    assert np.array_equal(seat_on_ground(far, lidar), far)
 
 
 def test_bad_class_threshold_is_one_line():

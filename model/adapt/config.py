@@ -90,12 +90,17 @@ class AdaptConfig:
         f"(defaults: {', '.join(f'{c}={a}:{b}' for c, (a, b) in DEFAULT_THRESHOLDS.items())})",
     )
     ignore_ratio: float = option(
-        0.5,
+        0.3,
         help="boxes between this share of the positive threshold and it are ignored "
         "(default %(default)s)",
     )
     range_start: float = option(30.0, help="pseudo-label range (m), first round (default 30)")
     range_end: float = option(50.0, help="pseudo-label range (m), last round (default 50)")
+    seat_on_ground: bool = option(
+        True,
+        negatable=True,
+        help="rest each new pseudo-label on the ground its LiDAR ring shows (default: on)",
+    )
     memory_iou: float = option(
         0.1, help="BEV IoU above which a new box and a remembered one are one object (default 0.1)"
     )

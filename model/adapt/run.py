@@ -4,7 +4,8 @@ Round ``r`` (the curriculum's :meth:`model.adapt.config.AdaptConfig.round_plan`)
 
 1. **Pseudo-labels** (:func:`label_frames`): the current detector (eval mode, no augmentation)
    on every frame; boxes at or above their class's ignore threshold merged into the frame's
-   memory (:func:`model.adapt.pseudo.ensemble`), then split into pseudo-labels and ignored boxes
+   memory (:func:`model.adapt.pseudo.ensemble`; each first rested on the ground around it,
+   :func:`model.adapt.pseudo.seat_on_ground`), then split into pseudo-labels and ignored boxes
    (:func:`model.adapt.pseudo.partition`). The round's report entry counts them per class.
 2. **Training** (:func:`train_step`, ``--steps-per-round`` steps): batches of frames drawn from
    ``(seed, round, pass)`` permutations, each frame under its own random view
@@ -42,6 +43,7 @@ from model.adapt.pseudo import (
     ensemble,
     partition,
     positive_mask,
+    seat_on_ground,
     select,
 )
 from model.adapt.state import (
@@ -154,7 +156,7 @@ def detect_frames(
     return [(d.boxes, d.labels, d.scores) for d in dets]
 
 
-def label_frames(run: AdaptRun, plan: RoundPlan) -> dict[str, Any]:
+def label_frames(run: AdaptRun, plan: RoundPlan, stop: StopRequest) -> dict[str, Any]:
     """Step 1 of a round (module docstring): the memory updated, the round's targets and its
     report entry (per class: pseudo-labels, ignored boxes, their mean score; the merge's counts)."""
     cfg, files = run.cfg, run.files
@@ -170,7 +172,15 @@ def label_frames(run: AdaptRun, plan: RoundPlan) -> dict[str, Any]:
     )
     for i in bar:
         frame = run.frames[i]
+        if stop.signum:
+            raise TrainingInterrupted(
+                stop.signum,
+                f"stopped while making round {plan.index + 1}'s pseudo-labels; the state of "
+                f"{run.progress.round} finished rounds is kept: run the same command again",
+            )
         boxes, labels, scores = detect_frames(run.model, [frame], floor)[0]
+        if cfg.seat_on_ground:
+            boxes = seat_on_ground(boxes, frame.lidar)
         keep = select(labels, scores, plan.negative)
         memory = files.memory.get(frame.sample_id, FrameMemory.empty())
         memory, stats = ensemble(
@@ -321,7 +331,7 @@ def adapt(cfg: AdaptConfig) -> list[dict[str, Any]]:
             r = run.progress.round
             plan = cfg.round_plan(r)
             if run.progress.labelled_round < r:
-                run.files.report = [*run.files.report[:r], label_frames(run, plan)]
+                run.files.report = [*run.files.report[:r], label_frames(run, plan, stop)]
                 run.progress.labelled_round = r
                 run.save()
             run.targets = {sid: partition(m, plan) for sid, m in run.files.memory.items()}
