@@ -27,6 +27,8 @@ PARSERS: dict[str, tuple[str, str]] = {
     "python -m model.calibrate": ("model.training.calibrate", "build_parser"),
     "python -m model.class_prompts": ("model.evaluation.class_prompts", "_parser"),
     "python -m model.results_table": ("model.evaluation.results_table", "build_parser"),
+    "python -m model.adapt": ("model.adapt.config", "build_parser"),
+    "python -m bench.unlabelled_root": ("bench.unlabelled_root", "build_parser"),
     **{
         command: (f"bench.{name}", "build_parser")
         for name in (

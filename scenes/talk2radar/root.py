@@ -219,8 +219,12 @@ class Talk2RadarRoot:
             raise RootError(f"{path}: split {split!r} not found (present: {self.splits()})")
         return parse_split_list(read_text_file(path, "split list", RootError), path)
 
-    def _all_frames(self, split: str) -> list[str]:
-        """Every frame of ``lidar/training/velodyne/`` (sorted), for a root without ImageSets."""
+    def frame_ids(self) -> list[str]:
+        """Every frame of ``lidar/training/velodyne/`` (sorted ids), whatever the ImageSets say.
+
+        Raises:
+            RootError: a point file not named by a frame id (names the file).
+        """
         folder = sample_dir(self.lidar_dir, VELODYNE)
         ids = []
         for path in sorted(folder.glob(f"*{FOLDER_SUFFIX[VELODYNE]}")):
@@ -228,6 +232,12 @@ class Talk2RadarRoot:
                 ids.append(parse_id(path.stem))
             except RootError as exc:
                 raise RootError(f"{path}: not named by a frame id ({exc})") from exc
+        return ids
+
+    def _all_frames(self, split: str) -> list[str]:
+        """Every frame (:meth:`frame_ids`), for a root without ImageSets, with a notice."""
+        folder = sample_dir(self.lidar_dir, VELODYNE)
+        ids = self.frame_ids()
         if not self._all_frames_noted:
             self._all_frames_noted = True
             warnings.warn(
@@ -340,8 +350,11 @@ class Talk2RadarRoot:
         labels = read_label_file(self._file(self.lidar_dir, LABEL, sid))
         return labels_to_boxes(labels, calib, self.classes)
 
-    def load(self, sample_id: str | int) -> Sample:
-        """Load one sample; every error names the offending file."""
+    def load_sensors(self, sample_id: str | int) -> Sample:
+        """A sample's sensor files only, as an unlabelled recording has them: its LiDAR and
+        radar points and calibrations and its camera image's path; no label, prompt or sidecar
+        file is read (``boxes`` empty, ``prompt`` and ``meta`` None, ``labels`` empty), so a root
+        without ``label_2/``, ``prompt/`` or ``meta/`` reads (``python -m model.adapt``)."""
         sid = format_id(sample_id)
         calib = read_calib(self._file(self.lidar_dir, CALIB, sid))
         lidar = read_points(self._file(self.lidar_dir, VELODYNE, sid), LIDAR_FEATURES)
@@ -353,18 +366,35 @@ class Talk2RadarRoot:
             radar = transform_points(radar_raw, sensor_to_lidar(calib, radar_calib)).astype(
                 np.float32
             )
-        labels = tuple(read_label_file(self._file(self.lidar_dir, LABEL, sid)))
-        boxes, classes = labels_to_boxes(labels, calib, self.classes)
         return Sample(
             sample_id=sid,
             lidar=lidar,
             radar=radar,
+            boxes=np.zeros((0, 7)),
+            classes=(),
+            prompt=None,
+            calib=calib,
+            radar_calib=radar_calib,
+            image_path=self.image_path(sid),
+        )
+
+    def load(self, sample_id: str | int) -> Sample:
+        """Load one sample (:meth:`load_sensors` and its label, prompt and sidecar); every error
+        names the offending file."""
+        sid = format_id(sample_id)
+        sensors = self.load_sensors(sid)
+        labels = tuple(read_label_file(self._file(self.lidar_dir, LABEL, sid)))
+        boxes, classes = labels_to_boxes(labels, sensors.calib, self.classes)
+        return Sample(
+            sample_id=sid,
+            lidar=sensors.lidar,
+            radar=sensors.radar,
             boxes=boxes,
             classes=classes,
             prompt=self.load_prompt(sid),
-            calib=calib,
-            radar_calib=radar_calib,
+            calib=sensors.calib,
+            radar_calib=sensors.radar_calib,
             labels=labels,
             meta=self.load_meta(sid),
-            image_path=self.image_path(sid),
+            image_path=sensors.image_path,
         )

@@ -1,0 +1,33 @@
+"""``python -m model.adapt``: 0 when done (or stopped by ``--stop-after-round``), 2 on bad input
+(one line, ``error: ...``), 130 / 143 on SIGINT / SIGTERM (the state saved: run it again)."""
+
+from __future__ import annotations
+
+import sys
+
+from model.adapt.config import AdaptError, parse_args
+from model.adapt.run import adapt, report_table
+from model.adapt.state import LAST_FILE, REPORT_FILE
+from model.training.stop_signal import TrainingInterrupted
+from scenes.utils.cli import error_line
+
+
+def main(argv: list[str] | None = None) -> int:
+    """The command (module docstring)."""
+    try:
+        cfg = parse_args(argv)
+        report = adapt(cfg)
+    except TrainingInterrupted as exc:
+        print(exc.message(), file=sys.stderr)
+        return exc.exit_code
+    except (AdaptError, OSError) as exc:
+        print(f"error: {error_line(exc)}", file=sys.stderr)
+        return 2
+    print(report_table(report))
+    done = sum(1 for e in report if e["steps"] == cfg.steps_per_round)
+    print(f"{done} of {cfg.rounds} rounds done; {cfg.out}/{LAST_FILE}, {cfg.out}/{REPORT_FILE}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
