@@ -209,22 +209,36 @@ def intensity_legend() -> np.ndarray:
     return colorbar_image(INTENSITY_STOPS, ["0", "64", "255"], "LiDAR intensity (sqrt scale)", "")
 
 
+def legend_swatches(
+    count: int, *, width: int = 320, font_size: int = 13
+) -> tuple[tuple[int, int, int, int], ...]:
+    """Where :func:`class_legend` paints the swatches of ``count`` classes, two to a row: per
+    class ``(x0, y0, x1, y1)``, image pixels, both ends inclusive (PIL's rectangle)."""
+    margin, line, swatch = 8, font_size + 6, font_size
+    column = (width - 2 * margin) // 2
+    out = []
+    for i in range(count):
+        x = margin + (i % 2) * column
+        y = margin + (i // 2) * line
+        out.append((x, y + 2, x + swatch, y + 2 + swatch))
+    return tuple(out)
+
+
 def class_legend(names: Sequence[str], *, width: int = 320, font_size: int = 13) -> np.ndarray:
-    """The legend of the box colours: a swatch of :func:`class_color` and the name of each class
-    of ``names`` (the served model's class set), two to a row.
+    """The legend of the box colours: a swatch of :func:`class_color` (at
+    :func:`legend_swatches`) and the name of each class of ``names`` (the served model's class
+    set), two to a row.
 
     Returns:
         ``(H, width, 3)`` uint8 RGB image (light text on a dark grey background).
     """
-    margin, line, swatch = 8, font_size + 6, font_size
+    margin, line = 8, font_size + 6
     rows = (len(names) + 1) // 2
     image = Image.new("RGB", (width, 2 * margin + rows * line), (37, 38, 43))
     draw = ImageDraw.Draw(image)
     font = _font(font_size)
-    column = (width - 2 * margin) // 2
-    for i, name in enumerate(names):
-        x = margin + (i % 2) * column
-        y = margin + (i // 2) * line
-        draw.rectangle([x, y + 2, x + swatch, y + 2 + swatch], fill=class_color(name))
-        draw.text((x + swatch + 6, y), name, fill=(230, 230, 230), font=font)
+    swatches = legend_swatches(len(names), width=width, font_size=font_size)
+    for name, (x0, y0, x1, y1) in zip(names, swatches, strict=True):
+        draw.rectangle([x0, y0, x1, y1], fill=class_color(name))
+        draw.text((x1 + 6, y0 - 2), name, fill=(230, 230, 230), font=font)
     return np.asarray(image, dtype=np.uint8)

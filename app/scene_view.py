@@ -448,7 +448,8 @@ def build_view_panel(
 ) -> ViewPanel:
     """Add the View widgets to ``gui`` (in the current container) and return their handles;
     ``classes``: the served model's classes, whose colours the class legend shows (its label
-    names them: "Box colours: Car, Pedestrian, Cyclist")."""
+    names them: "Box colours: Car, Pedestrian, Cyclist"; a PNG, so that its swatches are the
+    colours of the boxes, :attr:`scenes.geometry.classes.ObjectClass.color`, exactly)."""
     s = settings or ViewSettings()
     coloring_label = next(k for k, v in LIDAR_COLORING_LABELS.items() if v == s.lidar_coloring)
     camera = gui.add_button_group(
@@ -469,7 +470,9 @@ def build_view_panel(
         velocity_legend(s.velocity_range), label="Radar colours: compensated radial velocity"
     )
     lidar_legend_handle = gui.add_image(lidar_legend(s.lidar_coloring), label="LiDAR colours")
-    gui.add_image(class_legend(classes), label=f"{CLASS_LEGEND}: {', '.join(classes)}")
+    # PNG, not viser's JPEG for RGB: the swatches are the boxes' colours exactly, with sharp text
+    legend = class_legend(classes)
+    gui.add_image(legend, label=f"{CLASS_LEGEND}: {', '.join(classes)}", format="png")
     return ViewPanel(
         lidar_coloring=lidar_coloring,
         show_lidar=show_lidar,

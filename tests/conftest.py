@@ -424,9 +424,10 @@ def _ws_client() -> Callable[[int], BrowserLikeClient]:
 # ---------------------------------------------------------------------------- Chromium
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def chromium() -> str:
-    """Debian's Chromium; the test skips (and says so) where there is none."""
+    """Debian's Chromium; the test skips (and says so) where there is none (session-scoped, so
+    that a module's fixture can start one browser for its tests)."""
     path = find_chromium()
     if path is None:
         pytest.skip("no Chromium found (/usr/bin/chromium): install Debian's `chromium` package")

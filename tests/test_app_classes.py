@@ -12,7 +12,8 @@ import pytest
 
 from annotate import default_box
 from app.annotate_tab import AnnotationPanel
-from app.annotate_tab.widgets import CHANGE_CLASS, NEW_BOX_CLASS
+from app.annotate_tab.keys import Key, check_hotkeys, keys_of
+from app.annotate_tab.widgets import CHANGE_CLASS, NEW_BOX_CLASS, class_key
 from app.scene_view import CLASS_LEGEND
 from app.text import md_text
 from scenes.geometry.classes import NUSCENES, VOD
@@ -107,3 +108,19 @@ def test_a_nuscenes_model_is_drawn_named_and_annotated_in_its_classes(
         )
     finally:
         client.close()
+
+
+def test_a_ten_class_set_gets_keys_1_to_9_and_no_key_runs_two_actions() -> None:
+    """Key 0 is *Refers to nothing*; with ten classes it also chose the tenth (viser runs every
+    command of a hotkey), so class keys go 1 to 9 and :func:`keys_of` refuses a shared key."""
+    for classes in (VOD, NUSCENES):
+        actions: dict[tuple[str, str | None], set[str]] = {}
+        for k in keys_of(classes.names):
+            if k.key is not None:
+                actions.setdefault((k.key.lower(), k.modifier), set()).add(k.action)
+        assert all(len(a) == 1 for a in actions.values()), actions
+    shown = [k.shown for k in keys_of(NUSCENES.names) if k.action.startswith("new_class_")]
+    assert shown == [str(i) for i in range(1, 10)]
+    assert class_key(8) == "9" and class_key(9) is None
+    with pytest.raises(ValueError, match="key 0 would run both"):
+        check_hotkeys([*keys_of(), Key("new_class_9", "0", None, "", "0", "Placing")])

@@ -72,11 +72,17 @@ REVIEW = "Review"
 
 
 def keys_of(classes: Sequence[str] = VOD.names) -> tuple[Key, ...]:
-    """Every key of the Annotate tab for a model of ``classes``: a key per class of the set
-    (:func:`app.annotate_tab.widgets.class_key`: 1, 2, 3, ...) sets *New box class*."""
+    """Every key of the Annotate tab for a model of ``classes``: a key per class of the set up
+    to the ninth (:func:`app.annotate_tab.widgets.class_key`: 1, 2, 3, ... 9) sets *New box
+    class*; a tenth class has no key (0 is *Refers to nothing*).
+
+    Raises:
+        ValueError: two actions on one key and modifier (a hotkey would run both).
+    """
     out = [
-        Key(f"new_class_{i}", class_key(i), None, f"New box class: {c}", class_key(i), PLACE)
+        Key(f"new_class_{i}", key, None, f"New box class: {c}", key, PLACE)
         for i, c in enumerate(classes)
+        if (key := class_key(i)) is not None
     ]
     out += [
         Key("add_ready", "A", None, "Add the chosen labelled object", "A", PLACE),
@@ -122,7 +128,21 @@ def keys_of(classes: Sequence[str] = VOD.names) -> tuple[Key, ...]:
         Key("reject", "X", None, "Reject the pair under review", "X", REVIEW),
         Key("fix", "F", "shift", "Save the fix of the pair under review", "Shift+F", REVIEW),
     ]
+    check_hotkeys(out)
     return tuple(out)
+
+
+def check_hotkeys(keys: Sequence[Key]) -> None:
+    """Raise ValueError when one hotkey (key and modifier, the key's case ignored) runs two
+    actions: viser would run both on one press."""
+    seen: dict[tuple[str, str | None], str] = {}
+    for k in keys:
+        if k.key is None:
+            continue
+        held = seen.setdefault((k.key.lower(), k.modifier), k.action)
+        if held != k.action:
+            mod = f"{k.modifier}+" if k.modifier else ""
+            raise ValueError(f"key {mod}{k.key} would run both {held} and {k.action}")
 
 
 KEYS: tuple[Key, ...] = keys_of()

@@ -82,12 +82,17 @@ NEW_BOX_CLASS, CHANGE_CLASS = "New box class", "Change class"
 """Labels of the two class controls: the next box's class, and the selected box's relabel."""
 
 
-def class_key(index: int) -> str:
-    """The key that sets *New box class* to class ``index`` of the set: 1 to 9, then 0 (a set
-    of at most ten classes)."""
-    if not 0 <= index < 10:
-        raise ValueError(f"class keys go to 10 classes, not {index + 1}")
-    return str((index + 1) % 10)
+CLASS_KEYS = 9
+"""Classes of a set with a key of their own: 1 to 9 (0 is *Refers to nothing*; Shift+digits type
+other characters, which viser matches)."""
+
+
+def class_key(index: int) -> str | None:
+    """The key that sets *New box class* to class ``index`` (0-based) of the set: 1 to 9; None
+    from the tenth class on (chosen from the dropdown; key C cycles a placed box through all)."""
+    if index < 0:
+        raise ValueError(f"class index must be >= 0, got {index}")
+    return str(index + 1) if index < CLASS_KEYS else None
 
 
 def build_annotation_widgets(
@@ -122,7 +127,9 @@ def build_annotation_widgets(
         hint="A click on the ground places a box of the class below; a click on a draft box "
         "selects it; a click on a ready-made box adds it",
     )
-    digits = ", ".join(class_key(i) for i in range(len(classes)))
+    digits = ", ".join(k for i in range(len(classes)) if (k := class_key(i)) is not None)
+    if len(classes) > CLASS_KEYS:
+        digits += f" for the first {CLASS_KEYS}"
     cls = gui.add_dropdown(
         NEW_BOX_CLASS,
         classes,
