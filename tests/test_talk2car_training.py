@@ -152,3 +152,57 @@ def test_freeze_scene_runs_with_one_thread_unless_told(nusc, tmp_path):
         assert torch.get_num_threads() == 2
     finally:
         torch.set_num_threads(before)
+
+
+def test_commands_are_banked_with_rewordings(nusc):
+    """--given-variants: each command comes back reworded beside itself, with its referent (the
+    meaning words kept); 0 gives the commands alone; a Talk2Car run banks
+    TALK2CAR_GIVEN_VARIANTS by default."""
+    from model.training.config import TALK2CAR_GIVEN_VARIANTS, parse_args
+    from scenes.language.prompts.noise import is_meaning_word
+
+    item = frames(nusc).item(0)
+    given = [(g.text, g.referent_ids) for g in item.given]
+    plain = frame_prompts(item, np.random.default_rng(0), 16, PromptConfig(), 0, 0)
+    assert plain == given
+    banked = frame_prompts(item, np.random.default_rng(0), 16, PromptConfig(), 0, 2)
+    assert banked[: len(given)] == given
+    extra = banked[len(given) :]
+    assert len(extra) >= len(given) and len({t for t, _ in extra}) == len(extra)
+    texts = {t for t, _ in given}
+    for text, refs in extra:
+        assert text not in texts
+        source = [g for g in given if g[1] == refs]
+        assert source, f"{text!r} lost its referent"
+        meaning = [w.lower() for w in text.split() if is_meaning_word(w)]
+        assert any(
+            meaning == [w.lower() for w in t.split() if is_meaning_word(w)] for t, _ in source
+        )
+    again = frame_prompts(item, np.random.default_rng(0), 16, PromptConfig(), 0, 2)
+    assert again == banked
+    args = ["--data", str(nusc), "--talk2car", str(nusc / "commands"), "--freeze-scene"]
+    args += ["--out", str(nusc.parent / "unused-run"), "--threads", "1"]
+    assert parse_args(args)[0].given_variants == TALK2CAR_GIVEN_VARIANTS > 0
+    assert parse_args([*args, "--given-variants", "0"])[0].given_variants == 0
+
+
+def test_every_candidate_is_ranked_however_unsure(nusc, monkeypatch):
+    """A Talk2Car command refers to exactly one object: its answer is every candidate ranked by
+    score, the best first, even when the referent stage scores them all below its min_score
+    (with the min_score such a command got no box at all, a top-1 miss)."""
+    from model.evaluation.talk2car.predict import iterate_command_predictions
+    from scenes.datasets.nuscenes_frames import open_talk2car
+    from scenes.nuscenes.classes import model_class
+    from tests.conftest import untrained_model
+
+    model = untrained_model("referent")
+    head = model.grounding
+    refer = head.refer
+    monkeypatch.setattr(head, "refer", lambda cands, text: refer(cands, text) - 30.0)
+    root, commands = open_talk2car(nusc, nusc / "commands", "val")
+    found = list(iterate_command_predictions(model, root, commands, model_class, progress=False))
+    assert found
+    for p in found:
+        scores = p.answer.scores
+        assert len(scores) > 0 and scores.max() < head.min_score
+        assert list(scores) == sorted(scores, reverse=True)

@@ -27,6 +27,15 @@ from scenes.geometry.projection import in_camera_view
 if TYPE_CHECKING:
     from model.tpcnet import TPCNet
 
+RANK_EVERY_CANDIDATE = 0.0
+"""The smallest score the Talk2Car evaluation keeps: none is left out. A Talk2Car command refers
+to exactly one object, so the answer is the best-ranked candidate however unsure the referent
+stage is (the checkpoint's ``min_score`` and operating threshold are for the answer *set* of
+Talk2Radar prompts, which may be empty); the AP metrics pool every candidate by score. With the
+referent stage's ``min_score`` (0.01) a command whose candidates all scored lower got no box: 11
+to 14 of 211 val commands, top-1 misses whatever their ranking (docs/RESULTS.md, "Talk2Car on
+synthetic nuScenes roots")."""
+
 ToCamera = Callable[[Any, np.ndarray], tuple[Sequence[float], Sequence[float], Sequence[float]]]
 """``(NuScenesFrame, box (7,)) -> (translation (3,), size_wlh (3,), rotation_wxyz (4,))``."""
 
@@ -95,13 +104,15 @@ def iterate_command_predictions(
     root: Any,
     commands: Any,
     model_class: Callable[[str, Sequence[str]], str | None],
-    score_threshold: float | None = None,
+    score_threshold: float | None = RANK_EVERY_CANDIDATE,
     progress: bool = True,
     limit: int = 0,
 ) -> Iterator[CommandPrediction]:
     """Answer every kept command of ``commands`` (a ``CommandSet`` of ``root``) that has a referent,
     sample by sample in the root's order (each scene encoded once; eval mode, no gradients);
-    ``limit``: the first N samples only (0: all)."""
+    ``score_threshold``: the smallest score kept (default :data:`RANK_EVERY_CANDIDATE`: every
+    candidate, ranked; None: the model's ``min_score``); ``limit``: the first N samples only
+    (0: all)."""
     by_sample: dict[str, list[Any]] = {}
     for command in commands.commands:
         if command.command_token in commands.referent:
@@ -168,6 +179,7 @@ def predictions_json(
 
 
 __all__ = [
+    "RANK_EVERY_CANDIDATE",
     "CommandPrediction",
     "ToCamera",
     "iterate_command_predictions",
