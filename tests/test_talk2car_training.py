@@ -156,9 +156,8 @@ def test_freeze_scene_runs_with_one_thread_unless_told(nusc, tmp_path):
 
 def test_commands_are_banked_with_rewordings(nusc):
     """--given-variants: each command comes back reworded beside itself, with its referent (the
-    meaning words kept); 0 gives the commands alone; a Talk2Car run banks
-    TALK2CAR_GIVEN_VARIANTS by default."""
-    from model.training.config import TALK2CAR_GIVEN_VARIANTS, parse_args
+    meaning words kept); 0 (the default) gives the commands alone."""
+    from model.training.config import parse_args
     from scenes.language.prompts.noise import is_meaning_word
 
     item = frames(nusc).item(0)
@@ -182,8 +181,8 @@ def test_commands_are_banked_with_rewordings(nusc):
     assert again == banked
     args = ["--data", str(nusc), "--talk2car", str(nusc / "commands"), "--freeze-scene"]
     args += ["--out", str(nusc.parent / "unused-run"), "--threads", "1"]
-    assert parse_args(args)[0].given_variants == TALK2CAR_GIVEN_VARIANTS > 0
-    assert parse_args([*args, "--given-variants", "0"])[0].given_variants == 0
+    assert parse_args(args)[0].given_variants == 0
+    assert parse_args([*args, "--given-variants", "2"])[0].given_variants == 2
 
 
 def test_every_candidate_is_ranked_however_unsure(nusc, monkeypatch):

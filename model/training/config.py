@@ -61,13 +61,6 @@ with 4 a step a command was drawn about 4 times in a 30-epoch ``--freeze-scene``
 RESULTS.md, "Talk2Car on synthetic nuScenes roots": top-1 and the step's cost measured)."""
 
 
-TALK2CAR_GIVEN_VARIANTS = 2
-"""``--given-variants`` when every root is a nuScenes root with Talk2Car commands and the flag is
-not given: each command banked with two rewordings beside it (docs/RESULTS.md, "Talk2Car on
-synthetic nuScenes roots": a referent stage trained on about 1,200 commands of 170 samples fits
-them near its detector's ceiling and generalises far less)."""
-
-
 class TrainingError(RuntimeError):
     """Training cannot go on (bad data, non-finite loss); the message says why."""
 
@@ -186,12 +179,11 @@ class TrainConfig:
     bank_prompts: int = option(
         24, on_resume=True, help="--freeze-scene: prompts generated and encoded once per scene"
     )
-    given_variants: int | None = option(
-        None,
+    given_variants: int = option(
+        0,
         help="--freeze-scene, roots with given prompts (--scene-labels, --talk2car): rewordings "
         "of each given prompt banked beside it (scenes.language.prompts.noise.perturb: its "
-        f"meaning kept; default {TALK2CAR_GIVEN_VARIANTS} when every root is a nuScenes root "
-        "with --talk2car, else 0)",
+        "meaning kept), default 0",
     )
     label_prompts: int | None = option(
         None,
@@ -273,9 +265,6 @@ class TrainConfig:
             if all(r.talk2car is not None for r in roots):
                 per_scene = TALK2CAR_PROMPTS_PER_SCENE
             object.__setattr__(self, "prompts_per_scene", per_scene)
-        if self.given_variants is None:
-            talk2car = all(r.talk2car is not None for r in roots)
-            object.__setattr__(self, "given_variants", TALK2CAR_GIVEN_VARIANTS if talk2car else 0)
         if self.given_variants < 0:
             raise TrainingError(f"--given-variants must be >= 0, got {self.given_variants}")
         if self.label_prompts < 0:
@@ -389,7 +378,6 @@ __all__ = [
     "GENERATED_PROMPTS_PER_SCENE",
     "LABELLED_PROMPTS_PER_SCENE",
     "LABEL_PROMPTS",
-    "TALK2CAR_GIVEN_VARIANTS",
     "TALK2CAR_PROMPTS_PER_SCENE",
     "PromptDraw",
     "TrainConfig",
