@@ -6,8 +6,10 @@ actor of a frame, each sample's prompt and referents). Its samples are grouped i
 samples sharing sensor files) and worlds; each frame becomes one nuScenes sample, each world one
 scene, and each single-referent prompt one Talk2Car command in ``NUSC/commands/{split}_commands.json``
 (the split the source's list names). What the files hold, frames and poses:
-:mod:`scenes.nuscenes.export`. The command's sentence is the prompt as the generator wrote it
-(a command phrasing of the generator is issue 40's item 4; until it lands, the prompt text as is).
+:mod:`scenes.nuscenes.export`. The command's sentence is the prompt phrased as a driving command
+(``--phrasing``, default ``all``: an instruction of any of the generator's command templates,
+:func:`scenes.language.prompts.commands.as_command`, wrapped around the description, drawn from
+``--seed``); ``--phrasing none`` keeps the prompt as the generator wrote it.
 Errors are one line, ``error: ...``, exit code 2.
 """
 
@@ -21,6 +23,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from scenes.language.prompts.phrasing import PHRASINGS
 from scenes.nuscenes.export import ExportReport, SourceFrame, SourcePrompt, export_frames
 from scenes.synth.radar import RadarConfig
 from scenes.talk2radar.layout import RootError
@@ -75,9 +78,12 @@ def export(
     splits: Sequence[str] = SPLITS,
     seed: int = 0,
     version: str = "v1.0-trainval",
+    phrasing: str | None = "all",
 ) -> ExportReport:
     """Write the synthetic root ``source`` as a nuScenes root with Talk2Car commands at ``out``
     (replaced where it is an earlier export: it must hold a ``v1.0-*`` folder, or be empty).
+    ``phrasing``: the command phrasing stream of the sentences, None for the prompts as written
+    (:func:`scenes.nuscenes.export.export_frames`).
 
     Raises:
         RootError: a bad source or output folder.
@@ -94,7 +100,12 @@ def export(
     root = Talk2RadarRoot(source, radar="auto")
     frames = source_frames(root, splits)
     return export_frames(
-        frames, out, seed=seed, version=version, scan_period=RadarConfig().scan_period
+        frames,
+        out,
+        seed=seed,
+        version=version,
+        scan_period=RadarConfig().scan_period,
+        phrasing=phrasing,
     )
 
 
@@ -109,6 +120,13 @@ class ExportNuScenesCommand:
     )
     seed: int = option(0, help="seed of the random global poses (default %(default)s)")
     version: str = option("v1.0-trainval", help="version folder name (default %(default)s)")
+    phrasing: str = option(
+        "all",
+        choices=(*PHRASINGS, "none"),
+        help="the commands' wording: each single-referent prompt wrapped into a driving command "
+        "of this phrasing stream of the generator's templates (train, heldout, all), or none: the "
+        "prompt as written (default %(default)s)",
+    )
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -127,7 +145,8 @@ build_parser = _parser
 def run(args: ExportNuScenesCommand) -> int:
     """Export as ``args`` says and print what was written (errors raise)."""
     start = time.perf_counter()
-    report = export(args.source, args.out, args.splits, args.seed, args.version)
+    phrasing = None if args.phrasing == "none" else args.phrasing
+    report = export(args.source, args.out, args.splits, args.seed, args.version, phrasing)
     commands = ", ".join(f"{k} {v}" for k, v in report.commands.items())
     skipped = ", ".join(f"{v} {k}" for k, v in report.skipped.items()) or "none"
     print(

@@ -28,6 +28,7 @@ from scenes.nuscenes.talk2car import (
     model_box_to_camera,
     read_commands,
 )
+from scenes.nuscenes.writer import token as make_token
 from scenes.talk2radar.root import Talk2RadarRoot
 
 
@@ -120,13 +121,47 @@ def test_commands_read_back_with_the_same_boxes(source: Path, exported: Path) ->
                 ref.box,
                 atol=1e-4,
             )
-            sid = next(s for s in src.ids(split) if src.load_prompt(s) == c.text)
+            sid = next(s for s in src.ids(split) if make_token("command", s) == c.command_token)
             meta = src.load_meta(sid)
             actor = next(a for a in meta.actors if a.actor_id == meta.referent_ids[0])
             np.testing.assert_allclose(ref.box, actor.box, atol=1e-4)
             assert ref.cls == actor.cls
             total += 1
     assert total > 0
+
+
+def test_commands_are_phrased_as_commands(source: Path, exported: Path, tmp_path: Path) -> None:
+    """Item 5: each command is its single-referent prompt wrapped into a driving instruction
+    (the prompt's noun phrase inside, the sentence not the prompt), the same for the same seed;
+    ``phrasing=None`` keeps the prompts as written."""
+    from scenes.export_nuscenes import export
+    from scenes.language.prompts.commands import noun_phrase_of
+
+    src = Talk2RadarRoot(source)
+    prompts = {make_token("command", s): src.load_prompt(s) for sp in ("train", "val", "test")
+               for s in src.ids(sp)}  # fmt: skip
+
+    def sentences(root: Path) -> dict[str, str]:
+        return {
+            c["command_token"]: c["command"]
+            for split in ("train", "val", "test")
+            for c in json.loads((root / "commands" / f"{split}_commands.json").read_text())[
+                "commands"
+            ]
+        }
+
+    ours = sentences(exported)
+    assert ours
+    for command_token, text in ours.items():
+        prompt = prompts[command_token]
+        assert text != prompt
+        assert noun_phrase_of(prompt).lower() in text.lower()
+    export(source, tmp_path / "again", seed=3)
+    assert sentences(tmp_path / "again") == ours
+    export(source, tmp_path / "plain", seed=3, phrasing=None)
+    assert sentences(tmp_path / "plain") == {t: prompts[t] for t in ours}
+    with pytest.raises(ValueError, match="phrasing"):
+        export(source, tmp_path / "bad", seed=3, phrasing="poetic")
 
 
 def test_box_conversions_are_inverse() -> None:

@@ -152,3 +152,63 @@ def test_freeze_scene_runs_with_one_thread_unless_told(nusc, tmp_path):
         assert torch.get_num_threads() == 2
     finally:
         torch.set_num_threads(before)
+
+
+def test_commands_are_banked_with_rewordings(nusc):
+    """--given-variants: each command comes back reworded beside itself, with its referent (the
+    meaning words kept); 0 (the default) gives the commands alone."""
+    from model.training.config import parse_args
+    from scenes.language.prompts.noise import is_meaning_word
+
+    item = frames(nusc).item(0)
+    given = [(g.text, g.referent_ids) for g in item.given]
+    plain = frame_prompts(item, np.random.default_rng(0), 16, PromptConfig(), 0, 0)
+    assert plain == given
+    banked = frame_prompts(item, np.random.default_rng(0), 16, PromptConfig(), 0, 2)
+    assert banked[: len(given)] == given
+    extra = banked[len(given) :]
+    assert len(extra) >= len(given) and len({t for t, _ in extra}) == len(extra)
+    texts = {t for t, _ in given}
+    for text, refs in extra:
+        assert text not in texts
+        source = [g for g in given if g[1] == refs]
+        assert source, f"{text!r} lost its referent"
+        meaning = [w.lower() for w in text.split() if is_meaning_word(w)]
+        assert any(
+            meaning == [w.lower() for w in t.split() if is_meaning_word(w)] for t, _ in source
+        )
+    again = frame_prompts(item, np.random.default_rng(0), 16, PromptConfig(), 0, 2)
+    assert again == banked
+    args = ["--data", str(nusc), "--talk2car", str(nusc / "commands"), "--freeze-scene"]
+    args += ["--out", str(nusc.parent / "unused-run"), "--threads", "1"]
+    assert parse_args(args)[0].given_variants == 0
+    assert parse_args([*args, "--given-variants", "2"])[0].given_variants == 2
+
+
+def test_a_command_always_gets_its_best_candidate(nusc, monkeypatch):
+    """A Talk2Car command refers to exactly one object: its answer keeps the best-ranked
+    candidate even when the referent stage scores every one below its min_score (with the
+    min_score alone such a command got no box at all, a top-1 miss)."""
+    from model.evaluation.talk2car.predict import iterate_command_predictions
+    from scenes.datasets.nuscenes_frames import open_talk2car
+    from scenes.nuscenes.classes import model_class
+    from tests.conftest import untrained_model
+
+    model = untrained_model("referent")
+    head = model.grounding
+    refer = head.refer
+    monkeypatch.setattr(head, "refer", lambda cands, text: refer(cands, text) - 30.0)
+    root, commands = open_talk2car(nusc, nusc / "commands", "val")
+    found = list(iterate_command_predictions(model, root, commands, model_class, progress=False))
+    assert found
+    for p in found:
+        assert len(p.answer.scores) == 1 and p.answer.scores[0] < head.min_score
+        everything = model.ground(
+            model.encode_scene(*_points(root, p.command.sample_token)), p.command.text, 0.0
+        )
+        assert p.answer.scores[0] == pytest.approx(float(np.max(everything.scores)))
+
+
+def _points(root, token):
+    frame = root.frame(token)
+    return frame.lidar, frame.radar

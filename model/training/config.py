@@ -186,6 +186,12 @@ class TrainConfig:
     bank_prompts: int = option(
         24, on_resume=True, help="--freeze-scene: prompts generated and encoded once per scene"
     )
+    given_variants: int = option(
+        0,
+        help="--freeze-scene, roots with given prompts (--scene-labels, --talk2car): rewordings "
+        "of each given prompt banked beside it (scenes.language.prompts.noise.perturb: its "
+        "meaning kept), default 0",
+    )
     label_prompts: int | None = option(
         None,
         help="referent path, roots with --scene-labels: prompts generated per frame from its "
@@ -266,6 +272,8 @@ class TrainConfig:
             if all(r.talk2car is not None for r in roots):
                 per_scene = TALK2CAR_PROMPTS_PER_SCENE
             object.__setattr__(self, "prompts_per_scene", per_scene)
+        if self.given_variants < 0:
+            raise TrainingError(f"--given-variants must be >= 0, got {self.given_variants}")
         if self.label_prompts < 0:
             raise TrainingError(f"--label-prompts must be >= 0, got {self.label_prompts}")
         if self.init and self.init_detector:

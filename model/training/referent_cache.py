@@ -206,6 +206,7 @@ def cache_scenes(
     known: TextBank | None = None,
     prompt_config: PromptConfig | None = None,
     labelled: bool = False,
+    given_variants: int = 0,
 ) -> tuple[list[CachedScene], TextBank]:
     """Encode every scene of ``dataset`` with the frozen model, generate ``prompts_per_scene``
     prompts per scene (labels source: take its given prompts, plus ``label_prompts`` from its
@@ -215,7 +216,8 @@ def cache_scenes(
     returned holds only the new ones. ``prompt_config``: the generator's settings
     (:attr:`model.training.config.PromptDraw.config`; default: the base
     prompts in the training phrasings). ``labelled``: also cache each scene's labelled view
-    (:attr:`CachedScene.labelled`, :func:`scene_views`), with the same prompts."""
+    (:attr:`CachedScene.labelled`, :func:`scene_views`), with the same prompts.
+    ``given_variants``: rewordings banked beside each given prompt (:func:`frame_prompts`)."""
     from tqdm import tqdm
 
     model.eval()
@@ -227,7 +229,9 @@ def cache_scenes(
             objects, view = scene_views(model, item.lidar, item.radar, item.actors, labelled)
             ids = match_detections(objects.boxes, objects.labels, item.actors, model.cfg.class_set)
             rng = np.random.default_rng((seed, 11, i))
-            prompts = frame_prompts(item, rng, prompts_per_scene, pcfg, label_prompts)
+            prompts = frame_prompts(
+                item, rng, prompts_per_scene, pcfg, label_prompts, given_variants
+            )
             extra = None if view is None else _cached(*view, prompts, int((view[1] >= 0).sum()))
             scenes.append(replace(_cached(objects, ids, prompts), labelled=extra))
     done = {} if known is None else known.entries

@@ -53,6 +53,7 @@ from scenes.datasets.frames import AnnotatedRegion, FrameItem
 from scenes.geometry.actors import Actor
 from scenes.geometry.calib import Calibration
 from scenes.language.prompts import Prompt, PromptConfig, generate_prompts
+from scenes.language.prompts.noise import perturb
 
 
 @dataclass(frozen=True)
@@ -246,9 +247,15 @@ def frame_prompts(
     count: int,
     config: PromptConfig,
     label_prompts: int = 0,
+    given_variants: int = 0,
 ) -> list[tuple[str, tuple[int, ...]]]:
     """``(text, referent actor ids)`` of a frame's training prompts: the prompts that come with
     it (labels source, all of them), or ``count`` generated from its actors (sidecar source).
+
+    ``given_variants``: on a labels-source frame, each given prompt also comes back reworded that
+    many times (:func:`scenes.language.prompts.noise.perturb`: meaning-free words dropped,
+    synonyms, typos, casing; numbers, units, negators and sides kept), with its referents:
+    a root of few given sentences (Talk2Car's commands) then teaches its wording less by heart.
 
     ``label_prompts``: on a labels-source frame with complete labels (scene labels, or a nuScenes
     sample: :attr:`scenes.datasets.frames.FrameItem.labels_complete`), that many
@@ -257,6 +264,7 @@ def frame_prompts(
     prompts are kept as written; generated ones are reworded as ``config.p_perturb`` says."""
     if not frame.generates_prompts:
         given = [(g.text, g.referent_ids) for g in frame.given]
+        given += reworded(given, rng, given_variants)
         if label_prompts <= 0 or not frame.labels_complete:
             return given
         geometry = replace(config, geometry_only=True)
@@ -264,6 +272,26 @@ def frame_prompts(
         return given + [(p.text, tuple(p.referent_ids)) for p in extra]
     prompts: list[Prompt] = generate_prompts(frame.actors, rng, count, config=config)
     return [(p.text, tuple(p.referent_ids)) for p in prompts]
+
+
+def reworded(
+    prompts: Sequence[tuple[str, tuple[int, ...]]], rng: np.random.Generator, variants: int
+) -> list[tuple[str, tuple[int, ...]]]:
+    """Up to ``variants`` rewordings of each ``(text, referent ids)`` by
+    :func:`scenes.language.prompts.noise.perturb` (its meaning kept), each with the same
+    referents; a rewording equal to the text or to an earlier one is not repeated (a few tries
+    each)."""
+    out: list[tuple[str, tuple[int, ...]]] = []
+    for text, refs in prompts:
+        seen = {text}
+        for _ in range(3 * variants):
+            if len(seen) > variants:
+                break
+            new = perturb(text, rng)
+            if new not in seen:
+                seen.add(new)
+                out.append((new, refs))
+    return out
 
 
 def detection_targets(

@@ -215,6 +215,7 @@ def freeze_scene(
                 known=bank,
                 prompt_config=referent_cfg.prompts.config,
                 labelled=cfg.labelled_views > 0,
+                given_variants=cfg.given_variants,
             )
             into += part
             bank.entries.update(part_bank.entries)

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import io
 from collections import Counter
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -41,6 +41,8 @@ from PIL import Image
 from scenes.geometry.actors import Actor
 from scenes.geometry.boxes import box_corners, points_in_boxes
 from scenes.geometry.calib import Calibration
+from scenes.language.prompts.commands import as_command
+from scenes.language.prompts.phrasing import PHRASINGS
 from scenes.nuscenes.classes import CLASS_CATEGORY, WITH_RIDER
 from scenes.nuscenes.geometry import (
     MODEL_TO_LIDAR,
@@ -213,7 +215,7 @@ def export_frames(
     seed: int = 0,
     version: str = "v1.0-trainval",
     scan_period: float = 0.1,
-    phrase: Callable[[str], str] = lambda text: text,
+    phrasing: str | None = "all",
 ) -> ExportReport:
     """Write ``frames`` as a nuScenes root ``out`` (``version/`` tables, ``samples/``, ``sweeps/``,
     ``maps/``) with Talk2Car command files ``out/commands/{split}_commands.json``.
@@ -224,8 +226,19 @@ def export_frames(
         seed: Seeds the random global pose of every sample.
         version: The version folder's name.
         scan_period: Seconds between the source's accumulated radar scans.
-        phrase: Turns a single-referent prompt into a command's sentence.
+        phrasing: How a single-referent prompt becomes a command's sentence: a driving
+            instruction wrapped around it (:func:`scenes.language.prompts.commands.as_command`,
+            with the referent's class and motion) drawn from that phrasing stream (``train``,
+            ``heldout`` or ``all``), deterministic by ``seed``, the frame and the prompt; None:
+            the prompt's text as the generator wrote it.
+
+    Raises:
+        ValueError: an unknown ``phrasing``.
     """
+    if phrasing is not None and phrasing not in PHRASINGS:
+        raise ValueError(
+            f"phrasing must be one of {', '.join(PHRASINGS)} or None, got {phrasing!r}"
+        )
     out = Path(out)
     rng = np.random.default_rng(seed)
     w = TableWriter()
@@ -316,7 +329,7 @@ def export_frames(
             ann_token[actor.actor_id] = ann["token"]
 
         by_id = {a.actor_id: a for a in frame.actors}
-        for prompt in frame.prompts:
+        for p_index, prompt in enumerate(frame.prompts):
             split_scenes.setdefault(prompt.split, [])
             if scene_rec["token"] not in split_scenes[prompt.split]:
                 split_scenes[prompt.split].append(scene_rec["token"])
@@ -330,7 +343,8 @@ def export_frames(
                 continue
             n = len(commands.setdefault(prompt.split, []))
             commands[prompt.split].append(Talk2CarCommand(
-                command_token=token("command", prompt.sample_id), text=phrase(prompt.text),
+                command_token=token("command", prompt.sample_id),
+                text=_sentence(prompt.text, actor, phrasing, (seed, f_index, p_index)),
                 scene_token=scene_rec["token"], sample_token=sample_token, cam_token=cam_token,
                 box_token=ann_token[actor.actor_id], category=CLASS_CATEGORY[actor.cls],
                 box_camera=model_box_to_camera(to_camera, actor.box), box_2d=box_2d,
@@ -345,6 +359,16 @@ def export_frames(
     return ExportReport(
         len(w.records["scene"]), samples, {s: len(c) for s, c in commands.items()}, skipped
     )
+
+
+def _sentence(text: str, actor: Actor, phrasing: str | None, key: tuple[int, ...]) -> str:
+    """A command's sentence: ``text`` (a single-referent description of ``actor``) wrapped into a
+    driving instruction of the ``phrasing`` stream, drawn from ``key`` (the export's seed, the
+    frame and the prompt); ``phrasing`` None keeps ``text``."""
+    if phrasing is None:
+        return text
+    rng = np.random.default_rng((*key, 41))
+    return as_command(text, rng, phrasing, cls=actor.cls, moving=actor.is_moving)
 
 
 class _DataWriter:
