@@ -13,6 +13,7 @@ from annotate.draft import Draft
 from annotate.errors import StoreError
 from annotate.manifest import ManifestRecord
 from annotate.suggest import SuggestConfig, scene_actors
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.language.prompts import infer_tags
 from scenes.talk2radar.imagefile import ImageError
 from scenes.talk2radar.root import Sample
@@ -29,17 +30,19 @@ def frame_image_size(sample: Sample) -> tuple[int, int]:
         raise StoreError(str(exc)) from exc
 
 
-def pair_meta(draft: Draft, sample: Sample, record: ManifestRecord) -> SampleMeta:
+def pair_meta(
+    draft: Draft, sample: Sample, record: ManifestRecord, classes: ClassSet = VOD
+) -> SampleMeta:
     """The sidecar of a saved pair: keyword type tags of the prompt, the draft boxes as actors
     (ids ``0..K-1``, velocities from the frame's known actors or its radar) plus the frame's other
-    known actors, and the annotation facts in ``extra``."""
+    known actors of the store's class set ``classes``, and the annotation facts in ``extra``."""
     base = sample.meta
     actors = scene_actors(
         draft.box_array,
         draft.classes,
         base.actors if base is not None else (),
         sample.radar,
-        SuggestConfig(),
+        SuggestConfig(classes=classes),
     )
     extra = dict(base.extra) if base is not None else {}
     extra.update(

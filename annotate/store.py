@@ -299,7 +299,7 @@ class AnnotationStore:
             record = self._record(
                 Action.CREATE, sid, 1, annotator, (split,), draft, text, source.describe()
             )
-            text = text.with_meta(pair_meta(draft, sample, record))
+            text = text.with_meta(pair_meta(draft, sample, record, self.classes))
             tx.begin(_journal(record), f"saving pair {sid}")
             files = source.files if source.files is not None else write_source(self.writer, source)
             self.writer.write_sample_text(sid, files, text)
@@ -336,7 +336,7 @@ class AnnotationStore:
             kept = [lab for lab in labels if self.classes.label_class(lab.name) is None]
             text = self._text(draft, sample, kept)
             record = self._record(Action.EDIT, sid, current + 1, annotator, splits, draft, text)
-            text = text.with_meta(pair_meta(draft, sample, record))
+            text = text.with_meta(pair_meta(draft, sample, record, self.classes))
             targets = self.writer.text_files(sid, text)
             journal = _journal(record)
             journal["restore"] = {

@@ -23,7 +23,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from annotate.evidence import EvidenceConfig, box_evidence, estimate_velocity
-from scenes.geometry.actors import CLASSES, Actor
+from scenes.geometry.actors import Actor
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.language.prompts import DEFAULT_REGION, Predicate, ReferableRegion, describe
 from scenes.talk2radar.root import Sample
 
@@ -56,12 +57,15 @@ class SuggestConfig:
         region: Where referents may be (default: the synthetic prompts' referable region).
         evidence: Radar margins for the velocity estimate.
         max_words: Longest sentence.
+        classes: The classes a sentence may name (the served model's class set): a draft box of
+            another class cannot be described, a scene object of another class is left out.
     """
 
     match_distance: float = 1.0
     region: ReferableRegion = DEFAULT_REGION
     evidence: EvidenceConfig = field(default_factory=EvidenceConfig)
     max_words: int = 22
+    classes: ClassSet = VOD
 
 
 @dataclass(frozen=True)
@@ -109,11 +113,11 @@ def scene_actors(
 ) -> SceneActors:
     """Draft boxes ``(K, 7)`` and scene objects as actors with ground velocities (module doc).
 
-    Scene objects of other classes than ``scenes.CLASSES`` or with a non-positive size are left
+    Scene objects of other classes than ``config.classes`` or with a non-positive size are left
     out (they cannot be referred to).
 
     Raises:
-        ValueError: A draft box has a class outside the metric classes or a non-positive size.
+        ValueError: A draft box has a class outside ``config.classes`` or a non-positive size.
     """
     cfg = config if config is not None else SuggestConfig()
     b = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
@@ -122,7 +126,7 @@ def scene_actors(
     objects = [
         o
         for o in _as_objects(scene)
-        if o.cls in CLASSES and np.all(np.asarray(o.box, dtype=np.float64)[3:6] > 0)
+        if o.cls in cfg.classes and np.all(np.asarray(o.box, dtype=np.float64)[3:6] > 0)
     ]
     radar_arr = np.zeros((0, 7)) if radar is None else np.asarray(radar, dtype=np.float64)
     # Greedy one-to-one matching of draft boxes to scene objects by BEV centre distance.
@@ -149,6 +153,10 @@ def scene_actors(
 
     referents = []
     for i, cls in enumerate(classes):
+        if str(cls) not in cfg.classes:
+            raise ValueError(
+                f"box {i + 1} of {len(b)}: class {str(cls)!r} is not one of {cfg.classes.names}"
+            )
         known = objects[matched[i]].velocity if i in matched else None
         try:
             referents.append(Actor(i, str(cls), b[i], velocity(i, known)))

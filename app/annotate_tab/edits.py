@@ -25,6 +25,7 @@ from annotate import (
     Draft,
     DraftError,
     FitError,
+    SuggestConfig,
     default_box,
     fit_box,
     is_pristine,
@@ -436,6 +437,7 @@ class DraftEdits:
                 scene_objects(sample),
                 sample.radar,
                 np.random.default_rng(self._suggestions),
+                SuggestConfig(classes=p.session.engine.classes),
             )
             if suggestion.text is None:
                 p.notify("No suggestion", suggestion.reason or "no sentence fits these boxes")
