@@ -23,8 +23,18 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
+from scenes.geometry.actors import Actor
+from scenes.language.prompts.commands import as_command
 from scenes.language.prompts.phrasing import PHRASINGS
-from scenes.nuscenes.export import ExportReport, SourceFrame, SourcePrompt, export_frames
+from scenes.nuscenes.export import (
+    ExportReport,
+    Sentence,
+    SourceFrame,
+    SourcePrompt,
+    export_frames,
+)
 from scenes.synth.radar import RadarConfig
 from scenes.talk2radar.layout import RootError
 from scenes.talk2radar.root import Talk2RadarRoot
@@ -89,6 +99,7 @@ def export(
         RootError: a bad source or output folder.
         ValueError: a malformed file of the source (named).
     """
+    sentence = None if phrasing is None else command_sentence(phrasing)
     source, out = Path(source), Path(out)
     if out.resolve() == source.resolve():
         raise RootError(f"{out}: is the source root; choose another output folder")
@@ -105,8 +116,29 @@ def export(
         seed=seed,
         version=version,
         scan_period=RadarConfig().scan_period,
-        phrasing=phrasing,
+        sentence=sentence,
     )
+
+
+def command_sentence(phrasing: str) -> Sentence:
+    """The sentence of a command: a single-referent prompt's text wrapped into a driving
+    instruction (:func:`scenes.language.prompts.commands.as_command`, with the referent's class
+    and motion) of the ``phrasing`` stream (``train``, ``heldout`` or ``all``), drawn from the key
+    the export passes (its seed, the frame and the prompt), so deterministic by ``--seed``.
+
+    Raises:
+        ValueError: an unknown ``phrasing``.
+    """
+    if phrasing not in PHRASINGS:
+        raise ValueError(
+            f"phrasing must be one of {', '.join(PHRASINGS)} or None, got {phrasing!r}"
+        )
+
+    def sentence(text: str, actor: Actor, key: tuple[int, ...]) -> str:
+        rng = np.random.default_rng((*key, 41))
+        return as_command(text, rng, phrasing, cls=actor.cls, moving=actor.is_moving)
+
+    return sentence
 
 
 @dataclass(frozen=True)

@@ -7,6 +7,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from model import build_model
 from model.config import ConfigError, ModelConfig, PillarConfig, build_config
 from model.core.labelled import LabelledBoxes
 from scenes.geometry.calib import sensor_to_lidar
@@ -36,7 +37,7 @@ def test_the_default_is_the_sensors_origin_and_old_configs_read_so():
 
 def test_estimated_ground_is_the_referent_paths_and_checked():
     with pytest.raises(ConfigError, match="needs grounding='referent'"):
-        build_config("small", grounding="tpcnet", pillars=PillarConfig(ground="estimated"))
+        build_model("small", grounding="tpcnet", pillars=PillarConfig(ground="estimated"))
     with pytest.raises(ConfigError, match="ground"):
         PillarConfig(ground="tilted")
 

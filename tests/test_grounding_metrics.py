@@ -188,8 +188,8 @@ def test_bad_input_names_the_source_and_field():
         PromptBoxes.make(np.zeros((2, 6)), ["Car", "Car"], source="sample 7")
     with pytest.raises(ValueError, match="sample 7: 1 classes for 2 boxes"):
         PromptBoxes.make(np.zeros((2, 7)), ["Car"], source="sample 7")
-    with pytest.raises(ValueError, match="sample 7: unknown class 'Truck'"):
-        PromptBoxes.make(np.zeros((1, 7)), ["Truck"], source="sample 7")
+    with pytest.raises(ValueError, match="sample 7: unknown class 'Tram'"):
+        PromptBoxes.make(np.zeros((1, 7)), ["Tram"], source="sample 7")
     with pytest.raises(ValueError, match=r"scores must have shape \(1,\)"):
         PromptBoxes.make(np.zeros((1, 7)), ["Car"], [0.1, 0.2], source="sample 7")
 
@@ -205,7 +205,7 @@ def test_named_class_and_class_nouns():
     assert class_noun_prompt("Pedestrian") == "the pedestrians"
     assert class_noun_prompt(None) == "the objects"
     with pytest.raises(ValueError, match="no class noun"):
-        class_noun_prompt("Truck")
+        class_noun_prompt("Tram")
 
 
 def test_oracle_keeps_the_named_class_in_the_region():

@@ -103,7 +103,7 @@ def load_init(path: str, device: torch.device) -> TPCNet:
         model = model_from_payload(read_checkpoint(path), path, device)
     except CheckpointError as exc:
         raise AdaptError(f"--init: {exc}") from exc
-    if model.cfg.grounding != "referent":
+    if not model.takes_labelled_candidates:  # the referent path's head: a text-agnostic detector
         raise AdaptError(
             f"--init {path}: a {model.cfg.grounding!r} checkpoint; adaptation needs a "
             "referent-path checkpoint (its detector is text-agnostic)"

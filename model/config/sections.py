@@ -386,12 +386,6 @@ class ModelConfig:
     def __post_init__(self) -> None:
         check_choice("ModelConfig", "modalities", self.modalities, typing.get_args(Modalities))
         check_choice("ModelConfig", "grounding", self.grounding, typing.get_args(GroundingKind))
-        if self.pillars.ground != "sensor" and self.grounding != "referent":
-            raise ConfigError(
-                "ModelConfig.pillars.ground 'estimated' needs grounding='referent' (the paper's "
-                "path decodes its boxes inside ground())",
-                "pillars.ground",
-            )
         strides = self.backbone.cumulative_strides
         if self.fpn.output_stride not in strides:
             raise ConfigError(

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 import torch
 from torch import Tensor, nn
 
-from model.config import ModelConfig
+from model.config import ConfigError, ModelConfig
 from model.core.features import Clock, GroundTimings, PointsLike, Predictions, SceneFeatures
 from model.core.labelled import LabelledBoxes
 from model.grounding.interface import GroundingHead
@@ -28,6 +28,12 @@ class PaperGrounding(GroundingHead):
 
     def __init__(self, cfg: ModelConfig, text_dim: int) -> None:
         super().__init__()
+        if cfg.pillars.ground != "sensor":
+            raise ConfigError(
+                "ModelConfig.pillars.ground 'estimated' needs grounding='referent' (the paper's "
+                "path decodes its boxes inside ground())",
+                "pillars.ground",
+            )
         self.cfg = cfg
         channels = cfg.backbone.channels
         tf = cfg.text_fusion

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import io
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -41,8 +41,6 @@ from PIL import Image
 from scenes.geometry.actors import Actor
 from scenes.geometry.boxes import box_corners, points_in_boxes
 from scenes.geometry.calib import Calibration
-from scenes.language.prompts.commands import as_command
-from scenes.language.prompts.phrasing import PHRASINGS
 from scenes.nuscenes.classes import CLASS_CATEGORY, WITH_RIDER
 from scenes.nuscenes.geometry import (
     MODEL_TO_LIDAR,
@@ -56,6 +54,9 @@ from scenes.nuscenes.sensorfiles import write_lidar, write_radar
 from scenes.nuscenes.talk2car import Talk2CarCommand, model_box_to_camera, write_commands
 from scenes.nuscenes.writer import TableWriter, token
 from scenes.utils.durable import atomic_write_bytes
+
+Sentence = Callable[[str, Actor, tuple[int, ...]], str]
+"""A command's sentence from a prompt's text, its referent and a key to draw from."""
 
 __all__ = [
     "IMAGE_SIZE",
@@ -215,7 +216,7 @@ def export_frames(
     seed: int = 0,
     version: str = "v1.0-trainval",
     scan_period: float = 0.1,
-    phrasing: str | None = "all",
+    sentence: Sentence | None = None,
 ) -> ExportReport:
     """Write ``frames`` as a nuScenes root ``out`` (``version/`` tables, ``samples/``, ``sweeps/``,
     ``maps/``) with Talk2Car command files ``out/commands/{split}_commands.json``.
@@ -226,19 +227,11 @@ def export_frames(
         seed: Seeds the random global pose of every sample.
         version: The version folder's name.
         scan_period: Seconds between the source's accumulated radar scans.
-        phrasing: How a single-referent prompt becomes a command's sentence: a driving
-            instruction wrapped around it (:func:`scenes.language.prompts.commands.as_command`,
-            with the referent's class and motion) drawn from that phrasing stream (``train``,
-            ``heldout`` or ``all``), deterministic by ``seed``, the frame and the prompt; None:
-            the prompt's text as the generator wrote it.
-
-    Raises:
-        ValueError: an unknown ``phrasing``.
+        sentence: How a single-referent prompt becomes a command's sentence (called with the
+            prompt's text, its referent and a key of the export's seed, the frame and the
+            prompt, for a deterministic draw; the language that phrases it lives above this
+            room: :func:`scenes.export_nuscenes.command_sentence`); None: the text as written.
     """
-    if phrasing is not None and phrasing not in PHRASINGS:
-        raise ValueError(
-            f"phrasing must be one of {', '.join(PHRASINGS)} or None, got {phrasing!r}"
-        )
     out = Path(out)
     rng = np.random.default_rng(seed)
     w = TableWriter()
@@ -344,7 +337,11 @@ def export_frames(
             n = len(commands.setdefault(prompt.split, []))
             commands[prompt.split].append(Talk2CarCommand(
                 command_token=token("command", prompt.sample_id),
-                text=_sentence(prompt.text, actor, phrasing, (seed, f_index, p_index)),
+                text=(
+                    prompt.text
+                    if sentence is None
+                    else sentence(prompt.text, actor, (seed, f_index, p_index))
+                ),
                 scene_token=scene_rec["token"], sample_token=sample_token, cam_token=cam_token,
                 box_token=ann_token[actor.actor_id], category=CLASS_CATEGORY[actor.cls],
                 box_camera=model_box_to_camera(to_camera, actor.box), box_2d=box_2d,
@@ -359,16 +356,6 @@ def export_frames(
     return ExportReport(
         len(w.records["scene"]), samples, {s: len(c) for s, c in commands.items()}, skipped
     )
-
-
-def _sentence(text: str, actor: Actor, phrasing: str | None, key: tuple[int, ...]) -> str:
-    """A command's sentence: ``text`` (a single-referent description of ``actor``) wrapped into a
-    driving instruction of the ``phrasing`` stream, drawn from ``key`` (the export's seed, the
-    frame and the prompt); ``phrasing`` None keeps ``text``."""
-    if phrasing is None:
-        return text
-    rng = np.random.default_rng((*key, 41))
-    return as_command(text, rng, phrasing, cls=actor.cls, moving=actor.is_moving)
 
 
 class _DataWriter:
