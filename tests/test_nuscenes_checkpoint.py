@@ -205,3 +205,33 @@ def test_prompts_grouped_by_their_referents_classes():
     # a vod evaluation, whose referents are all of the three, prints no empty beyond_vod row
     vod_only = format_grounding_tables({"model": (grounding_metrics(outcomes[2:3], 0.5), None)})
     assert "beyond_vod" not in vod_only and "vod_classes" in vod_only
+
+
+def test_app_serves_the_roots_bundled_checkpoint(road_users, nuscenes_root, tmp_path, monkeypatch):
+    """``python launch.py`` without ``--checkpoint``: the nuscenes checkpoint on a nuScenes root
+    and on a ``--classes nuscenes`` root, the vod one elsewhere; ``--checkpoint`` still wins."""
+    import launch
+    from model.checkpoint import BUNDLED
+
+    vod_root = tmp_path / "vod"
+    generate_root(vod_root, 2, SynthSettings(seed=5, camera=None), split_fractions=(1, 0, 0))
+    assert launch.root_classes(road_users) == "nuscenes"
+    assert launch.root_classes(nuscenes_root) == "nuscenes"
+    assert launch.root_classes(vod_root) == "vod"
+    assert launch.root_classes(tmp_path) == "vod"  # no manifest: a release
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    (broken / "synth_manifest.jsonl").write_text("{}\n")
+    with pytest.raises(launch.LaunchError, match=r"synth_manifest.jsonl:1: not the generator"):
+        launch.root_classes(broken)
+    # which file is read: a stand-in for each bundled checkpoint (the small vod one)
+    read = []
+    monkeypatch.setattr("model.load_checkpoint", lambda path, device: read.append(path) or path)
+    stand_in = tmp_path / "nusc.pt"
+    stand_in.write_bytes(b"")
+    monkeypatch.setitem(BUNDLED, "nuscenes", stand_in)
+    assert launch.load_model(None, "cpu", classes="nuscenes") == (stand_in, None)
+    assert launch.load_model(None, "cpu", classes="vod") == (DEFAULT_CHECKPOINT, None)
+    assert launch.load_model(tmp_path / "x.pt", "cpu", classes="nuscenes")[0] == tmp_path / "x.pt"
+    stand_in.unlink()  # not bundled (yet): the vod one, with a warning
+    assert launch.load_model(None, "cpu", classes="nuscenes") == (DEFAULT_CHECKPOINT, None)
