@@ -190,21 +190,17 @@ def test_prompts_grouped_by_their_referents_classes():
         _outcome(["Car"], True),
         _outcome(["Car", "Truck"], True),
     ]
-    assert [o.groups()[-1] for o in outcomes] == [
-        "beyond_vod",
-        "beyond_vod",
-        "vod_classes",
-        "multiple",
-    ]
+    groups = ["beyond_vod", "beyond_vod", "vod_classes", None]
+    assert [o.class_group() for o in outcomes] == groups
     metrics = grounding_metrics(outcomes, 0.5)
     assert metrics.by_group["beyond_vod"].prompts == 2
     assert metrics.by_group["beyond_vod"].acc_25 == pytest.approx(50.0)
     assert metrics.by_group["vod_classes"].acc_25 == pytest.approx(100.0)
     table = format_grounding_tables({"model": (metrics, None)})
     assert "beyond_vod" in table and "vod_classes" in table
-    # a vod evaluation, whose referents are all of the three, prints no empty beyond_vod row
+    # a vod evaluation, whose referents are all of the three, has no class groups (as before)
     vod_only = format_grounding_tables({"model": (grounding_metrics(outcomes[2:3], 0.5), None)})
-    assert "beyond_vod" not in vod_only and "vod_classes" in vod_only
+    assert "beyond_vod" not in vod_only and "vod_classes" not in vod_only
 
 
 def test_app_serves_the_roots_bundled_checkpoint(road_users, nuscenes_root, tmp_path, monkeypatch):

@@ -63,7 +63,8 @@ CLASS_GROUPS: tuple[str, ...] = ("vod_classes", "beyond_vod")
 """Prompt groups by the referents' classes: every referent of the ``vod`` set's classes (Car,
 Pedestrian, Cyclist), or every referent of a class beyond them (a ``nuscenes`` model's trucks,
 buses, trailers, construction vehicles, motorcycles, bicycles, cones, barriers); a prompt with
-referents of both, or none, is in neither. Printed only where a prompt is in them."""
+referents of both, or none, is in neither. Only where some referent is of a class beyond the
+three (a ``vod`` evaluation's figures and report files are as they were)."""
 
 GROUPS: tuple[str, ...] = ("class_only", "attribute", "single", "multiple", "empty", *CLASS_GROUPS)
 """Prompt groups: no attribute tag / some attribute tag; one referent / two or more / none (the
@@ -178,7 +179,8 @@ class PromptOutcome:
         return bool(self.tags - {CLASS_TAG})
 
     def groups(self) -> tuple[str, ...]:
-        """The :data:`GROUPS` this prompt belongs to."""
+        """The groups of :data:`GROUPS` before :data:`CLASS_GROUPS` this prompt belongs to
+        (:meth:`class_group`: the last)."""
         out = ["attribute" if self.is_attribute else "class_only"]
         if self.num_referents == 1:
             out.append("single")
@@ -186,12 +188,16 @@ class PromptOutcome:
             out.append("multiple")
         else:
             out.append("empty")
+        return tuple(out)
+
+    def class_group(self) -> str | None:
+        """The :data:`CLASS_GROUPS` group of this prompt's referents (None: in neither)."""
         three = [c in VOD for c in self.referent_classes]
         if three and all(three):
-            out.append("vod_classes")
-        elif three and not any(three):
-            out.append("beyond_vod")
-        return tuple(out)
+            return "vod_classes"
+        if three and not any(three):
+            return "beyond_vod"
+        return None
 
 
 def match_count(predicted: PromptBoxes, referents: PromptBoxes) -> int:
@@ -337,7 +343,9 @@ class GroundingMetrics:
 def grounding_metrics(outcomes: Sequence[PromptOutcome], threshold: float) -> GroundingMetrics:
     """Summaries overall, per type tag and per group of :func:`prompt_outcome` results."""
     by_type = {t: [o for o in outcomes if t in o.tags] for t in GROUNDING_TYPES}
-    by_group = {g: [o for o in outcomes if g in o.groups()] for g in GROUPS}
+    beyond = any(c not in VOD for o in outcomes for c in o.referent_classes)
+    names = GROUPS if beyond else tuple(g for g in GROUPS if g not in CLASS_GROUPS)
+    by_group = {g: [o for o in outcomes if g in (*o.groups(), o.class_group())] for g in names}
     return GroundingMetrics(
         threshold=float(threshold),
         overall=summarize(outcomes),
