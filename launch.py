@@ -76,7 +76,9 @@ class LaunchConfig:
 
     Attributes:
         data: The served root (None: the default synthetic set, :func:`ensure_default_data`).
-        checkpoint: The served checkpoint (None: ``model.DEFAULT_CHECKPOINT``).
+        checkpoint: The served checkpoint (None: the bundled one of the root's class set,
+            :func:`root_classes`: ``checkpoints/tpcnet-nuscenes.pt`` on a nuScenes root or a
+            ``--classes nuscenes`` synthetic root, ``model.DEFAULT_CHECKPOINT`` otherwise).
         device: The model's device.
         split: The ImageSets split served (None: :func:`choose_split`'s choice; on a nuScenes
             root ``all`` or a command file's split, None: ``all``).
@@ -89,7 +91,10 @@ class LaunchConfig:
         f"(default: synthetic scenes generated into {DEFAULT_DATA})",
     )
     checkpoint: Path | None = option(
-        None, help="a TPCNet checkpoint (default: the bundled one, model.DEFAULT_CHECKPOINT)"
+        None,
+        help="a TPCNet checkpoint (default: the bundled one of the root's class set: "
+        "checkpoints/tpcnet-nuscenes.pt on a nuScenes root or a root generated with --classes "
+        "nuscenes, checkpoints/tpcnet-small.pt otherwise)",
     )
     device: Literal["cpu", "cuda"] = option("cpu", help="model device")
     split: str | None = option(
@@ -285,14 +290,42 @@ def open_nuscenes(
         raise LaunchError(str(exc)) from exc
 
 
-def load_model(checkpoint: Path | None, device: str, threads: int = 1) -> tuple[TPCNet, str | None]:
-    """The checkpoint's model, or an untrained small one when the default checkpoint is absent.
+def root_classes(path: Path) -> str:
+    """The class set a served root talks about: ``nuscenes`` for a nuScenes root
+    (:func:`is_nuscenes`) or a synthetic root whose manifest says so
+    (:func:`scenes.synth.manifest.manifest_classes`), else ``vod``.
+
+    Raises:
+        LaunchError: an unreadable manifest (one line naming it).
+    """
+    from scenes.synth.manifest import manifest_classes
+
+    if is_nuscenes(path):
+        return "nuscenes"
+    try:
+        return manifest_classes(path) or "vod"
+    except ValueError as exc:
+        raise LaunchError(str(exc)) from exc
+
+
+def _shown(path: Path) -> str:
+    """``path`` relative to the repository where it lies under it."""
+    return str(path.relative_to(REPO)) if path.is_relative_to(REPO) else str(path)
+
+
+def load_model(
+    checkpoint: Path | None, device: str, threads: int = 1, classes: str = "vod"
+) -> tuple[TPCNet, str | None]:
+    """The checkpoint's model; without one the bundled checkpoint of ``classes`` (the served
+    root's class set, :func:`root_classes`; ``model.checkpoint.BUNDLED``), the vod one where that
+    is absent, or an untrained small one when the default checkpoint is absent too.
 
     ``threads`` sets torch's intra-op CPU threads for the whole process.
     """
     import torch
 
-    from model import DEFAULT_CHECKPOINT, CheckpointError, build_model, load_checkpoint
+    from model import CheckpointError, build_model, load_checkpoint
+    from model.checkpoint import BUNDLED, DEFAULT_CHECKPOINT
 
     if threads < 1:
         raise LaunchError(f"--threads must be >= 1, got {threads}")
@@ -304,6 +337,15 @@ def load_model(checkpoint: Path | None, device: str, threads: int = 1) -> tuple[
             return load_checkpoint(checkpoint, device), None
         except (CheckpointError, OSError) as exc:
             raise LaunchError(f"--checkpoint: {exc}") from exc
+    bundled = BUNDLED.get(classes, DEFAULT_CHECKPOINT)
+    if bundled != DEFAULT_CHECKPOINT and bundled.is_file():
+        log.info("a %s root: serving %s", classes, _shown(bundled))
+        try:
+            return load_checkpoint(bundled, device), None
+        except CheckpointError as exc:
+            raise LaunchError(f"the bundled checkpoint is unusable: {exc}") from exc
+    if bundled != DEFAULT_CHECKPOINT:
+        log.warning("%s not found: serving %s", _shown(bundled), _shown(DEFAULT_CHECKPOINT))
     if DEFAULT_CHECKPOINT.is_file():
         try:
             return load_checkpoint(DEFAULT_CHECKPOINT, device), None
@@ -342,7 +384,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 )
             root = open_root(data, args.split)
             split = choose_split(root, args.split)
-        model, note = load_model(args.checkpoint, args.device, args.threads)
+        model, note = load_model(args.checkpoint, args.device, args.threads, root_classes(data))
     except (LaunchError, ServerStartError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -185,7 +185,7 @@ class Talk2CarStore:
         if not path.is_file():
             return [], ()
         try:
-            found = read_commands(self.commands_dir, split, self.root)
+            found = read_commands(self.commands_dir, split, self.root, self.classes)
             data = read_json_file(path, "Talk2Car command file", CommandFileError)
         except (NuScenesError, OSError) as exc:
             raise StoreError(str(exc)) from exc

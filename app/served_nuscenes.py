@@ -108,7 +108,7 @@ class NuScenesSource:
         order = {s: i for i, s in enumerate(SPLIT_ORDER)}
         position = {s: i for i, s in enumerate(self.nuscenes.samples)}
         for split in sorted(names, key=lambda s: (order.get(s, len(order)), s)):
-            found = read_commands(folder, split, self.nuscenes)
+            found = read_commands(folder, split, self.nuscenes, self.classes)
             self.skipped[split] = dict(found.skipped)
             for reason, count in sorted(found.skipped.items()):
                 log.warning("%s: %s: %d command(s) skipped: %s", folder, split, count, reason)

@@ -35,6 +35,13 @@ from scenes.utils.durable import atomic_file
 DEFAULT_CHECKPOINT = Path(__file__).resolve().parents[1] / "checkpoints" / "tpcnet-small.pt"
 """The checkpoint the app serves and the commands read by default (``make run``)."""
 
+NUSCENES_CHECKPOINT = DEFAULT_CHECKPOINT.with_name("tpcnet-nuscenes.pt")
+"""The bundled ``nuscenes``-class checkpoint (nuScenes' ten detection classes, docs/RESULTS.md):
+what the app serves by default on a nuScenes root or a ``--classes nuscenes`` synthetic root."""
+
+BUNDLED = {"vod": DEFAULT_CHECKPOINT, "nuscenes": NUSCENES_CHECKPOINT}
+"""The bundled checkpoint of each class set (:data:`scenes.geometry.classes.PRESETS`)."""
+
 FORMAT = "talk2pc-tpcnet"
 FORMAT_VERSION = 1
 

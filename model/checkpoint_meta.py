@@ -43,6 +43,10 @@ class CheckpointMeta:
         operating_threshold_source: Where it was chosen: ``root``, ``split``, ``prompts``,
             ``set_f1``, ``exact_set``.
         training_stages: How the checkpoint was made, as written beside it (free text).
+        class_remap: The run (or, through ``--init``, the ancestor) that started from a
+            checkpoint of another class set (``--init-other-classes``): source, both sets, the
+            shared classes, the tensors remapped and re-initialised
+            (:class:`model.training.class_remap.ClassRemap`); None: none did.
         extra: Any other key of the file, kept as it was.
     """
 
@@ -54,6 +58,7 @@ class CheckpointMeta:
     operating_threshold: Any = None
     operating_threshold_source: Mapping[str, Any] | None = None
     training_stages: str | None = None
+    class_remap: Mapping[str, Any] | None = None
     extra: Mapping[str, Any] = field(default_factory=dict)
 
     @classmethod

@@ -44,6 +44,7 @@ import numpy as np
 from model.evaluation.metrics import MIN_OVERLAPS
 from model.evaluation.report_file import BY_GROUP, BY_TYPE, OVERALL, THRESHOLD, SummaryFigures
 from scenes.geometry.boxes import iou3d
+from scenes.geometry.classes import VOD
 
 GROUNDING_TYPES: tuple[str, ...] = ("class", "depth", "velocity", "motion", "position")
 """Prompt type tags the metrics are split by (``scenes.language.prompts`` tags)."""
@@ -58,10 +59,17 @@ CandidateSource = Literal["detector", "labels"]
 """What the referent stage chooses the answer among: the detector's proposals, or the frame's
 labelled boxes (grounding apart from detection; ``model.evaluate --candidates``)."""
 
-GROUPS: tuple[str, ...] = ("class_only", "attribute", "single", "multiple", "empty")
+CLASS_GROUPS: tuple[str, ...] = ("vod_classes", "beyond_vod")
+"""Prompt groups by the referents' classes: every referent of the ``vod`` set's classes (Car,
+Pedestrian, Cyclist), or every referent of a class beyond them (a ``nuscenes`` model's trucks,
+buses, trailers, construction vehicles, motorcycles, bicycles, cones, barriers); a prompt with
+referents of both, or none, is in neither. Only where some referent is of a class beyond the
+three (a ``vod`` evaluation's figures and report files are as they were)."""
+
+GROUPS: tuple[str, ...] = ("class_only", "attribute", "single", "multiple", "empty", *CLASS_GROUPS)
 """Prompt groups: no attribute tag / some attribute tag; one referent / two or more / none (the
 right answer is no box: things outside the classes, attributes nothing in the scene has; its
-exact-set share is the share of such prompts answered with no box)."""
+exact-set share is the share of such prompts answered with no box); then :data:`CLASS_GROUPS`."""
 
 
 def _min_overlap(cls: str, source: str) -> float:
@@ -134,6 +142,7 @@ class PromptOutcome:
         true_positives: Of those, matched one-to-one to a referent.
         hit_25, hit_50: Top-box hit in ``[0, 1]`` at 3D IoU > 0.25 / 0.5 (a fraction only when the
             top score is tied, see the module doc); None without referents.
+        referent_classes: The referents' classes (sorted, each once).
     """
 
     sample_id: str
@@ -143,6 +152,7 @@ class PromptOutcome:
     true_positives: int
     hit_25: float | None
     hit_50: float | None
+    referent_classes: tuple[str, ...] = ()
 
     @property
     def precision(self) -> float:
@@ -169,7 +179,8 @@ class PromptOutcome:
         return bool(self.tags - {CLASS_TAG})
 
     def groups(self) -> tuple[str, ...]:
-        """The :data:`GROUPS` this prompt belongs to."""
+        """The groups of :data:`GROUPS` before :data:`CLASS_GROUPS` this prompt belongs to
+        (:meth:`class_group`: the last)."""
         out = ["attribute" if self.is_attribute else "class_only"]
         if self.num_referents == 1:
             out.append("single")
@@ -178,6 +189,15 @@ class PromptOutcome:
         else:
             out.append("empty")
         return tuple(out)
+
+    def class_group(self) -> str | None:
+        """The :data:`CLASS_GROUPS` group of this prompt's referents (None: in neither)."""
+        three = [c in VOD for c in self.referent_classes]
+        if three and all(three):
+            return "vod_classes"
+        if three and not any(three):
+            return "beyond_vod"
+        return None
 
 
 def match_count(predicted: PromptBoxes, referents: PromptBoxes) -> int:
@@ -239,6 +259,7 @@ def prompt_outcome(
         true_positives=match_count(kept, referents),
         hit_25=hits[0],
         hit_50=hits[1],
+        referent_classes=tuple(sorted(set(referents.classes))),
     )
 
 
@@ -322,7 +343,9 @@ class GroundingMetrics:
 def grounding_metrics(outcomes: Sequence[PromptOutcome], threshold: float) -> GroundingMetrics:
     """Summaries overall, per type tag and per group of :func:`prompt_outcome` results."""
     by_type = {t: [o for o in outcomes if t in o.tags] for t in GROUNDING_TYPES}
-    by_group = {g: [o for o in outcomes if g in o.groups()] for g in GROUPS}
+    beyond = any(c not in VOD for o in outcomes for c in o.referent_classes)
+    names = GROUPS if beyond else tuple(g for g in GROUPS if g not in CLASS_GROUPS)
+    by_group = {g: [o for o in outcomes if g in (*o.groups(), o.class_group())] for g in names}
     return GroundingMetrics(
         threshold=float(threshold),
         overall=summarize(outcomes),
@@ -366,6 +389,8 @@ def format_grounding_tables(rows: Mapping[str, tuple[GroundingMetrics, float | N
     lines.append(f"{'':<12}{'prompts':>8}" + "".join(f"{name:>24}" for name in rows))
     for split in SPLIT_NAMES:
         summaries = [m.by_group.get(split) or m.by_type.get(split) for m, _ in rows.values()]
+        if split in CLASS_GROUPS and all(s is None for s in summaries):
+            continue
         count = max((s.prompts for s in summaries if s is not None), default=0)
         cells = [
             "-" if s is None else f"{s.acc_25:.1f} / {s.set_f1:.1f} / {s.exact:.1f}"

@@ -163,7 +163,7 @@ def talk2car_answers(
     from scenes.datasets.nuscenes_frames import open_talk2car
     from scenes.nuscenes.classes import model_class
 
-    root, commands = open_talk2car(data, talk2car, split)
+    root, commands = open_talk2car(data, talk2car, split, model.cfg.class_set)
     answers = []
     for p in iterate_command_predictions(
         model,

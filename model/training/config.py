@@ -146,6 +146,15 @@ class TrainConfig:
         help="copy only the scene encoder and detector from this checkpoint; the referent stage "
         "starts from scratch (new runs)",
     )
+    init_other_classes: str | None = option(
+        None,
+        on_resume=True,
+        help="copy the weights of this checkpoint of another class set (e.g. the vod "
+        "checkpoints/tpcnet-small.pt into a --classes nuscenes model): every weight whose shape "
+        "matches; the class-shaped ones (heatmap channels, the referent stage's class columns) "
+        "copied for the classes of both sets by name, the others re-initialised, as printed and "
+        "recorded in the checkpoint (model.training.class_remap; new runs)",
+    )
     prompts_per_scene: int | None = option(
         None,
         on_resume=True,
@@ -276,8 +285,12 @@ class TrainConfig:
             raise TrainingError(f"--given-variants must be >= 0, got {self.given_variants}")
         if self.label_prompts < 0:
             raise TrainingError(f"--label-prompts must be >= 0, got {self.label_prompts}")
-        if self.init and self.init_detector:
-            raise TrainingError("give --init or --init-detector, not both")
+        given = [n for n in ("init", "init_detector", "init_other_classes") if getattr(self, n)]
+        if len(given) > 1:
+            flags = " and ".join("--" + n.replace("_", "-") for n in given)
+            raise TrainingError(
+                f"give one of --init, --init-detector, --init-other-classes, not {flags}"
+            )
         for name in ("epochs", "batch_size", "prompts_per_scene"):
             if getattr(self, name) < 1:
                 flag = "--" + name.replace("_", "-")

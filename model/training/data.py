@@ -132,8 +132,8 @@ def frame_dataset(
     """The frames of one root's ``split`` (its source chosen as the module says); a Talk2Radar
     root's labels read into ``classes`` (the model's class set)."""
     if spec.talk2car is not None:
-        root, commands = open_talk2car(spec.path, spec.talk2car, split)
-        return NuScenesFrames(root, commands, **kwargs)  # type: ignore[arg-type]
+        root, commands = open_talk2car(spec.path, spec.talk2car, split, classes)
+        return NuScenesFrames(root, commands, classes=classes, **kwargs)  # type: ignore[arg-type]
     labels = None if spec.scene_labels is None else SceneLabels(spec.scene_labels, classes)
     return FrameDataset(spec.path, split, scene_labels=labels, classes=classes, **kwargs)  # type: ignore[arg-type]
 

@@ -295,6 +295,7 @@ def set_up(cfg: TrainConfig, resume: bool, stop: StopRequest) -> Run:
             "roots": [spec.path for spec in specs],
             "train_samples": len(dataset),
         },
+        class_remap=CheckpointMeta.of(model).class_remap,
     ).with_portable_paths()
     if saved is not None and saved.rng:
         set_rng_state(saved.rng[rank])

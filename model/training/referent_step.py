@@ -261,7 +261,12 @@ def frame_prompts(
     sample: :attr:`scenes.datasets.frames.FrameItem.labels_complete`), that many
     more prompts generated from its labelled boxes, of the attributes a box alone decides
     (``PromptConfig.geometry_only``: class, depth, side; the boxes' motion is unknown). Given
-    prompts are kept as written; generated ones are reworded as ``config.p_perturb`` says."""
+    prompts are kept as written; generated ones are reworded as ``config.p_perturb`` says.
+    Prompts are generated over the frame's class set (:attr:`FrameItem.prompt_classes`: the
+    world's, so that a ``--classes nuscenes`` world's trucks and cones are talked about; a
+    prompt whose referents the model's set lacks finds no candidate and is left out)."""
+    if config.classes != frame.prompt_classes:
+        config = replace(config, classes=frame.prompt_classes)
     if not frame.generates_prompts:
         given = [(g.text, g.referent_ids) for g in frame.given]
         given += reworded(given, rng, given_variants)

@@ -1,6 +1,11 @@
 """The model a training run starts from: a resumed run's, or a new one built from the run's
 settings and initialised from another checkpoint as asked (``--init``: every weight whose name and
-shape match, a grown input widened; ``--init-detector``: the scene encoder and detector only).
+shape match, a grown input widened; ``--init-detector``: the scene encoder and detector only;
+``--init-other-classes``: a checkpoint of another class set, :mod:`model.training.class_remap`).
+
+A new model carries the class remapping of its start in ``model.checkpoint_metadata.class_remap``
+(its own ``--init-other-classes``, or the one its ``--init`` checkpoint records: the lineage), and
+the run writes it into every checkpoint (:func:`model.training.loop.set_up`).
 """
 
 from __future__ import annotations
@@ -11,7 +16,8 @@ from pathlib import Path
 
 import torch
 
-from model.checkpoint import model_from_payload
+from model.checkpoint import model_from_payload, read_checkpoint
+from model.checkpoint_meta import CheckpointMeta
 from model.tpcnet import TPCNet, build_model
 from model.training.config import TrainConfig, TrainingError
 from model.training.state import (
@@ -63,7 +69,8 @@ def check_class_set(payload: dict, path: str, wanted: str) -> None:
     if stored != wanted:
         raise TrainingError(
             f"{path}: a checkpoint of the {stored!r} class set cannot start a {wanted!r} model "
-            f"(--classes {wanted}); give a {wanted!r} checkpoint or train from scratch"
+            f"(--classes {wanted}); give a {wanted!r} checkpoint, train from scratch, or start "
+            f"from it with --init-other-classes {path}"
         )
 
 
@@ -75,8 +82,6 @@ def init_from(model: torch.nn.Module, path: str, prefixes: tuple[str, ...] = ())
     ``ReferentConfig.context`` or ``numeric_compare`` switched on, and its text gate) is copied
     into its first entries, the new ones zero (:func:`widened`). Returns how many tensors were
     copied. A checkpoint of another class set is refused (:func:`check_class_set`)."""
-    from model.checkpoint import read_checkpoint
-
     payload = read_checkpoint(path)
     check_class_set(payload, path, model.cfg.class_set.name)
     state = payload["state_dict"]
@@ -118,9 +123,20 @@ def start_model(
     if resume:
         print(f"{out}: nothing to resume, starting a new run", file=sys.stderr)
     model = build_model(cfg.preset, **cfg.model_overrides())
+    remap = None
     if cfg.init:
         copied = init_from(model, cfg.init)
         print(f"initialised {copied} weight tensors from {cfg.init}", file=sys.stderr)
+        remap = CheckpointMeta.from_dict(read_checkpoint(cfg.init)["metadata"]).class_remap
+    if cfg.init_other_classes:
+        from model.training.class_remap import init_other_classes
+
+        done = init_other_classes(
+            model, read_checkpoint(cfg.init_other_classes), cfg.init_other_classes
+        )
+        if rank == 0:
+            print("\n".join(done.lines()), file=sys.stderr)
+        remap = done.to_dict()
     if cfg.init_detector:
         copied = init_from(model, cfg.init_detector, SCENE_MODULES)
         print(
@@ -128,4 +144,5 @@ def start_model(
             f"{cfg.init_detector}; the referent stage starts from scratch",
             file=sys.stderr,
         )
+    model.checkpoint_metadata = CheckpointMeta(class_remap=remap)
     return model, None, TrainState()

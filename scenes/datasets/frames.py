@@ -40,7 +40,9 @@ synthetic world, or several prompts on one release frame) are one item.
 from __future__ import annotations
 
 import sys
+from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from torch.utils.data import Dataset
@@ -50,7 +52,7 @@ from scenes.datasets.augment import AugmentConfig
 from scenes.geometry.actors import Actor
 from scenes.geometry.boxes import match_by_centre
 from scenes.geometry.calib import IMAGE_SIZE, Calibration
-from scenes.geometry.classes import VOD, ClassSet
+from scenes.geometry.classes import PRESETS, VOD, ClassSet
 from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.talk2radar.scene_labels import SceneLabels, fov_mask
 
@@ -167,6 +169,11 @@ class FrameItem:
             (:func:`model.training.referent_step.detection_targets`); None: none.
         labels_complete: Every object of the class set is among :attr:`actors` (scene labels,
             or a nuScenes sample: 360 degrees): label prompts may be generated from them.
+        prompt_classes: The class set prompts are generated over for this frame
+            (``PromptConfig.classes``, :func:`model.training.referent_step.frame_prompts`): on
+            the sidecar source the world's (its sidecar's ``extra["classes"]``, ``vod`` when
+            absent: a ``--classes nuscenes`` world is talked about by its trucks and cones), on
+            the labels source the model's (the actors were read into it).
     """
 
     sample_id: str
@@ -179,6 +186,7 @@ class FrameItem:
     from_labels: bool = False
     ignore_boxes: np.ndarray | None = None
     labels_complete: bool = False
+    prompt_classes: str = "vod"
 
     @property
     def generates_prompts(self) -> bool:
@@ -381,6 +389,9 @@ class FrameDataset(Dataset):
                 region=region,
                 from_labels=self.source == "labels",
                 labels_complete=self.scene_labels is not None,
+                prompt_classes=self.classes.name
+                if sample.meta is None
+                else world_classes(sample.meta.extra, self.root.path, sample.sample_id),
             ),
             self.augment,
             self.sensors,
@@ -438,7 +449,24 @@ def augment_item(
         from_labels=item.from_labels,
         ignore_boxes=ignore,
         labels_complete=item.labels_complete,
+        prompt_classes=item.prompt_classes,
     )
+
+
+def world_classes(extra: Mapping[str, object], root: Path, sample_id: str) -> str:
+    """The class set a synthetic world was generated with: its sidecar's ``extra["classes"]``
+    (``python -m scenes.synth --classes``), ``vod`` when absent (the default world writes none).
+
+    Raises:
+        ValueError: the field names no preset (one line naming the sidecar and the field).
+    """
+    name = extra.get("classes", "vod")
+    if name not in PRESETS:
+        raise ValueError(
+            f"{root / 'meta' / (sample_id + '.json')}: field 'extra.classes': {name!r} is not "
+            f"one of {tuple(PRESETS)}"
+        )
+    return str(name)
 
 
 __all__ = [
@@ -452,4 +480,5 @@ __all__ = [
     "frame_groups",
     "scene_ids",
     "shift_actor",
+    "world_classes",
 ]

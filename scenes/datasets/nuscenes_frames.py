@@ -6,8 +6,9 @@ with scene labels does (:class:`scenes.datasets.frames.FrameDataset`'s labels so
 :class:`scenes.datasets.frames.FrameItem` per nuScenes sample that a command of the split refers
 to, in the root's sample order, with
 
-- ``actors``: every annotation of the sample whose category maps into the class set
-  (``scenes.nuscenes.classes.model_class``), in the model frame, velocities zero (unknown); an
+- ``actors``: every annotation of the sample whose category maps into the model's class set
+  (``scenes.nuscenes.classes.model_class`` with ``classes``: a ``nuscenes`` model's trucks and
+  cones are actors, a ``vod`` model's are ignored), in the model frame, velocities zero (unknown); an
   actor's id is its annotation's index in the frame (``NuScenesFrame.boxes``), so a command's
   referent (``CommandSet.referent``: a ``Referent`` with box, cls and annotation index) is the actor of that id;
 - ``ignore_boxes``: the annotations outside the class set (a truck, a bus, a barrier): no
@@ -28,6 +29,7 @@ is the one place they are imported (tests give their own root and commands to
 from __future__ import annotations
 
 from collections.abc import Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -37,7 +39,8 @@ from torch.utils.data import Dataset
 from scenes.datasets import augment as aug
 from scenes.datasets.augment import AugmentConfig
 from scenes.datasets.frames import FrameItem, GivenPrompt, SensorAugment, augment_item
-from scenes.geometry.actors import CLASSES, Actor
+from scenes.geometry.actors import Actor
+from scenes.geometry.classes import VOD, ClassSet
 
 RADAR_SWEEPS = 5
 """Radar sweeps accumulated per radar when the model reads a nuScenes root (``time = -k`` for the
@@ -82,11 +85,12 @@ class NuScenesRootLike(Protocol):
 
 
 def open_talk2car(
-    path: str | Path, commands: str | Path, split: str
+    path: str | Path, commands: str | Path, split: str, classes: ClassSet = VOD
 ) -> tuple[NuScenesRootLike, CommandSetLike]:
     """The nuScenes root at ``path`` (:data:`RADAR_SWEEPS` radar sweeps a frame) and its Talk2Car
-    commands of ``split`` (``commands``: the folder holding ``{split}_commands.json``); the
-    loader's skip reasons are printed by count.
+    commands of ``split`` (``commands``: the folder holding ``{split}_commands.json``) whose
+    referents map onto ``classes`` (the model's set); the loader's skip reasons are printed by
+    count.
 
     Raises:
         ValueError: a malformed root or command file (the loader's one-line message).
@@ -97,15 +101,18 @@ def open_talk2car(
     from scenes.nuscenes.talk2car import read_commands
 
     root = NuScenesRoot(path, radar_sweeps=RADAR_SWEEPS)
-    found = read_commands(commands, split, root)
+    found = read_commands(commands, split, root, classes)
     for reason, count in sorted(found.skipped.items()):
         print(f"{commands}: {split}: {count} command(s) skipped: {reason}", file=sys.stderr)
     return root, found
 
 
-def frame_actors(frame: Any, model_class: Any) -> tuple[tuple[Actor, ...], np.ndarray]:
-    """The actors of a ``NuScenesFrame`` (annotations in the class set, id = annotation index) and
-    the ``(J, 7)`` boxes of the others (:attr:`FrameItem.ignore_boxes`)."""
+def frame_actors(
+    frame: Any, model_class: Any, classes: ClassSet = VOD
+) -> tuple[tuple[Actor, ...], np.ndarray]:
+    """The actors of a ``NuScenesFrame`` (annotations whose category ``model_class`` maps into
+    ``classes``, id = annotation index) and the ``(J, 7)`` boxes of the others
+    (:attr:`FrameItem.ignore_boxes`)."""
     boxes = np.asarray(frame.boxes, dtype=np.float64).reshape(-1, 7)
     actors, ignored = [], []
     for i, (box, category, attributes) in enumerate(
@@ -114,17 +121,20 @@ def frame_actors(frame: Any, model_class: Any) -> tuple[tuple[Actor, ...], np.nd
         cls = model_class(category, attributes)
         if cls is None:
             ignored.append(box)
-        elif cls not in CLASSES:
-            raise ValueError(f"model_class({category!r}) gave {cls!r}, not one of {CLASSES}")
+        elif cls not in classes:
+            raise ValueError(
+                f"model_class({category!r}) gave {cls!r}, not one of the {classes.name!r} class "
+                f"set ({', '.join(classes.names)})"
+            )
         else:
             actors.append(Actor(i, cls, box.copy(), np.zeros(2)))
     return tuple(actors), np.array(ignored, dtype=np.float64).reshape(-1, 7)
 
 
-def _model_class() -> Any:
+def _model_class(classes: ClassSet) -> Any:
     from scenes.nuscenes.classes import model_class
 
-    return model_class
+    return partial(model_class, classes=classes)
 
 
 class NuScenesFrames(Dataset):
@@ -135,7 +145,10 @@ class NuScenesFrames(Dataset):
         commands: Its commands of one split (``CommandSet``); only kept commands with a referent.
         augment, sensors, seed: As :class:`scenes.datasets.frames.FrameDataset`'s.
         model_class: ``(category, attributes) -> class name or None`` (default
-            ``scenes.nuscenes.classes.model_class``, the mapping's one home).
+            ``scenes.nuscenes.classes.model_class`` into ``classes``, the mapping's one home).
+        classes: The model's class set: the annotations whose category maps onto it are the
+            actors (a ``nuscenes`` model trains on trucks, cones, ...), the others are ignored;
+            prompts are generated over it (:attr:`FrameItem.prompt_classes`).
 
     Raises:
         ValueError: no command of the split has a referent.
@@ -151,6 +164,7 @@ class NuScenesFrames(Dataset):
         sensors: SensorAugment | None = None,
         seed: int = 0,
         model_class: Any = None,
+        classes: ClassSet = VOD,
     ) -> None:
         self.root = root
         self.commands = commands
@@ -159,7 +173,8 @@ class NuScenesFrames(Dataset):
         self.sensors = sensors
         self.seed = seed
         self.epoch = 0
-        self.model_class = model_class or _model_class()
+        self.classes = classes
+        self.model_class = model_class or _model_class(classes)
         by_sample: dict[str, list[Any]] = {}
         for command in commands.commands:
             if command.command_token in commands.referent:
@@ -170,7 +185,7 @@ class NuScenesFrames(Dataset):
         if not self.ids:
             raise ValueError(
                 f"Talk2Car split {commands.split!r}: no command with a referent in the class set "
-                f"({', '.join(CLASSES)}): nothing to train on"
+                f"({', '.join(classes.names)}): nothing to train on"
             )
 
     @property
@@ -193,7 +208,7 @@ class NuScenesFrames(Dataset):
         """Frame ``index`` as read (not augmented)."""
         token = self.ids[index]
         frame = self.root.frame(token)
-        actors, ignored = frame_actors(frame, self.model_class)
+        actors, ignored = frame_actors(frame, self.model_class, self.classes)
         known = {a.actor_id for a in actors}
         given = []
         for command in self.by_sample[token]:
@@ -214,6 +229,7 @@ class NuScenesFrames(Dataset):
             from_labels=True,
             ignore_boxes=ignored,
             labels_complete=True,
+            prompt_classes=self.classes.name,
         )
 
     def __getitem__(self, index: int) -> FrameItem:

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from scenes.geometry.boxes import wrap_yaw
+from scenes.geometry.classes import VOD, ClassSet
 from scenes.nuscenes.classes import model_class
 from scenes.nuscenes.geometry import boxes_from_poses, quaternion_from_matrix, transform
 from scenes.nuscenes.root import NuScenesError, NuScenesFrame, NuScenesRoot
@@ -190,13 +191,18 @@ def _parse(path: Path, i: int, rec: object) -> Talk2CarCommand:
     )
 
 
-def read_commands(folder: str | Path, split: str, root: NuScenesRoot) -> CommandSet:
+def read_commands(
+    folder: str | Path, split: str, root: NuScenesRoot, classes: ClassSet = VOD
+) -> CommandSet:
     """Read ``folder/{split}_commands.json`` strictly and pair each command with its sample.
 
     Args:
         folder: The folder holding the command files (the full release: ``NUSC/commands``).
         split: ``train``, ``val``, ``test`` or any name a file carries.
         root: The nuScenes root the commands refer to.
+        classes: The model's class set: a command whose referent's category maps outside it
+            (:func:`scenes.nuscenes.classes.model_class`) is skipped; a kept referent's ``cls``
+            is its class in this set.
 
     Returns:
         The kept commands (their :attr:`Talk2CarCommand.sample_token` resolved), each one's
@@ -250,7 +256,7 @@ def read_commands(folder: str | Path, split: str, root: NuScenesRoot) -> Command
         if categories[index] != cmd.category:
             skipped["obj_name is not the annotation's category"] += 1
             continue
-        cls = model_class(cmd.category, attributes[index])
+        cls = model_class(cmd.category, attributes[index], classes)
         if cls is None:
             skipped[f"category outside the class set: {cmd.category}"] += 1
             continue

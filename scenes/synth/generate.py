@@ -86,6 +86,7 @@ from scenes.synth.frame import (
     synthesize_sequence,
     world_streams,
 )
+from scenes.synth.manifest import MANIFEST
 from scenes.synth.sequence import sequence_pose
 from scenes.talk2radar.layout import LABEL, LIDAR_FOLDER, sample_file
 from scenes.talk2radar.poses import FRAME_RATE, write_pose
@@ -120,7 +121,6 @@ __all__ = [  # with the settings and one frame from scenes.synth.frame, re-expor
     "write_frame",
 ]
 
-MANIFEST = "synth_manifest.jsonl"
 SPLITS = ("train", "val", "test")
 MAX_SAMPLES = 100_000  # 5-digit ids
 DEFAULT_SETTINGS = SynthSettings()

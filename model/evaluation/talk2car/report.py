@@ -124,8 +124,8 @@ def run_talk2car(
     from scenes.nuscenes.talk2car import model_box_to_camera
     from scenes.utils.durable import atomic_write_text
 
-    root, commands = open_talk2car(data, talk2car, split)
     model = load_checkpoint(checkpoint, device=device)
+    root, commands = open_talk2car(data, talk2car, split, model.cfg.class_set)
     classes = partial(model_class, classes=model.cfg.class_set)  # the checkpoint's class set
     predictions = list(iterate_command_predictions(model, root, commands, classes, limit=limit))
     if not predictions:
