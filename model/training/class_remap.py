@@ -33,6 +33,7 @@ from model.referent.compare import COMPARE_FEATURES
 from model.referent.context import PER_CLASS, RANK_FEATURES
 from model.referent.stage import geometry_input_width
 from model.referent.subsets import PER_PICKED, PICKED, SUBSET_RANK_FEATURES
+from model.tpcnet import head_class
 from scenes.geometry.classes import ClassSet
 
 ColumnKey = tuple[str, ...]
@@ -152,7 +153,8 @@ def init_other_classes(model: torch.nn.Module, payload: dict, source: str) -> Cl
     done: dict[str, str] = {}
     fresh: list[str] = []
     geometry_keys = None
-    if own_cfg.grounding == "referent" and given_cfg.grounding == "referent":
+    kinds = (head_class(own_cfg.grounding), head_class(given_cfg.grounding))
+    if all(kind.takes_labelled_candidates for kind in kinds):  # both have a referent stage
         geometry_keys = (
             geometry_input_keys(own_cfg.referent, own_set),
             geometry_input_keys(given_cfg.referent, given_set),
