@@ -41,8 +41,8 @@ import torch
 from model.evaluation.class_prompt_counts import (
     CLASS_PROMPTS,
     ClassSummary,
+    ask_class_prompts,
     bev_range,
-    count_prompt,
     other_label_boxes,
 )
 from scenes.geometry.calib import IMAGE_SIZE
@@ -124,24 +124,9 @@ def frame_counts(
         return (bev_range(boxes) <= max_range) & in_camera_view(boxes, sample.calib, IMAGE_SIZE)
 
     others = other_label_boxes(sample.labels, sample.calib)
-    out = []
-    for cls, prompt in CLASS_PROMPTS.items():
-        pred = model.ground(features, prompt, score_threshold=threshold)
-        boxes = np.asarray(pred.boxes, dtype=np.float64).reshape(-1, 7)
-        out.append(
-            count_prompt(
-                cls,
-                boxes,
-                np.asarray(pred.scores, dtype=np.float64).reshape(-1),
-                list(pred.classes),
-                gt_boxes,
-                sample.classes,
-                counted(boxes),
-                counted(gt_boxes),
-                others,
-            )
-        )
-    return out
+    return ask_class_prompts(
+        model, features, threshold, gt_boxes, sample.classes, counted, counted(gt_boxes), others
+    )
 
 
 def run(

@@ -38,7 +38,13 @@ import numpy as np
 import torch
 
 from bench.common import BenchResult, Table, Target, bench_main, bench_parser, machine_info
-from model.evaluation.class_prompt_counts import CLASS_PROMPTS, PromptCount, bev_range, count_prompt
+from model.evaluation.class_prompt_counts import (
+    CLASS_PROMPTS,
+    PromptCount,
+    ask_class_prompts,
+    bev_range,
+    count_prompt,
+)
 from scenes.geometry.actors import CLASSES
 from scenes.geometry.calib import IMAGE_SIZE, sensor_to_lidar
 from scenes.geometry.projection import in_camera_view
@@ -155,22 +161,9 @@ def score_frame(
                 gt_in,
             )
         )
-    prompts = []
-    for cls, text in CLASS_PROMPTS.items():
-        pred = model.ground(features, text, score_threshold=prompt_threshold)
-        boxes = np.asarray(pred.boxes, dtype=np.float64).reshape(-1, 7)
-        prompts.append(
-            count_prompt(
-                cls,
-                boxes,
-                np.asarray(pred.scores, dtype=np.float64).reshape(-1),
-                list(pred.classes),
-                gt_boxes,
-                gt_classes,
-                counted(boxes),
-                gt_in,
-            )
-        )
+    prompts = ask_class_prompts(
+        model, features, prompt_threshold, gt_boxes, gt_classes, counted, gt_in
+    )
     return FrameCounts(tuple(detection), tuple(prompts))
 
 

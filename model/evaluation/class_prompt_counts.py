@@ -7,8 +7,9 @@ y left, z up, metres; z at the geometric centre, yaw counter-clockwise about +z)
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -21,6 +22,10 @@ from scenes.geometry.calib import (
 )
 from scenes.geometry.classes import VOD, ClassSet, object_class
 from scenes.talk2radar.kitti import ObjectLabel
+
+if TYPE_CHECKING:
+    from model.core.features import SceneFeatures
+    from model.tpcnet import TPCNet
 
 
 def class_prompts(classes: ClassSet = VOD) -> dict[str, str]:
@@ -208,6 +213,39 @@ _TOTALS = (
     "false_centre",
     "answered",
 )
+
+
+def ask_class_prompts(
+    model: TPCNet,
+    features: SceneFeatures,
+    threshold: float,
+    gt_boxes: np.ndarray,
+    gt_classes: Sequence[str],
+    counted: Callable[[np.ndarray], np.ndarray],
+    gt_counted: np.ndarray,
+    other_boxes: np.ndarray | None = None,
+) -> list[PromptCount]:
+    """Each prompt of :data:`CLASS_PROMPTS` asked over one frame's encoded ``features`` at
+    ``threshold`` and counted (:func:`count_prompt`); ``counted`` says which boxes ``(K, 7)`` lie
+    in the counted region."""
+    out = []
+    for cls, text in CLASS_PROMPTS.items():
+        pred = model.ground(features, text, score_threshold=threshold)
+        boxes = np.asarray(pred.boxes, dtype=np.float64).reshape(-1, 7)
+        out.append(
+            count_prompt(
+                cls,
+                boxes,
+                np.asarray(pred.scores, dtype=np.float64).reshape(-1),
+                list(pred.classes),
+                gt_boxes,
+                gt_classes,
+                counted(boxes),
+                gt_counted,
+                other_boxes,
+            )
+        )
+    return out
 
 
 @dataclass(frozen=True)
