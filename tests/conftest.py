@@ -191,6 +191,23 @@ def _untrained_model() -> Callable[..., torch.nn.Module]:
     return untrained_model
 
 
+def untrained_nuscenes_app_model() -> torch.nn.Module:
+    """A fresh untrained referent-path model of the ``nuscenes`` class set that answers every
+    box (threshold 0): what the app tests serve to see the set's ten classes."""
+    return untrained_model(
+        "referent",
+        text_encoder="gru",
+        classes="nuscenes",
+        head__score_threshold=0.0,
+        operating_threshold=0.0,
+    )
+
+
+@pytest.fixture(name="untrained_nuscenes_app_model", scope="session")
+def _untrained_nuscenes_app_model() -> Callable[[], torch.nn.Module]:
+    return untrained_nuscenes_app_model
+
+
 @pytest.fixture(name="grounding", scope="module", params=GROUNDINGS)
 def _grounding(request: pytest.FixtureRequest) -> str:
     return request.param

@@ -21,16 +21,12 @@ from scenes.talk2radar.root import Talk2RadarRoot
 
 
 @pytest.fixture(scope="module")
-def nuscenes_app(tmp_path_factory, write_tiny_root, torch_threads, serve_app, untrained_model):
+def nuscenes_app(
+    tmp_path_factory, write_tiny_root, torch_threads, serve_app, untrained_nuscenes_app_model
+):
     root = write_tiny_root(tmp_path_factory.mktemp("classes") / "root")
     with torch_threads(1):
-        model = untrained_model(
-            "referent",
-            text_encoder="gru",
-            classes="nuscenes",
-            head__score_threshold=0.0,
-            operating_threshold=0.0,
-        )
+        model = untrained_nuscenes_app_model()
         with serve_app(root, model) as app:
             yield app
 

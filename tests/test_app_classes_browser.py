@@ -64,19 +64,15 @@ def _truck_frame(root: Path) -> int:
 
 
 @pytest.fixture(scope="module")
-def page_and_app(nuscenes_synth_root, chromium, torch_threads, serve_app, untrained_model):
+def page_and_app(
+    nuscenes_synth_root, chromium, torch_threads, serve_app, untrained_nuscenes_app_model
+):
     """A Chromium page on the app serving the root with a ``nuscenes`` model: ``(page, app,
     session)``, the page loaded on the frame with a truck."""
     from playwright.sync_api import sync_playwright
 
     with torch_threads(1):
-        model = untrained_model(
-            "referent",
-            text_encoder="gru",
-            classes="nuscenes",
-            head__score_threshold=0.0,
-            operating_threshold=0.0,
-        )
+        model = untrained_nuscenes_app_model()
         with torch.no_grad():
             model.scene.head.heatmap[-1].bias[NUSCENES.names.index(SHOWN)] += 6.0
         with (
