@@ -339,9 +339,9 @@ class AnnotationPanel:
         if self.selected is not None:
             index = draft.index_of(self.selected)
             selected = draft.boxes[index]
-            w.box.value = options[index]
+            self._show(w.box, options[index])
         else:
-            w.box.value = NO_BOX
+            self._show(w.box, NO_BOX)
         for handle in w.box_inputs():
             handle.visible = selected is not None
         if selected is None:
