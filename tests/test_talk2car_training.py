@@ -125,30 +125,47 @@ def test_nuscenes_root_refuses_validation_during_training(nusc, tmp_path, capsys
     assert "--val-every 0" in capsys.readouterr().err
 
 
-def test_freeze_scene_runs_with_one_thread_unless_told(nusc, tmp_path):
-    """A --freeze-scene run on the CPU takes FREEZE_SCENE_THREADS torch threads by default (its
-    small steps slow down several times with two threads on a shared machine); --threads wins.
-    A nuScenes root draws TALK2CAR_PROMPTS_PER_SCENE prompts a sample and step by default."""
+def test_freeze_scene_threads_follow_the_machine(nusc, tmp_path, monkeypatch):
+    """A --freeze-scene run on the CPU takes every core on an idle machine and
+    FREEZE_SCENE_THREADS torch threads on a busy one (its small steps slow down several times
+    with two threads when another job holds a core); --threads wins. A nuScenes root draws
+    TALK2CAR_PROMPTS_PER_SCENE prompts a sample and step by default."""
+    import os
+
     from model.training.config import (
         FREEZE_SCENE_THREADS,
+        IDLE_LOAD,
         LABELLED_PROMPTS_PER_SCENE,
         TALK2CAR_PROMPTS_PER_SCENE,
+        freeze_scene_threads,
         parse_args,
     )
+    from model.training.data import TALK2CAR_WEIGHT
 
+    assert freeze_scene_threads(0.0, 2) == 2 and freeze_scene_threads(0.0, 0) == 1
+    assert freeze_scene_threads(IDLE_LOAD, 2) == FREEZE_SCENE_THREADS == 1
     args = ["--data", str(nusc), "--talk2car", str(nusc / "commands"), "--device", "cpu"]
     args += ["--out", str(tmp_path / "run")]
     before = torch.get_num_threads()
     try:
+        monkeypatch.setattr(os, "getloadavg", lambda: (3.0, 3.0, 3.0))  # busy
         torch.set_num_threads(2)
         cfg, _ = parse_args([*args, "--freeze-scene"])
-        assert torch.get_num_threads() == FREEZE_SCENE_THREADS == 1
+        assert torch.get_num_threads() == FREEZE_SCENE_THREADS
         assert cfg.prompts_per_scene == TALK2CAR_PROMPTS_PER_SCENE > LABELLED_PROMPTS_PER_SCENE
         assert cfg.label_prompts == 24
+        # each commanded sample seen TALK2CAR_WEIGHT times an epoch unless --data-weight says
+        assert cfg.roots()[0].weight == TALK2CAR_WEIGHT > 1
+        assert parse_args([*args, "--data-weight", "1"])[0].roots()[0].weight == 1
         torch.set_num_threads(2)
         parse_args([*args, "--freeze-scene", "--threads", "2"])
         assert torch.get_num_threads() == 2
         parse_args(args)  # the joint stage: torch's default, untouched
+        assert torch.get_num_threads() == 2
+        monkeypatch.setattr(os, "getloadavg", lambda: (0.1, 0.1, 0.1))  # idle
+        monkeypatch.setattr(os, "cpu_count", lambda: 2)
+        torch.set_num_threads(1)
+        parse_args([*args, "--freeze-scene"])
         assert torch.get_num_threads() == 2
     finally:
         torch.set_num_threads(before)

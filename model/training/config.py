@@ -7,6 +7,7 @@ how they combine. :class:`TrainConfig` is stored in every checkpoint and run sta
 from __future__ import annotations
 
 import argparse
+import os
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal, get_args
@@ -98,7 +99,7 @@ class TrainConfig:
         (),
         flag="--data-weight",
         help="referent path: times each frame of the matching --data root (in order) is seen "
-        "per epoch (default 1)",
+        "per epoch (default 1; a nuScenes root: model.training.data.TALK2CAR_WEIGHT)",
     )
     scene_labels: tuple[str, ...] = option(
         (),
@@ -356,25 +357,36 @@ class TrainCommand:
 
     Attributes:
         resume: Continue the run in ``--out``.
-        threads: torch's CPU threads (0: :data:`FREEZE_SCENE_THREADS` for a ``--freeze-scene``
+        threads: torch's CPU threads (0: :func:`freeze_scene_threads` for a ``--freeze-scene``
             run on the CPU, torch's default otherwise).
     """
 
     resume: bool = option(False, help="continue the run in --out")
     threads: int = option(
         0,
-        help="torch CPU threads (0: 1 for --freeze-scene on the CPU, torch's default otherwise); "
-        "use 1 when other jobs share the cores",
+        help="torch CPU threads (0: for --freeze-scene on the CPU, every core on an idle machine "
+        "and 1 on a busy one; torch's default otherwise); use 1 when other jobs share the cores",
     )
 
 
 FREEZE_SCENE_THREADS = 1
-"""torch's CPU threads of a ``--freeze-scene`` run when ``--threads`` is not given. Its steps are
-many small operations on cached candidates (the referent stage: overhead, not FLOPs; a second
-thread buys nothing, docs/PERFORMANCE.md's thread tables), and torch's two-thread pool slows down
-several times over when another job takes a core: measured on the 2-core machine with another
-training job running, 8 cached nuScenes scenes and 80 steps took 50 s with 1 thread against
-209 s with 2 (docs/RESULTS.md, "Talk2Car on synthetic nuScenes roots")."""
+"""torch's CPU threads of a ``--freeze-scene`` run when ``--threads`` is not given and other jobs
+hold the cores (:func:`freeze_scene_threads`). Its steps are many small operations on cached
+candidates, and torch's thread pool slows down several times over when another job takes a core:
+measured on the 2-core machine with another training job running, 8 cached nuScenes scenes and
+80 steps took 50 s with 1 thread against 209 s with 2 (docs/RESULTS.md, "Talk2Car on synthetic
+nuScenes roots")."""
+
+IDLE_LOAD = 0.5
+"""A 1-minute load average below this is an idle machine (:func:`freeze_scene_threads`)."""
+
+
+def freeze_scene_threads(load: float, cores: int) -> int:
+    """torch's CPU threads of a ``--freeze-scene`` run when ``--threads`` is not given: every core
+    on an idle machine (``load``, the 1-minute load average, below :data:`IDLE_LOAD`), else
+    :data:`FREEZE_SCENE_THREADS`. Idle, the second core pays: 8 cached nuScenes scenes, 120 steps
+    ran at 3.3 steps a second with 1 thread and 5.0 with 2 on the 2-core machine."""
+    return max(1, cores) if load < IDLE_LOAD else FREEZE_SCENE_THREADS
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -392,7 +404,7 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     cfg = from_args(TrainConfig, a)
     threads = command.threads
     if not threads and cfg.freeze_scene and str(cfg.device).startswith("cpu"):
-        threads = FREEZE_SCENE_THREADS
+        threads = freeze_scene_threads(os.getloadavg()[0], os.cpu_count() or 1)
     if threads:
         torch.set_num_threads(threads)
     return cfg, command.resume
@@ -401,11 +413,13 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
 __all__ = [
     "FREEZE_SCENE_THREADS",
     "GENERATED_PROMPTS_PER_SCENE",
+    "IDLE_LOAD",
     "LABELLED_PROMPTS_PER_SCENE",
     "LABEL_PROMPTS",
     "TALK2CAR_PROMPTS_PER_SCENE",
     "PromptDraw",
     "TrainConfig",
     "TrainingError",
+    "freeze_scene_threads",
     "parse_args",
 ]

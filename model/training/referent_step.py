@@ -260,7 +260,8 @@ def frame_prompts(
     ``label_prompts``: on a labels-source frame with complete labels (scene labels, or a nuScenes
     sample: :attr:`scenes.datasets.frames.FrameItem.labels_complete`), that many
     more prompts generated from its labelled boxes, of the attributes a box alone decides
-    (``PromptConfig.geometry_only``: class, depth, side; the boxes' motion is unknown). Given
+    (``PromptConfig.geometry_only``: class, depth, side; motion too where the frame's
+    velocities are known, :attr:`FrameItem.unknown_motion`: a nuScenes sample). Given
     prompts are kept as written; generated ones are reworded as ``config.p_perturb`` says.
     Prompts are generated over the frame's class set (:attr:`FrameItem.prompt_classes`: the
     world's, so that a ``--classes nuscenes`` world's trucks and cones are talked about; a
@@ -272,8 +273,11 @@ def frame_prompts(
         given += reworded(given, rng, given_variants)
         if label_prompts <= 0 or not frame.labels_complete:
             return given
-        geometry = replace(config, geometry_only=True)
-        extra: list[Prompt] = generate_prompts(frame.actors, rng, label_prompts, config=geometry)
+        unknown = frame.unknown_motion
+        geometry = replace(config, geometry_only=unknown is None)
+        extra: list[Prompt] = generate_prompts(
+            frame.actors, rng, label_prompts, config=geometry, unknown_motion=unknown or ()
+        )
         return given + [(p.text, tuple(p.referent_ids)) for p in extra]
     prompts: list[Prompt] = generate_prompts(frame.actors, rng, count, config=config)
     return [(p.text, tuple(p.referent_ids)) for p in prompts]

@@ -30,8 +30,9 @@ Two sources of a frame's objects and prompts:
   its ``label_2`` boxes matched to the frame's objects). Without scene labels the objects are the
   union of the referents of the frame's samples (every other object then counts as background,
   which :class:`FrameDataset` warns about). Nothing under ``meta/`` is read in this mode; objects
-  have no velocity (zeros, never read: the prompts are given, and candidates' motion evidence
-  comes from the radar points).
+  have no velocity (zeros: the prompts are given, and candidates' motion evidence comes from the
+  radar points; a nuScenes sample's actors carry the velocities its data tells,
+  :attr:`FrameItem.unknown_motion`).
 
 A frame is :meth:`scenes.talk2radar.root.Talk2RadarRoot.frame_key`: samples sharing sensor files (one
 synthetic world, or several prompts on one release frame) are one item.
@@ -187,6 +188,7 @@ class FrameItem:
     ignore_boxes: np.ndarray | None = None
     labels_complete: bool = False
     prompt_classes: str = "vod"
+    unknown_motion: tuple[int, ...] | None = None
 
     @property
     def generates_prompts(self) -> bool:

@@ -111,9 +111,13 @@ def frame_actors(
     frame: Any, model_class: Any, classes: ClassSet = VOD
 ) -> tuple[tuple[Actor, ...], np.ndarray]:
     """The actors of a ``NuScenesFrame`` (annotations whose category ``model_class`` maps into
-    ``classes``, id = annotation index) and the ``(J, 7)`` boxes of the others
-    (:attr:`FrameItem.ignore_boxes`)."""
+    ``classes``, id = annotation index, velocity the frame's where known, else zero) and the
+    ``(J, 7)`` boxes of the others (:attr:`FrameItem.ignore_boxes`)."""
     boxes = np.asarray(frame.boxes, dtype=np.float64).reshape(-1, 7)
+    velocities = getattr(frame, "velocities", None)
+    if velocities is None:
+        velocities = np.full((len(boxes), 2), np.nan)
+    velocities = np.asarray(velocities, dtype=np.float64).reshape(len(boxes), 2)
     actors, ignored = [], []
     for i, (box, category, attributes) in enumerate(
         zip(boxes, frame.categories, frame.attributes, strict=True)
@@ -127,7 +131,8 @@ def frame_actors(
                 f"set ({', '.join(classes.names)})"
             )
         else:
-            actors.append(Actor(i, cls, box.copy(), np.zeros(2)))
+            known = np.isfinite(velocities[i]).all()
+            actors.append(Actor(i, cls, box.copy(), velocities[i].copy() if known else np.zeros(2)))
     return tuple(actors), np.array(ignored, dtype=np.float64).reshape(-1, 7)
 
 
@@ -209,6 +214,11 @@ class NuScenesFrames(Dataset):
         token = self.ids[index]
         frame = self.root.frame(token)
         actors, ignored = frame_actors(frame, self.model_class, self.classes)
+        velocities = getattr(frame, "velocities", None)
+        unknown_motion = None
+        if velocities is not None:
+            finite = np.isfinite(np.asarray(velocities, dtype=np.float64)).all(axis=1)
+            unknown_motion = tuple(a.actor_id for a in actors if not finite[a.actor_id])
         known = {a.actor_id for a in actors}
         given = []
         for command in self.by_sample[token]:
@@ -230,6 +240,7 @@ class NuScenesFrames(Dataset):
             ignore_boxes=ignored,
             labels_complete=True,
             prompt_classes=self.classes.name,
+            unknown_motion=unknown_motion,
         )
 
     def __getitem__(self, index: int) -> FrameItem:

@@ -20,6 +20,13 @@ import numpy as np
 
 from scenes.geometry.calib import Calibration
 from scenes.nuscenes.geometry import LIDAR_TO_MODEL, boxes_from_poses, pose_matrix
+from scenes.nuscenes.motion import (
+    MAX_SPEED,
+    MAX_TIME_GAP,
+    attribute_velocity,
+    combine,
+    radar_velocity,
+)
 from scenes.nuscenes.radar import RADAR_CHANNELS, default_filter, model_channels
 from scenes.nuscenes.sensorfiles import read_lidar, read_radar
 from scenes.nuscenes.tables import NuScenesError, Tables, read_tables, version_folder
@@ -57,6 +64,8 @@ class NuScenesFrame:
         image_path: The CAM_FRONT key-frame image, or None where the file is missing.
         image_size: ``(width, height)`` from the sample_data record.
         description: The scene's description.
+        velocities: ``(K, 2)`` float64 each annotation's ground velocity in the model frame
+            (m/s), NaN where the release does not tell it (:mod:`scenes.nuscenes.motion`).
     """
 
     sample_token: str
@@ -75,6 +84,7 @@ class NuScenesFrame:
     image_path: Path | None
     image_size: tuple[int, int]
     description: str
+    velocities: np.ndarray | None = field(default=None, repr=False)
 
 
 class NuScenesRoot:
@@ -279,6 +289,37 @@ class NuScenesRoot:
             )
         return boxes, tuple(categories), tuple(attributes)
 
+    def neighbour_velocities(self, sample_token: str) -> np.ndarray:
+        """``(K, 2)`` float64 each annotation's ground velocity in the sample's model frame from
+        its instance's ``prev`` and ``next`` annotations (both when both exist, else one and
+        itself; NaN without one within :data:`~scenes.nuscenes.motion.MAX_TIME_GAP`, or faster
+        than :data:`~scenes.nuscenes.motion.MAX_SPEED`: a root whose global poses do not hold
+        one world together), in
+        :meth:`annotations` order (:mod:`scenes.nuscenes.motion`, source 1)."""
+        t = self.tables
+        anns = t.records["sample_annotation"]
+        samples = t.records["sample"]
+        tokens = self.annotations(sample_token)
+        turn = self.model_from_global(sample_token)[:3, :3]
+        out = np.full((len(tokens), 2), np.nan)
+        for i, token in enumerate(tokens):
+            ann = anns[token]
+            before = anns.get(ann.get("prev") or "", ann)
+            after = anns.get(ann.get("next") or "", ann)
+            if before is after:
+                continue
+            times = [samples.get(a["sample_token"], {}).get("timestamp") for a in (before, after)]
+            if any(not isinstance(v, (int, float)) for v in times):
+                continue
+            gap = (times[1] - times[0]) * 1e-6
+            if not 0 < gap <= MAX_TIME_GAP:
+                continue
+            moved = np.subtract(after["translation"], before["translation"], dtype=np.float64)
+            velocity = (turn @ moved)[:2] / gap
+            if np.hypot(*velocity) <= MAX_SPEED:
+                out[i] = velocity
+        return out
+
     def frame(self, sample_token: str) -> NuScenesFrame:
         """The sample's sensors and annotations in the model frame (:class:`NuScenesFrame`).
 
@@ -363,4 +404,9 @@ class NuScenesRoot:
             image_path=image if image.is_file() else None,
             image_size=(width, height),
             description=self.scene_description(sample_token),
+            velocities=combine(
+                attribute_velocity(attributes),
+                self.neighbour_velocities(sample_token),
+                radar_velocity(boxes, radar),
+            ),
         )

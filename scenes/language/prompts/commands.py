@@ -304,13 +304,17 @@ def commands_for(
 ) -> list[Prompt]:
     """``prompts`` with a ``share`` of the single-referent ones (not counting questions) phrased
     as commands about their referent (:func:`draw_command`; the template's id appended to
-    :attr:`Prompt.variants`); referents, tags, predicate and family kept."""
+    :attr:`Prompt.variants`); referents, tags, predicate and family kept. A prompt whose referent
+    is not in ``actors`` is kept as it is."""
     out = []
     for p in prompts:
         if len(p.referent_ids) != 1 or p.family == "count" or rng.random() >= share:
             out.append(p)
             continue
-        actor = actors[p.referent_ids[0]]
+        actor = actors.get(p.referent_ids[0])
+        if actor is None:  # its motion unknown (generate_prompts' unknown_motion)
+            out.append(p)
+            continue
         drawn = draw_command(
             p.text, rng, phrasing, cls=actor.cls, moving=is_moving(actor), max_words=max_words
         )

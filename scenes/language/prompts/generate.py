@@ -8,7 +8,7 @@ referents: count is not a filter, it is said from the resolved set.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from dataclasses import replace
 
 import numpy as np
@@ -19,11 +19,16 @@ from scenes.language.prompts.extended import generate_extended
 from scenes.language.prompts.features import DEFAULT_REGION, ReferableRegion, actor_features
 from scenes.language.prompts.noise import perturb
 from scenes.language.prompts.phrasing import too_wide
-from scenes.language.prompts.predicate import Predicate, analyse_features
+from scenes.language.prompts.predicate import Predicate, analyse, analyse_features
 from scenes.language.prompts.render import Prompt, render_with_variants
 from scenes.language.prompts.sampling import PromptConfig, draw_anchor, sample_predicate
 
-__all__ = ["PromptConfig", "generate_prompts"]
+__all__ = ["PromptConfig", "generate_prompts", "motion_hypotheses", "motion_robust"]
+
+HYPOTHESIS_SPEEDS = (0.8, 2.0, 5.0, 10.0, 20.0)
+"""m/s: the speeds an actor of unknown motion is tried at (:func:`motion_hypotheses`), along and
+against its heading and across it both ways, beside standing still: they straddle the generator's
+moving threshold and its speed words' round numbers."""
 
 
 def generate_prompts(
@@ -33,6 +38,7 @@ def generate_prompts(
     *,
     region: ReferableRegion = DEFAULT_REGION,
     config: PromptConfig | None = None,
+    unknown_motion: Collection[int] = (),
 ) -> list[Prompt]:
     """Up to ``n`` distinct prompts about the scene, each with its exact referent set.
 
@@ -49,6 +55,11 @@ def generate_prompts(
     prompts come from :func:`scenes.language.prompts.extended.generate_extended` (every family of
     :data:`~scenes.language.prompts.sampling.FAMILIES`, some with an empty referent set).
 
+    ``unknown_motion``: ids of actors whose velocity is not known (labelled boxes whose motion
+    the data does not tell, :mod:`scenes.nuscenes.motion`; their ``velocity`` is a placeholder):
+    only prompts whose referents hold whatever those actors do are kept
+    (:func:`motion_robust`), and none is phrased as a command about such an actor.
+
     Sentences are drawn from a generator seeded once from ``rng``, so the predicates drawn do
     not depend on the wording: the ``train`` and ``heldout`` phrasings of one ``rng`` state say
     the same predicates in other words (up to the rare prompt whose sentence in one wording
@@ -60,13 +71,15 @@ def generate_prompts(
     if n < 0:
         raise ValueError(f"generate_prompts: n must be >= 0, got {n}")
     config = config if config is not None else PromptConfig()
+    unknown = frozenset(int(i) for i in unknown_motion)
     if config.language == "extended":
         out = generate_extended(actors, rng, n, region=region, config=config)
+        out = [p for p in out if motion_robust(p, actors, unknown, region)]
     else:
-        out = _generate_base(actors, rng, n, region, config)
+        out = _generate_base(actors, rng, n, region, config, unknown)
     if config.command_share > 0.0 and out:
         commands = np.random.default_rng(int(rng.integers(2**63)))
-        by_id = {a.actor_id: a for a in actors}
+        by_id = {a.actor_id: a for a in actors if a.actor_id not in unknown}
         out = commands_for(
             out, by_id, commands, config.command_share, config.phrasing, config.max_words
         )
@@ -85,6 +98,7 @@ def _generate_base(
     n: int,
     region: ReferableRegion,
     config: PromptConfig,
+    unknown: frozenset[int] = frozenset(),
 ) -> list[Prompt]:
     """The base language's prompts (:func:`generate_prompts`)."""
     feats = actor_features(actors)
@@ -124,6 +138,52 @@ def _generate_base(
         wide = too_wide(variants, config.classes)
         if key in seen_text or len(text.split()) > config.max_words or wide:
             continue
+        prompt = Prompt(text, res.ids, pred.tags, pred, variants)
+        if not motion_robust(prompt, actors, unknown, region):
+            continue
         seen_text.add(key)
-        out.append(Prompt(text, res.ids, pred.tags, pred, variants))
+        out.append(prompt)
     return out
+
+
+def motion_hypotheses(actor: Actor) -> list[np.ndarray]:
+    """Ground velocities ``(2,)`` an actor of unknown motion might have: standing still, and
+    each of :data:`HYPOTHESIS_SPEEDS` along and against its heading and across it both ways."""
+    yaw = float(actor.box[6])
+    along = np.array([np.cos(yaw), np.sin(yaw)])
+    across = np.array([-along[1], along[0]])
+    out = [np.zeros(2)]
+    for speed in HYPOTHESIS_SPEEDS:
+        out += [speed * along, -speed * along, speed * across, -speed * across]
+    return out
+
+
+def motion_robust(
+    prompt: Prompt,
+    actors: Sequence[Actor],
+    unknown: Collection[int],
+    region: ReferableRegion = DEFAULT_REGION,
+) -> bool:
+    """Whether ``prompt``'s referent set stays what it is, and unambiguous, whatever the actors
+    ``unknown`` (ids) do: resolved again with each of :func:`motion_hypotheses` given to all of
+    them at once (hypothesis ``i`` to each; a predicate filters actors one by one, so this tries
+    every hypothesis on every actor). Without unknown actors, always; a prompt of another family
+    than ``attribute`` (no predicate to resolve again) only without them."""
+    if not unknown:
+        return True
+    if prompt.predicate is None or prompt.family != "attribute" or prompt.expression is not None:
+        return False
+    moved = [a for a in actors if a.actor_id in unknown]
+    if not moved:
+        return True
+    hypotheses = [motion_hypotheses(a) for a in moved]
+    for i in range(len(hypotheses[0])):
+        velocity = {a.actor_id: h[i] for a, h in zip(moved, hypotheses, strict=True)}
+        tried = [
+            replace(a, velocity=velocity[a.actor_id]) if a.actor_id in velocity else a
+            for a in actors
+        ]
+        res = analyse(prompt.predicate, tried, region)
+        if not res.usable or res.ids != prompt.referent_ids:
+            return False
+    return True
