@@ -131,3 +131,20 @@ def test_paired_iou_is_the_matrix_at_those_pairs():
     assert paired_bev_iou(np.zeros((0, 7)), np.zeros((0, 7))).shape == (0,)
     with pytest.raises(ValueError, match="against"):
         paired_bev_iou(a[:2], b[:3])
+
+
+def test_points_in_footprints_per_box_with_margin() -> None:
+    from scenes.geometry.boxes import points_in_footprints
+
+    boxes = np.array(
+        [[0.0, 0.0, 0.0, 4.0, 2.0, 1.5, 0.0], [10.0, 0.0, 5.0, 4.0, 2.0, 1.5, np.pi / 2]]
+    )
+    xy = np.array([[1.9, 0.9, 99.0], [2.3, 0.0, 0.0], [10.0, 1.9, 0.0], [11.9, 0.0, 0.0]])
+    inside = points_in_footprints(xy, boxes)
+    assert inside.shape == (4, 2)
+    np.testing.assert_array_equal(
+        inside, [[True, False], [False, False], [False, True], [False, False]]
+    )
+    grown = points_in_footprints(xy, boxes, margin=0.5)
+    np.testing.assert_array_equal(grown[:, 0], [True, True, False, False])
+    assert points_in_footprints(np.zeros((0, 2)), boxes).shape == (0, 2)

@@ -51,6 +51,7 @@ from model.tpcnet import TPCNet
 from model.training.config import PromptDraw
 from scenes.datasets.frames import AnnotatedRegion, FrameItem
 from scenes.geometry.actors import Actor
+from scenes.geometry.boxes import points_in_footprints
 from scenes.geometry.calib import Calibration
 from scenes.language.prompts import Prompt, PromptConfig, generate_prompts
 from scenes.language.prompts.noise import perturb
@@ -343,13 +344,7 @@ def in_bev_footprint(xy: np.ndarray, boxes: np.ndarray, margin: float = 0.0) -> 
     """``(N,)`` bool: which ``(N, 2)`` ground positions lie inside the bird's-eye footprint of any
     of ``boxes`` ``(J, 7)`` (LiDAR frame), each grown by ``margin`` metres on every side."""
     pts = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-    out = np.zeros(len(pts), dtype=bool)
-    for box in np.asarray(boxes, dtype=np.float64).reshape(-1, 7):
-        d = pts - box[:2]
-        c, s = np.cos(box[6]), np.sin(box[6])
-        along, across = d[:, 0] * c + d[:, 1] * s, -d[:, 0] * s + d[:, 1] * c
-        out |= (np.abs(along) <= box[3] / 2 + margin) & (np.abs(across) <= box[4] / 2 + margin)
-    return out
+    return points_in_footprints(pts, boxes, margin).any(axis=1)
 
 
 @functools.lru_cache(maxsize=64)

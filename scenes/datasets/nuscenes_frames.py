@@ -109,16 +109,17 @@ def open_talk2car(
 
 def frame_actors(
     frame: Any, model_class: Any, classes: ClassSet = VOD
-) -> tuple[tuple[Actor, ...], np.ndarray]:
+) -> tuple[tuple[Actor, ...], np.ndarray, tuple[int, ...] | None]:
     """The actors of a ``NuScenesFrame`` (annotations whose category ``model_class`` maps into
-    ``classes``, id = annotation index, velocity the frame's where known, else zero) and the
-    ``(J, 7)`` boxes of the others (:attr:`FrameItem.ignore_boxes`)."""
+    ``classes``, id = annotation index, velocity the frame's where known, else zero), the
+    ``(J, 7)`` boxes of the others (:attr:`FrameItem.ignore_boxes`) and the ids of the actors
+    whose velocity is unknown (:attr:`FrameItem.unknown_motion`; None: a frame without
+    velocities)."""
     boxes = np.asarray(frame.boxes, dtype=np.float64).reshape(-1, 7)
-    velocities = getattr(frame, "velocities", None)
-    if velocities is None:
-        velocities = np.full((len(boxes), 2), np.nan)
+    given = getattr(frame, "velocities", None)
+    velocities = np.full((len(boxes), 2), np.nan) if given is None else given
     velocities = np.asarray(velocities, dtype=np.float64).reshape(len(boxes), 2)
-    actors, ignored = [], []
+    actors, ignored, unknown = [], [], []
     for i, (box, category, attributes) in enumerate(
         zip(boxes, frame.categories, frame.attributes, strict=True)
     ):
@@ -133,7 +134,10 @@ def frame_actors(
         else:
             known = np.isfinite(velocities[i]).all()
             actors.append(Actor(i, cls, box.copy(), velocities[i].copy() if known else np.zeros(2)))
-    return tuple(actors), np.array(ignored, dtype=np.float64).reshape(-1, 7)
+            if not known:
+                unknown.append(i)
+    ignored_boxes = np.array(ignored, dtype=np.float64).reshape(-1, 7)
+    return tuple(actors), ignored_boxes, None if given is None else tuple(unknown)
 
 
 def _model_class(classes: ClassSet) -> Any:
@@ -213,12 +217,7 @@ class NuScenesFrames(Dataset):
         """Frame ``index`` as read (not augmented)."""
         token = self.ids[index]
         frame = self.root.frame(token)
-        actors, ignored = frame_actors(frame, self.model_class, self.classes)
-        velocities = getattr(frame, "velocities", None)
-        unknown_motion = None
-        if velocities is not None:
-            finite = np.isfinite(np.asarray(velocities, dtype=np.float64)).all(axis=1)
-            unknown_motion = tuple(a.actor_id for a in actors if not finite[a.actor_id])
+        actors, ignored, unknown_motion = frame_actors(frame, self.model_class, self.classes)
         known = {a.actor_id for a in actors}
         given = []
         for command in self.by_sample[token]:

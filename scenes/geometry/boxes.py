@@ -92,6 +92,26 @@ def points_in_boxes(points: np.ndarray, boxes: np.ndarray) -> np.ndarray:
     )
 
 
+def points_in_footprints(xy: np.ndarray, boxes: np.ndarray, margin: float = 0.0) -> np.ndarray:
+    """Which ground positions lie inside which boxes' bird's-eye footprints, each grown by
+    ``margin`` metres on every side (boundary included; z is not looked at).
+
+    Args:
+        xy: ``(N, >=2)``; only x, y are used. LiDAR frame.
+        boxes: ``(K, 7)``.
+
+    Returns:
+        ``(N, K)`` bool.
+    """
+    pts = np.asarray(xy, dtype=np.float64)[:, :2]
+    b = _as_boxes(boxes)
+    d = pts[:, None, :] - b[None, :, :2]  # (N, K, 2)
+    cos, sin = np.cos(b[:, 6]), np.sin(b[:, 6])
+    along = d[..., 0] * cos + d[..., 1] * sin
+    across = -d[..., 0] * sin + d[..., 1] * cos
+    return (np.abs(along) <= b[:, 3] / 2 + margin) & (np.abs(across) <= b[:, 4] / 2 + margin)
+
+
 def _cross(o: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """z of (a - o) x (b - o) for broadcastable ``(..., 2)`` arrays."""
     return (a[..., 0] - o[..., 0]) * (b[..., 1] - o[..., 1]) - (a[..., 1] - o[..., 1]) * (

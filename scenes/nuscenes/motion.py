@@ -30,6 +30,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from scenes.geometry.boxes import points_in_footprints
+
 __all__ = [
     "MAX_SPEED",
     "MAX_TIME_GAP",
@@ -79,18 +81,6 @@ def attribute_velocity(attributes: Sequence[Sequence[str]]) -> np.ndarray:
     return out
 
 
-def _in_boxes(xy: np.ndarray, boxes: np.ndarray, margin: float) -> np.ndarray:
-    """``(K, M)`` bool: point ``m`` ``(M, 2)`` inside box ``k``'s BEV footprint grown by
-    ``margin`` (boxes ``(K, 7)`` ``x, y, z, l, w, h, yaw``)."""
-    d = xy[None, :, :] - boxes[:, None, :2]
-    c, s = np.cos(boxes[:, 6])[:, None], np.sin(boxes[:, 6])[:, None]
-    along = d[..., 0] * c + d[..., 1] * s
-    across = -d[..., 0] * s + d[..., 1] * c
-    return (np.abs(along) <= boxes[:, 3:4] / 2 + margin) & (
-        np.abs(across) <= boxes[:, 4:5] / 2 + margin
-    )
-
-
 def radar_velocity(boxes: np.ndarray, radar: np.ndarray) -> np.ndarray:
     """``(K, 2)`` float64 the radar estimate of each box's ground velocity (module docstring),
     NaN where unknown.
@@ -105,7 +95,7 @@ def radar_velocity(boxes: np.ndarray, radar: np.ndarray) -> np.ndarray:
     key = radar[radar[:, 6] == 0]
     if not len(boxes) or not len(key):
         return out
-    inside = _in_boxes(key[:, :2], boxes, RADAR_MARGIN)
+    inside = points_in_footprints(key, boxes, RADAR_MARGIN).T  # (K, M)
     for k in np.flatnonzero(inside.any(axis=1)):
         v_r = float(np.median(key[inside[k], 5]))
         centre = boxes[k, :2]
