@@ -143,6 +143,8 @@ def test_freeze_scene_threads_follow_the_machine(nusc, tmp_path, monkeypatch):
     from model.training.data import TALK2CAR_WEIGHT
 
     assert freeze_scene_threads(0.0, 2) == 2 and freeze_scene_threads(0.0, 0) == 1
+    assert freeze_scene_threads(0.0, 2, processes=2) == 1  # torchrun's two ranks share the cores
+    assert freeze_scene_threads(0.0, 8, processes=2) == 4
     assert freeze_scene_threads(IDLE_LOAD, 2) == FREEZE_SCENE_THREADS == 1
     args = ["--data", str(nusc), "--talk2car", str(nusc / "commands"), "--device", "cpu"]
     args += ["--out", str(tmp_path / "run")]
@@ -167,6 +169,9 @@ def test_freeze_scene_threads_follow_the_machine(nusc, tmp_path, monkeypatch):
         torch.set_num_threads(1)
         parse_args([*args, "--freeze-scene"])
         assert torch.get_num_threads() == 2
+        monkeypatch.setenv("LOCAL_WORLD_SIZE", "2")  # under torchrun --nproc_per_node 2
+        parse_args([*args, "--freeze-scene"])
+        assert torch.get_num_threads() == 1
     finally:
         torch.set_num_threads(before)
 
