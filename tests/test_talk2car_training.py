@@ -136,11 +136,13 @@ def test_freeze_scene_threads_follow_the_machine(nusc, tmp_path, monkeypatch):
         FREEZE_SCENE_THREADS,
         IDLE_LOAD,
         LABELLED_PROMPTS_PER_SCENE,
+        TALK2CAR_LABEL_PROMPTS,
         TALK2CAR_PROMPTS_PER_SCENE,
         freeze_scene_threads,
         parse_args,
+        talk2car_label_prompts,
     )
-    from model.training.data import TALK2CAR_WEIGHT
+    from model.training.data import talk2car_weight
 
     assert freeze_scene_threads(0.0, 2) == 2 and freeze_scene_threads(0.0, 0) == 1
     assert freeze_scene_threads(0.0, 2, processes=2) == 1  # torchrun's two ranks share the cores
@@ -155,9 +157,15 @@ def test_freeze_scene_threads_follow_the_machine(nusc, tmp_path, monkeypatch):
         cfg, _ = parse_args([*args, "--freeze-scene"])
         assert torch.get_num_threads() == FREEZE_SCENE_THREADS
         assert cfg.prompts_per_scene == TALK2CAR_PROMPTS_PER_SCENE > LABELLED_PROMPTS_PER_SCENE
-        assert cfg.label_prompts == 24
-        # each commanded sample seen TALK2CAR_WEIGHT times an epoch unless --data-weight says
-        assert cfg.roots()[0].weight == TALK2CAR_WEIGHT > 1
+        # a root of few commanded samples is seen several times an epoch unless --data-weight says
+        samples = cfg.roots()[0].samples
+        assert (
+            samples
+            and samples
+            >= len(read_commands(nusc / "commands", "train", NuScenesRoot(nusc)).commands) / 20
+        )
+        assert cfg.label_prompts == talk2car_label_prompts(samples) == TALK2CAR_LABEL_PROMPTS
+        assert cfg.roots()[0].weight == talk2car_weight(samples) > 1
         assert parse_args([*args, "--data-weight", "1"])[0].roots()[0].weight == 1
         torch.set_num_threads(2)
         parse_args([*args, "--freeze-scene", "--threads", "2"])
@@ -174,6 +182,57 @@ def test_freeze_scene_threads_follow_the_machine(nusc, tmp_path, monkeypatch):
         assert torch.get_num_threads() == 1
     finally:
         torch.set_num_threads(before)
+
+
+def test_talk2car_defaults_follow_the_commanded_samples(tmp_path):
+    """A nuScenes root's default weight and label prompts follow its commanded training samples,
+    counted from the command file alone: few samples get more passes and more label prompts
+    each, many get one pass and LABEL_PROMPTS, so a run's cost grows no faster than its root."""
+    from model.training.config import (
+        LABEL_PROMPTS,
+        TALK2CAR_LABEL_PROMPTS,
+        talk2car_label_prompts,
+    )
+    from model.training.data import TALK2CAR_MAX_WEIGHT, talk2car_weight
+    from scenes.nuscenes.talk2car import CommandFileError, commanded_samples
+
+    assert talk2car_weight(170) == TALK2CAR_MAX_WEIGHT == 3.0
+    assert talk2car_weight(255) == 2.0 and talk2car_weight(510) == talk2car_weight(7000) == 1.0
+    assert talk2car_label_prompts(170) == TALK2CAR_LABEL_PROMPTS == 96
+    assert talk2car_label_prompts(340) == 48
+    assert talk2car_label_prompts(680) == talk2car_label_prompts(7000) == LABEL_PROMPTS == 24
+    cmds = [{"sample_token": t, "command": "x"} for t in ("a", "b", "a", "c")]
+    (tmp_path / "train_commands.json").write_text(json.dumps({"commands": cmds}))
+    assert commanded_samples(tmp_path, "train") == 3
+    with pytest.raises(CommandFileError, match=r"val_commands\.json"):
+        commanded_samples(tmp_path, "val")
+    (tmp_path / "val_commands.json").write_text("[]")
+    with pytest.raises(CommandFileError, match="field 'commands'"):
+        commanded_samples(tmp_path, "val")
+
+
+def test_a_talk2car_run_builds_its_referent_stage_without_dropout(nusc, tmp_path):
+    """A run on nuScenes roots builds its model with TALK2CAR_REFERENT_DROPOUT in the referent
+    stage unless --referent-dropout says otherwise; a Talk2Radar root keeps the preset's; a value
+    outside [0, 1) is refused with the flag named."""
+    from model.config import build_config
+    from model.training.config import TALK2CAR_REFERENT_DROPOUT, TrainingError, parse_args
+    from model.training.start import start_model
+
+    args = ["--data", str(nusc), "--talk2car", str(nusc / "commands"), "--device", "cpu"]
+    args += ["--out", str(tmp_path / "run"), "--freeze-scene", "--threads", "1"]
+    cfg, _ = parse_args(args)
+    assert cfg.referent_dropout == TALK2CAR_REFERENT_DROPOUT
+    model, _, _ = start_model(cfg, False, 0, 1, torch.device("cpu"))
+    preset = build_config("small").referent.dropout
+    assert model.cfg.referent.dropout == TALK2CAR_REFERENT_DROPOUT != preset
+    assert all(
+        m.p == TALK2CAR_REFERENT_DROPOUT for m in model.modules() if isinstance(m, torch.nn.Dropout)
+    )
+    cfg, _ = parse_args([*args, "--referent-dropout", "0.2"])
+    assert start_model(cfg, False, 0, 1, torch.device("cpu"))[0].cfg.referent.dropout == 0.2
+    with pytest.raises(TrainingError, match="--referent-dropout"):
+        parse_args([*args, "--referent-dropout", "1.5"])
 
 
 def test_commands_are_banked_with_rewordings(nusc):

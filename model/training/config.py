@@ -62,6 +62,36 @@ is not given: a sample holds several commands beside its :data:`LABEL_PROMPTS` l
 with 4 a step a command was drawn about 4 times in a 30-epoch ``--freeze-scene`` run (docs/
 RESULTS.md, "Talk2Car on synthetic nuScenes roots": top-1 and the step's cost measured)."""
 
+TALK2CAR_LABEL_PROMPTS = 96
+"""The most ``--label-prompts`` a run on nuScenes roots with Talk2Car commands gets when the flag is
+not given (:func:`talk2car_label_prompts`): a Talk2Car root of few samples teaches a referent stage
+learnt from it (``--freeze-scene --init-detector``) more the more sentences about each sample it
+reads: 96 label prompts a sample instead of :data:`LABEL_PROMPTS` gave 69.0 % top-1 against 68.0 %
+on 2,125 val commands of another seed (docs/RESULTS.md, "Talk2Car on synthetic nuScenes roots"),
+for about a minute more of prompt encoding."""
+
+TALK2CAR_LABEL_BUDGET = 96 * 170
+"""Label prompts a run on nuScenes roots generates in all (per view) by default: a root of 170
+commanded samples gets :data:`TALK2CAR_LABEL_PROMPTS` a sample, one of more samples fewer (never
+under :data:`LABEL_PROMPTS`), so the prompt encoding stays about a minute and a half."""
+
+
+def talk2car_label_prompts(samples: int) -> int:
+    """``--label-prompts`` of a run on nuScenes roots of ``samples`` commanded training samples in
+    all: :data:`TALK2CAR_LABEL_BUDGET` shared among them, between :data:`LABEL_PROMPTS` and
+    :data:`TALK2CAR_LABEL_PROMPTS` (96 for 170 samples, 48 for 340, 24 from 680)."""
+    if samples <= 0:
+        return TALK2CAR_LABEL_PROMPTS
+    return int(min(TALK2CAR_LABEL_PROMPTS, max(LABEL_PROMPTS, TALK2CAR_LABEL_BUDGET // samples)))
+
+
+TALK2CAR_REFERENT_DROPOUT = 0.0
+"""``--referent-dropout`` when every root is a nuScenes root with Talk2Car commands and the flag is
+not given (the preset's ``ReferentConfig.dropout`` otherwise). A referent stage learnt on a
+root's cached samples gains nothing from dropout inside its attention blocks, and dropout's random
+masks are a third of a cached step's time on the CPU (docs/RESULTS.md, "Talk2Car on synthetic
+nuScenes roots")."""
+
 
 class TrainingError(RuntimeError):
     """Training cannot go on (bad data, non-finite loss); the message says why."""
@@ -99,7 +129,8 @@ class TrainConfig:
         (),
         flag="--data-weight",
         help="referent path: times each frame of the matching --data root (in order) is seen "
-        "per epoch (default 1; a nuScenes root: model.training.data.TALK2CAR_WEIGHT)",
+        "per epoch (default 1; a nuScenes root: model.training.data.talk2car_weight of its "
+        "commanded training samples, 3 for 170 of them, 1 from 510)",
     )
     scene_labels: tuple[str, ...] = option(
         (),
@@ -130,6 +161,12 @@ class TrainConfig:
         help="the class set the model detects and grounds (scenes.geometry.classes): vod (Car, "
         "Pedestrian, Cyclist) or nuscenes (nuScenes' 10 detection classes); labels of other "
         "classes are no targets",
+    )
+    referent_dropout: float | None = option(
+        None,
+        help="referent path: dropout inside the referent stage's attention blocks while training "
+        f"(default: {TALK2CAR_REFERENT_DROPOUT} when every root is a nuScenes root with "
+        "--talk2car, the preset's ReferentConfig.dropout otherwise)",
     )
     grounding: GroundingKind = option(
         "referent",
@@ -204,9 +241,11 @@ class TrainConfig:
     )
     label_prompts: int | None = option(
         None,
-        help="referent path, roots with --scene-labels: prompts generated per frame from its "
-        "labelled boxes (class, depth and side only: their motion is unknown) beside the given "
-        f"one (default {LABEL_PROMPTS} with --scene-labels; 0: given prompts only)",
+        help="referent path, roots with --scene-labels or --talk2car: prompts generated per frame "
+        "from its labelled boxes (class, depth and side; motion where the boxes' velocities are "
+        f"known) beside the given ones (default {LABEL_PROMPTS} with --scene-labels, "
+        f"up to {TALK2CAR_LABEL_PROMPTS} when every root is a nuScenes root: "
+        "talk2car_label_prompts; 0: given prompts only)",
     )
     language: LanguageKind = option(
         "base",
@@ -275,13 +314,23 @@ class TrainConfig:
         except DataSpecError as exc:
             raise TrainingError(str(exc)) from exc
         labelled = [r.labelled for r in roots]
+        talk2car = all(r.talk2car is not None for r in roots)
         if self.label_prompts is None:
-            object.__setattr__(self, "label_prompts", LABEL_PROMPTS if any(labelled) else 0)
+            count = LABEL_PROMPTS if any(labelled) else 0
+            if talk2car:
+                count = talk2car_label_prompts(sum(r.samples or 0 for r in roots))
+            object.__setattr__(self, "label_prompts", count)
         if self.prompts_per_scene is None:
             per_scene = LABELLED_PROMPTS_PER_SCENE if all(labelled) else GENERATED_PROMPTS_PER_SCENE
-            if all(r.talk2car is not None for r in roots):
+            if talk2car:
                 per_scene = TALK2CAR_PROMPTS_PER_SCENE
             object.__setattr__(self, "prompts_per_scene", per_scene)
+        if self.referent_dropout is None and talk2car:
+            object.__setattr__(self, "referent_dropout", TALK2CAR_REFERENT_DROPOUT)
+        if self.referent_dropout is not None and not 0.0 <= self.referent_dropout < 1.0:
+            raise TrainingError(
+                f"--referent-dropout must be in [0, 1), got {self.referent_dropout}"
+            )
         if self.given_variants < 0:
             raise TrainingError(f"--given-variants must be >= 0, got {self.given_variants}")
         if self.label_prompts < 0:
@@ -343,12 +392,15 @@ class TrainConfig:
         )
         return PromptDraw(self.prompts_per_scene, self.label_prompts, config)
 
-    def model_overrides(self) -> dict[str, str]:
+    def model_overrides(self) -> dict[str, object]:
         """The ``build_model`` overrides given on the command line."""
         names = (
             "modalities", "fusion", "text_fusion", "anchor", "text_encoder", "grounding", "classes"
         )  # fmt: skip
-        return {n: getattr(self, n) for n in names if getattr(self, n) is not None}
+        out = {n: getattr(self, n) for n in names if getattr(self, n) is not None}
+        if self.referent_dropout is not None:
+            out["referent__dropout"] = self.referent_dropout
+        return out
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -420,10 +472,14 @@ __all__ = [
     "IDLE_LOAD",
     "LABELLED_PROMPTS_PER_SCENE",
     "LABEL_PROMPTS",
+    "TALK2CAR_LABEL_BUDGET",
+    "TALK2CAR_LABEL_PROMPTS",
     "TALK2CAR_PROMPTS_PER_SCENE",
+    "TALK2CAR_REFERENT_DROPOUT",
     "PromptDraw",
     "TrainConfig",
     "TrainingError",
     "freeze_scene_threads",
     "parse_args",
+    "talk2car_label_prompts",
 ]

@@ -3,8 +3,8 @@
 ``python -m model.train --data ROOT [--data ROOT2 ...] [--data-weight W ...] [--scene-labels VOD
 ...]``: each ``--data`` root is one :class:`RootSpec`. ``--data-weight`` and ``--scene-labels`` pair
 with the ``--data`` roots in order (give ``none`` for a root without scene labels; fewer values
-than roots leave the rest at weight 1, a nuScenes root at :data:`TALK2CAR_WEIGHT`, and without
-scene labels). A root given scene labels, or one
+than roots leave the rest at weight 1, a nuScenes root at :func:`talk2car_weight` of its
+commanded training samples, and without scene labels). A root given scene labels, or one
 without a ``meta/`` folder (a release as it comes), trains on its labels and given prompts and
 never reads a sidecar; a synthetic root with its sidecar trains on generated prompts
 (:class:`scenes.datasets.frames.FrameDataset`). So one command can pre-train on our world and
@@ -34,17 +34,34 @@ from torch.utils.data import Dataset
 from scenes.datasets.frames import FrameDataset, FrameItem
 from scenes.datasets.nuscenes_frames import NuScenesFrames, is_nuscenes_root, open_talk2car
 from scenes.geometry.classes import VOD, ClassSet
+from scenes.nuscenes.talk2car import CommandFileError, commanded_samples
 from scenes.talk2radar.scene_labels import SceneLabels
 
 NO_SCENE_LABELS = "none"
 """The ``--scene-labels`` value of a root that has none."""
 
-TALK2CAR_WEIGHT = 2.0
-"""A nuScenes root's ``--data-weight`` when none is given: each commanded sample is seen twice an
-epoch. Such a root has few samples, each holding several commands, so one pass a epoch under-trains
-a referent stage learnt from its commands: from scratch (``--freeze-scene --init-detector``), 30
-epochs of one pass reach 63.7 % top-1 on 2,125 val commands of another seed and 60 epochs 67.3 %
-(docs/RESULTS.md, "Talk2Car on synthetic nuScenes roots")."""
+TALK2CAR_VISITS = 510
+"""Sample visits an epoch that a nuScenes root gets when ``--data-weight`` is not given: its weight
+is this over its commanded training samples, between 1 and :data:`TALK2CAR_MAX_WEIGHT`
+(:func:`talk2car_weight`). A Talk2Car root of few samples, each holding several commands, is
+seen several times an epoch, since one pass an epoch under-trains a referent stage learnt from
+its commands (``--freeze-scene --init-detector``: 30 epochs of one pass over 170 samples reach
+63.7 % top-1 on 2,125 val commands of another seed, of two passes 66.7 %, of three 70.1 % with
+:data:`model.training.config.TALK2CAR_LABEL_PROMPTS` label prompts; docs/RESULTS.md, "Talk2Car on
+synthetic nuScenes roots"); a root of 510 samples or more (the release: about 7,000) is seen once,
+so that a 30-epoch run's length grows with its samples no faster than it must."""
+
+TALK2CAR_MAX_WEIGHT = 3.0
+"""The largest default weight of a nuScenes root (:data:`TALK2CAR_VISITS`)."""
+
+
+def talk2car_weight(samples: int) -> float:
+    """A nuScenes root's default ``--data-weight`` for ``samples`` commanded training samples:
+    ``TALK2CAR_VISITS / samples`` within ``[1, TALK2CAR_MAX_WEIGHT]`` (3 for 170 samples, 2 for
+    255, 1 from 510)."""
+    if samples <= 0:
+        return TALK2CAR_MAX_WEIGHT
+    return float(min(TALK2CAR_MAX_WEIGHT, max(1.0, TALK2CAR_VISITS / samples)))
 
 
 class DataSpecError(ValueError):
@@ -61,12 +78,15 @@ class RootSpec:
         scene_labels: A View-of-Delft root with the frames' full labels, or None.
         talk2car: A nuScenes root's Talk2Car command folder (``{split}_commands.json``), or None
             (a Talk2Radar root).
+        samples: A nuScenes root's commanded training samples
+            (:func:`scenes.nuscenes.talk2car.commanded_samples`), or None.
     """
 
     path: str
     weight: float = 1.0
     scene_labels: str | None = None
     talk2car: str | None = None
+    samples: int | None = None
 
     @property
     def labelled(self) -> bool:
@@ -104,13 +124,22 @@ def root_specs(
     out = []
     for i, path in enumerate(data):
         nuscenes = is_nuscenes_root(path)
-        weight = float(weights[i]) if i < len(weights) else TALK2CAR_WEIGHT if nuscenes else 1.0
-        if not math.isfinite(weight) or weight <= 0:
-            raise DataSpecError(f"--data-weight {weights[i]!r} of {path}: must be a number > 0")
         labels = scene_labels[i] if i < len(scene_labels) else None
         labels = None if labels in (None, NO_SCENE_LABELS) else labels
         commands = talk2car[i] if i < len(talk2car) else None
         commands = None if commands in (None, NO_SCENE_LABELS) else commands
+        samples = None
+        if nuscenes and commands is not None:
+            try:
+                samples = commanded_samples(commands, "train")
+            except CommandFileError as exc:
+                raise DataSpecError(str(exc)) from exc
+        if i < len(weights):
+            weight = float(weights[i])
+        else:
+            weight = talk2car_weight(samples) if samples is not None else 1.0
+        if not math.isfinite(weight) or weight <= 0:
+            raise DataSpecError(f"--data-weight {weights[i]!r} of {path}: must be a number > 0")
         if nuscenes and commands is None:
             raise DataSpecError(
                 f"--data {path} is a nuScenes root (it holds a v1.0-* folder): give its Talk2Car "
@@ -126,7 +155,7 @@ def root_specs(
                 f"--scene-labels {labels} pairs with the nuScenes root {path}, whose own "
                 "annotations are its scene labels; give 'none'"
             )
-        out.append(RootSpec(path, weight, labels, commands))
+        out.append(RootSpec(path, weight, labels, commands, samples))
     return tuple(out)
 
 
@@ -202,11 +231,13 @@ class MixedFrames(Dataset):
 
 __all__ = [
     "NO_SCENE_LABELS",
-    "TALK2CAR_WEIGHT",
+    "TALK2CAR_MAX_WEIGHT",
+    "TALK2CAR_VISITS",
     "DataSpecError",
     "MixedFrames",
     "RootSpec",
     "TrainingFrames",
     "frame_dataset",
     "root_specs",
+    "talk2car_weight",
 ]

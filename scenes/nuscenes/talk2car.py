@@ -44,6 +44,7 @@ __all__ = [
     "Referent",
     "Talk2CarCommand",
     "camera_box_to_model",
+    "commanded_samples",
     "commands_file",
     "model_box_to_camera",
     "read_commands",
@@ -189,6 +190,23 @@ def _parse(path: Path, i: int, rec: object) -> Talk2CarCommand:
         box_2d=tuple(float(v) for v in box_2d),
         t2c_img=rec["t2c_img"],
     )
+
+
+def commanded_samples(folder: str | Path, split: str) -> int:
+    """How many samples ``folder/{split}_commands.json``'s commands refer to (distinct
+    ``sample_token`` values: CAM_FRONT keyframes, one per sample), read from the file alone,
+    without the nuScenes root; commands that :func:`read_commands` would skip are counted too.
+
+    Raises:
+        CommandFileError: a missing file, or one without its ``commands`` list (one line).
+    """
+    path = commands_file(folder, split)
+    if not path.is_file():
+        raise CommandFileError(f"{path}: no such Talk2Car command file")
+    data = read_json_file(path, "Talk2Car command file", CommandFileError)
+    if not isinstance(data, dict) or not isinstance(data.get("commands"), list):
+        raise CommandFileError(f"{path}: field 'commands': expected a JSON object with a list")
+    return len({c.get("sample_token") for c in data["commands"] if isinstance(c, dict)})
 
 
 def read_commands(
