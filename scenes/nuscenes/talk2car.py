@@ -200,13 +200,23 @@ def commanded_samples(folder: str | Path, split: str) -> int:
     Raises:
         CommandFileError: a missing file, or one without its ``commands`` list (one line).
     """
+    _, data = _command_data(folder, split)
+    return len({c.get("sample_token") for c in data["commands"] if isinstance(c, dict)})
+
+
+def _command_data(folder: str | Path, split: str) -> tuple[Path, dict]:
+    """``folder/{split}_commands.json`` and its JSON object, whose ``commands`` is a list.
+
+    Raises:
+        CommandFileError: a missing file, or one without its ``commands`` list (one line).
+    """
     path = commands_file(folder, split)
     if not path.is_file():
         raise CommandFileError(f"{path}: no such Talk2Car command file")
     data = read_json_file(path, "Talk2Car command file", CommandFileError)
     if not isinstance(data, dict) or not isinstance(data.get("commands"), list):
         raise CommandFileError(f"{path}: field 'commands': expected a JSON object with a list")
-    return len({c.get("sample_token") for c in data["commands"] if isinstance(c, dict)})
+    return path, data
 
 
 def read_commands(
@@ -230,12 +240,7 @@ def read_commands(
         CommandFileError: a missing or malformed file (one line: file, command index, field), a
             command_token seen twice.
     """
-    path = commands_file(folder, split)
-    if not path.is_file():
-        raise CommandFileError(f"{path}: no such Talk2Car command file")
-    data = read_json_file(path, "Talk2Car command file", CommandFileError)
-    if not isinstance(data, dict) or not isinstance(data.get("commands"), list):
-        raise CommandFileError(f"{path}: field 'commands': expected a JSON object with a list")
+    path, data = _command_data(folder, split)
     scenes = data.get("scene_tokens", [])
     if not isinstance(scenes, list) or not all(isinstance(s, str) for s in scenes):
         raise CommandFileError(f"{path}: field 'scene_tokens': expected a list of tokens")
