@@ -5,7 +5,8 @@ For each kept command (``scenes.nuscenes.talk2car.read_commands``), whether the 
 detector proposes a box of the referent's class whose bird's-eye centre lies within the top-1
 distance of the referent (1.0 m for a car, 0.5 m for a pedestrian or cyclist:
 ``model.evaluation.talk2car.metrics.TOP1_DISTANCE``): the share of commands a perfect referent
-stage could answer. Printed overall and per class, with the candidates per sample.
+stage could answer. Printed overall and per class, with the candidates per sample, and on the rain, night and fog subsets of the scene descriptions
+(``model.evaluation.talk2car.report.subset_of``).
 """
 
 from __future__ import annotations
@@ -28,9 +29,11 @@ __all__ = ["Talk2CarRecallOptions", "build_parser", "detector_recall", "main"]
 def detector_recall(
     data: Path, split: str, radar_sweeps: int, checkpoint: Path
 ) -> dict[str, tuple[int, int]]:
-    """``class -> (commands whose referent is detected, commands)`` plus ``"all"``."""
+    """``class -> (commands whose referent is detected, commands)`` plus ``"all"`` and each
+    scene subset that holds commands (``"rain"``, ``"night"``, ``"fog"``)."""
     from model.checkpoint import load_checkpoint
     from model.evaluation.talk2car.metrics import TOP1_DISTANCE
+    from model.evaluation.talk2car.report import subset_of
     from scenes.nuscenes.root import NuScenesRoot
     from scenes.nuscenes.talk2car import read_commands
 
@@ -53,7 +56,7 @@ def detector_recall(
             gaps = np.hypot(*(boxes[:, :2] - referent.box[:2]).T)
             same = labels == model.cfg.class_set.index(referent.cls)
             hit = bool(((gaps < TOP1_DISTANCE[referent.cls]) & same).any())
-            for key in ("all", referent.cls):
+            for key in (referent.cls, *subset_of(frame.description)):
                 counts.setdefault(key, [0, 0])
                 counts[key][0] += hit
                 counts[key][1] += 1

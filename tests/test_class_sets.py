@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 import torch
 
-from model.checkpoint import DEFAULT_CHECKPOINT, load_checkpoint, read_checkpoint
+from model.checkpoint import DEFAULT_CHECKPOINT, load_checkpoint, read_checkpoint, write_payload
 from model.config import HeadConfig
 from model.core.grid import BevGrid
 from model.core.labelled import LabelledBoxes
@@ -232,7 +232,8 @@ def test_labelled_candidates_of_the_models_set_only(untrained_model):
 
 def test_vod_checkpoint_refused_by_a_nuscenes_run_and_loads_as_vod(truck_root, tmp_path):
     payload = read_checkpoint(DEFAULT_CHECKPOINT)
-    assert "classes" not in payload["config"]["head"]  # stored before the field existed
+    payload["config"]["head"].pop("classes", None)  # as stored before the field existed
+    assert load_checkpoint(write_payload(tmp_path / "old.pt", payload)).cfg.class_set is VOD
     assert load_checkpoint(DEFAULT_CHECKPOINT).cfg.class_set is VOD
     cfg = _cfg(
         truck_root, tmp_path / "c", classes="nuscenes", init_detector=str(DEFAULT_CHECKPOINT)

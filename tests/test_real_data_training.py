@@ -130,6 +130,41 @@ def test_freeze_scene_with_init_detector_on_a_release_root(release_root, tmp_pat
     assert referent and not all(torch.equal(own[k], ref[k]) for k in referent)
 
 
+def test_init_detector_over_init_takes_each_part_from_its_own_checkpoint(release_root, tmp_path):
+    """``--init A --init-detector B``: the scene encoder and detector are B's, the referent stage
+    A's (a retrained detector under an earlier referent stage); any other pair is refused."""
+    from model.checkpoint import save_checkpoint
+    from model.training.config import TrainConfig, TrainingError
+    from model.training.start import start_model
+
+    shipped = load_checkpoint("checkpoints/tpcnet-small.pt")
+    other = load_checkpoint("checkpoints/tpcnet-small.pt")
+    with torch.no_grad():
+        for tensor in other.state_dict().values():
+            if tensor.is_floating_point():
+                tensor.add_(1.0)
+    detector = save_checkpoint(tmp_path / "detector.pt", other)
+    cfg = TrainConfig(
+        data=(str(release_root),),
+        out=str(tmp_path / "run"),
+        init="checkpoints/tpcnet-small.pt",
+        init_detector=str(detector),
+    )
+    model, _, _ = start_model(cfg, False, 0, 1, torch.device("cpu"))
+    own, ref, moved = model.state_dict(), shipped.state_dict(), other.state_dict()
+    scene = [k for k in own if k.startswith(SCENE_MODULES) and own[k].is_floating_point()]
+    referent = [k for k in own if k.startswith("referent.") and own[k].is_floating_point()]
+    assert scene and all(torch.equal(own[k], moved[k]) for k in scene)
+    assert referent and all(torch.equal(own[k], ref[k]) for k in referent)
+    with pytest.raises(TrainingError, match="not --init-detector and --init-other-classes"):
+        TrainConfig(
+            data=(str(release_root),),
+            out="runs/x",
+            init_detector=str(detector),
+            init_other_classes=str(detector),
+        )
+
+
 def test_joint_training_on_a_release_and_a_synthetic_root(synth_root, release_root, tmp_path):
     out = tmp_path / "run"
     code = main(

@@ -95,3 +95,5 @@ def test_subsets_from_the_scene_description():
     assert subset_of("Heavy raining at the intersection") == ("all", "rain")
     assert subset_of("Nighttime, ped crossing") == ("all", "night")
     assert subset_of("Sunny, train station") == ("all",)
+    assert subset_of("Fog, peds, parked cars") == ("all", "fog")
+    assert subset_of("Foggy night") == ("all", "night", "fog")

@@ -299,3 +299,28 @@ def test_a_command_always_gets_its_best_candidate(nusc, monkeypatch):
 def _points(root, token):
     frame = root.frame(token)
     return frame.lidar, frame.radar
+
+
+def test_detector_recall_counts_each_command_once_per_class_and_subset(nusc):
+    """``bench.talk2car_recall``: every kept val command counts once under ``all``, once under
+    its referent's class and once under each subset its scene's description names."""
+    from bench.talk2car_recall import detector_recall
+    from model.evaluation.talk2car.report import subset_of
+
+    root = NuScenesRoot(nusc)
+    commands = read_commands(nusc / "commands", "val", root).commands
+    counts = detector_recall(nusc, "val", 1, Path("checkpoints/tpcnet-small.pt"))
+    assert counts["all"][1] == len(commands) > 0
+    classes = {c: 0 for c in ("Car", "Pedestrian", "Cyclist")}
+    subsets: dict[str, int] = {}
+    for command in commands:
+        scene = root.tables.records["scene"][
+            root.tables.records["sample"][command.sample_token]["scene_token"]
+        ]
+        for s in subset_of(scene["description"])[1:]:
+            subsets[s] = subsets.get(s, 0) + 1
+    assert subsets
+    for name, n in subsets.items():
+        assert counts[name][1] == n
+    assert sum(counts[c][1] for c in classes if c in counts) == len(commands)
+    assert all(0 <= hit <= n for hit, n in counts.values())

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from model.adapt.config import AdaptError
+from scenes.geometry.ground import estimate_ground, level_points
 from scenes.talk2radar.layout import VELODYNE, RootError, sample_dir
 from scenes.talk2radar.root import Talk2RadarRoot
 
@@ -43,13 +44,25 @@ class UnlabelledFrames:
         radar: Radar tree (``auto``: the first present; ``none``: no radar).
         split: An ImageSets list name, or ``""`` for every frame of the LiDAR folder.
         max_frames: The first N frames only (0: all).
+        ground_height: Given: each frame's clouds with heights above the ground estimated from its
+            LiDAR cloud, that ground this far below the origin (a checkpoint whose
+            ``PillarConfig.ground`` is ``estimated`` sees its frames so, :mod:`scenes.geometry.ground`);
+            None: as they are.
 
     Raises:
         AdaptError: not a root, no frame, or a split list that is missing or malformed (one line
             naming the path).
     """
 
-    def __init__(self, path: str | Path, radar: str = "auto", split: str = "", max_frames: int = 0):
+    def __init__(
+        self,
+        path: str | Path,
+        radar: str = "auto",
+        split: str = "",
+        max_frames: int = 0,
+        ground_height: float | None = None,
+    ):
+        self.ground_height = ground_height
         try:
             self.root = Talk2RadarRoot(
                 path, radar=None if radar == "none" else radar, sidecar=False
@@ -76,7 +89,12 @@ class UnlabelledFrames:
             sample = self.root.load_sensors(sid)
         except (RootError, ValueError, OSError) as exc:
             raise AdaptError(f"--data: {exc}") from exc
-        return SensorFrame(sid, sample.lidar, sample.radar)
+        lidar, radar = sample.lidar, sample.radar
+        if self.ground_height is not None:
+            plane = estimate_ground(lidar, self.ground_height)
+            lidar = level_points(lidar, plane, self.ground_height)
+            radar = level_points(radar, plane, self.ground_height)
+        return SensorFrame(sid, lidar, radar)
 
 
 __all__ = ["SensorFrame", "UnlabelledFrames"]

@@ -128,6 +128,9 @@ def set_up(cfg: AdaptConfig) -> AdaptRun:
             f"(step {files.progress.step_in_round} of round {files.progress.round + 1})",
             file=sys.stderr,
         )
+    pillars = model.cfg.pillars
+    if pillars.ground == "estimated":  # the frames as the model sees them at inference
+        frames.ground_height = pillars.ground_height
     scene = {id(p) for p in model.scene.parameters()}
     params = [p for p in model.parameters_in_checkpoint_order() if id(p) in scene]
     for p in model.parameters():

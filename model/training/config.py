@@ -24,6 +24,7 @@ from model.config import (
     TextEncoderKind,
     TextFusionKind,
 )
+from model.config.sections import GroundKind
 from model.training.data import DataSpecError, RootSpec, root_specs
 from scenes.language.prompts.sampling import FAMILIES, PromptConfig
 from scenes.utils.cli import command_parser, from_args, option
@@ -168,6 +169,13 @@ class TrainConfig:
         f"(default: {TALK2CAR_REFERENT_DROPOUT} when every root is a nuScenes root with "
         "--talk2car, the preset's ReferentConfig.dropout otherwise)",
     )
+    ground: GroundKind | None = option(
+        None,
+        help="referent path: heights measured from the sensor (sensor) or from the ground "
+        "estimated from each LiDAR cloud (estimated: model.config.PillarConfig.ground), in "
+        "training as at inference; default: the --init-detector or --init checkpoint's, else "
+        "sensor",
+    )
     grounding: GroundingKind = option(
         "referent",
         help="referent: text-agnostic detector + referent stage (default); tpcnet: the paper's "
@@ -182,7 +190,7 @@ class TrainConfig:
         None,
         on_resume=True,
         help="copy only the scene encoder and detector from this checkpoint; the referent stage "
-        "starts from scratch (new runs)",
+        "starts from scratch, or from --init's when both are given (new runs)",
     )
     init_other_classes: str | None = option(
         None,
@@ -336,10 +344,11 @@ class TrainConfig:
         if self.label_prompts < 0:
             raise TrainingError(f"--label-prompts must be >= 0, got {self.label_prompts}")
         given = [n for n in ("init", "init_detector", "init_other_classes") if getattr(self, n)]
-        if len(given) > 1:
+        if len(given) > 1 and given != ["init", "init_detector"]:
             flags = " and ".join("--" + n.replace("_", "-") for n in given)
             raise TrainingError(
-                f"give one of --init, --init-detector, --init-other-classes, not {flags}"
+                "give one of --init, --init-detector, --init-other-classes (or --init with "
+                f"--init-detector), not {flags}"
             )
         for name in ("epochs", "batch_size", "prompts_per_scene"):
             if getattr(self, name) < 1:
@@ -400,6 +409,8 @@ class TrainConfig:
         out = {n: getattr(self, n) for n in names if getattr(self, n) is not None}
         if self.referent_dropout is not None:
             out["referent__dropout"] = self.referent_dropout
+        if self.ground is not None:
+            out["pillars__ground"] = self.ground
         return out
 
 

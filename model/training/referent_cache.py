@@ -41,6 +41,7 @@ from model.training.referent_step import (
     _per_item,
     frame_prompts,
     in_grid_actors,
+    model_frame,
 )
 from scenes.datasets.frames import FrameDataset
 from scenes.geometry.actors import Actor
@@ -225,7 +226,7 @@ def cache_scenes(
     scenes = []
     with torch.no_grad():
         for i in tqdm(range(len(dataset)), desc="cache scenes", disable=not progress):
-            item = dataset[i]
+            item = model_frame(model, dataset[i])
             objects, view = scene_views(model, item.lidar, item.radar, item.actors, labelled)
             ids = match_detections(objects.boxes, objects.labels, item.actors, model.cfg.class_set)
             rng = np.random.default_rng((seed, 11, i))

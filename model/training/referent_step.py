@@ -50,6 +50,7 @@ from model.nets.text import (
 from model.tpcnet import TPCNet
 from model.training.config import PromptDraw
 from scenes.datasets.frames import AnnotatedRegion, FrameItem
+from scenes.datasets.levelled import level_item
 from scenes.geometry.actors import Actor
 from scenes.geometry.boxes import points_in_footprints
 from scenes.geometry.calib import Calibration
@@ -91,6 +92,16 @@ class ReferentLoss:
     bce: Tensor
     listwise: Tensor
     prompts: int
+
+
+def model_frame(model: TPCNet, item: FrameItem) -> FrameItem:
+    """``item`` as ``model`` sees it: with heights above the ground estimated from its LiDAR
+    cloud when the model's ``PillarConfig.ground`` is ``estimated`` (as ``TPCNet.encode_scene``
+    does at inference; :func:`scenes.datasets.levelled.level_item`), else as it is."""
+    pillars = model.cfg.pillars
+    if pillars.ground != "estimated":
+        return item
+    return level_item(item, pillars.ground_height)
 
 
 def in_grid_actors(actors: Sequence[Actor], model: TPCNet) -> list[Actor]:
@@ -190,6 +201,7 @@ def referent_step(
     device = model.device
     head = referent_head(model)
     rngs = _per_item(rng, len(frames))
+    frames = [model_frame(model, f) for f in frames]
     lidar = model.scene.clouds([f.lidar for f in frames], len(frames), "lidar")
     radar = model.scene.clouds([f.radar for f in frames], len(frames), "radar")
     out, maps = model.detect(lidar, radar)
@@ -367,6 +379,7 @@ __all__ = [
     "float32_output",
     "in_bev_footprint",
     "in_grid_actors",
+    "model_frame",
     "referent_step",
     "step_text",
     "training_candidates",

@@ -1,6 +1,7 @@
 """The model a training run starts from: a resumed run's, or a new one built from the run's
 settings and initialised from another checkpoint as asked (``--init``: every weight whose name and
-shape match, a grown input widened; ``--init-detector``: the scene encoder and detector only;
+shape match, a grown input widened; ``--init-detector``: the scene encoder and detector only, over ``--init``'s when both are given:
+a retrained detector under an earlier referent stage;
 ``--init-other-classes``: a checkpoint of another class set, :mod:`model.training.class_remap`).
 
 A new model carries the class remapping of its start in ``model.checkpoint_metadata.class_remap``
@@ -100,6 +101,21 @@ def init_from(model: torch.nn.Module, path: str, prefixes: tuple[str, ...] = ())
     return len(same)
 
 
+def start_overrides(cfg: TrainConfig) -> dict[str, object]:
+    """``cfg``'s model overrides, plus the start checkpoint's ground (``PillarConfig.ground`` and
+    ``ground_height``: how its detector sees heights) when ``--ground`` is not given and a
+    referent-path model starts from one (``--init-detector``, else ``--init`` or
+    ``--init-other-classes``)."""
+    out = cfg.model_overrides()
+    start = cfg.init_detector or cfg.init or cfg.init_other_classes
+    if cfg.ground is None and start and cfg.grounding == "referent":
+        pillars = read_checkpoint(start)["config"].get("pillars", {})
+        out["pillars__ground"] = pillars.get("ground", "sensor")
+        if "ground_height" in pillars:
+            out["pillars__ground_height"] = pillars["ground_height"]
+    return out
+
+
 def start_model(
     cfg: TrainConfig, resume: bool, rank: int, world: int, device: torch.device
 ) -> tuple[TPCNet, RunState | None, TrainState]:
@@ -122,7 +138,7 @@ def start_model(
         return model, run, state
     if resume:
         print(f"{out}: nothing to resume, starting a new run", file=sys.stderr)
-    model = build_model(cfg.preset, **cfg.model_overrides())
+    model = build_model(cfg.preset, **start_overrides(cfg))
     remap = None
     if cfg.init:
         copied = init_from(model, cfg.init)
@@ -139,9 +155,10 @@ def start_model(
         remap = done.to_dict()
     if cfg.init_detector:
         copied = init_from(model, cfg.init_detector, SCENE_MODULES)
+        rest = f"the rest from {cfg.init}" if cfg.init else "the referent stage starts from scratch"
         print(
             f"initialised the scene encoder and detector ({copied} tensors) from "
-            f"{cfg.init_detector}; the referent stage starts from scratch",
+            f"{cfg.init_detector}; {rest}",
             file=sys.stderr,
         )
     model.checkpoint_metadata = CheckpointMeta(class_remap=remap)

@@ -1,6 +1,7 @@
 """The report of ``python -m model.evaluate --talk2car``: table II's figures over a split's
 commands (:mod:`model.evaluation.talk2car.metrics`), overall and on the rain and night subsets
-(:func:`subset_of`, from the nuScenes scene descriptions), Talk2Car's AP50, and top-1 beside the
+(:func:`subset_of`, from the nuScenes scene descriptions; fog too, which only synthetic roots
+have), Talk2Car's AP50, and top-1 beside the
 class-noun and language-blind baselines."""
 
 from __future__ import annotations
@@ -16,20 +17,17 @@ import numpy as np
 from model.evaluation.talk2car.metrics import table_ii, talk2car_ap, top1_hits
 from model.evaluation.talk2car.predict import CommandPrediction, projected_2d_box
 
-SUBSETS: tuple[str, ...] = ("all", "rain", "night")
-"""The table's rows: every command, and those of scenes whose description names rain or night."""
+SUBSETS: tuple[str, ...] = ("all", "rain", "night", "fog")
+"""The table's rows: every command, and those of scenes whose description names rain, night or
+fog (table II's subsets are rain and night; nuScenes has no fog, the synthetic roots' third weather
+does, and an empty subset is left out of the table)."""
 
 
 def subset_of(description: str) -> tuple[str, ...]:
-    """The subsets a scene belongs to: ``all``, plus ``rain`` / ``night`` when its nuScenes
-    description says so (a word starting ``rain``, or ``night``; case-insensitive)."""
+    """The subsets a scene belongs to: ``all``, plus ``rain`` / ``night`` / ``fog`` when its
+    description says so (a word starting with the subset's name; case-insensitive)."""
     words = description.lower().replace(",", " ").replace(".", " ").split()
-    out = ["all"]
-    if any(w.startswith("rain") for w in words):
-        out.append("rain")
-    if any(w.startswith("night") for w in words):
-        out.append("night")
-    return tuple(out)
+    return ("all", *(s for s in SUBSETS[1:] if any(w.startswith(s) for w in words)))
 
 
 @dataclass(frozen=True)
