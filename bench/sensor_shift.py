@@ -22,7 +22,9 @@ The gap column is the pooled detection recall minus the in-domain one (points); 
 is a gap of at most 10 points on every held-out rig. A pitched LiDAR is scored against the actors'
 boxes in its own frame (:meth:`scenes.synth.setups.SensorSetup.boxes_in_lidar_frame`).
 ``--level-ground`` runs the model with heights above the ground it estimates from each cloud
-(:attr:`model.config.PillarConfig.ground`). ``--quick``: 2 worlds (a smoke run).
+(:attr:`model.config.PillarConfig.ground`; the shipped checkpoint has it on since stage 3l, so the
+flag only changes a checkpoint trained with ``--ground sensor``). ``--quick``: 2 worlds (a smoke
+run).
 """
 
 from __future__ import annotations
