@@ -5,7 +5,8 @@ For each kept command (``scenes.nuscenes.talk2car.read_commands``), whether the 
 detector proposes a box of the referent's class whose bird's-eye centre lies within the top-1
 distance of the referent (1.0 m for a car, 0.5 m for a pedestrian or cyclist:
 ``model.evaluation.talk2car.metrics.TOP1_DISTANCE``): the share of commands a perfect referent
-stage could answer. Printed overall and per class, with the candidates per sample, and on the rain, night and fog subsets of the scene descriptions
+stage could answer. Printed overall and per class, with the candidates per sample, and on the
+rain, night and fog subsets of the scene descriptions
 (``model.evaluation.talk2car.report.subset_of``).
 """
 

@@ -46,8 +46,8 @@ class UnlabelledFrames:
         max_frames: The first N frames only (0: all).
         ground_height: Given: each frame's clouds with heights above the ground estimated from its
             LiDAR cloud, that ground this far below the origin (a checkpoint whose
-            ``PillarConfig.ground`` is ``estimated`` sees its frames so, :mod:`scenes.geometry.ground`);
-            None: as they are.
+            ``PillarConfig.ground`` is ``estimated`` sees its frames so,
+            :mod:`scenes.geometry.ground`); None: as they are.
 
     Raises:
         AdaptError: not a root, no frame, or a split list that is missing or malformed (one line

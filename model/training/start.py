@@ -1,7 +1,7 @@
 """The model a training run starts from: a resumed run's, or a new one built from the run's
 settings and initialised from another checkpoint as asked (``--init``: every weight whose name and
-shape match, a grown input widened; ``--init-detector``: the scene encoder and detector only, over ``--init``'s when both are given:
-a retrained detector under an earlier referent stage;
+shape match, a grown input widened; ``--init-detector``: the scene encoder and detector only,
+over ``--init``'s when both are given, a retrained detector under an earlier referent stage;
 ``--init-other-classes``: a checkpoint of another class set, :mod:`model.training.class_remap`).
 
 A new model carries the class remapping of its start in ``model.checkpoint_metadata.class_remap``
