@@ -123,7 +123,8 @@ def test_training_levels_frames_only_for_a_ground_estimating_model(pitched_frame
 
 def test_a_run_takes_its_start_checkpoints_ground_unless_told(tmp_path, write_tiny_root):
     """``--ground`` builds the model so; without it the ``--init-detector`` / ``--init``
-    checkpoint's ground carries over (how that detector sees heights), else the sensor's."""
+    checkpoint's ground carries over (how that detector sees heights) to a model of its grounding
+    kind, else the sensor's."""
     import torch
 
     from model.checkpoint import load_checkpoint, save_checkpoint
@@ -141,6 +142,8 @@ def test_a_run_takes_its_start_checkpoints_ground_unless_told(tmp_path, write_ti
     assert ground(init_detector=str(levelled)) == "estimated"
     assert ground(init=str(levelled)) == "estimated"
     assert ground(init=str(levelled), ground="sensor") == "sensor"
+    # a checkpoint of the other grounding kind lends no ground (the paper's path has none)
+    assert ground(init=str(levelled), grounding="tpcnet") == "sensor"
     assert ground(ground="estimated") == "estimated"
     assert ground() == "sensor"
 

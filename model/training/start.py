@@ -103,13 +103,16 @@ def init_from(model: torch.nn.Module, path: str, prefixes: tuple[str, ...] = ())
 
 def start_overrides(cfg: TrainConfig) -> dict[str, object]:
     """``cfg``'s model overrides, plus the start checkpoint's ground (``PillarConfig.ground`` and
-    ``ground_height``: how its detector sees heights) when ``--ground`` is not given and a
-    referent-path model starts from one (``--init-detector``, else ``--init`` or
+    ``ground_height``: how its detector sees heights) when ``--ground`` is not given and the model
+    starts from a checkpoint of its own grounding kind (``--init-detector``, else ``--init`` or
     ``--init-other-classes``)."""
     out = cfg.model_overrides()
     start = cfg.init_detector or cfg.init or cfg.init_other_classes
-    if cfg.ground is None and start and cfg.grounding == "referent":
-        pillars = read_checkpoint(start)["config"].get("pillars", {})
+    if cfg.ground is None and start:
+        config = read_checkpoint(start)["config"]
+        if config.get("grounding") != cfg.grounding:
+            return out
+        pillars = config.get("pillars", {})
         out["pillars__ground"] = pillars.get("ground", "sensor")
         if "ground_height" in pillars:
             out["pillars__ground_height"] = pillars["ground_height"]
