@@ -53,7 +53,7 @@ from model.grounding.referent import ReferentGrounding
 from model.grounding.scene_encoder import SceneEncoder
 from model.head.detector import HeadOutput
 from model.nets.text import build_text_encoder, validate_prompt
-from scenes.geometry.ground import GroundPlane, estimate_ground, level_points, unlevel_boxes
+from scenes.geometry.ground import GroundPlane, level_clouds, level_points, unlevel_boxes
 
 CHECKPOINT_NAMES = {
     "lidar": "scene.lidar",
@@ -215,13 +215,12 @@ class TPCNet(nn.Module):
         """The clouds and labelled boxes with heights above the ground estimated from ``lidar``
         (``cfg.pillars.ground == "estimated"``), and that plane."""
         height = self.cfg.pillars.ground_height
-        lidar_np = _numpy(lidar)
-        plane = estimate_ground(lidar_np, height)
-        radar_np = None if radar is None else level_points(_numpy(radar), plane, height)
+        radar_np = None if radar is None else _numpy(radar)
+        plane, lidar_np, radar_np = level_clouds(_numpy(lidar), radar_np, height)
         if candidates is not None:
             boxes = level_points(candidates.boxes, plane, height)
             candidates = LabelledBoxes(boxes, candidates.labels, candidates.classes)
-        return level_points(lidar_np, plane, height), radar_np, candidates, plane
+        return lidar_np, radar_np, candidates, plane
 
     def ground(
         self, features: SceneFeatures, prompt: str, score_threshold: float | None = None

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenes.geometry.ground import estimate_ground, level_points, unlevel_boxes
+from scenes.geometry.ground import estimate_ground, level_clouds, level_points, unlevel_boxes
 from scenes.synth.lidar import pitch_rotation
 
 
@@ -42,6 +42,16 @@ def test_levelled_points_put_the_ground_at_the_reference_height_and_boxes_go_bac
     back = unlevel_boxes(boxes, plane, 1.7)
     np.testing.assert_allclose(level_points(back, plane, 1.7), boxes)
     np.testing.assert_array_equal(back[:, [0, 1, 3, 4, 5, 6]], boxes[:, [0, 1, 3, 4, 5, 6]])
+
+
+def test_level_clouds_levels_both_clouds_on_the_lidars_ground():
+    cloud = ground_cloud(1.4, 2.0)
+    radar = np.c_[cloud[:50, :3], np.ones((50, 4))].astype(np.float32)
+    plane, lidar, levelled = level_clouds(cloud, radar, 1.7)
+    assert plane == estimate_ground(cloud, 1.7)
+    np.testing.assert_array_equal(lidar, level_points(cloud, plane, 1.7))
+    np.testing.assert_array_equal(levelled, level_points(radar, plane, 1.7))
+    assert level_clouds(cloud, None, 1.7)[2] is None
 
 
 def test_too_few_points_give_the_level_reference_plane():

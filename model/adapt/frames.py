@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from model.adapt.config import AdaptError
-from scenes.geometry.ground import estimate_ground, level_points
+from scenes.geometry.ground import level_clouds
 from scenes.talk2radar.layout import VELODYNE, RootError, sample_dir
 from scenes.talk2radar.root import Talk2RadarRoot
 
@@ -91,9 +91,7 @@ class UnlabelledFrames:
             raise AdaptError(f"--data: {exc}") from exc
         lidar, radar = sample.lidar, sample.radar
         if self.ground_height is not None:
-            plane = estimate_ground(lidar, self.ground_height)
-            lidar = level_points(lidar, plane, self.ground_height)
-            radar = level_points(radar, plane, self.ground_height)
+            _, lidar, radar = level_clouds(lidar, radar, self.ground_height)
         return SensorFrame(sid, lidar, radar)
 
 

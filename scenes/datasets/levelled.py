@@ -17,7 +17,7 @@ from dataclasses import replace
 import numpy as np
 
 from scenes.datasets.frames import FrameItem, shift_actor
-from scenes.geometry.ground import estimate_ground, level_points
+from scenes.geometry.ground import level_clouds, level_points
 
 __all__ = ["level_item"]
 
@@ -25,10 +25,8 @@ __all__ = ["level_item"]
 def level_item(item: FrameItem, reference_height: float) -> FrameItem:
     """``item`` with every height above the ground estimated from ``item.lidar`` and that ground
     at ``z = -reference_height`` (module docstring). A cloud with too few ground cells gets the
-    level plane at the reference height (:func:`~scenes.geometry.ground.estimate_ground`)."""
-    plane = estimate_ground(item.lidar, reference_height)
-    lidar = level_points(item.lidar, plane, reference_height)
-    radar = level_points(item.radar, plane, reference_height)
+    level plane at the reference height (:func:`~scenes.geometry.ground.level_clouds`)."""
+    plane, lidar, radar = level_clouds(item.lidar, item.radar, reference_height)
     actors = tuple(
         shift_actor(a, -float(plane.height_at(a.box[None, :2])[0]) - reference_height)
         for a in item.actors

@@ -107,6 +107,17 @@ def level_points(points: np.ndarray, plane: GroundPlane, reference_height: float
     return out
 
 
+def level_clouds(
+    lidar: np.ndarray, radar: np.ndarray | None, reference_height: float
+) -> tuple[GroundPlane, np.ndarray, np.ndarray | None]:
+    """The ground estimated from ``lidar (N, >=3)`` (:func:`estimate_ground`) and both clouds
+    levelled on it (:func:`level_points`): what a model whose heights are above the estimated
+    ground sees, at inference and in training alike. ``radar`` None stays None."""
+    plane = estimate_ground(lidar, reference_height)
+    levelled = None if radar is None else level_points(radar, plane, reference_height)
+    return plane, level_points(lidar, plane, reference_height), levelled
+
+
 def unlevel_boxes(boxes: np.ndarray, plane: GroundPlane, reference_height: float) -> np.ndarray:
     """``(K, 7)`` boxes found in the levelled frame of :func:`level_points`, back in the sensor's
     (their centres' ``z`` moved by the plane under them; sizes and yaw kept)."""
