@@ -192,7 +192,7 @@ class TPCNet(nn.Module):
                 f"model of the {self.cfg.class_set.name!r} class set"
             )
         plane = None
-        if self.cfg.pillars.ground == "estimated" and lidar is not None:
+        if self.cfg.pillars.levels_on_ground and lidar is not None:
             lidar, radar, candidates, plane = self._levelled(lidar, radar, candidates)
         lidar_t = self.scene.clouds(None if lidar is None else [lidar], 1, "lidar")
         radar_t = self.scene.clouds(None if radar is None else [radar], 1, "radar")
@@ -213,7 +213,7 @@ class TPCNet(nn.Module):
         candidates: LabelledBoxes | None,
     ) -> tuple[np.ndarray, np.ndarray | None, LabelledBoxes | None, GroundPlane]:
         """The clouds and labelled boxes with heights above the ground estimated from ``lidar``
-        (``cfg.pillars.ground == "estimated"``), and that plane."""
+        (``cfg.pillars.levels_on_ground``), and that plane."""
         height = self.cfg.pillars.ground_height
         radar_np = None if radar is None else _numpy(radar)
         plane, lidar_np, radar_np = level_clouds(_numpy(lidar), radar_np, height)

@@ -33,6 +33,8 @@ def test_the_default_is_the_sensors_origin_and_old_configs_read_so():
     del plain["pillars"]["ground"], plain["pillars"]["ground_height"]
     cfg = ModelConfig.from_dict(plain)
     assert cfg.pillars.ground == "sensor" and cfg.pillars.ground_height == 1.65
+    assert not cfg.pillars.levels_on_ground
+    assert PillarConfig(ground="estimated").levels_on_ground
 
 
 def test_estimated_ground_is_the_referent_paths_and_checked():

@@ -129,7 +129,7 @@ def set_up(cfg: AdaptConfig) -> AdaptRun:
             file=sys.stderr,
         )
     pillars = model.cfg.pillars
-    if pillars.ground == "estimated":  # the frames as the model sees them at inference
+    if pillars.levels_on_ground:  # the frames as the model sees them at inference
         frames.ground_height = pillars.ground_height
     scene = {id(p) for p in model.scene.parameters()}
     params = [p for p in model.parameters_in_checkpoint_order() if id(p) in scene]

@@ -56,7 +56,7 @@ class PillarConfig:
             put ``ground_height`` below the origin; both clouds and labelled candidates are
             levelled on it and the answer boxes moved back: a sensor mounted at another height
             or pitched then gives the detector the heights it was trained on). Referent path
-            only; training clouds are used as given.
+            only; training levels its frames alike (:attr:`levels_on_ground`).
         ground_height: Where ``estimated`` puts the ground (m below the origin): where the
             estimate finds it on the training rig's streets.
     """
@@ -71,6 +71,13 @@ class PillarConfig:
     radar_scale: tuple[float, ...] = (1.0, 1.0, 1.0, 0.1, 0.2, 0.2, 1.0)
     ground: GroundKind = field(default="sensor", metadata={ABSENT: "sensor"})
     ground_height: float = field(default=1.65, metadata={ABSENT: 1.65})
+
+    @property
+    def levels_on_ground(self) -> bool:
+        """Whether the model sees its clouds with heights above the estimated ground: the one
+        test of it for inference (``TPCNet.encode_scene``), training frames
+        (:func:`model.training.referent_step.model_frame`) and adaptation frames."""
+        return self.ground == "estimated"
 
     def __post_init__(self) -> None:
         check_choice("PillarConfig", "ground", self.ground, typing.get_args(GroundKind))

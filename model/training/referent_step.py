@@ -99,7 +99,7 @@ def model_frame(model: TPCNet, item: FrameItem) -> FrameItem:
     cloud when the model's ``PillarConfig.ground`` is ``estimated`` (as ``TPCNet.encode_scene``
     does at inference; :func:`scenes.datasets.levelled.level_item`), else as it is."""
     pillars = model.cfg.pillars
-    if pillars.ground != "estimated":
+    if not pillars.levels_on_ground:
         return item
     return level_item(item, pillars.ground_height)
 
