@@ -218,12 +218,33 @@ def test_only_the_detector_adapts(full_run: Path, init_checkpoint: Path):
     assert changed and all(
         k.split(".")[0] in {"lidar", "radar", "fusion", "neck", "head"} for k in changed
     )
-    assert any("running_mean" in k for k in changed)  # batch-norm statistics follow the data
+    # --norm-statistics keep (the default): the batch-norm layers learn their scale and shift,
+    # their running statistics stay the initial checkpoint's
+    assert any(k.endswith(".weight") and k[: -len("weight")] + "running_mean" in a for k in changed)
+    assert not any("running_" in k for k in changed)
     meta = after.checkpoint_metadata
     assert meta.operating_threshold == 0.3
     assert meta.extra["adaptation"]["rounds_done"] == 2
     assert meta.extra["adaptation"]["init"] == str(init_checkpoint)
     assert "model.adapt" in meta.training_stages and "untrained (test)" in meta.training_stages
+
+
+def test_statistics_follow_and_boxes_stay_when_asked(
+    sensor_root: Path, init_checkpoint: Path, torch_threads
+):
+    """``--norm-statistics follow``: the running statistics follow the new frames;
+    ``--regression-weight 0`` (no weight decay): the box-regression branch stays as it was."""
+    out = sensor_root.parent / "run-follow"
+    more = ["--rounds", "1", "--norm-statistics", "follow", "--regression-weight", "0"]
+    with torch_threads(1):
+        assert main(run_args(sensor_root, init_checkpoint, out, *more, "--weight-decay", "0")) == 0
+    a = load_checkpoint(init_checkpoint).state_dict()
+    b = load_checkpoint(out / "last.pt").state_dict()
+    changed = {k for k in a if not torch.equal(a[k], b[k])}
+    assert any("running_mean" in k for k in changed)
+    learnt = {k for k in changed if "running_" not in k and "num_batches" not in k}
+    assert any(k.startswith("head.heatmap.") for k in learnt)
+    assert not any(k.startswith("head.regression.") for k in learnt)
 
 
 def test_resume_continues_where_it_stopped(

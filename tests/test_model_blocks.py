@@ -239,6 +239,27 @@ def test_pillar_encoder_trains_with_a_single_point() -> None:
     assert enc.linear.weight.grad is not None
 
 
+def test_pillar_encoder_learns_with_held_statistics() -> None:
+    """Batch norm in eval mode while the PFN learns (``model.adapt --norm-statistics keep``):
+    the pooled-first path back-propagates, with the per-point computation's gradient."""
+    torch.manual_seed(0)
+    enc = _lidar_encoder(channels=6).eval()
+    with torch.no_grad():
+        enc.norm.weight.copy_(torch.tensor([1.0, -0.5, 2.0, -1.0, 0.3, 1.0]))
+        enc.norm.running_mean.uniform_(-1.0, 1.0)
+    cloud = torch.rand(50, 4) * torch.tensor([6.0, 6.0, 1.0, 255.0])
+    enc([cloud]).sum().backward()
+    pooled_first = enc.linear.weight.grad.clone()
+    enc.linear.weight.grad = None
+    # the same canvas sum, every point normalised (the training branch's formula)
+    pillars = voxelize([cloud], enc.grid, enc.z_min, enc.z_max, enc.max_points)
+    h = torch.relu(enc.norm(enc.linear(enc.point_features(pillars))))
+    index = pillars.pillar_of_point.unsqueeze(1).expand(-1, h.shape[1])
+    empty = torch.zeros(pillars.keys.numel(), h.shape[1])
+    empty.scatter_reduce(0, index, h, reduce="amax", include_self=False).sum().backward()
+    assert torch.allclose(pooled_first, enc.linear.weight.grad, atol=1e-4, rtol=1e-4)
+
+
 # ----------------------------------------------------------------------------------- backbone/FPN
 
 

@@ -21,6 +21,10 @@ from scenes.geometry.actors import CLASSES
 from scenes.utils.cli import add_options, from_args, option
 
 RadarChoice = Literal["auto", "radar_5frames", "radar_3frames", "radar", "none"]
+NormStatistics = Literal["keep", "follow"]
+"""What the batch-norm running statistics do while adapting: ``keep`` the initial checkpoint's
+(the layers in eval mode; their scale and shift still learn) or ``follow`` the new frames (train
+mode, AdaBN-like)."""
 
 DEFAULT_THRESHOLDS: dict[str, tuple[float, float]] = {
     "Car": (0.5, 0.35),
@@ -101,6 +105,16 @@ class AdaptConfig:
         negatable=True,
         help="rest each new pseudo-label on the ground its LiDAR ring shows (default: on)",
     )
+    regression_weight: float = option(
+        0.25,
+        help="weight of the box-regression loss on the pseudo-labels (the training's 0.25; 0: "
+        "the heatmap alone learns, the boxes stay the initial checkpoint's) (default %(default)s)",
+    )
+    norm_statistics: NormStatistics = option(
+        "keep",
+        help="batch-norm running statistics while adapting: keep the initial checkpoint's or "
+        "follow the new frames (default %(default)s)",
+    )
     memory_iou: float = option(
         0.1, help="BEV IoU above which a new box and a remembered one are one object (default 0.1)"
     )
@@ -143,6 +157,7 @@ class AdaptConfig:
             ("threshold-end", self.threshold_end),
             ("ignore-ratio", self.ignore_ratio),
             ("flip-probability", self.flip_probability),
+            ("regression-weight", self.regression_weight),
         ):
             if not 0.0 <= value <= 1.0:
                 raise AdaptError(f"--{name} must be in [0, 1], got {value}")
@@ -225,6 +240,7 @@ __all__ = [
     "DEFAULT_THRESHOLDS",
     "AdaptConfig",
     "AdaptError",
+    "NormStatistics",
     "RoundPlan",
     "build_parser",
     "parse_args",

@@ -16,8 +16,10 @@ Round ``r`` (the curriculum's :meth:`model.adapt.config.AdaptConfig.round_plan`)
    (:func:`model.training.loop.cosine_lr`) over all the run's steps and its gradient clipping.
 
 Only the scene encoder and the detector (``lidar.``, ``radar.``, ``fusion.``, ``neck.``,
-``head.``) are trained; they run in train mode, so their batch-norm running statistics follow the
-new sensor's data too (AdaBN-like). The text encoder and the referent stage are frozen and in eval
+``head.``) are trained; they run in train mode but for their batch-norm layers, whose running
+statistics stay the initial checkpoint's (``--norm-statistics keep``; ``follow``: they follow the
+new sensor's frames, AdaBN-like, which on two-frame batches cost more than it gave:
+docs/RESULTS.md, "Adaptation to unlabelled frames"). The text encoder and the referent stage are frozen and in eval
 mode: the adapted checkpoint answers prompts with the initial checkpoint's referent stage over the
 adapted detector's candidates, at the initial checkpoint's operating threshold.
 """
@@ -145,6 +147,10 @@ def set_up(cfg: AdaptConfig) -> AdaptRun:
     return AdaptRun(cfg, frames, model, params, optimizer, files, out)
 
 
+BATCH_NORMS = (torch.nn.BatchNorm1d, torch.nn.BatchNorm2d, torch.nn.BatchNorm3d)
+"""The layers whose running statistics ``--norm-statistics keep`` holds."""
+
+
 def detect_frames(
     model: TPCNet, frames: list[SensorFrame], threshold: float
 ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
@@ -259,12 +265,16 @@ def train_step(run: AdaptRun, plan: RoundPlan, step: int) -> LossTerms:
     model.train()
     model.text_encoder.eval()
     model.grounding.eval()
+    if cfg.norm_statistics == "keep":
+        for module in model.scene.modules():
+            if isinstance(module, BATCH_NORMS):
+                module.eval()
     lidar = model.scene.clouds([f.lidar for f in items], len(items), "lidar")
     radar = model.scene.clouds([f.radar for f in items], len(items), "radar")
     out, _ = model.detect(lidar, radar)
     actors = [in_grid_actors(f.actors, model) for f in items]
     targets = detection_targets(model, items, actors).to(model.device)
-    terms = grounding_loss(float32_output(out), targets)
+    terms = grounding_loss(float32_output(out), targets, beta=cfg.regression_weight)
     run.optimizer.zero_grad(set_to_none=True)
     terms.total.backward()
     norm = torch.nn.utils.clip_grad_norm_(run.params, cfg.grad_clip)

@@ -301,7 +301,9 @@ class PillarEncoder(nn.Module):
         )
         pooled = pooled.scatter_reduce(0, index, h, reduce="amax", include_self=False)
         mean, centre = self._pillar_points(pillars)
-        pooled -= torch.cat([mean, centre], dim=1) @ per_pillar.t()
+        # Out of place: autograd needs the amax's output (batch-norm layers held in eval mode
+        # while the PFN learns, ``python -m model.adapt --norm-statistics keep``).
+        pooled = pooled - torch.cat([mean, centre], dim=1) @ per_pillar.t()
         return torch.relu(self.norm(pooled * sign))
 
     def _factorised(self, dtype: torch.dtype) -> tuple[Tensor, Tensor, Tensor]:
