@@ -90,6 +90,22 @@ def test_pedestrian_thresholds_and_top1_distance():
     assert top1_hits([command([ped], [1.0], ped, "Pedestrian")]).tolist() == [True]
 
 
+def test_other_classes_are_scored_as_the_class_they_are_like():
+    """A nuScenes-class model's referents: a truck as a car (1.0 m, AP_A 0.7), a traffic cone
+    and a bicycle as a pedestrian or cyclist (0.5 m, AP_A 0.5); an unknown class is refused."""
+    truck = np.array([12.0, 0.0, 0.0, 7.0, 2.5, 2.8, 0.0])
+    off = truck + np.array([0.9, 0, 0, 0, 0, 0, 0])  # BEV IoU 6.1 / 7.9 = 0.77
+    assert top1_hits([command([off], [1.0], truck, "Truck")]).tolist() == [True]
+    assert table_ii([command([off], [1.0], truck, "Truck")])["BEV AP_A"] == 100.0
+    cone = np.array([6.0, 1.0, 0.0, 0.4, 0.4, 1.0, 0.0])
+    for cls in ("TrafficCone", "Bicycle"):
+        near = command([cone + np.array([0.6, 0, 0, 0, 0, 0, 0])], [1.0], cone, cls)
+        assert near.scored_as in ("Pedestrian", "Cyclist")
+        assert top1_hits([near]).tolist() == [False]  # 0.6 m: beyond a small object's 0.5
+    with pytest.raises(ValueError, match="referent class 'Tram'"):
+        command([CAR], [1.0], CAR, "Tram")
+
+
 def test_subsets_from_the_scene_description():
     assert subset_of("Rain, night, parked cars") == ("all", "rain", "night")
     assert subset_of("Heavy raining at the intersection") == ("all", "rain")

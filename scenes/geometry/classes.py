@@ -52,9 +52,9 @@ class ObjectClass:
         mean_size: ``(l, w, h)`` mean box size in metres.
         min_overlaps: The evaluator's minimum overlaps ``(image 2D, BEV, 3D)`` of a match (a match
             needs strictly more). The VoD / KITTI table has three rows; the other classes take the
-            row of the class they are scored like: large vehicles (truck, bus, trailer,
-            construction vehicle) as Car ``(0.7, 0.5, 0.5)``, two-wheelers (motorcycle, bicycle)
-            as Cyclist and small objects (traffic cone, barrier) as Pedestrian
+            row of the class they are scored like (``scored_as``): large vehicles (truck, bus,
+            trailer, construction vehicle) as Car ``(0.7, 0.5, 0.5)``, two-wheelers (motorcycle,
+            bicycle) as Cyclist and small objects (traffic cone, barrier) as Pedestrian
             ``(0.5, 0.25, 0.25)``.
         match_distance: Metres within which a detection's BEV centre is this class's actor
             (training's candidate matching, the language suite's scoring).
@@ -72,6 +72,10 @@ class ObjectClass:
         neighbour: KITTI's neighbouring label name (lower case) the evaluator ignores rather than
             counts as missed for this class (``van`` for a car, ``person_sitting`` for a
             pedestrian), or None.
+        scored_as: The View-of-Delft class whose thresholds a metric defined for those three
+            classes only applies to this one (its ``min_overlaps`` are that class's: checked
+            below; Talk2Car's AP and top-1, :mod:`model.evaluation.talk2car.metrics`); empty:
+            the class itself (one of the three).
     """
 
     name: str
@@ -87,8 +91,11 @@ class ObjectClass:
     with_rider_only: bool = False
     find_radius: float = 1.0
     neighbour: str | None = None
+    scored_as: str = ""
 
     def __post_init__(self) -> None:
+        if not self.scored_as:
+            object.__setattr__(self, "scored_as", self.name)
         if not self.name or any(c.isspace() for c in self.name):
             raise ValueError(f"class name {self.name!r} must be one non-empty token")
         if len(self.mean_size) != 3 or min(self.mean_size) <= 0:
@@ -233,21 +240,22 @@ NUSCENES = ClassSet(
         ),
         ObjectClass(
             "Truck", "truck", "trucks", (6.93, 2.51, 2.84), _AS_CAR, 3.0, (230, 60, 40),
-            categories=("vehicle.truck",), find_radius=3.0,
+            categories=("vehicle.truck",), find_radius=3.0, scored_as="Car",
         ),
         ObjectClass(
             "Bus", "bus", "buses", (10.5, 2.94, 3.47), _AS_CAR, 4.0, (250, 220, 40),
             categories=("vehicle.bus.rigid", "vehicle.bus.bendy"), find_radius=4.0,
+            scored_as="Car",
         ),
         ObjectClass(
             "Trailer", "trailer", "trailers", (12.29, 2.90, 3.87), _AS_CAR, 4.0, (160, 110, 60),
-            categories=("vehicle.trailer",), find_radius=4.0,
+            categories=("vehicle.trailer",), find_radius=4.0, scored_as="Car",
         ),
         ObjectClass(
             "ConstructionVehicle", "construction vehicle", "construction vehicles",
             (6.37, 2.85, 3.19), _AS_CAR, 3.0, (200, 170, 110),
             label_names=("construction_vehicle",), categories=("vehicle.construction",),
-            find_radius=3.0,
+            find_radius=3.0, scored_as="Car",
         ),
         ObjectClass(
             "Pedestrian", "pedestrian", "pedestrians", (0.73, 0.67, 1.77), _AS_SMALL, 1.0,
@@ -256,20 +264,20 @@ NUSCENES = ClassSet(
         ObjectClass(
             "Motorcycle", "motorcycle", "motorcycles", (2.11, 0.77, 1.47), _AS_SMALL, 1.2,
             (150, 90, 255), label_names=("motor", "moped_scooter"),
-            categories=("vehicle.motorcycle",),
+            categories=("vehicle.motorcycle",), scored_as="Cyclist",
         ),
         ObjectClass(
             "Bicycle", "bicycle", "bicycles", (1.70, 0.60, 1.28), _AS_SMALL, 1.2, (70, 200, 255),
-            label_names=("cyclist",), categories=("vehicle.bicycle",),
+            label_names=("cyclist",), categories=("vehicle.bicycle",), scored_as="Cyclist",
         ),
         ObjectClass(
             "TrafficCone", "traffic cone", "traffic cones", (0.41, 0.41, 1.07), _AS_SMALL, 0.6,
             (255, 120, 60), heading=False, label_names=("traffic_cone",),
-            categories=("movable_object.trafficcone",), find_radius=0.6,
+            categories=("movable_object.trafficcone",), find_radius=0.6, scored_as="Pedestrian",
         ),
         ObjectClass(
             "Barrier", "barrier", "barriers", (0.50, 2.53, 0.98), _AS_SMALL, 1.2, (180, 180, 200),
-            categories=("movable_object.barrier",),
+            categories=("movable_object.barrier",), scored_as="Pedestrian",
         ),
     ),
 )  # fmt: skip
@@ -296,6 +304,15 @@ for _set in PRESETS.values():
     for _c in _set.classes:
         if MATCH_DISTANCE[_c.name] != _c.match_distance:
             raise ValueError(f"class {_c.name}: match_distance differs between the presets")
+
+
+for _set in PRESETS.values():
+    for _c in _set.classes:
+        if _c.scored_as not in VOD or VOD.get(_c.scored_as).min_overlaps != _c.min_overlaps:
+            raise ValueError(
+                f"class {_c.name}: scored_as {_c.scored_as!r} must be a View-of-Delft class whose "
+                "min_overlaps it has"
+            )
 
 
 def object_class(name: str) -> ObjectClass:

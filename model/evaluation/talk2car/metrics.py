@@ -22,6 +22,12 @@ Table II of the paper reports, per command of a split (one referred object each)
   command without a box scores 0.
 - **Top-1** (:func:`top1_hits`): the best box's bird's-eye centre within
   :data:`TOP1_DISTANCE` of the referent (1.0 m for a car, 0.5 m for a pedestrian or cyclist).
+
+Both tables name the three View-of-Delft classes, as MSSG and the paper score Talk2Car; a
+referent of another class (a model of nuScenes' ten classes) is scored as the class its
+:attr:`~scenes.geometry.classes.ObjectClass.scored_as` names: a truck, bus, trailer or
+construction vehicle as a car, a motorcycle or bicycle as a cyclist, a traffic cone or barrier as
+a pedestrian (the evaluator's minimum overlaps make the same choice).
 """
 
 from __future__ import annotations
@@ -32,6 +38,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scenes.geometry.boxes import bev_iou, iou3d
+from scenes.geometry.classes import ALL_CLASSES, object_class
 
 MSSG_THRESHOLDS: dict[str, dict[str, float]] = {
     "AP_A": {"Car": 0.7, "Pedestrian": 0.5, "Cyclist": 0.5},
@@ -60,7 +67,7 @@ class CommandBoxes:
         boxes: ``(K, 7)`` float64 answer boxes, best first.
         scores: ``(K,)`` their scores (descending).
         referent: ``(7,)`` the referred box.
-        referent_class: Its class (``Car``, ``Pedestrian``, ``Cyclist``).
+        referent_class: Its class (any class of a preset; scored as its ``scored_as``).
         classes: The answer boxes' classes (empty where not known; the metrics do not read them).
     """
 
@@ -84,13 +91,16 @@ class CommandBoxes:
         if len(s) != len(b):
             raise ValueError(f"CommandBoxes: {len(s)} scores for {len(b)} boxes")
         r = np.asarray(referent, dtype=np.float64).reshape(7)
-        if cls not in TOP1_DISTANCE:
-            raise ValueError(
-                f"CommandBoxes: referent class {cls!r} is not one of {tuple(TOP1_DISTANCE)}"
-            )
+        if cls not in ALL_CLASSES:
+            raise ValueError(f"CommandBoxes: referent class {cls!r} is not one of {ALL_CLASSES}")
         if classes and len(classes) != len(b):
             raise ValueError(f"CommandBoxes: {len(classes)} classes for {len(b)} boxes")
         return CommandBoxes(b, s, r, cls, tuple(classes))
+
+    @property
+    def scored_as(self) -> str:
+        """The View-of-Delft class whose thresholds score this command (module docstring)."""
+        return object_class(self.referent_class).scored_as
 
 
 def interpolated_ap(tp: np.ndarray, scores: np.ndarray, positives: int) -> float:
@@ -134,7 +144,7 @@ def grounding_ap(
     ``thresholds``; no command: 0."""
     tp, scores = [], []
     for command in commands:
-        tp.append(command_hits(command, overlap, thresholds[command.referent_class]))
+        tp.append(command_hits(command, overlap, thresholds[command.scored_as]))
         scores.append(command.scores)
     if not commands:
         return 0.0
@@ -158,7 +168,7 @@ def top1_hits(commands: Sequence[CommandBoxes]) -> np.ndarray:
         if len(command.boxes):
             best = command.boxes[int(np.argmax(command.scores))]
             gap = float(np.hypot(*(best[:2] - command.referent[:2])))
-            out[i] = gap <= TOP1_DISTANCE[command.referent_class]
+            out[i] = gap <= TOP1_DISTANCE[command.scored_as]
     return out
 
 
