@@ -71,6 +71,23 @@ def test_the_benchmark_runs_end_to_end_on_a_random_weights_model(tmp_path, untra
     assert data["data"]["targets"][0]["name"].startswith("held-out detection recall gap")
 
 
+def test_a_nuscenes_class_checkpoint_is_measured_on_its_own_road_users(
+    tmp_path, untrained_model, capsys
+):
+    """The worlds hold the checkpoint's classes, each counted and prompted (10 for nuScenes')."""
+    model = untrained_model(
+        "referent", text_encoder="gru", operating_threshold=0.5, classes="nuscenes"
+    )
+    ckpt = save_checkpoint(tmp_path / "random-nusc.pt", model, step=1)
+    argv = ["--checkpoint", str(ckpt), "--worlds", "2", "--setups", "radar-1scan"]
+    assert main([*argv, "--out-dir", str(tmp_path), "--quick"]) == 0
+    assert "| Barrier recall (targets) |" in capsys.readouterr().out
+    rows = json.loads((tmp_path / "sensor_shift.json").read_text())["data"]["setups"]
+    names = set(model.cfg.class_set.names)
+    assert all(set(r["targets"]) == names | {"all"} for r in rows)
+    assert sum(r["targets"]["all"] for r in rows) > sum(r["targets"]["Car"] for r in rows) > 0
+
+
 def test_bad_options_are_one_line_errors(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["--setups", "no-such-rig", "--out-dir", str(tmp_path)])

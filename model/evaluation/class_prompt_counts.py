@@ -224,12 +224,14 @@ def ask_class_prompts(
     counted: Callable[[np.ndarray], np.ndarray],
     gt_counted: np.ndarray,
     other_boxes: np.ndarray | None = None,
+    classes: ClassSet = VOD,
 ) -> list[PromptCount]:
-    """Each prompt of :data:`CLASS_PROMPTS` asked over one frame's encoded ``features`` at
-    ``threshold`` and counted (:func:`count_prompt`); ``counted`` says which boxes ``(K, 7)`` lie
-    in the counted region."""
+    """Each prompt of :func:`class_prompts` of ``classes`` (default the three of
+    :data:`CLASS_PROMPTS`) asked over one frame's encoded ``features`` at ``threshold`` and
+    counted (:func:`count_prompt`); ``counted`` says which boxes ``(K, 7)`` lie in the counted
+    region."""
     out = []
-    for cls, text in CLASS_PROMPTS.items():
+    for cls, text in class_prompts(classes).items():
         pred = model.ground(features, text, score_threshold=threshold)
         boxes = np.asarray(pred.boxes, dtype=np.float64).reshape(-1, 7)
         out.append(
