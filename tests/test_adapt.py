@@ -15,12 +15,13 @@ import torch
 from bench.unlabelled_root import sensor_only_copy
 from model.adapt.__main__ import main
 from model.adapt.augment import View
-from model.adapt.config import AdaptConfig, AdaptError
+from model.adapt.config import DEFAULT_THRESHOLDS, AdaptConfig, AdaptError
 from model.adapt.frames import UnlabelledFrames
 from model.adapt.pseudo import FrameMemory, ensemble, partition, seat_on_ground, select
 from model.adapt.run import step_indices
 from model.checkpoint import load_checkpoint, save_checkpoint
 from model.training.referent_step import in_bev_footprint
+from scenes.geometry.classes import NUSCENES, VOD
 from scenes.talk2radar.layout import LABEL, LIDAR_FOLDER, PROMPT, sample_dir
 
 LOW = ["--class-threshold", "Car=0.09", "--class-threshold", "Pedestrian=0.09"]
@@ -39,10 +40,11 @@ def test_pseudo_labels_are_selected_by_per_class_thresholds():
     # labels Car, Pedestrian, Cyclist, Car; scores straddling each class's own threshold
     labels = np.array([0, 1, 2, 0, 1])
     scores = np.array([0.45, 0.35, 0.39, 0.55, 0.25])
-    picked = select(labels, scores, {"Car": 0.5, "Pedestrian": 0.3, "Cyclist": 0.4})
+    three = ("Car", "Pedestrian", "Cyclist")
+    picked = select(labels, scores, {"Car": 0.5, "Pedestrian": 0.3, "Cyclist": 0.4}, three)
     assert picked.tolist() == [False, True, False, True, False]
     # one threshold for all would pick otherwise: the thresholds are per class
-    assert select(labels, scores, dict.fromkeys(("Car", "Pedestrian", "Cyclist"), 0.3)).sum() == 4
+    assert select(labels, scores, dict.fromkeys(three, 0.3), three).sum() == 4
 
 
 def test_partition_keeps_confident_near_boxes_and_ignores_the_rest():
@@ -53,7 +55,8 @@ def test_partition_keeps_confident_near_boxes_and_ignores_the_rest():
     memory = FrameMemory(
         boxes, np.zeros(4, np.int64), np.array([0.5, 0.7, 0.7, 0.7]), np.array([0, 0, 0, 1])
     )
-    first, last = cfg.round_plan(0), cfg.round_plan(2)
+    classes = VOD.names
+    first, last = cfg.round_plan(0, classes), cfg.round_plan(2, classes)
     assert first.positive["Car"] == pytest.approx(0.6) and last.positive["Car"] == pytest.approx(
         0.3
     )
@@ -94,8 +97,24 @@ def test_pseudo_labels_rest_on_the_ground_the_new_sensor_sees():
 
 
 def test_bad_class_threshold_is_one_line():
-    with pytest.raises(AdaptError, match=r"--class-threshold 'Truck=0\.5'"):
-        config(class_threshold=("Truck=0.5",))
+    with pytest.raises(AdaptError, match=r"--class-threshold 'Tram=0\.5'"):
+        config(class_threshold=("Tram=0.5",))
+    # a class of another class set: refused against the checkpoint's classes
+    with pytest.raises(AdaptError, match=r"Truck=\.\.\.: the checkpoint's classes are Car, Ped"):
+        config(class_threshold=("Truck=0.5",)).thresholds(VOD.names)
+
+
+def test_every_class_of_a_nuscenes_checkpoint_has_thresholds():
+    cfg = config(class_threshold=("TrafficCone=0.6:0.45",), threshold_start=0.55)
+    plan = cfg.round_plan(0, NUSCENES.names)
+    assert plan.classes == NUSCENES.names and set(plan.positive) == set(NUSCENES.names)
+    assert plan.positive["TrafficCone"] == 0.6 and plan.positive["Truck"] == 0.55
+    assert plan.positive["Pedestrian"] == DEFAULT_THRESHOLDS["Pedestrian"][0]
+    labels = np.array([NUSCENES.index("Truck"), NUSCENES.index("TrafficCone")])
+    assert select(labels, np.array([0.56, 0.56]), plan.positive, plan.classes).tolist() == [
+        True,
+        False,
+    ]
 
 
 # ------------------------------------------------------------------ augmentation consistency
@@ -245,6 +264,25 @@ def test_statistics_follow_and_boxes_stay_when_asked(
     learnt = {k for k in changed if "running_" not in k and "num_batches" not in k}
     assert any(k.startswith("head.heatmap.") for k in learnt)
     assert not any(k.startswith("head.regression.") for k in learnt)
+
+
+def test_a_nuscenes_class_checkpoint_adapts_over_its_own_classes(
+    sensor_root: Path, untrained_model, torch_threads, capsys
+):
+    init = sensor_root.parent / "init-nusc.pt"
+    model = untrained_model("referent", seed=3, classes="nuscenes")
+    save_checkpoint(init, model, operating_threshold=0.3)
+    out = sensor_root.parent / "run-nusc"
+    low = [f"--class-threshold={c}=0.09" for c in NUSCENES.names]
+    args = run_args(sensor_root, init, out, "--rounds", "1", *low)
+    with torch_threads(1):
+        assert main([a for a in args if a not in LOW]) == 0
+    report = json.loads((out / "adapt_report.json").read_text())["rounds"][0]
+    assert list(report["pseudo_labels"]) == list(NUSCENES.names)
+    assert sum(report["pseudo_labels"].values()) > 0
+    printed = capsys.readouterr().out  # the table names them apart
+    assert "pseudo Trai" in printed and "pseudo Traf" in printed
+    assert load_checkpoint(out / "last.pt").cfg.class_set == NUSCENES
 
 
 def test_resume_continues_where_it_stopped(

@@ -14,10 +14,11 @@ ignored, not background).
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
-from scenes.geometry.actors import CLASSES
+from scenes.geometry.classes import ALL_CLASSES
 from scenes.utils.cli import add_options, from_args, option
 
 RadarChoice = Literal["auto", "radar_5frames", "radar_3frames", "radar", "none"]
@@ -32,7 +33,8 @@ DEFAULT_THRESHOLDS: dict[str, tuple[float, float]] = {
     "Cyclist": (0.4, 0.3),
 }
 """Positive threshold of each class in the first and in the last round (``--class-threshold``
-overrides one); a class not listed takes ``--threshold-start`` / ``--threshold-end``."""
+overrides one); a class not listed (a nuScenes-class checkpoint's trucks, cones...) takes
+``--threshold-start`` / ``--threshold-end``."""
 
 
 class AdaptError(ValueError):
@@ -46,6 +48,7 @@ class RoundPlan:
 
     Attributes:
         index: The round (0 first).
+        classes: The checkpoint's class names in heatmap-channel order (what a label indexes).
         positive: ``{class: threshold}``: a box scoring at least this is a pseudo-label.
         negative: ``{class: threshold}``: a box scoring at least this (and below ``positive``)
             is ignored; lower is background.
@@ -54,6 +57,7 @@ class RoundPlan:
     """
 
     index: int
+    classes: tuple[str, ...]
     positive: dict[str, float]
     negative: dict[str, float]
     max_range: float
@@ -141,10 +145,8 @@ class AdaptConfig:
         0, on_resume=True, help="stop (resumable) after this many rounds (0: run them all)"
     )
     quiet: bool = option(False, on_resume=True, help="no progress bar")
-    thresholds: dict[str, tuple[float, float]] = field(
-        default_factory=dict, metadata={"cli": False}
-    )
-    """Filled from ``class_threshold`` and the defaults: ``{class: (start, end)}``."""
+    overrides: dict[str, tuple[float, float]] = field(default_factory=dict, metadata={"cli": False})
+    """Filled from ``class_threshold``: ``{class: (start, end)}``."""
 
     def __post_init__(self) -> None:
         for name, value in (("rounds", self.rounds), ("steps-per-round", self.steps_per_round)):
@@ -171,19 +173,16 @@ class AdaptConfig:
             raise AdaptError(f"--scale-range must be 0 < LOW <= HIGH, got {low} {high}")
         if self.max_miss < 0 or self.max_frames < 0 or self.stop_after_round < 0:
             raise AdaptError("--max-miss, --max-frames and --stop-after-round must be >= 0")
-        object.__setattr__(self, "thresholds", self._thresholds())
+        object.__setattr__(self, "overrides", self._overrides())
 
-    def _thresholds(self) -> dict[str, tuple[float, float]]:
-        out = {
-            c: DEFAULT_THRESHOLDS.get(c, (self.threshold_start, self.threshold_end))
-            for c in CLASSES
-        }
+    def _overrides(self) -> dict[str, tuple[float, float]]:
+        out = {}
         for given in self.class_threshold:
             name, sep, values = given.partition("=")
-            if not sep or name not in CLASSES:
+            if not sep or name not in ALL_CLASSES:
                 raise AdaptError(
                     f"--class-threshold {given!r}: expected CLASS=START[:END] with CLASS one of "
-                    f"{', '.join(CLASSES)}"
+                    f"{', '.join(ALL_CLASSES)}"
                 )
             try:
                 parts = [float(v) for v in values.split(":")]
@@ -198,19 +197,34 @@ class AdaptConfig:
             out[name] = (parts[0], parts[-1])
         return out
 
-    def round_plan(self, index: int) -> RoundPlan:
-        """The curriculum at round ``index`` (module docstring): thresholds and range linear
-        from the first round's to the last's."""
+    def thresholds(self, classes: Sequence[str]) -> dict[str, tuple[float, float]]:
+        """``{class: (first round's, last round's)}`` positive threshold of each of the
+        checkpoint's ``classes``: ``--class-threshold``, else :data:`DEFAULT_THRESHOLDS`, else
+        ``--threshold-start`` / ``--threshold-end``. AdaptError naming the flag when an override
+        names a class the checkpoint does not have."""
+        for name in self.overrides:
+            if name not in classes:
+                raise AdaptError(
+                    f"--class-threshold {name}=...: the checkpoint's classes are "
+                    f"{', '.join(classes)}"
+                )
+        default = (self.threshold_start, self.threshold_end)
+        return {c: self.overrides.get(c, DEFAULT_THRESHOLDS.get(c, default)) for c in classes}
+
+    def round_plan(self, index: int, classes: Sequence[str]) -> RoundPlan:
+        """The curriculum at round ``index`` (module docstring) for a checkpoint of ``classes``
+        (heatmap-channel order): thresholds and range linear from the first round's to the
+        last's."""
         t = index / (self.rounds - 1) if self.rounds > 1 else 1.0
-        positive = {c: a + (b - a) * t for c, (a, b) in self.thresholds.items()}
+        positive = {c: a + (b - a) * t for c, (a, b) in self.thresholds(classes).items()}
         negative = {c: v * self.ignore_ratio for c, v in positive.items()}
         max_range = self.range_start + (self.range_end - self.range_start) * t
-        return RoundPlan(index, positive, negative, max_range)
+        return RoundPlan(index, tuple(classes), positive, negative, max_range)
 
     def settings(self) -> dict[str, object]:
         """The settings a resumed run must share (every flag but the ``on_resume`` ones), as
         plain data."""
-        free = {"stop_after_round", "quiet", "thresholds"}
+        free = {"stop_after_round", "quiet", "overrides"}
         out: dict[str, object] = {}
         for name in self.__dataclass_fields__:
             if name not in free:

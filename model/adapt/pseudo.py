@@ -23,18 +23,17 @@ With ``--seat-on-ground`` (default) each new box is first moved in z to rest on 
 new sensor sees around it (:func:`seat_on_ground`): a detector trained on one mounting height
 places boxes too high or too low on another (0.1 m too high on the nuScenes-like set-up, 0.14 m
 higher than VoD's), and pseudo-labels would teach that error back to it. Boxes are ``(K, 7)`` ``x, y, z, l, w, h, yaw`` in the LiDAR frame;
-labels index :data:`scenes.geometry.actors.CLASSES`.
+labels index the checkpoint's class set (heatmap-channel order, :attr:`RoundPlan.classes`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from model.adapt.config import RoundPlan
-from scenes.geometry.actors import CLASSES
 from scenes.geometry.boxes import bev_iou
 
 
@@ -44,7 +43,7 @@ class FrameMemory:
 
     Attributes:
         boxes: ``(K, 7)`` float64, LiDAR frame.
-        labels: ``(K,)`` int64 into ``CLASSES``.
+        labels: ``(K,)`` int64 into the checkpoint's classes.
         scores: ``(K,)`` float64 detector scores (the kept box's).
         misses: ``(K,)`` int64 rounds in a row the box went undetected.
     """
@@ -81,10 +80,16 @@ class FrameMemory:
         )
 
 
-def select(labels: np.ndarray, scores: np.ndarray, threshold: Mapping[str, float]) -> np.ndarray:
+def select(
+    labels: np.ndarray,
+    scores: np.ndarray,
+    threshold: Mapping[str, float],
+    classes: Sequence[str],
+) -> np.ndarray:
     """``(K,)`` bool: the boxes whose score reaches their class's entry of ``threshold``
-    (``{class name: threshold}``; a class without an entry is never selected)."""
-    limits = np.array([threshold.get(c, np.inf) for c in CLASSES])
+    (``{class name: threshold}``; a class without an entry is never selected); ``labels`` index
+    ``classes``."""
+    limits = np.array([threshold.get(c, np.inf) for c in classes])
     labels = np.asarray(labels, np.int64)
     return np.asarray(scores, np.float64) >= limits[labels] if len(labels) else np.zeros(0, bool)
 
@@ -161,7 +166,7 @@ class FrameTargets:
 
     Attributes:
         boxes: ``(P, 7)`` pseudo-labels, LiDAR frame.
-        labels: ``(P,)`` int64 into ``CLASSES``.
+        labels: ``(P,)`` int64 into the checkpoint's classes.
         ignore: ``(J, 7)`` boxes ignored: no target, no negative on their footprint.
     """
 
@@ -174,7 +179,7 @@ def positive_mask(memory: FrameMemory, plan: RoundPlan) -> np.ndarray:
     """``(K,)`` bool: the remembered boxes that are pseudo-labels at ``plan``: seen this round,
     confident for their class, within the round's range (module docstring)."""
     near = np.hypot(memory.boxes[:, 0], memory.boxes[:, 1]) <= plan.max_range
-    confident = select(memory.labels, memory.scores, plan.positive)
+    confident = select(memory.labels, memory.scores, plan.positive, plan.classes)
     return confident & near & (memory.misses == 0)
 
 

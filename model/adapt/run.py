@@ -68,7 +68,7 @@ from model.training.referent_step import detection_targets, float32_output, in_g
 from model.training.state import rng_state, set_rng_state
 from model.training.stop_signal import StopRequest, TrainingInterrupted
 from scenes.datasets.frames import FrameItem
-from scenes.geometry.actors import CLASSES, Actor
+from scenes.geometry.actors import Actor
 from scenes.utils.durable import atomic_write_text
 
 
@@ -130,6 +130,7 @@ def set_up(cfg: AdaptConfig) -> AdaptRun:
             f"(step {files.progress.step_in_round} of round {files.progress.round + 1})",
             file=sys.stderr,
         )
+    cfg.thresholds(model.cfg.class_set.names)  # an override of a class the checkpoint lacks
     pillars = model.cfg.pillars
     if pillars.levels_on_ground:  # the frames as the model sees them at inference
         frames.ground_height = pillars.ground_height
@@ -190,7 +191,7 @@ def label_frames(run: AdaptRun, plan: RoundPlan, stop: StopRequest) -> dict[str,
         boxes, labels, scores = detect_frames(run.model, [frame], floor)[0]
         if cfg.seat_on_ground:
             boxes = seat_on_ground(boxes, frame.lidar)
-        keep = select(labels, scores, plan.negative)
+        keep = select(labels, scores, plan.negative, plan.classes)
         memory = files.memory.get(frame.sample_id, FrameMemory.empty())
         memory, stats = ensemble(
             memory, boxes[keep], labels[keep], scores[keep], cfg.memory_iou, cfg.max_miss
@@ -207,19 +208,21 @@ def label_frames(run: AdaptRun, plan: RoundPlan, stop: StopRequest) -> dict[str,
 
 def count_targets(memory: dict[str, FrameMemory], plan: RoundPlan) -> dict[str, Any]:
     """Per class: pseudo-labels, ignored boxes and the pseudo-labels' mean score."""
-    positive = dict.fromkeys(CLASSES, 0)
-    ignored = dict.fromkeys(CLASSES, 0)
-    score_sum = dict.fromkeys(CLASSES, 0.0)
+    positive = dict.fromkeys(plan.classes, 0)
+    ignored = dict.fromkeys(plan.classes, 0)
+    score_sum = dict.fromkeys(plan.classes, 0.0)
     for m in memory.values():
         mask = positive_mask(m, plan)
         for label, score, kept in zip(m.labels, m.scores, mask, strict=True):
-            name = CLASSES[label]
+            name = plan.classes[label]
             if kept:
                 positive[name] += 1
                 score_sum[name] += float(score)
             else:
                 ignored[name] += 1
-    mean = {c: (round(score_sum[c] / positive[c], 4) if positive[c] else None) for c in CLASSES}
+    mean = {
+        c: (round(score_sum[c] / positive[c], 4) if positive[c] else None) for c in plan.classes
+    }
     return {"pseudo_labels": positive, "ignored": ignored, "mean_score": mean}
 
 
@@ -250,7 +253,7 @@ def train_step(run: AdaptRun, plan: RoundPlan, step: int) -> LossTerms:
         view = draw_view(rng, cfg.flip_probability, cfg.max_rotation, cfg.scale_range)
         t = run.targets[frame.sample_id]
         actors = tuple(
-            Actor(k, CLASSES[label], box, np.zeros(2))
+            Actor(k, plan.classes[label], box, np.zeros(2))
             for k, (box, label) in enumerate(zip(view.boxes(t.boxes), t.labels, strict=True))
         )
         items.append(
@@ -306,16 +309,18 @@ def write_report(run: AdaptRun) -> None:
 
 def report_table(report: list[dict[str, Any]]) -> str:
     """The report as a text table: per round, the thresholds, range, pseudo-labels and ignored
-    boxes per class, the memory merge and the mean training loss."""
+    boxes per class (the classes the rounds name), the memory merge and the mean training loss."""
+    classes = list(report[0]["positive"]) if report else []
     head = ["round", "range m"]
-    head += [f"thr {c[:3]}" for c in CLASSES] + [f"pseudo {c[:3]}" for c in CLASSES]
-    head += [f"ign {c[:3]}" for c in CLASSES] + ["matched", "added", "dropped", "loss"]
+    short = [c[:4] for c in classes]  # Trailer and TrafficCone differ in their fourth letter
+    head += [f"thr {c}" for c in short] + [f"pseudo {c}" for c in short]
+    head += [f"ign {c}" for c in short] + ["matched", "added", "dropped", "loss"]
     rows = [head]
     for e in report:
         row = [str(e["round"] + 1), f"{e['max_range']:.0f}"]
-        row += [f"{e['positive'][c]:.2f}" for c in CLASSES]
-        row += [str(e["pseudo_labels"][c]) for c in CLASSES]
-        row += [str(e["ignored"][c]) for c in CLASSES]
+        row += [f"{e['positive'][c]:.2f}" for c in classes]
+        row += [str(e["pseudo_labels"][c]) for c in classes]
+        row += [str(e["ignored"][c]) for c in classes]
         m = e["memory"]
         row += [str(m["matched"]), str(m["added"]), str(m["dropped"])]
         row.append(f"{e['loss']:.3f}" if e["steps"] else "-")
@@ -342,7 +347,7 @@ def adapt(cfg: AdaptConfig) -> list[dict[str, Any]]:
             if cfg.stop_after_round and run.progress.round >= cfg.stop_after_round:
                 break
             r = run.progress.round
-            plan = cfg.round_plan(r)
+            plan = cfg.round_plan(r, run.model.cfg.class_set.names)
             if run.progress.labelled_round < r:
                 run.files.report = [*run.files.report[:r], label_frames(run, plan, stop)]
                 run.progress.labelled_round = r
@@ -379,7 +384,7 @@ def adapt(cfg: AdaptConfig) -> list[dict[str, Any]]:
 
 
 def _round_line(entry: dict[str, Any]) -> str:
-    counts = ", ".join(f"{c} {entry['pseudo_labels'][c]}" for c in CLASSES)
+    counts = ", ".join(f"{c} {n}" for c, n in entry["pseudo_labels"].items())
     return (
         f"round {entry['round'] + 1}: pseudo-labels {counts} (within {entry['max_range']:.0f} m); "
         f"mean loss {entry['loss']:.3f}"
