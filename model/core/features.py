@@ -98,7 +98,7 @@ class Predictions:
     Attributes:
         boxes: ``(K, 7)`` float64 ``x, y, z, l, w, h, yaw``, LiDAR frame, sorted by score.
         scores: ``(K,)`` float64 in ``[0, 1]``.
-        labels: ``(K,)`` int64 indices into ``scenes.geometry.actors.CLASSES``.
+        labels: ``(K,)`` int64 indices into the model's class set (``cfg.class_set``, channel order).
         classes: ``K`` class names.
         heatmaps: ``(3, H, W)`` float32 sigmoid heatmaps (Car, Pedestrian, Cyclist) on ``grid``,
             ``heatmaps[c, iy, ix]``.
