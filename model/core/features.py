@@ -100,8 +100,8 @@ class Predictions:
         scores: ``(K,)`` float64 in ``[0, 1]``.
         labels: ``(K,)`` int64 indices into the model's class set (``cfg.class_set``, channel order).
         classes: ``K`` class names.
-        heatmaps: ``(3, H, W)`` float32 sigmoid heatmaps (Car, Pedestrian, Cyclist) on ``grid``,
-            ``heatmaps[c, iy, ix]``.
+        heatmaps: ``(C, H, W)`` float32 sigmoid heatmaps, one per class of the model's class set
+            (``vod``: Car, Pedestrian, Cyclist) on ``grid``, ``heatmaps[c, iy, ix]``.
         grid: The head's BEV grid.
         prompt: The prompt as encoded (stripped).
         truncated: Whether the prompt exceeded the text encoder's token limit.
