@@ -28,7 +28,7 @@ from model.evaluation.predict_pool import (
 )
 from model.evaluation.report import class_noun_of, evaluate_predictions
 from model.evaluation.report_file import SECONDS
-from model.evaluation.worker_watch import Liveness, PredictionWorkerError
+from model.evaluation.worker_watch import Liveness, PredictionWorkerError, WorkerWatch
 from scenes.talk2radar.root import Talk2RadarRoot
 
 
@@ -201,6 +201,24 @@ def test_a_worker_that_dies_or_stops_mid_run_is_named_in_one_line(
     else:
         assert "stopped (SIGSTOP" in line and re.search(r"samples? \d{5}", line), line
         assert took < 2.0 + 30  # the limit (the floor here), then the look and the kill
+
+
+def test_a_dead_worker_is_named_after_the_pool_forgot_it():
+    """The pool's manager may empty its process map once the pool breaks, before the error is
+    made: the watch names the worker from what it saw at an earlier look (under load the error
+    was once a bare "a prediction worker ended abruptly")."""
+    context = multiprocessing.get_context("fork")
+    worker = context.Process(target=time.sleep, args=(60,))
+    worker.start()
+    starts = context.SimpleQueue()
+    processes = {worker.pid: worker}
+    watch = WorkerWatch(Liveness(), [("00001",)], processes)
+    watch.heard(starts)  # a look while the pool still lists it
+    os.kill(worker.pid, signal.SIGKILL)
+    worker.join(5)
+    processes.clear()  # the broken pool's manager
+    line = str(watch.died(starts))
+    assert f"prediction worker 1 of 1 (pid {worker.pid}) killed by SIGKILL" in line, line
 
 
 @pytest.mark.parametrize("signum", [signal.SIGKILL, signal.SIGSTOP], ids=["killed", "stopped"])

@@ -214,7 +214,6 @@ def _result(
 
 def _stop_pool(
     pool: ProcessPoolExecutor,
-    processes: Mapping[int, BaseProcess],
     watch: WorkerWatch,
     kill: bool,
 ) -> None:
@@ -223,13 +222,13 @@ def _stop_pool(
     cannot finish (a stopped one)."""
     manager = getattr(pool, "_executor_manager_thread", None)
     if kill:
-        watch.end(processes)
+        watch.end()
     pool.shutdown(wait=False, cancel_futures=True)
     longest = max((len(g) for g in watch.groups), default=1)
     deadline = time.monotonic() + watch.liveness.task_limit(watch.seconds_per_sample, longest)
-    for p in list(processes.values()):
+    for p in watch.known().values():
         p.join(timeout=max(0.0, deadline - time.monotonic()))
-    watch.end(processes)
+    watch.end()
     if manager is not None:
         manager.join()
 
@@ -319,7 +318,7 @@ def predictions(
                     yield pred
     finally:
         torch.set_num_threads(threads)
-        _stop_pool(pool, processes, watch, kill=ended_by_watch)
+        _stop_pool(pool, watch, kill=ended_by_watch)
         starts.close()
         folder.cleanup()
 

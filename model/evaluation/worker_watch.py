@@ -117,7 +117,8 @@ class WorkerWatch:
         liveness: The limits.
         groups: The tasks' sample ids, by task index.
         processes: The pool's worker processes, pid -> process (read again at each look: the
-            pool starts them as work comes).
+            pool starts them as work comes, and its manager thread may empty the map once the pool
+            breaks, so each look also keeps its own copy: :meth:`known`).
     """
 
     def __init__(
@@ -129,6 +130,7 @@ class WorkerWatch:
         self.liveness = liveness
         self.groups = groups
         self.processes = processes
+        self._known: dict[int, BaseProcess] = {}
         self.started: dict[int, tuple[int, float]] = {}
         """task index -> (pid, time.time() it started)."""
         self.last_sign = time.time()
@@ -147,8 +149,15 @@ class WorkerWatch:
         rate = seconds / max(samples, 1)
         self.seconds_per_sample = max(rate, self.seconds_per_sample or 0.0)
 
+    def known(self) -> dict[int, BaseProcess]:
+        """Every worker process seen so far, pid -> process: the pool's map as it is now and as
+        it was at the earlier looks (a broken pool's manager may have emptied it already)."""
+        self._known.update(list(self.processes.items()))
+        return dict(self._known)
+
     def heard(self, queue: StartQueue) -> None:
         """Read the workers' start messages."""
+        self.known()
         while not queue.empty():
             task, pid, when = queue.get()
             if pid not in self.workers_seen:
@@ -166,7 +175,7 @@ class WorkerWatch:
         self.last_sign = time.time()
 
     def _name(self, pid: int) -> str:
-        for known in self.processes:
+        for known in self.known():
             self._pids.setdefault(known, len(self._pids) + 1)
         number = self._pids.get(pid)
         count = max(len(self._pids), 1)
@@ -207,7 +216,7 @@ class WorkerWatch:
             return None
         states = [
             f"{self._name(pid)}: {process_state(pid) or exit_words(p.exitcode)}"
-            for pid, p in list(self.processes.items())
+            for pid, p in self.known().items()
         ]
         what = "since the last result" if self.any_started else "since the pool started"
         return PredictionWorkerError(
@@ -222,11 +231,11 @@ class WorkerWatch:
         (``starts`` read first; a message is one pipe write, whole or absent, so a killed
         worker leaves none half written)."""
         self.heard(starts)
-        processes = self.processes
+        processes = self.known()
         deadline = time.monotonic() + 5.0  # the pool ends the others with SIGTERM: their codes
         for p in list(processes.values()):
             p.join(timeout=max(0.0, deadline - time.monotonic()))
-        codes = {pid: p.exitcode for pid, p in list(processes.items())}
+        codes = {pid: p.exitcode for pid, p in processes.items()}
         dead = [pid for pid, code in codes.items() if code not in (None, -signal.SIGTERM)]
         dead = dead or [pid for pid, code in codes.items() if code is not None]
         if not dead:
@@ -244,9 +253,9 @@ class WorkerWatch:
         )
         return PredictionWorkerError(f"{'; '.join(parts)}{hint}; {RETRY}")
 
-    def end(self, processes: Mapping[int, BaseProcess]) -> None:
+    def end(self) -> None:
         """Kill every worker still alive (SIGKILL: a stopped process takes no other signal)."""
-        for p in list(processes.values()):
+        for p in self.known().values():
             if p.exitcode is None:
                 p.kill()
 
