@@ -3,8 +3,9 @@ NUSC [--split val] [--radar-sweeps 5] [--checkpoint CHECKPOINT]``.
 
 For each kept command (``scenes.nuscenes.talk2car.read_commands``), whether the checkpoint's
 detector proposes a box of the referent's class whose bird's-eye centre lies within the top-1
-distance of the referent (1.0 m for a car, 0.5 m for a pedestrian or cyclist:
-``model.evaluation.talk2car.metrics.TOP1_DISTANCE``): the share of commands a perfect referent
+distance of the referent (1.0 m for a car, 0.5 m for a pedestrian or cyclist, other classes as
+the class they are scored as: ``model.evaluation.talk2car.metrics.top1_distance``; the referents
+read into the checkpoint's class set): the share of commands a perfect referent
 stage could answer. Printed overall and per class, with the candidates per sample, and on the
 rain, night and fog subsets of the scene descriptions
 (``model.evaluation.talk2car.report.subset_of``).
@@ -33,15 +34,15 @@ def detector_recall(
     """``class -> (commands whose referent is detected, commands)`` plus ``"all"`` and each
     scene subset that holds commands (``"rain"``, ``"night"``, ``"fog"``)."""
     from model.checkpoint import load_checkpoint
-    from model.evaluation.talk2car.metrics import TOP1_DISTANCE
+    from model.evaluation.talk2car.metrics import top1_distance
     from model.evaluation.talk2car.report import subset_of
     from scenes.nuscenes.root import NuScenesRoot
     from scenes.nuscenes.talk2car import read_commands
 
     root = NuScenesRoot(data, radar_sweeps=radar_sweeps)
-    commands = read_commands(data / "commands", split, root)
     model = load_checkpoint(checkpoint)
     model.eval()
+    commands = read_commands(data / "commands", split, root, model.cfg.class_set)
     by_sample: dict[str, list] = {}
     for command in commands.commands:
         by_sample.setdefault(command.sample_token, []).append(command)
@@ -56,7 +57,7 @@ def detector_recall(
             referent = commands.referent[command.command_token]
             gaps = np.hypot(*(boxes[:, :2] - referent.box[:2]).T)
             same = labels == model.cfg.class_set.index(referent.cls)
-            hit = bool(((gaps < TOP1_DISTANCE[referent.cls]) & same).any())
+            hit = bool(((gaps < top1_distance(referent.cls)) & same).any())
             for key in (referent.cls, *subset_of(frame.description)):
                 counts.setdefault(key, [0, 0])
                 counts[key][0] += hit

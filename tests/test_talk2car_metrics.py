@@ -14,6 +14,7 @@ from model.evaluation.talk2car.metrics import (
     iou_2d,
     table_ii,
     talk2car_ap,
+    top1_distance,
     top1_hits,
 )
 from model.evaluation.talk2car.report import subset_of
@@ -102,6 +103,7 @@ def test_other_classes_are_scored_as_the_class_they_are_like():
         near = command([cone + np.array([0.6, 0, 0, 0, 0, 0, 0])], [1.0], cone, cls)
         assert near.scored_as in ("Pedestrian", "Cyclist")
         assert top1_hits([near]).tolist() == [False]  # 0.6 m: beyond a small object's 0.5
+    assert (top1_distance("Bus"), top1_distance("Barrier"), top1_distance("Car")) == (1.0, 0.5, 1.0)
     with pytest.raises(ValueError, match="referent class 'Tram'"):
         command([CAR], [1.0], CAR, "Tram")
 

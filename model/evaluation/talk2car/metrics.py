@@ -160,6 +160,12 @@ def table_ii(commands: Sequence[CommandBoxes]) -> dict[str, float]:
     return out
 
 
+def top1_distance(cls: str) -> float:
+    """The top-1 distance (m) of a referent of class ``cls``: :data:`TOP1_DISTANCE` of the class
+    it is scored as (module docstring)."""
+    return TOP1_DISTANCE[object_class(cls).scored_as]
+
+
 def top1_hits(commands: Sequence[CommandBoxes]) -> np.ndarray:
     """``(C,)`` bool: the best box's bird's-eye centre lies within :data:`TOP1_DISTANCE` of the
     referent (a command without a box: False)."""
@@ -168,7 +174,7 @@ def top1_hits(commands: Sequence[CommandBoxes]) -> np.ndarray:
         if len(command.boxes):
             best = command.boxes[int(np.argmax(command.scores))]
             gap = float(np.hypot(*(best[:2] - command.referent[:2])))
-            out[i] = gap <= TOP1_DISTANCE[command.scored_as]
+            out[i] = gap <= top1_distance(command.referent_class)
     return out
 
 
@@ -211,5 +217,6 @@ __all__ = [
     "iou_2d",
     "table_ii",
     "talk2car_ap",
+    "top1_distance",
     "top1_hits",
 ]
