@@ -15,6 +15,7 @@ import torch
 from model.training.data import DataSpecError, root_specs
 from model.training.referent_step import detection_targets, frame_prompts, in_bev_footprint
 from scenes.datasets.nuscenes_frames import NuScenesFrames, is_nuscenes_root
+from scenes.geometry.classes import NUSCENES
 from scenes.language.prompts import PromptConfig
 from scenes.nuscenes.root import NuScenesRoot
 from scenes.nuscenes.talk2car import read_commands
@@ -324,3 +325,20 @@ def test_detector_recall_counts_each_command_once_per_class_and_subset(nusc):
         assert counts[name][1] == n
     assert sum(counts[c][1] for c in classes if c in counts) == len(commands)
     assert all(0 <= hit <= n for hit, n in counts.values())
+
+
+def test_detector_recall_of_a_nuscenes_class_checkpoint(nusc):
+    """The referents are read into the checkpoint's classes (a ridden bicycle is a Bicycle) and
+    scored at the distance of the class they are scored as."""
+    from bench.talk2car_recall import detector_recall
+
+    root = NuScenesRoot(nusc)
+    # the train split's referents: a car and a ridden bicycle
+    commands = read_commands(nusc / "commands", "train", root, NUSCENES).commands
+    counts = detector_recall(nusc, "train", 1, Path("checkpoints/tpcnet-nuscenes.pt"))
+    assert counts["all"][1] == len(commands) > 0
+    assert (
+        "Bicycle" in counts
+        and "Cyclist" not in counts
+        and set(counts) - {"all", "rain", "night", "fog"} <= set(NUSCENES.names)
+    )
