@@ -16,9 +16,9 @@ and prompted). Per set-up:
 - **false boxes per frame**: those proposals in the counted region that match no actor of their
   class;
 - **class-prompt set F1**: "the cyclists", "the pedestrians" and "the cars" (each class's plural)
-  asked at the checkpoint's operating threshold, each answer's F1 against the counted actors of the class
-  (2 found / (answer boxes in the region + targets); 1 for an empty answer to an empty set),
-  averaged over the prompts; beside it the class prompts' pooled recall.
+  asked at the checkpoint's operating threshold, each answer's F1 against the counted actors of
+  the class (2 found / (answer boxes in the region + targets); 1 for an empty answer to an empty
+  set), averaged over the prompts; beside it the class prompts' pooled recall.
 
 The gap column is the pooled detection recall minus the in-domain one (points); the issue's target
 is a gap of at most 10 points on every held-out rig. A pitched LiDAR is scored against the actors'

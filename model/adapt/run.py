@@ -19,8 +19,8 @@ Only the scene encoder and the detector (``lidar.``, ``radar.``, ``fusion.``, ``
 ``head.``) are trained; they run in train mode but for their batch-norm layers, whose running
 statistics stay the initial checkpoint's (``--norm-statistics keep``; ``follow``: they follow the
 new sensor's frames, AdaBN-like, which on two-frame batches cost more than it gave:
-docs/RESULTS.md, "Adaptation to unlabelled frames"). The text encoder and the referent stage are frozen and in eval
-mode: the adapted checkpoint answers prompts with the initial checkpoint's referent stage over the
+docs/RESULTS.md, "Adaptation to unlabelled frames"). The text encoder and the referent stage are
+frozen and in eval mode: the adapted checkpoint answers prompts with the initial checkpoint's referent stage over the
 adapted detector's candidates, at the initial checkpoint's operating threshold.
 """
 
