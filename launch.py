@@ -416,7 +416,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         f"Talk2PC is serving {len(app.frames)} frames of {data} at {app.url} (split {split!r})",
         flush=True,
     )
-    print(f"Annotation saves pairs into {app.annotations.path}", flush=True)
+    print(app.annotations.saving_line(), flush=True)
     print("Press Ctrl-C to stop.", flush=True)
     try:
         while not stop.wait(0.5):

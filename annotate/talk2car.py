@@ -15,8 +15,12 @@ Talk2Car's data folder: ``--talk2car <pairs>/commands`` reads the commands back
 
 Nothing is written before the first save. A save rewrites its split's file atomically with the
 commands already there (read back strictly; a file holding a command that does not resolve
-against the served root is refused, never rewritten without it) and the new one; saves are
-idempotent per request key, as :meth:`annotate.AnnotationStore.save`'s. The command file keeps
+against the served root is refused, never rewritten without it) and the new one; every key the
+store does not write is kept (a command's keys beyond the release's eleven, top-level keys such
+as ``version``), and the commands already there keep their records as read; saves are
+idempotent per request key, as :meth:`annotate.AnnotationStore.save`'s. The pairs folder's
+``commands/`` never lies inside the served nuScenes root nor inside a folder the store must not
+write (the app's ``--talk2car`` folder): :func:`check_pairs_folder`. The command file keeps
 no annotator, no versions and no reviews (the release's format has none): :meth:`open` refuses
 to reopen a command (delete it and annotate it again), :meth:`history` and :meth:`records` are
 empty.
@@ -30,6 +34,7 @@ from __future__ import annotations
 
 import threading
 import uuid
+from collections.abc import Sequence
 from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
@@ -51,14 +56,22 @@ from scenes.nuscenes.root import NuScenesError, NuScenesRoot
 from scenes.nuscenes.talk2car import (
     CommandFileError,
     Talk2CarCommand,
+    command_record,
     commands_file,
     model_box_to_camera,
     read_commands,
-    write_commands,
+    write_command_file,
 )
+from scenes.utils.owned import inside
 from scenes.utils.textfile import read_json_file
 
-__all__ = ["COMMANDS_FOLDER", "MATCH", "Talk2CarStore", "referred_annotation"]
+__all__ = [
+    "COMMANDS_FOLDER",
+    "MATCH",
+    "Talk2CarStore",
+    "check_pairs_folder",
+    "referred_annotation",
+]
 
 COMMANDS_FOLDER = "commands"
 """The folder of a pairs root that holds ``{split}_commands.json`` (as Talk2Car's data folder)."""
@@ -132,6 +145,30 @@ def referred_annotation(
     )
 
 
+def check_pairs_folder(
+    path: str | Path, root: str | Path, protected: Sequence[str | Path] = ()
+) -> None:
+    """Refuse a pairs folder whose ``commands/`` (where saves go) lies inside the nuScenes root
+    ``root`` or is, or lies inside, one of the ``protected`` folders (the app's ``--talk2car``).
+
+    Raises:
+        StoreError: one line naming the pairs folder and the folder it would write into.
+    """
+    commands = Path(path) / COMMANDS_FOLDER
+    if inside(commands, root):
+        raise StoreError(
+            f"pairs folder {path}: its commands would go into {commands}, inside the served "
+            f"nuScenes root {root}, which is never written; name a pairs folder outside it"
+        )
+    for folder in protected:
+        if inside(commands, folder):
+            raise StoreError(
+                f"pairs folder {path}: its commands would go into {commands}, the --talk2car "
+                f"folder {folder} (or inside it), which is never written; name another pairs "
+                "folder"
+            )
+
+
 def _now() -> str:
     return datetime.now(UTC).isoformat(timespec="milliseconds")
 
@@ -148,6 +185,11 @@ class Talk2CarStore:
             size of the root's first sample).
         classes: The class set (the served model's): a command's box is an annotation whose
             category maps onto the draft box's class of this set.
+        protected: Folders never written into (the served ``--talk2car`` folder).
+
+    Raises:
+        StoreError: a pairs folder that would write into the root or a protected folder
+            (:func:`check_pairs_folder`).
     """
 
     def __init__(
@@ -157,7 +199,9 @@ class Talk2CarStore:
         splits: tuple[str, ...] = DEFAULT_SPLITS,
         validation: ValidationConfig | None = None,
         classes: ClassSet = VOD,
+        protected: Sequence[str | Path] = (),
     ) -> None:
+        check_pairs_folder(path, root.path, protected)
         self.path = Path(path)
         self.classes = classes
         self.commands_dir = self.path / COMMANDS_FOLDER
@@ -174,8 +218,9 @@ class Talk2CarStore:
 
     # ------------------------------------------------------------------ reading
 
-    def _read(self, split: str) -> tuple[list[str], tuple[Talk2CarCommand, ...]]:
-        """The scene tokens and commands of one split's file (none when it does not exist).
+    def _read(self, split: str) -> tuple[dict, tuple[Talk2CarCommand, ...]]:
+        """One split's file as read (its JSON object, every key in it; an empty one when the file
+        does not exist) and its commands.
 
         Raises:
             StoreError: the file is malformed, or holds commands that do not resolve against
@@ -183,7 +228,7 @@ class Talk2CarStore:
         """
         path = commands_file(self.commands_dir, split)
         if not path.is_file():
-            return [], ()
+            return {"scene_tokens": [], "commands": []}, ()
         try:
             found = read_commands(self.commands_dir, split, self.root, self.classes)
             data = read_json_file(path, "Talk2Car command file", CommandFileError)
@@ -195,7 +240,7 @@ class Talk2CarStore:
                 f"{path}: {sum(found.skipped.values())} command(s) do not resolve against "
                 f"{self.root.path} ({reasons}); the file is not rewritten"
             )
-        return list(data.get("scene_tokens", [])), found.commands
+        return data, found.commands
 
     def commands(self, split: str) -> tuple[Talk2CarCommand, ...]:
         """The commands saved in ``split`` (file order)."""
@@ -284,7 +329,8 @@ class Talk2CarStore:
             (int(cam["width"]), int(cam["height"])),
         )[0]
         with self._lock:
-            scene_tokens, existing = self._read(split)
+            data, existing = self._read(split)
+            scene_tokens = list(data.get("scene_tokens", []))
             if sample_rec["scene_token"] not in scene_tokens:
                 scene_tokens.append(sample_rec["scene_token"])
             command = Talk2CarCommand(
@@ -299,8 +345,13 @@ class Talk2CarStore:
                 box_2d=(float(left), float(top), float(right - left), float(bottom - top)),
                 t2c_img=f"img_{split}_{len(existing)}.jpg",
             )
+            records = [*data["commands"], command_record(command)]
             with fs_errors(f"writing {commands_file(self.commands_dir, split)}"):
-                write_commands(self.commands_dir, split, scene_tokens, (*existing, command))
+                write_command_file(
+                    self.commands_dir,
+                    split,
+                    {**data, "scene_tokens": scene_tokens, "commands": records},
+                )
         record = ManifestRecord(
             action=Action.CREATE,
             sample_id=command.command_token,
@@ -324,11 +375,11 @@ class Talk2CarStore:
         """
         with self._lock:
             for split in self.splits:
-                scene_tokens, commands = self._read(split)
-                kept = tuple(c for c in commands if c.command_token != sample_id)
-                if len(kept) != len(commands):
+                data, commands = self._read(split)
+                if any(c.command_token == sample_id for c in commands):
+                    kept = [r for r in data["commands"] if r.get("command_token") != sample_id]
                     with fs_errors(f"writing {commands_file(self.commands_dir, split)}"):
-                        write_commands(self.commands_dir, split, scene_tokens, kept)
+                        write_command_file(self.commands_dir, split, {**data, "commands": kept})
                     return
         raise StoreError(f"no command {sample_id!r} in {self.commands_dir}")
 

@@ -29,8 +29,10 @@ from typing import Any, Protocol
 from annotate import AnnotationStore, Draft, SourceFrame
 from annotate.validation import Issue, ValidationConfig
 from app.labelled import LabelledFrames
+from app.text import md_text
 from scenes.geometry.classes import VOD, ClassSet
 from scenes.talk2radar.drives import Drives, find_drives
+from scenes.talk2radar.kitti import outside_class_counts, outside_class_phrase
 from scenes.talk2radar.layout import RootError
 from scenes.talk2radar.root import Sample, Talk2RadarRoot
 
@@ -156,7 +158,19 @@ class Talk2RadarServed:
         return ()
 
     def frame_notes(self, sample: Sample) -> str:
-        return ""
+        """The line of a sample whose referents (its ``label_2`` on a root with prompts) fall
+        outside the served model's class set: how many, of which classes, and that the model
+        cannot answer them (``""`` when none do, and on a release without prompts, whose labels
+        are every object and no referents)."""
+        counts = outside_class_counts(sample.labels, self.classes)
+        if not counts or not has_prompts(self.root):
+            return ""
+        phrase = outside_class_phrase(counts)
+        return (
+            f"**Note:** {md_text(phrase)}: the checkpoint's classes are "
+            f"{md_text(', '.join(self.classes.names))}; it cannot answer them, and the GT above "
+            "leaves them out"
+        )
 
     def drives(self, ids: Sequence[str]) -> Drives:
         """:func:`scenes.talk2radar.drives.find_drives` (errors: ``RootError``, ``OSError``)."""

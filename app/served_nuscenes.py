@@ -16,7 +16,9 @@ every command of the sample with its referred box.
 
 Pairs. Annotated pairs are Talk2Car commands (:class:`annotate.talk2car.Talk2CarStore`) saved
 only into the folder named with ``--pairs DIR`` (``DIR/commands/{split}_commands.json``); without
-it nothing is written and the tab suggests ``<root>-talk2car``.
+it nothing is written and the tab suggests ``<root>-talk2car``. A ``DIR`` whose ``commands/`` lies
+inside the served root or is (or lies inside) the ``--talk2car`` folder is refused when the app
+starts (:func:`annotate.talk2car.check_pairs_folder`): the release is never written.
 """
 
 from __future__ import annotations
@@ -28,8 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
-from annotate import Draft, SourceFrame
-from annotate.talk2car import Talk2CarStore, referred_annotation
+from annotate import Draft, SourceFrame, StoreError
+from annotate.talk2car import Talk2CarStore, check_pairs_folder, referred_annotation
 from annotate.validation import Issue
 from app.labelled import LabelledFrames
 from app.text import md_text
@@ -217,6 +219,10 @@ class NuScenesServed:
         source: The frames.
         pairs: ``--pairs DIR``: where annotated commands go (``DIR/commands/``); None: nowhere
             (the tab suggests ``<root>-talk2car``).
+
+    Raises:
+        RootError: ``pairs`` would write into the served root or the ``--talk2car`` folder (one
+            line, :func:`annotate.talk2car.check_pairs_folder`).
     """
 
     def __init__(self, source: NuScenesSource, pairs: Path | None = None) -> None:
@@ -227,6 +233,13 @@ class NuScenesServed:
             Path(pairs) if pairs is not None else path.with_name(path.name + PAIRS_SUFFIX)
         )
         self.named = pairs is not None
+        self.protected = (source.talk2car,) if source.talk2car is not None else ()
+        """Folders the pairs never go into (the ``--talk2car`` folder; the root is checked too)."""
+        if pairs is not None:
+            try:
+                check_pairs_folder(self.pairs_path, source.path, self.protected)
+            except StoreError as exc:
+                raise RootError(f"--pairs: {exc}") from None
 
     def unnamed_message(self) -> str:
         return (
@@ -236,7 +249,9 @@ class NuScenesServed:
         )
 
     def open_store(self) -> Talk2CarStore:
-        return Talk2CarStore(self.pairs_path, self.root.nuscenes, classes=self.root.classes)
+        return Talk2CarStore(
+            self.pairs_path, self.root.nuscenes, classes=self.root.classes, protected=self.protected
+        )
 
     def source_frame(self, sample: Sample) -> SourceFrame:
         return SourceFrame(

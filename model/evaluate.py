@@ -25,6 +25,11 @@ Decisions (the devkit behaves differently, see the spec §2.2):
   errors naming the file, and class names that are neither scored nor known (a typo such as
   ``Cyclst``) stay out of the metric, as the protocol says, but are counted and reported (the
   table's last line and a warning on stderr).
+- Referents of classes outside the checkpoint's class set (a ``Truck`` on a three-class root, the
+  bicycles of a ``--classes nuscenes`` root for the three-class checkpoint) are counted and named
+  in one line after the tables and in the JSON's ``outside_class_set``; a prompt whose referents
+  all lie outside the set is reported apart, never scored as an empty-answer prompt, and one with
+  some keeps them as referents the model cannot answer (:mod:`model.evaluation.outside_classes`).
 - Every error is one line on stderr, ``error: ...``, and exit code 2; a prediction worker
   (``--workers``) that dies or stops answering too (:mod:`model.evaluation.worker_watch`: within
   ``--worker-timeout`` and the measured time per frame; which worker, which frame, what to do),

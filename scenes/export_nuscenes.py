@@ -10,13 +10,14 @@ scene, and each single-referent prompt one Talk2Car command in ``NUSC/commands/{
 (``--phrasing``, default ``all``: an instruction of any of the generator's command templates,
 :func:`scenes.language.prompts.commands.as_command`, wrapped around the description, drawn from
 ``--seed``); ``--phrasing none`` keeps the prompt as the generator wrote it.
+``--out`` is new, empty or an earlier export of this command (:func:`export`): no other folder is
+written into, and only files an export wrote are ever replaced or removed.
 Errors are one line, ``error: ...``, exit code 2.
 """
 
 from __future__ import annotations
 
 import argparse
-import shutil
 import sys
 import time
 from collections.abc import Sequence
@@ -36,14 +37,16 @@ from scenes.nuscenes.export import (
     export_frames,
 )
 from scenes.synth.radar import RadarConfig
-from scenes.talk2radar.layout import RootError
 from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.utils.cli import command_parser, option, run_command
+from scenes.utils.owned import owned_output
 
 __all__ = ["SPLITS", "ExportNuScenesCommand", "export", "main", "source_frames"]
 
 SPLITS = ("train", "val", "test")
 """The source lists exported by default."""
+WRITER = "scenes.export_nuscenes"
+"""This command's name in the marker of its outputs (:mod:`scenes.utils.owned`)."""
 
 
 def source_frames(root: Talk2RadarRoot, splits: Sequence[str]) -> list[SourceFrame]:
@@ -90,34 +93,34 @@ def export(
     version: str = "v1.0-trainval",
     phrasing: str | None = "all",
 ) -> ExportReport:
-    """Write the synthetic root ``source`` as a nuScenes root with Talk2Car commands at ``out``
-    (replaced where it is an earlier export: it must hold a ``v1.0-*`` folder, or be empty).
+    """Write the synthetic root ``source`` as a nuScenes root with Talk2Car commands at ``out``.
     ``phrasing``: the command phrasing stream of the sentences, None for the prompts as written
     (:func:`scenes.nuscenes.export.export_frames`).
 
+    ``out`` must be new, empty, or an earlier export of this command (recognised by the marker
+    it left, :data:`scenes.utils.owned.MARKER`), and apart from ``source`` (neither it, inside it
+    nor containing it). The root is written into a staging folder beside ``out`` and installed
+    when complete (:func:`scenes.utils.owned.owned_output`): an earlier export's files are
+    replaced, any other file in ``out`` is kept, and a failed export leaves ``out`` as it was.
+
     Raises:
-        RootError: a bad source or output folder.
+        RootError: a bad source.
+        scenes.utils.owned.FolderError: a refused output folder (one line naming it).
         ValueError: a malformed file of the source (named).
     """
     sentence = None if phrasing is None else command_sentence(phrasing)
     source, out = Path(source), Path(out)
-    if out.resolve() == source.resolve():
-        raise RootError(f"{out}: is the source root; choose another output folder")
-    if out.exists():
-        names = {p.name for p in out.iterdir()} if out.is_dir() else {"?"}
-        if names and not any(n.startswith("v1.0-") for n in names):
-            raise RootError(f"{out}: exists and is neither empty nor an earlier nuScenes export")
-        shutil.rmtree(out)
     root = Talk2RadarRoot(source, radar="auto")
-    frames = source_frames(root, splits)
-    return export_frames(
-        frames,
-        out,
-        seed=seed,
-        version=version,
-        scan_period=RadarConfig().scan_period,
-        sentence=sentence,
-    )
+    with owned_output(out, WRITER, {"the source root": source}) as staging:
+        frames = source_frames(root, splits)
+        return export_frames(
+            frames,
+            staging,
+            seed=seed,
+            version=version,
+            scan_period=RadarConfig().scan_period,
+            sentence=sentence,
+        )
 
 
 def command_sentence(phrasing: str) -> Sentence:

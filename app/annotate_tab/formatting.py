@@ -106,10 +106,18 @@ def evidence_markdown(
     return "\n".join(rows)
 
 
-def checks_markdown(report: ValidationReport) -> str:
-    """What validation says about the draft, shown under *Save pair* (why it is disabled)."""
+def checks_markdown(report: ValidationReport, saving: bool = True) -> str:
+    """What validation says about the draft, shown under *Save pair* (why it is disabled).
+
+    Args:
+        report: The draft's validation.
+        saving: Whether pairs can be saved here at all (False: the status line says why, and a
+            complete draft is not called ready to save).
+    """
     lines = []
-    if report.ok:
+    if report.ok and not saving:
+        lines.append("**The pair is complete**, but saving is unavailable (see the status above).")
+    elif report.ok:
         lines.append("**Ready to save** (*Save pair*, or Enter in *Pair prompt*).")
     else:
         lines.append("**Save pair is disabled until:**")
@@ -162,7 +170,7 @@ def status_markdown(
         pristine: Whether the draft holds nothing worth keeping (:func:`annotate.is_pristine`).
         unavailable: Why saving is unavailable (None: the store is open).
         saving_to: The folder pairs are saved into when it is not the served root (None: the
-            served root).
+            served root); not shown while saving is unavailable (nothing is saved anywhere).
         last_saved: What the last save of this browser wrote (``"pair 00061 (version 1) in
             train"``), or None.
         note: One more line (how the referents were chosen), or None.
@@ -172,7 +180,7 @@ def status_markdown(
         lines.append(f"**Saving is unavailable:** {md_text(unavailable)}")
     if last_saved is not None:
         lines.append(f"**Saved {md_text(last_saved)}.**")
-    if saving_to is not None:
+    if saving_to is not None and unavailable is None:
         lines.append(
             f"Pairs are saved into {md_text(saving_to)} (a Talk2Radar root beside the served "
             "one, whose files are not touched)."

@@ -83,6 +83,13 @@ class AnnotationHub:
                 self._error = f"{type(exc).__name__}: {exc}"
                 log.error("annotation store of %s unavailable: %s", self.path, self._error)
 
+    def saving_line(self) -> str:
+        """One line on where pairs go (the console's, at start): the folder they are saved
+        into, or why nothing is saved (the tab's "Saving is unavailable")."""
+        if self.error is not None:
+            return f"Annotation does not save pairs: {self.error}"
+        return f"Annotation saves pairs into {self.path}"
+
     @property
     def separate(self) -> bool:
         """Whether pairs go into another folder than the served root."""

@@ -31,6 +31,7 @@ from annotate import (
     BoxEvidence,
     Draft,
     DraftEditor,
+    StoreError,
     ValidationConfig,
     ValidationReport,
     box_evidence,
@@ -367,7 +368,7 @@ class AnnotationPanel:
             extra = self.hub.served.draft_issues(draft, self.frame.sample)
             report = replace(report, issues=report.issues + extra) if extra else report
         self.report = report
-        w.checks.content = checks_markdown(self.report)
+        w.checks.content = checks_markdown(self.report, saving=self.store is not None)
         w.save.disabled = self.store is None or self.frame is None or not self.report.ok
         w.split.disabled = draft.sample_id is not None
 
@@ -399,8 +400,15 @@ class AnnotationPanel:
         self._shown[id(handle)] = handle.value
 
     def refresh_pairs(self) -> None:
-        """Re-read the saved pairs of the root into the *Pair* dropdown and table."""
-        pairs = self.store.pairs() if self.store is not None else ()
+        """Re-read the saved pairs of the root into the *Pair* dropdown and table; a pairs file
+        that cannot be listed (a command that does not resolve against the root, a malformed
+        file) is one line in the table and the log, and the tab keeps working."""
+        problem = None
+        try:
+            pairs = self.store.pairs() if self.store is not None else ()
+        except (StoreError, OSError, ValueError) as exc:
+            pairs, problem = (), " ".join(str(exc).split())
+            log.warning("saved pairs of %s cannot be listed: %s", self.hub.path, problem)
         with self.session.lock:
             if self.session.closed:
                 return
@@ -414,7 +422,11 @@ class AnnotationPanel:
             elif options:
                 w.pair.value = options[-1]
             w.open_pair.disabled = w.delete_pair.disabled = not options
-            w.pairs.content = pairs_markdown(pairs, self.hub.path)
+            w.pairs.content = (
+                f"**Saved pairs cannot be listed:** {md_text(problem)}"
+                if problem is not None
+                else pairs_markdown(pairs, self.hub.path)
+            )
 
     # ------------------------------------------------------------------ listeners
 

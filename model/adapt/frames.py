@@ -17,7 +17,7 @@ import numpy as np
 
 from model.adapt.config import AdaptError
 from scenes.geometry.ground import level_clouds
-from scenes.talk2radar.layout import VELODYNE, RootError, sample_dir
+from scenes.talk2radar.layout import VELODYNE, RootError, sample_dir, split_file
 from scenes.talk2radar.root import Talk2RadarRoot
 
 
@@ -50,8 +50,9 @@ class UnlabelledFrames:
             :mod:`scenes.geometry.ground`); None: as they are.
 
     Raises:
-        AdaptError: not a root, no frame, or a split list that is missing or malformed (one line
-            naming the path).
+        AdaptError: not a root, no frame (naming the split list when ``split`` is given and its
+            list is empty, else the LiDAR folder), or a split list that is missing or malformed
+            (one line naming the path).
     """
 
     def __init__(
@@ -77,6 +78,9 @@ class UnlabelledFrames:
         if max_frames:
             self.ids = self.ids[:max_frames]
         if not self.ids:
+            listed = split_file(self.root.lidar_dir, split)
+            if split and listed.is_file():
+                raise AdaptError(f"--split {split}: no frame to adapt on ({listed} lists no frame)")
             folder = sample_dir(self.root.lidar_dir, VELODYNE)
             raise AdaptError(f"--data {path}: no frame to adapt on (no .bin file in {folder})")
 

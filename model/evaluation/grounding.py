@@ -137,12 +137,15 @@ class PromptOutcome:
     Attributes:
         sample_id: The sample (prompt) id.
         tags: Its prompt type tags.
-        num_referents: Referred boxes.
+        num_referents: Referred boxes (:attr:`outside_referents` included).
         num_predicted: Predicted boxes at or above the operating threshold.
         true_positives: Of those, matched one-to-one to a referent.
         hit_25, hit_50: Top-box hit in ``[0, 1]`` at 3D IoU > 0.25 / 0.5 (a fraction only when the
             top score is tied, see the module doc); None without referents.
         referent_classes: The referents' classes (sorted, each once).
+        outside_referents: Of ``num_referents``, referents of classes outside the model's set
+            (:mod:`model.evaluation.outside_classes`): never matched, so recall and F1 count
+            them as missed.
     """
 
     sample_id: str
@@ -153,6 +156,7 @@ class PromptOutcome:
     hit_25: float | None
     hit_50: float | None
     referent_classes: tuple[str, ...] = ()
+    outside_referents: int = 0
 
     @property
     def precision(self) -> float:
@@ -244,22 +248,30 @@ def prompt_outcome(
     predicted: PromptBoxes,
     referents: PromptBoxes,
     threshold: float,
+    outside: int = 0,
 ) -> PromptOutcome:
     """Score one prompt's answer: top-box hits over all of ``predicted``, set matching over the
-    boxes with ``score >= threshold`` (the operating threshold)."""
+    boxes with ``score >= threshold`` (the operating threshold). ``outside``: referents of the
+    prompt beyond ``referents``, of classes outside the model's set: they count in ``R``, never
+    matched (a prompt with only such referents has top-box hits of 0)."""
+    if outside < 0:
+        raise ValueError(f"prompt {sample_id}: outside referents must be >= 0, got {outside}")
     kept = predicted.above(threshold)
     hits: tuple[float | None, ...] = (None, None)
     if len(referents):
         hits = top_box_hits(predicted, referents, ACC_IOUS)
+    elif outside:
+        hits = (0.0, 0.0)
     return PromptOutcome(
         sample_id=sample_id,
         tags=frozenset(tags),
-        num_referents=len(referents),
+        num_referents=len(referents) + outside,
         num_predicted=len(kept),
         true_positives=match_count(kept, referents),
         hit_25=hits[0],
         hit_50=hits[1],
         referent_classes=tuple(sorted(set(referents.classes))),
+        outside_referents=outside,
     )
 
 

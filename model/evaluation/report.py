@@ -14,7 +14,9 @@
   prompt type and per group; with ``baselines=True`` also for the language-blind oracle and the
   class-noun prompt (:mod:`model.evaluation.baselines`), each with its official mAP. They judge the boxes as
   ``ground`` returns them (LiDAR frame, before the prediction files' image / range filter), against
-  the referents of ``label_2``.
+  the referents of ``label_2``. Referents of classes outside the model's set are counted and named
+  (:mod:`model.evaluation.outside_classes`: a prompt with only such referents is reported apart,
+  one with some keeps them as referents the model cannot answer).
 
 Thresholds: the model grounds each prompt once, decoding at ``min(decode, operating)``; the boxes
 scoring at least the decode threshold (``score_threshold``, default
@@ -46,6 +48,7 @@ from model.evaluation.grounding import (
     prompt_outcome,
 )
 from model.evaluation.metrics import VodResult, evaluate_frames
+from model.evaluation.outside_classes import OutsideClasses
 from model.evaluation.predict import (
     PredictSettings,
     decode_threshold,
@@ -63,6 +66,7 @@ from model.evaluation.report_file import (
     GT_OBJECTS,
     NOTES,
     NUM_FRAMES,
+    OUTSIDE,
     SECONDS,
     BaselineName,
 )
@@ -71,7 +75,12 @@ from model.protocol import model_classes
 from scenes.geometry.actors import Actor
 from scenes.geometry.classes import VOD, ClassSet
 from scenes.language.prompts import infer_tags
-from scenes.talk2radar.kitti import ObjectLabel, format_label_line, parse_label_line
+from scenes.talk2radar.kitti import (
+    ObjectLabel,
+    format_label_line,
+    outside_class_counts,
+    parse_label_line,
+)
 from scenes.talk2radar.root import Sample, Talk2RadarRoot
 from scenes.talk2radar.scene_labels import SceneLabels
 
@@ -131,6 +140,8 @@ class GroundingReport:
         grounding: The model's grounding metrics (None when not computed).
         baselines: Name of :data:`BASELINES` -> its result (only those computed).
         notes: Baseline name -> why it was not computed.
+        outside: The referents outside the model's class set and the prompts reported apart
+            (:mod:`model.evaluation.outside_classes`).
     """
 
     result: VodResult
@@ -144,17 +155,25 @@ class GroundingReport:
     baselines: Mapping[BaselineName, BaselineResult] = field(default_factory=dict)
     notes: Mapping[BaselineName, str] = field(default_factory=dict)
     classes: ClassSet = VOD
+    outside: OutsideClasses = field(default_factory=OutsideClasses)
 
     def rescored(self, predictions: Mapping[str, list[ObjectLabel]]) -> GroundingReport:
         """The same report with other predictions for the same frames (e.g. read back from the
         written files, as the official devkit would read them); grounding and baselines kept."""
         fresh = build_report(self.ground_truth, predictions, self.tags, self.seconds, self.classes)
-        return replace(fresh, grounding=self.grounding, baselines=self.baselines, notes=self.notes)
+        return replace(
+            fresh,
+            grounding=self.grounding,
+            baselines=self.baselines,
+            notes=self.notes,
+            outside=self.outside,
+        )
 
     def to_dict(self) -> dict:
         """JSON-ready: the official dict plus ``by_prompt_type``, ``by_depth`` and timing; with
         grounding metrics, ``grounding`` (:meth:`GroundingMetrics.to_dict`), ``baselines`` (name ->
-        official dict + ``grounding``) and ``baseline_notes``."""
+        official dict + ``grounding``), ``baseline_notes`` and ``outside_class_set``
+        (:meth:`OutsideClasses.to_dict`)."""
         out = {
             **self.result.to_dict(),
             NUM_FRAMES: self.result.num_frames,
@@ -166,6 +185,7 @@ class GroundingReport:
             out[GROUNDING] = self.grounding.to_dict()
             out[BASELINES_KEY] = {k: v.to_dict() for k, v in self.baselines.items()}
             out[NOTES] = dict(self.notes)
+            out[OUTSIDE] = self.outside.to_dict()
         return out
 
     def grounding_rows(self) -> dict[str, tuple[GroundingMetrics, float | None]]:
@@ -181,7 +201,8 @@ class GroundingReport:
 
     def format_tables(self) -> str:
         """The official table, mAP by prompt type and by depth bin (3D, entire area, R11), then the
-        grounding tables (model and baselines side by side)."""
+        grounding tables (model and baselines side by side), the baselines' notes and the line of
+        the referents outside the model's class set (:meth:`OutsideClasses.note`)."""
         lines = [self.result.format_table()]
         lines.append("mAP by prompt type (3D, entire area, 11-point / 40-point)")
         for name, (n, res) in self.by_type.items():
@@ -196,6 +217,9 @@ class GroundingReport:
             lines.append(format_grounding_tables(rows).rstrip("\n"))
         for name, why in self.notes.items():
             lines.append(f"{ROW_NAMES.get(name, name)} baseline not computed: {why}")
+        note = self.outside.note()
+        if note is not None:
+            lines.append(note)
         return "\n".join(lines) + "\n"
 
 
@@ -341,6 +365,8 @@ def evaluate_predictions(
     answers = AnswerSet()
     base: dict[BaselineName, AnswerSet] = {name: AnswerSet() for name in BASELINES}
     no_meta: list[str] = []
+    outside: dict[str, dict[str, int]] = {}  # sample id -> its referents outside the set
+    apart: list[str] = []  # prompts whose referents all lie outside the set: not scored
     settings = PredictSettings(
         score_threshold=ground_at,
         min_label_score=decode,
@@ -365,15 +391,26 @@ def evaluate_predictions(
             answer = PromptBoxes.make(
                 pred.boxes, pred.classes, pred.scores, source=f"{where} model"
             )
-            answers.outcomes.append(prompt_outcome(sid, tags[sid], answer, referents, op))
+            beyond = outside_class_counts(sample.labels, classes)
+            if beyond:
+                outside[sid] = beyond
+            scored = not beyond or len(referents) > 0  # else: reported apart, never scored
+            if not scored:
+                apart.append(sid)
+            missed = sum(beyond.values())
+            if scored:
+                answers.outcomes.append(
+                    prompt_outcome(sid, tags[sid], answer, referents, op, missed)
+                )
             if not baselines:
                 continue
             cls = named_class(tags[sid], sample.classes)
             noun_boxes = pred.extra[class_noun_prompt(cls)]
             base["class_noun"].labels[sid] = _labels(noun_boxes, decode, sample)
-            base["class_noun"].outcomes.append(
-                prompt_outcome(sid, tags[sid], noun_boxes, referents, op)
-            )
+            if scored:
+                base["class_noun"].outcomes.append(
+                    prompt_outcome(sid, tags[sid], noun_boxes, referents, op, missed)
+                )
             if scene_labels is not None:
                 boxes, labels = scene_labels.load(sid).metric()
                 objects = [
@@ -388,7 +425,10 @@ def evaluate_predictions(
                 skip = unsensed_ids(sample.meta, source=f"{root.path / 'meta' / sid}.json")
                 oracle = oracle_boxes(sample.meta.actors, cls, exclude=skip)
             base["oracle"].labels[sid] = _labels(oracle, decode, sample)
-            base["oracle"].outcomes.append(prompt_outcome(sid, tags[sid], oracle, referents, op))
+            if scored:
+                base["oracle"].outcomes.append(
+                    prompt_outcome(sid, tags[sid], oracle, referents, op, missed)
+                )
     report = build_report(gt, dt, tags, tuple(seconds), classes)
     found: dict[BaselineName, BaselineResult] = {}
     notes: dict[BaselineName, str] = {}
@@ -409,6 +449,7 @@ def evaluate_predictions(
         grounding=grounding_metrics(answers.outcomes, op),
         baselines=found,
         notes=notes,
+        outside=OutsideClasses.of(classes.name, outside, tuple(apart)),
     )
 
 

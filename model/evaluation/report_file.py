@@ -13,8 +13,11 @@ constants into typed figures (what :mod:`model.evaluation.results_table` prints)
      "median_seconds_per_frame": s,
      "grounding": grounding,                   grounding = {"operating_threshold": t,
      "baselines": {name: {area..., "grounding": grounding}},    "overall": summary,
-     "baseline_notes": {name: why}}                              "by_prompt_type": {tag: summary},
-                                                                 "by_group": {group: summary}}
+     "baseline_notes": {name: why},                              "by_prompt_type": {tag: summary},
+     "outside_class_set": outside}                               "by_group": {group: summary}}
+                        outside = {"class_set": name, "referents": {label name: N},
+                                   "referents_in_scored_prompts": N, "prompts_apart": N,
+                                   "prompt_ids_apart": [id, ...]}
 
 A summary holds the fields of :class:`model.evaluation.grounding.GroundingSummary` by name (its
 figures are :class:`SummaryFigures`' fields). The figures need only what the tables print (a file may hold more); a section a file lacks (older
@@ -64,6 +67,20 @@ SECONDS, GROUNDING, BASELINES_KEY, NOTES = (
 
 THRESHOLD, OVERALL, BY_GROUP = "operating_threshold", "overall", "by_group"
 """Grounding metrics' operating threshold, all prompts, per prompt group (per tag: BY_TYPE)."""
+
+OUTSIDE = "outside_class_set"
+"""A report's referents outside the model's class set (:mod:`model.evaluation.outside_classes`),
+a mapping of the keys below."""
+
+OUTSIDE_CLASS_SET, OUTSIDE_REFERENTS, OUTSIDE_SCORED, OUTSIDE_APART, OUTSIDE_APART_IDS = (
+    "class_set",
+    "referents",
+    "referents_in_scored_prompts",
+    "prompts_apart",
+    "prompt_ids_apart",
+)
+"""Under :data:`OUTSIDE`: the model's class set, label name -> referents outside it, those left
+in scored prompts (missed), the number of prompts reported apart and their sample ids."""
 
 
 def class_key(name: str, kind: str, r40: bool = False) -> str:

@@ -26,6 +26,7 @@ and the warning says why and which command calibrates the run later.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import shlex
 import sys
 import traceback
@@ -40,6 +41,7 @@ import numpy as np
 from model.evaluation.grounding import PromptBoxes, prompt_outcome
 from model.evaluation.predict import iterate_predictions
 from scenes.utils.cli import command_parser, error_line, option, run_command
+from scenes.utils.run_lock import RunLockError, run_lock
 
 if TYPE_CHECKING:
     from model.tpcnet import TPCNet
@@ -289,16 +291,21 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def run(a: CalibrateConfig) -> int:
-    """Calibrate as ``a`` says and print the curve and the choice (errors raise)."""
-    cal = calibrate_file(
-        a.checkpoint,
-        a.data,
-        a.split,
-        a.limit,
-        a.min_prompts,
-        dry_run=a.dry_run,
-        talk2car=a.talk2car,
-    )
+    """Calibrate as ``a`` says and print the curve and the choice (errors raise). The folder of
+    the checkpoint rewritten is locked meanwhile (:mod:`scenes.utils.run_lock`: a training run
+    or another calibration writing there refuses this one; not for ``--dry-run``)."""
+    with contextlib.ExitStack() as held:
+        if not a.dry_run:
+            held.enter_context(run_lock(Path(a.checkpoint).parent, "--checkpoint"))
+        cal = calibrate_file(
+            a.checkpoint,
+            a.data,
+            a.split,
+            a.limit,
+            a.min_prompts,
+            dry_run=a.dry_run,
+            talk2car=a.talk2car,
+        )
     for t, f1, exact in cal.curve:
         mark = "  <- chosen" if t == cal.threshold else ""
         print(f"threshold {t:.3f}: set F1 {f1:5.1f}  exact-set {exact:5.1f}{mark}")
@@ -315,7 +322,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """``python -m model.calibrate``; a bad checkpoint or root (CheckpointError, RootError: both
     ValueErrors) is one ``error:`` line, exit status 2."""
     return run_command(
-        build_parser(), CalibrateConfig, run, argv, (ValueError, OSError, ImportError)
+        build_parser(), CalibrateConfig, run, argv, (ValueError, OSError, ImportError, RunLockError)
     )
 
 

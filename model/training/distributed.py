@@ -21,9 +21,11 @@ the process group's 30 minutes: every joined rank runs a heartbeat and a watch o
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from pathlib import Path
 from typing import Any
 
 import torch
@@ -33,6 +35,8 @@ from torch.distributed import distributed_c10d
 from torch.nn.parallel import DistributedDataParallel
 
 from model.training.rank_watch import RankLiveness, RankWatch
+from scenes.utils.cli import error_line
+from scenes.utils.run_lock import RunLockError, run_lock
 
 
 def launched() -> bool:
@@ -152,6 +156,35 @@ def barrier() -> None:
         dist.barrier()
 
 
+@contextlib.contextmanager
+def folder_lock(folder: str | Path, what: str = "--out") -> Iterator[None]:
+    """:func:`scenes.utils.run_lock.run_lock` on the run folder, taken by rank 0 alone (the one
+    rank that writes it) for the ``with`` block; every rank learns whether it was taken. A
+    refusal raises :class:`RunLockError` on every rank: rank 0's names the holder (the line to
+    print), the others' is empty (so that one line is said)."""
+    error: RunLockError | None = None
+    with contextlib.ExitStack() as stack:
+        if rank() == 0:
+            try:
+                stack.enter_context(run_lock(folder, what))
+            except RunLockError as exc:
+                error = exc
+            except OSError as exc:
+                error = RunLockError(
+                    f"{folder}: the run folder cannot be locked: {error_line(exc)}"
+                )
+        if agree_max(int(error is not None)):
+            raise error if error is not None else RunLockError("")
+        yield
+
+
+def note_step(seconds: float) -> None:
+    """A training step took ``seconds`` (its wall time, collectives included): the rank watch
+    sets its limit from it (:meth:`model.training.rank_watch.RankWatch.note_step`)."""
+    if _WATCH is not None:
+        _WATCH.note_step(seconds)
+
+
 class StepModule(nn.Module):
     """A training step as a module: ``forward(*args)`` is ``step(model, *args)`` (module
     docstring). Its parameters are ``model``'s."""
@@ -182,12 +215,14 @@ __all__ = [
     "agree_max",
     "barrier",
     "close",
+    "folder_lock",
     "gather",
     "init_from_env",
     "launch_rank",
     "launched",
     "local_device",
     "mean",
+    "note_step",
     "rank",
     "same_on_every_rank",
     "world",

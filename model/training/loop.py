@@ -24,6 +24,13 @@ One loop trains every stage: :func:`set_up` (the dataset, the frozen scenes and 
 the run's grounding kind, chosen once: :mod:`model.training.kinds`, :mod:`model.training.steps`),
 :func:`train_epochs` (:func:`train_step`, :func:`end_epoch`) and :func:`finish`.
 
+One run writes ``--out`` at a time: :func:`main` holds its lock (:mod:`scenes.utils.run_lock`,
+taken by rank 0 under ``torchrun``, :func:`model.training.distributed.folder_lock`) until the run
+is calibrated; a second run on it exits 2 with one line naming the first. The training roots'
+labels of classes outside the model's set are counted and said once at set-up
+(:mod:`model.training.label_check`). Each step's wall time sets the rank watch's limit
+(:mod:`model.training.rank_watch`).
+
 SIGINT or SIGTERM (:mod:`model.training.stop_signal`) let the current step finish, save the run state and
 exit with 130 or 143 and one line. A non-finite loss or gradient stops training with a message
 (exit 2); the last good checkpoint is kept as it was, and so is a training split without a box of
@@ -32,6 +39,7 @@ the three classes.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import sys
 import time
@@ -47,8 +55,8 @@ from model.checkpoint_meta import CheckpointMeta
 from model.tpcnet import TPCNet
 from model.training import distributed
 from model.training.config import TrainConfig, TrainingError, parse_args
-from model.training.data import RootSpec
 from model.training.kinds import TrainingData, TrainingKind, training_kind
+from model.training.label_check import check_labels, outside_line
 from model.training.referent_step import ReferentTrainConfig
 from model.training.start import start_model
 from model.training.state import (
@@ -64,12 +72,10 @@ from model.training.state import (
 )
 from model.training.steps import TrainStep
 from model.training.stop_signal import StopRequest, TrainingInterrupted
-from scenes.geometry.classes import VOD, ClassSet, class_set
-from scenes.talk2radar.kitti import read_label_file
-from scenes.talk2radar.layout import LABEL, sample_dir, sample_file, split_file
+from scenes.geometry.classes import class_set
 from scenes.talk2radar.root import Talk2RadarRoot
-from scenes.talk2radar.scene_labels import SceneLabels
 from scenes.utils.durable import append_json_line
+from scenes.utils.run_lock import RunLockError
 
 
 def cosine_lr(step: int, total: int, base: float, warmup: int) -> float:
@@ -113,28 +119,6 @@ def validate(model: torch.nn.Module, cfg: TrainConfig, root: Talk2RadarRoot) -> 
         "roi_mAP_3d": report.result.roi.map_3d,
         "frames": len(ids),
     }
-
-
-def check_labels(spec: RootSpec, split: str, classes: ClassSet = VOD) -> None:
-    """Refuse a training root none of whose ``split`` frames has a label of ``classes`` (the
-    model's class set; its ``label_2``, or its scene labels' where given): it would train to
-    nothing and report mAP 0."""
-    if spec.talk2car is not None:
-        return  # a nuScenes root: NuScenesFrames refuses a split without a referred command
-    root = Talk2RadarRoot(spec.path, radar=None)
-    ids = root.ids(split)
-    if not ids:
-        raise TrainingError(f"{split_file(root.lidar_dir, split)}: split {split!r} is empty")
-    scene = None if spec.scene_labels is None else SceneLabels(spec.scene_labels)
-    for sid in ids:
-        path = sample_file(root.lidar_dir, LABEL, sid) if scene is None else scene.label_path(sid)
-        if path.is_file() and any(classes.label_index(x.name) >= 0 for x in read_label_file(path)):
-            return
-    folder = sample_dir(root.lidar_dir if scene is None else scene.tree, LABEL)
-    raise TrainingError(
-        f"{folder}: no label of the {len(ids)} samples of split {split!r} has a "
-        f"{', '.join(classes.names)} box ({classes.name!r} class set): nothing to train on"
-    )
 
 
 def train(cfg: TrainConfig, resume: bool = False) -> TrainState:
@@ -270,8 +254,13 @@ def set_up(cfg: TrainConfig, resume: bool, stop: StopRequest) -> Run:
             "model.evaluate --data NUSC --talk2car CMDS (it is calibrated on the val commands "
             "at the end)"
         )
-    for spec in specs:
-        check_labels(spec, cfg.train_split, class_set(cfg.classes))
+    for spec in specs:  # labels outside the model's class set: counted, said once
+        dropped = check_labels(spec, cfg.train_split, class_set(cfg.classes))
+        if dropped and rank == 0:
+            print(
+                outside_line(spec, cfg.train_split, dropped, class_set(cfg.classes)),
+                file=sys.stderr,
+            )
     dataset = kind.dataset(cfg, specs, root)
     referent_cfg = ReferentTrainConfig(cfg.prompt_draw())
     model, saved, state = start_model(cfg, resume, rank, world, device)
@@ -360,6 +349,7 @@ def train_step(run: Run, indices: list[int], clock: _Throughput) -> None:
     the stage's losses, backward, clipping (a non-finite loss or gradient stops the run), the bar
     and, every ``--log-every`` steps, the log line (terms averaged over the ranks)."""
     cfg, state, optimizer = run.cfg, run.state, run.optimizer
+    began = time.perf_counter()
     for group in optimizer.param_groups:
         group["lr"] = cosine_lr(state.step, run.total_steps, cfg.lr, cfg.warmup_steps)
     loss = run.step(indices, state.epoch)
@@ -391,6 +381,7 @@ def train_step(run: Run, indices: list[int], clock: _Throughput) -> None:
             record.update(zip(terms_logged, means, strict=True))
             lr = optimizer.param_groups[0]["lr"]
             _log(run.out, {**record, "lr": lr, "samples_per_s": rate})
+    distributed.note_step(time.perf_counter() - began)  # the rank watch's limit follows it
 
 
 def end_epoch(run: Run) -> None:
@@ -430,31 +421,39 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     rank, joined = distributed.launch_rank(), False
-    try:
-        joined = distributed.init_from_env(cfg.device)
-        state = train(cfg, resume=resume)
-    except TrainingInterrupted as exc:
+    with contextlib.ExitStack() as held:  # --out's lock (scenes.utils.run_lock), until calibrated
+        try:
+            joined = distributed.init_from_env(cfg.device)
+            held.enter_context(distributed.folder_lock(cfg.out))
+            state = train(cfg, resume=resume)
+        except RunLockError as exc:  # another run writes --out: rank 0 says who
+            if str(exc):
+                print(f"error: {exc}", file=sys.stderr)
+            return 2
+        except TrainingInterrupted as exc:
+            if rank == 0:
+                print(exc.message(), file=sys.stderr)
+            return exc.exit_code
+        except KeyboardInterrupt:  # before the handlers were installed
+            print("interrupted by SIGINT: nothing new to save", file=sys.stderr)
+            return 130
+        except (TrainingError, RunStateError, ValueError, FileNotFoundError) as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        finally:
+            if joined:
+                distributed.close()
         if rank == 0:
-            print(exc.message(), file=sys.stderr)
-        return exc.exit_code
-    except KeyboardInterrupt:  # before the handlers were installed
-        print("interrupted by SIGINT: nothing new to save", file=sys.stderr)
-        return 130
-    except (TrainingError, RunStateError, ValueError, FileNotFoundError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    finally:
-        if joined:
-            distributed.close()
-    if rank == 0:
-        print(
-            f"done: {state.step} steps, {state.epoch} epochs, best val 3D mAP {state.best_map:.2f}"
-        )
-        if training_kind(cfg).calibrates and cfg.calibrate and state.epoch >= cfg.epochs:
-            from model.training.calibrate import calibrate_run
+            print(
+                f"done: {state.step} steps, {state.epoch} epochs, best val 3D mAP "
+                f"{state.best_map:.2f}"
+            )
+            if training_kind(cfg).calibrates and cfg.calibrate and state.epoch >= cfg.epochs:
+                from model.training.calibrate import calibrate_run
 
-            first = cfg.roots()[0]
-            calibrate_run(Path(cfg.out) / LAST_FILE, first.path, cfg.val_split, first.talk2car)
+                first = cfg.roots()[0]
+                out = Path(cfg.out) / LAST_FILE
+                calibrate_run(out, first.path, cfg.val_split, first.talk2car)
     return 0
 
 

@@ -76,6 +76,11 @@ class ObjectClass:
             classes only applies to this one (its ``min_overlaps`` are that class's: checked
             below; Talk2Car's AP and top-1, :mod:`model.evaluation.talk2car.metrics`); empty:
             the class itself (one of the three).
+        attributes: The nuScenes attribute a writer gives an object of the class, ``(moving,
+            still)`` by nuScenes' conventions (``vehicle.moving`` / ``vehicle.parked``,
+            ``pedestrian.moving`` / ``pedestrian.standing``, ``cycle.with_rider`` /
+            ``cycle.without_rider``: a still two-wheeler counts as parked, a VoD Cyclist is
+            ridden by definition); empty: the class takes none (traffic cones, barriers).
     """
 
     name: str
@@ -92,6 +97,7 @@ class ObjectClass:
     find_radius: float = 1.0
     neighbour: str | None = None
     scored_as: str = ""
+    attributes: tuple[str, str] | tuple[()] = ()
 
     def __post_init__(self) -> None:
         if not self.scored_as:
@@ -106,6 +112,8 @@ class ObjectClass:
             raise ValueError(f"class {self.name}: color must be 3 values in [0, 255]")
         if self.match_distance <= 0:
             raise ValueError(f"class {self.name}: match_distance must be positive")
+        if len(self.attributes) not in (0, 2):
+            raise ValueError(f"class {self.name}: attributes must be (moving, still) or empty")
         object.__setattr__(
             self, "label_names", tuple(dict.fromkeys((self.name.lower(), *self.label_names)))
         )
@@ -204,6 +212,9 @@ WITH_RIDER = "cycle.with_rider"
 
 _AS_CAR = (0.7, 0.5, 0.5)
 _AS_SMALL = (0.5, 0.25, 0.25)
+_VEHICLE = ("vehicle.moving", "vehicle.parked")
+_WALKING = ("pedestrian.moving", "pedestrian.standing")
+_CYCLE = (WITH_RIDER, "cycle.without_rider")
 _PEDESTRIANS = (
     "human.pedestrian.adult",
     "human.pedestrian.child",
@@ -216,15 +227,17 @@ VOD = ClassSet(
     (
         ObjectClass(
             "Car", "car", "cars", (4.2, 1.8, 1.6), _AS_CAR, 2.0, (255, 150, 0),
-            categories=("vehicle.car",), neighbour="van", find_radius=2.0,
+            categories=("vehicle.car",), neighbour="van", find_radius=2.0, attributes=_VEHICLE,
         ),
         ObjectClass(
             "Pedestrian", "pedestrian", "pedestrians", (0.6, 0.6, 1.75), _AS_SMALL, 1.0,
             (255, 70, 170), categories=_PEDESTRIANS, neighbour="person_sitting",
+            attributes=_WALKING,
         ),
         ObjectClass(
             "Cyclist", "cyclist", "cyclists", (1.8, 0.6, 1.7), _AS_SMALL, 1.2, (70, 200, 255),
             categories=("vehicle.bicycle",), with_rider_only=True,
+            attributes=(WITH_RIDER, WITH_RIDER),
         ),
     ),
 )  # fmt: skip
@@ -236,39 +249,43 @@ NUSCENES = ClassSet(
     (
         ObjectClass(
             "Car", "car", "cars", (4.63, 1.97, 1.74), _AS_CAR, 2.0, (255, 150, 0),
-            categories=("vehicle.car",), neighbour="van", find_radius=2.0,
+            categories=("vehicle.car",), neighbour="van", find_radius=2.0, attributes=_VEHICLE,
         ),
         ObjectClass(
             "Truck", "truck", "trucks", (6.93, 2.51, 2.84), _AS_CAR, 3.0, (230, 60, 40),
             categories=("vehicle.truck",), find_radius=3.0, scored_as="Car",
+            attributes=_VEHICLE,
         ),
         ObjectClass(
             "Bus", "bus", "buses", (10.5, 2.94, 3.47), _AS_CAR, 4.0, (250, 220, 40),
             categories=("vehicle.bus.rigid", "vehicle.bus.bendy"), find_radius=4.0,
-            scored_as="Car",
+            scored_as="Car", attributes=_VEHICLE,
         ),
         ObjectClass(
             "Trailer", "trailer", "trailers", (12.29, 2.90, 3.87), _AS_CAR, 4.0, (160, 110, 60),
             categories=("vehicle.trailer",), find_radius=4.0, scored_as="Car",
+            attributes=_VEHICLE,
         ),
         ObjectClass(
             "ConstructionVehicle", "construction vehicle", "construction vehicles",
             (6.37, 2.85, 3.19), _AS_CAR, 3.0, (200, 170, 110),
             label_names=("construction_vehicle",), categories=("vehicle.construction",),
-            find_radius=3.0, scored_as="Car",
+            find_radius=3.0, scored_as="Car", attributes=_VEHICLE,
         ),
         ObjectClass(
             "Pedestrian", "pedestrian", "pedestrians", (0.73, 0.67, 1.77), _AS_SMALL, 1.0,
             (255, 70, 170), categories=_PEDESTRIANS, neighbour="person_sitting",
+            attributes=_WALKING,
         ),
         ObjectClass(
             "Motorcycle", "motorcycle", "motorcycles", (2.11, 0.77, 1.47), _AS_SMALL, 1.2,
             (150, 90, 255), label_names=("motor", "moped_scooter"),
-            categories=("vehicle.motorcycle",), scored_as="Cyclist",
+            categories=("vehicle.motorcycle",), scored_as="Cyclist", attributes=_CYCLE,
         ),
         ObjectClass(
             "Bicycle", "bicycle", "bicycles", (1.70, 0.60, 1.28), _AS_SMALL, 1.2, (70, 200, 255),
             label_names=("cyclist",), categories=("vehicle.bicycle",), scored_as="Cyclist",
+            attributes=_CYCLE,
         ),
         ObjectClass(
             "TrafficCone", "traffic cone", "traffic cones", (0.41, 0.41, 1.07), _AS_SMALL, 0.6,

@@ -93,6 +93,8 @@ if set(CATEGORY_CLASS.values()) - {None} != set(VOD.names) or not set(CATEGORIES
     cat for s in PRESETS.values() for c in s.classes for cat in c.categories
 }:
     raise ImportError("scenes.geometry.classes maps categories this module does not list")
+if not set(ATTRIBUTES) >= {a for s in PRESETS.values() for c in s.classes for a in c.attributes}:
+    raise ImportError("scenes.geometry.classes gives attributes this module does not list")
 
 
 def model_class(

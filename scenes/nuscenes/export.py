@@ -20,8 +20,11 @@ each frame one sample, each single-referent prompt one Talk2Car command. Per sam
 - CAM_FRONT: the source's camera image resized and padded to 1600 x 900 (intrinsics scaled and
   shifted to match) or a grey image where the source has none; its extrinsics are the source
   camera's, so boxes project on the image as in the source.
-- every actor a sample_annotation (global box, size w l h, attributes from its class and speed,
-  num_lidar_pts / num_radar_pts counted), one instance per actor of a world.
+- every actor a sample_annotation (global box, size w l h, its class's category
+  (:data:`scenes.nuscenes.classes.CLASS_CATEGORY`) and attribute, moving or still, by nuScenes'
+  conventions (:attr:`scenes.geometry.classes.ObjectClass.attributes`; none for cones and
+  barriers), num_lidar_pts / num_radar_pts counted), one instance per actor of a world; actors
+  of every class set's classes are written.
 - a command's camera-frame box at the camera's own time (as Talk2Car gives them) and its 2D box
   projected and clipped to the image; a prompt whose referent is not wholly in front of the camera
   is skipped and counted.
@@ -41,7 +44,8 @@ from PIL import Image
 from scenes.geometry.actors import Actor
 from scenes.geometry.boxes import box_corners, points_in_boxes
 from scenes.geometry.calib import Calibration
-from scenes.nuscenes.classes import CLASS_CATEGORY, WITH_RIDER
+from scenes.geometry.classes import object_class
+from scenes.nuscenes.classes import CLASS_CATEGORY
 from scenes.nuscenes.geometry import (
     MODEL_TO_LIDAR,
     pose_matrix,
@@ -177,17 +181,13 @@ def _annotation(
 ) -> dict:
     c, s = np.cos(actor.box[6]), np.sin(actor.box[6])
     heading = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    moving = actor.is_moving
-    attribute = {
-        "Car": "vehicle.moving" if moving else "vehicle.parked",
-        "Pedestrian": "pedestrian.moving" if moving else "pedestrian.standing",
-        "Cyclist": WITH_RIDER,
-    }[actor.cls]
+    attributes = object_class(actor.cls).attributes
+    attribute = attributes[0 if actor.is_moving else 1] if attributes else None
     return {
         "translation": [float(v) for v in transform(actor.box[:3], model_to_global)[0]],
         "size": [float(actor.box[4]), float(actor.box[3]), float(actor.box[5])],
         "rotation": [float(v) for v in quaternion_from_matrix(model_to_global[:3, :3] @ heading)],
-        "attribute_tokens": [token("attribute", attribute)],
+        "attribute_tokens": [token("attribute", attribute)] if attribute else [],
         "visibility_token": "4",
         "num_lidar_pts": int(points_in_boxes(lidar[:, :3], actor.box[None])[:, 0].sum()),
         "num_radar_pts": int(points_in_boxes(radar[:, :3], actor.box[None])[:, 0].sum()),

@@ -370,12 +370,7 @@ class NuScenesRoot:
         cam_token = data[CAM_FRONT]
         cam_sd = t.get("sample_data", cam_token)
         cam_cs = t.get("calibrated_sensor", cam_sd["calibrated_sensor_token"])
-        intrinsic = np.asarray(cam_cs["camera_intrinsic"], dtype=np.float64)
-        if intrinsic.shape != (3, 3):
-            raise NuScenesError(
-                f"{t.folder / 'calibrated_sensor.json'}: record {cam_sd['calibrated_sensor_token']}: "
-                "field 'camera_intrinsic': CAM_FRONT needs a 3 x 3 matrix"
-            )
+        intrinsic = _camera_intrinsic(t, cam_sd["calibrated_sensor_token"], cam_cs)
         to_camera = self.to_camera(sample_token)
         calib = Calibration(
             P2=np.c_[intrinsic, np.zeros(3)], R0_rect=np.eye(3), Tr_velo_to_cam=to_camera[:3]
@@ -410,3 +405,30 @@ class NuScenesRoot:
                 radar_velocity(boxes, radar),
             ),
         )
+
+
+def _camera_intrinsic(tables: Tables, token: str, record: dict) -> np.ndarray:
+    """``(3, 3)`` float64 the CAM_FRONT intrinsics of calibrated_sensor ``token``.
+
+    Raises:
+        NuScenesError: not a 3 x 3 matrix of finite numbers, a focal length (``[0][0]``,
+            ``[1][1]``) that is not > 0, or a last row other than ``0 0 1`` (names the file,
+            record and field): projected 2D boxes would be meaningless (AP50 2D silently 0).
+    """
+    where = f"{tables.folder / 'calibrated_sensor.json'}: record {token}: field 'camera_intrinsic'"
+    try:
+        intrinsic = np.asarray(record["camera_intrinsic"], dtype=np.float64)
+    except (TypeError, ValueError):
+        intrinsic = np.zeros(0)
+    if intrinsic.shape != (3, 3) or not np.isfinite(intrinsic).all():
+        raise NuScenesError(f"{where}: CAM_FRONT needs a 3 x 3 matrix of finite numbers")
+    fx, fy = intrinsic[0, 0], intrinsic[1, 1]
+    if not (fx > 0 and fy > 0):
+        raise NuScenesError(
+            f"{where}: CAM_FRONT focal lengths fx = {fx:g}, fy = {fy:g}; both must be > 0"
+        )
+    if not np.array_equal(intrinsic[2], [0.0, 0.0, 1.0]):
+        raise NuScenesError(
+            f"{where}: CAM_FRONT's last row is {intrinsic[2].tolist()}; expected [0, 0, 1]"
+        )
+    return intrinsic

@@ -2,7 +2,8 @@
 
 LiDAR (``samples/LIDAR_TOP/*.pcd.bin``): float32 x 5 per point, ``x, y, z, intensity, ring
 index``, in the LIDAR_TOP frame (x right, y forward, z up). A file whose size is not a multiple
-of 20 bytes, or with a non-finite coordinate, is refused naming the file.
+of 20 bytes, or with a NaN or infinite value in any channel of any point, is refused naming the
+file, the first such point and its channel.
 
 Radar (``samples/RADAR_*/*.pcd``): PCD v0.7, ``DATA binary``, the 18 fields of
 :data:`RADAR_FIELDS` with the sizes and types of :data:`RADAR_SIZES` / :data:`RADAR_TYPES`
@@ -11,6 +12,11 @@ one point whose float fields are NaN (the devkit reads it as no point). The offi
 reader (1.2.0) asserts that bytes remain after every field it reads, so :func:`write_radar` ends
 the file with one byte after the last point (:data:`TRAILER`), as the release's files do; the
 reader here accepts a file with or without it.
+
+The radar reader is strict, naming the file: ``WIDTH`` and ``POINTS`` must be one whole number
+>= 0 each and agree (``HEIGHT`` is 1, ``COUNT`` 1 per field), the file must hold those points and
+not a whole point more, and every float field of every point must be finite, except the one
+point of an empty sweep (a lone point whose ``x``, ``y`` or ``z`` is NaN).
 """
 
 from __future__ import annotations
@@ -23,6 +29,7 @@ from scenes.utils.durable import atomic_write_bytes
 
 __all__ = [
     "LIDAR_COLUMNS",
+    "LIDAR_FIELDS",
     "RADAR_FIELDS",
     "RADAR_SIZES",
     "RADAR_TYPES",
@@ -38,6 +45,8 @@ __all__ = [
 
 LIDAR_COLUMNS = 5
 """float32 values per LiDAR point: x, y, z, intensity, ring index."""
+LIDAR_FIELDS: tuple[str, ...] = ("x", "y", "z", "intensity", "ring")
+"""The names of a LiDAR point's :data:`LIDAR_COLUMNS` values, in file order (messages name them)."""
 RADAR_FIELDS: tuple[str, ...] = (
     "x", "y", "z", "dyn_prop", "id", "rcs", "vx", "vy", "vx_comp", "vy_comp",
     "is_quality_valid", "ambig_state", "x_rms", "y_rms", "invalid_state", "pdh0", "vx_rms",
@@ -69,7 +78,8 @@ def read_lidar(path: str | Path) -> np.ndarray:
     """A LIDAR_TOP file as ``(N, 5)`` float32 ``x, y, z, intensity, ring`` (LIDAR_TOP frame).
 
     Raises:
-        SensorFileError: missing, a size not a multiple of 20 bytes, or a non-finite x, y or z.
+        SensorFileError: missing, a size not a multiple of 20 bytes, or a NaN or infinite value
+            in any channel (names the first such point and channel).
     """
     path = Path(path)
     try:
@@ -81,10 +91,21 @@ def read_lidar(path: str | Path) -> np.ndarray:
             f"{path}: {len(raw)} bytes is not a whole number of {LIDAR_COLUMNS}-float32 points"
         )
     points = np.frombuffer(raw, dtype="<f4").reshape(-1, LIDAR_COLUMNS).astype(np.float32)
-    bad = ~np.isfinite(points[:, :3]).all(axis=1)
-    if bad.any():
-        raise SensorFileError(f"{path}: point {int(np.argmax(bad))} has a non-finite coordinate")
+    _check_finite(path, ~np.isfinite(points), LIDAR_FIELDS)
     return points
+
+
+def _check_finite(path: Path, bad: np.ndarray, names: tuple[str, ...]) -> None:
+    """Raise :class:`SensorFileError` naming the first point (row of ``bad``, ``(N, len(names))``
+    bool: True where a value is NaN or infinite) with a bad value, and that value's channel."""
+    rows = np.flatnonzero(bad.any(axis=1))
+    if len(rows):
+        row = int(rows[0])
+        name = names[int(np.argmax(bad[row]))]
+        raise SensorFileError(
+            f"{path}: point {row} has a NaN or infinite {name!r}; bad points: {len(rows)} of "
+            f"{len(bad)}"
+        )
 
 
 def write_lidar(path: str | Path, points: np.ndarray) -> None:
@@ -138,7 +159,9 @@ def read_radar(path: str | Path) -> np.ndarray:
 
     Raises:
         SensorFileError: missing, a header other than the 18-field binary layout (names the
-            line), or fewer bytes than its points need.
+            line), a ``WIDTH`` or ``POINTS`` that is not one whole number >= 0 or that disagree,
+            fewer bytes than its points need or a whole point more, or a NaN or infinite float
+            field (names the first such point and field) outside an empty sweep.
     """
     path = Path(path)
     try:
@@ -167,6 +190,7 @@ def read_radar(path: str | Path) -> np.ndarray:
         "FIELDS": list(RADAR_FIELDS),
         "SIZE": [str(s) for s in RADAR_SIZES],
         "TYPE": list(RADAR_TYPES),
+        "COUNT": ["1"] * len(RADAR_FIELDS),
         "DATA": ["binary"],
         "HEIGHT": ["1"],
     }
@@ -176,17 +200,39 @@ def read_radar(path: str | Path) -> np.ndarray:
                 f"{path}: PCD {key} is {' '.join(header.get(key, ['(missing)']))!r}, "
                 f"expected {' '.join(want)!r}"
             )
-    try:
-        count = int(header.get("WIDTH", ["?"])[0])
-    except ValueError as exc:
-        raise SensorFileError(f"{path}: PCD WIDTH is not a whole number") from exc
-    dtype = radar_dtype()
-    if len(raw) - offset < count * dtype.itemsize:
+    count = _header_count(path, header, "WIDTH")
+    points = _header_count(path, header, "POINTS")
+    if points != count:
         raise SensorFileError(
-            f"{path}: {count} points need {count * dtype.itemsize} bytes, the file has "
-            f"{len(raw) - offset}"
+            f"{path}: PCD POINTS is {points} but WIDTH x HEIGHT is {count}; they must agree"
+        )
+    dtype = radar_dtype()
+    need, have = count * dtype.itemsize, len(raw) - offset
+    if have < need:
+        raise SensorFileError(f"{path}: {count} points need {need} bytes, the file has {have}")
+    if have - need >= dtype.itemsize:
+        raise SensorFileError(
+            f"{path}: the file holds {have} bytes of points, {have - need} more than the {count} "
+            f"points of its header need ({dtype.itemsize} bytes each): WIDTH / POINTS are wrong"
         )
     rec = np.frombuffer(raw, dtype=dtype, count=count, offset=offset).copy()
-    if count and np.isnan([rec[0][n] for n in RADAR_FIELDS[:3]]).any():
-        return rec[:0]
+    if count == 1 and np.isnan([rec[0][n] for n in RADAR_FIELDS[:3]]).any():
+        return rec[:0]  # the one point of an empty sweep
+    floats = tuple(n for n, t in zip(RADAR_FIELDS, RADAR_TYPES, strict=True) if t == "F")
+    _check_finite(path, np.stack([~np.isfinite(rec[n]) for n in floats], axis=1), floats)
     return rec
+
+
+def _header_count(path: Path, header: dict[str, list[str]], key: str) -> int:
+    """The PCD header's ``key`` (``WIDTH``, ``POINTS``): one whole number >= 0.
+
+    Raises:
+        SensorFileError: missing, several values, not a whole number, or negative.
+    """
+    value = header.get(key)
+    if value is None:
+        raise SensorFileError(f"{path}: the PCD header has no {key} line")
+    text = " ".join(value)
+    if len(value) != 1 or not value[0].isascii() or not value[0].isdigit():
+        raise SensorFileError(f"{path}: PCD {key} is {text!r}, expected one whole number >= 0")
+    return int(value[0])

@@ -135,7 +135,9 @@ def version_folder(root: Path, version: str | None) -> Path:
     """The version folder of a root: ``root/version``, or the one ``v1.0-*`` folder present.
 
     Raises:
-        NuScenesError: the folder is missing, or ``version`` is None and there are none or several.
+        NuScenesError: the folder is missing, or ``version`` is None and there are none or several
+            (the message lists the folders found and says to keep one: no command takes a
+            version).
     """
     if version is not None:
         folder = root / version
@@ -143,11 +145,16 @@ def version_folder(root: Path, version: str | None) -> Path:
             raise NuScenesError(f"{folder}: no such nuScenes version folder")
         return folder
     found = sorted(p for p in root.glob("v1.0-*") if p.is_dir())
-    if len(found) != 1:
-        what = "no" if not found else f"{len(found)} ({', '.join(p.name for p in found)})"
+    if not found:
         raise NuScenesError(
-            f"{root}: {what} nuScenes version folders (v1.0-*); "
-            + ("is this a nuScenes root?" if not found else "name one with version=")
+            f"{root}: no nuScenes version folders (v1.0-*); is this a nuScenes root?"
+        )
+    if len(found) > 1:
+        names = ", ".join(p.name for p in found)
+        raise NuScenesError(
+            f"{root}: {len(found)} ({names}) nuScenes version folders (v1.0-*), and a root is "
+            f"read with exactly one: keep the one to use in {root} and move the others out (each "
+            "release in a root of its own)"
         )
     return found[0]
 

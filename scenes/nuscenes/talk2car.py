@@ -16,6 +16,14 @@ sample_annotation (or one of another sample), an ``obj_name`` other than the ann
 category, a category outside the class set (:func:`scenes.nuscenes.classes.model_class`), and a
 camera-frame box that disagrees with the annotation's by more than :data:`CENTRE_TOLERANCE` m or
 :data:`YAW_TOLERANCE` rad.
+
+A command's text goes through the one text policy, as a prompt does
+(:func:`scenes.utils.text_policy.clean_text` under :data:`~scenes.utils.text_policy.COMMAND`):
+a kept command's :attr:`Talk2CarCommand.text` is the normalised sentence, and one that the policy
+refuses (a control, invisible or line-break character, even written as a JSON escape such as
+``"\\u0000"``; more than 500 characters) is skipped and named in :attr:`CommandSet.skipped` by a
+reason of its own, ``<file>: command <i> (<command_token>): <the policy's reason>``, so it is
+never fed to the model, the app or training.
 """
 
 from __future__ import annotations
@@ -34,6 +42,7 @@ from scenes.nuscenes.classes import model_class
 from scenes.nuscenes.geometry import boxes_from_poses, quaternion_from_matrix, transform
 from scenes.nuscenes.root import NuScenesError, NuScenesFrame, NuScenesRoot
 from scenes.utils.durable import atomic_write_text
+from scenes.utils.text_policy import COMMAND, TextPolicyError, clean_text
 from scenes.utils.textfile import read_json_file
 
 __all__ = [
@@ -44,10 +53,12 @@ __all__ = [
     "Referent",
     "Talk2CarCommand",
     "camera_box_to_model",
+    "command_record",
     "commanded_samples",
     "commands_file",
     "model_box_to_camera",
     "read_commands",
+    "write_command_file",
     "write_commands",
 ]
 
@@ -77,7 +88,8 @@ class Talk2CarCommand:
 
     Attributes:
         command_token: The command's token.
-        text: The sentence (``command``).
+        text: The sentence (``command``; once :func:`read_commands` kept it, normalised by the
+            text policy).
         scene_token: The nuScenes scene.
         sample_token: The nuScenes SAMPLE token (resolved from :attr:`cam_token`).
         cam_token: The file's ``sample_token``: a CAM_FRONT sample_data token.
@@ -124,7 +136,8 @@ class CommandSet:
         split: The split the file names.
         commands: The kept commands, in file order.
         referent: command_token -> its :class:`Referent`.
-        skipped: reason -> count of commands left out.
+        skipped: reason -> count of commands left out (a command refused by the text policy
+            has a reason of its own naming the file, the command and why: count 1).
     """
 
     split: str
@@ -233,8 +246,10 @@ def read_commands(
             is its class in this set.
 
     Returns:
-        The kept commands (their :attr:`Talk2CarCommand.sample_token` resolved), each one's
-        referred annotation in the model frame, and the skipped ones by reason.
+        The kept commands (their :attr:`Talk2CarCommand.sample_token` resolved, their text
+        normalised by the text policy), each one's referred annotation in the model frame, and
+        the skipped ones by reason (a command the text policy refuses: one reason of its own
+        naming the file, command and why).
 
     Raises:
         CommandFileError: a missing or malformed file (one line: file, command index, field), a
@@ -257,6 +272,11 @@ def read_commands(
                 f"{path}: command {i} ({cmd.command_token}): field 'command_token': seen before"
             )
         seen.add(cmd.command_token)
+        try:
+            cmd = replace(cmd, text=clean_text(cmd.text, COMMAND))
+        except TextPolicyError as exc:
+            skipped[f"{path}: command {i} ({cmd.command_token}): {exc}"] += 1
+            continue
         try:
             sample = root.sample_of_camera(cmd.cam_token)
         except NuScenesError:
@@ -296,37 +316,44 @@ def read_commands(
     return CommandSet(split, tuple(kept), referent, skipped)
 
 
+def command_record(c: Talk2CarCommand) -> dict:
+    """A command as the release's file writes it: its field names and order, ``sample_token`` =
+    the CAM_FRONT sample_data token, ``rotation`` as four strings."""
+    translation, size, rotation = (np.asarray(v, dtype=np.float64) for v in c.box_camera)
+    return {
+        "scene_token": c.scene_token,
+        "sample_token": c.cam_token,
+        "translation": [float(v) for v in translation],
+        "size": [float(v) for v in size],
+        "rotation": [repr(float(v)) for v in rotation],
+        "command": c.text,
+        "obj_name": c.category,
+        "box_token": c.box_token,
+        "command_token": c.command_token,
+        "2d_box": [float(v) for v in c.box_2d],
+        "t2c_img": c.t2c_img,
+    }
+
+
+def write_command_file(path: str | Path, split: str, data: dict) -> Path:
+    """Write the JSON object ``data`` (``scene_tokens``, ``commands`` and whatever else a file
+    carries) as ``path/{split}_commands.json``, atomically. Returns the file written."""
+    out = commands_file(path, split)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(out, json.dumps(data, indent=1) + "\n")
+    return out
+
+
 def write_commands(
     path: str | Path, split: str, scene_tokens: Sequence[str], commands: Sequence[Talk2CarCommand]
 ) -> Path:
     """Write ``path/{split}_commands.json`` (``path`` is the folder, as for
-    :func:`read_commands`) in the release's format, atomically: its field names and order, the
-    file's ``sample_token`` = the command's CAM_FRONT sample_data token, ``rotation`` as four
-    strings. Returns the file written."""
-    out = commands_file(path, split)
-    records = []
-    for c in commands:
-        translation, size, rotation = (np.asarray(v, dtype=np.float64) for v in c.box_camera)
-        records.append(
-            {
-                "scene_token": c.scene_token,
-                "sample_token": c.cam_token,
-                "translation": [float(v) for v in translation],
-                "size": [float(v) for v in size],
-                "rotation": [repr(float(v)) for v in rotation],
-                "command": c.text,
-                "obj_name": c.category,
-                "box_token": c.box_token,
-                "command_token": c.command_token,
-                "2d_box": [float(v) for v in c.box_2d],
-                "t2c_img": c.t2c_img,
-            }
-        )
-    out.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(
-        out, json.dumps({"scene_tokens": list(scene_tokens), "commands": records}, indent=1) + "\n"
+    :func:`read_commands`) in the release's format (:func:`command_record`), atomically.
+    Returns the file written."""
+    records = [command_record(c) for c in commands]
+    return write_command_file(
+        path, split, {"scene_tokens": list(scene_tokens), "commands": records}
     )
-    return out
 
 
 def _to_camera(frame: NuScenesFrame | np.ndarray) -> np.ndarray:

@@ -9,7 +9,7 @@ classes: :func:`labels_to_boxes` leaves them out.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -182,6 +182,19 @@ def outside_class_counts(labels: Sequence[ObjectLabel], classes: ClassSet = VOD)
         if lab.name != "DontCare" and classes.label_class(lab.name) is None:
             counts[lab.name] = counts.get(lab.name, 0) + 1
     return dict(sorted(counts.items()))
+
+
+def outside_class_phrase(counts: Mapping[str, int], noun: str = "referents") -> str:
+    """The words every reader says :func:`outside_class_counts` with (evaluation, the app,
+    training): ``"12 referents of classes outside the model's set (Bicycle 9, Truck 3)"``; ``""``
+    for no count."""
+    total = sum(counts.values())
+    if not total:
+        return ""
+    order = sorted(counts.items(), key=lambda kv: (-kv[1], kv[0]))
+    named = ", ".join(f"{name} {n}" for name, n in order)
+    word = noun.removesuffix("s") if total == 1 else noun
+    return f"{total} {word} of classes outside the model's set ({named})"
 
 
 def boxes_to_labels(

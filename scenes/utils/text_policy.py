@@ -28,7 +28,9 @@ writes (the prompt file, the sidecar, the manifest's prompt and annotator), and
 
 The files the project reads share this classification (:func:`forbidden_at`, with the line feed
 allowed: :mod:`scenes.utils.textfile`, the one reading policy), and a prompt file is read under
-:data:`PROMPT` there.
+:data:`PROMPT` there. A Talk2Car command file is JSON, whose escapes (``"\\u0000"``) reach past
+the file's check: each command's text goes through :func:`clean_text` under :data:`COMMAND`
+(:func:`scenes.nuscenes.talk2car.read_commands`; a refused command is skipped, counted and named).
 
 Decision: refuse rather than silently drop forbidden characters. A NUL or a line separator in a
 prompt is a paste or a forged message, never meant; dropping it could join two words
@@ -82,6 +84,10 @@ ANNOTATOR = TextRule("annotator name", 64)
 
 NOTE = TextRule("review note", 500)
 """A reviewer's note on a pair (:mod:`annotate.review`)."""
+
+COMMAND = TextRule("command", PROMPT.max_chars)
+"""A Talk2Car command read from a command file (:func:`scenes.nuscenes.talk2car.read_commands`):
+a prompt by another name, fed to the model, the app and training as one, under the same cap."""
 
 
 class TextPolicyError(ValueError):
@@ -192,6 +198,7 @@ def _too_long(rule: TextRule, length: int) -> TextPolicyError:
 
 __all__ = [
     "ANNOTATOR",
+    "COMMAND",
     "NOTE",
     "PROMPT",
     "TextPolicyError",
