@@ -53,7 +53,9 @@ from model.grounding.referent import ReferentGrounding
 from model.grounding.scene_encoder import SceneEncoder
 from model.head.detector import HeadOutput
 from model.nets.text import build_text_encoder, validate_prompt
+from scenes.geometry.classes import ClassSet
 from scenes.geometry.ground import GroundPlane, level_clouds, level_points, unlevel_boxes
+from scenes.language.reading import Reading, read_prompt
 
 CHECKPOINT_NAMES = {
     "lidar": "scene.lidar",
@@ -223,7 +225,11 @@ class TPCNet(nn.Module):
         return lidar_np, radar_np, candidates, plane
 
     def ground(
-        self, features: SceneFeatures, prompt: str, score_threshold: float | None = None
+        self,
+        features: SceneFeatures,
+        prompt: str,
+        score_threshold: float | None = None,
+        ranked: bool = False,
     ) -> Predictions:
         """Answer one prompt on an encoded scene.
 
@@ -236,17 +242,31 @@ class TPCNet(nn.Module):
                 ``cfg.referent.min_score`` for the referent stage, a referent probability); the
                 returned *set* at the checkpoint's operating threshold is
                 :func:`model.evaluation.predict.operating_threshold`'s business.
+            ranked: Every candidate above the threshold in score order, as the head ranks
+                them, without the sentence's number (a singular description or a command is
+                otherwise answered with its best box only, :attr:`Reading.single`).
 
         Returns:
             :class:`Predictions` (boxes, scores, class names, sigmoid heatmaps, grid, timings).
         """
         text_prompt = validate_prompt(prompt)
         self.grounding.check(self.scene, features)
+        reading = read_prompt(text_prompt, self.cfg.class_set)
+        texts = reading.texts if self.grounding.takes_alternatives else reading.texts[:1]
         clock = Clock(self.device)
         with torch.no_grad():
-            text = self.text_encoder([text_prompt])
+            text = self.text_encoder(list(texts))
             t_text = clock.lap()
             answer = self.grounding.answer(self.scene, features, text, text_prompt, score_threshold)
+            if reading.command and not len(answer.boxes) and reading.classes:
+                # a command means one object: the best candidate of its classes, however low
+                wide = self.grounding.answer(self.scene, features, text, text_prompt, 0.0)
+                rows = [i for i, c in enumerate(wide.classes) if c in reading.classes]
+                answer = wide.pick(rows[:1])
+        if reading.single and not ranked:
+            answer = answer.pick(range(min(1, len(answer.boxes))))
+        note = answer_note(reading, answer.classes, self.cfg.class_set)
+        answer = replace(answer, reading=reading, note=note)
         return replace(answer, timings=replace(answer.timings, text=t_text))
 
     def forward(
@@ -283,6 +303,20 @@ __all__ = [
     "as_points",
     "head_class",
 ]
+
+
+def answer_note(reading: Reading, answered: Sequence[str], classes: ClassSet) -> str:
+    """A sentence for the person when the answer is not what the sentence asked for: a class the
+    model does not know, or a command whose object is not there; "" otherwise."""
+    if reading.missing:
+        return (
+            f"No {reading.missing} here: this model finds {classes.plural_list()}, "
+            f"not {reading.missing}s."
+        )
+    if reading.command and not answered:
+        nouns = " or ".join(classes.get(c).noun for c in reading.classes) or "road user"
+        return f"No {nouns} here to carry out the command."
+    return ""
 
 
 def _numpy(points: PointsLike) -> np.ndarray:

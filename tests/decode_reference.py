@@ -84,7 +84,7 @@ def shipped_outputs(frames: list) -> dict[str, np.ndarray]:
             out[f"f{i}/cand_{name}"] = _tensor(getattr(o, name))
         out[f"f{i}/prompts"] = np.array(prompts)
         for j, prompt in enumerate(prompts):
-            pred = model.ground(features, prompt)
+            pred = model.ground(features, prompt, ranked=True)
             out[f"f{i}/p{j}/boxes"] = pred.boxes
             out[f"f{i}/p{j}/scores"] = pred.scores
             out[f"f{i}/p{j}/labels"] = pred.labels

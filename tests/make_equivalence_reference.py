@@ -95,13 +95,13 @@ def pipeline_outputs(
             out[f"f{f}_detect_regression"] = _checksums(head.regression[0].numpy())
             features = model.encode_scene(lidar, radar)
             for p, prompt in enumerate(prompts):
-                pred = model.ground(features, prompt)
+                pred = model.ground(features, prompt, ranked=True)
                 key = f"f{f}_p{p}"
                 out[f"{key}_boxes"] = np.asarray(pred.boxes, dtype=np.float64).reshape(-1, 7)
                 out[f"{key}_scores"] = np.asarray(pred.scores, dtype=np.float64)
                 out[f"{key}_labels"] = np.asarray(pred.labels, dtype=np.int64)
                 out[f"{key}_heatmaps"] = _checksums(pred.heatmaps)
-                every = model.ground(features, prompt, score_threshold=0.0)
+                every = model.ground(features, prompt, score_threshold=0.0, ranked=True)
                 out[f"{key}_all_scores"] = np.asarray(every.scores, dtype=np.float64)
                 out[f"{key}_all_labels"] = np.asarray(every.labels, dtype=np.int64)
     return out

@@ -156,10 +156,12 @@ def test_ground_draws_on_the_scene_canvas_kept_from_the_last_prompt(untrained_mo
     features = model.encode_scene(*random_scene())
     objects = features.objects
     assert objects is not None and len(objects) > 0
-    first = model.ground(features, "the nearest car", score_threshold=0.0)
+    first = model.ground(features, "the nearest car", score_threshold=0.0, ranked=True)
     kept = head._kept_canvas
     assert kept is not None and kept[0]() is objects
-    second = model.ground(features, "the two pedestrians on the left", score_threshold=0.0)
+    second = model.ground(
+        features, "the two pedestrians on the left", score_threshold=0.0, ranked=True
+    )
     assert head._kept_canvas is kept  # the same scene: the same canvas
     assert len(first.scores) == len(second.scores) == len(objects)  # (all, at threshold 0)
     # What each answer drew equals the heatmap function on that prompt's probabilities.

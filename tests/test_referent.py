@@ -198,7 +198,7 @@ def test_referent_model_grounds_a_scene(tiny_root):
     sample = Talk2RadarRoot(tiny_root).load(Talk2RadarRoot(tiny_root).ids("test")[0])
     features = model.encode_scene(sample.lidar, sample.radar)
     assert features.objects is not None and features.detection_heatmaps.shape == (3, 80, 80)
-    pred = model.ground(features, "the nearest car on the left", score_threshold=0.0)
+    pred = model.ground(features, "the nearest car on the left", score_threshold=0.0, ranked=True)
     assert len(pred.boxes) == len(features.objects)
     assert np.all(np.diff(pred.scores) <= 0) and np.all((pred.scores >= 0) & (pred.scores <= 1))
     assert pred.heatmaps.shape == (3, 80, 80) and pred.timings.referent > 0
@@ -206,7 +206,7 @@ def test_referent_model_grounds_a_scene(tiny_root):
     k = len(pred.scores) // 2
     assert k > 0 and pred.scores[k - 1] > pred.scores[k]
     cut = float(pred.scores[k - 1] + pred.scores[k]) / 2.0
-    high = model.ground(features, "the nearest car on the left", score_threshold=cut)
+    high = model.ground(features, "the nearest car on the left", score_threshold=cut, ranked=True)
     assert 0 < len(high.scores) == k < len(pred.scores)
     np.testing.assert_allclose(high.scores, pred.scores[:k], atol=1e-6)
     np.testing.assert_allclose(high.boxes, pred.boxes[:k], atol=1e-6)
@@ -560,3 +560,24 @@ def test_box_point_pairs_are_the_brute_force_pairs_in_order(seed):
             assert got_box.tolist() == want_box and got_point.tolist() == want_point
     empty = box_point_pairs(lidar, boxes[:0], 0.2, True)
     assert len(empty[0]) == len(empty[1]) == 0
+
+
+def test_a_singular_description_and_a_command_get_the_best_box_only(tiny_root):
+    """Issue 49: "the X closest to us" and a command mean one object; a plural keeps its set."""
+    torch.manual_seed(0)
+    model = build_model("small", grounding="referent").eval()
+    sample = Talk2RadarRoot(tiny_root).load(Talk2RadarRoot(tiny_root).ids("test")[0])
+    features = model.encode_scene(sample.lidar, sample.radar)
+    ranked = model.ground(features, "the nearest car on the left", score_threshold=0.0, ranked=True)
+    assert len(ranked.boxes) > 1
+    one = model.ground(features, "the nearest car on the left", score_threshold=0.0)
+    assert len(one.boxes) == 1 and one.reading.single
+    np.testing.assert_allclose(one.boxes[0], ranked.boxes[0])
+    command = model.ground(features, "park behind the silver van on the left", score_threshold=0.0)
+    assert len(command.boxes) == 1 and command.reading.command
+    assert command.reading.texts == ("the car on the left",)
+    plural = model.ground(features, "the cars on the left", score_threshold=0.0)
+    assert len(plural.boxes) == len(ranked.boxes) and not plural.reading.single
+    # a command is never answered with nothing while a candidate of its class is there
+    high = model.ground(features, "park behind the silver van on the left", score_threshold=1.0)
+    assert len(high.boxes) == 1 and high.classes == ("Car",)

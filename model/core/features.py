@@ -11,7 +11,8 @@ raises :class:`MissingSensorError`.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -19,6 +20,7 @@ from torch import Tensor
 
 from model.core.candidates import SceneCandidates
 from model.core.grid import BevGrid
+from scenes.language.reading import Reading
 
 PointsLike = np.ndarray | Tensor
 
@@ -106,6 +108,10 @@ class Predictions:
         prompt: The prompt as encoded (stripped).
         truncated: Whether the prompt exceeded the text encoder's token limit.
         timings: Time per stage of the grounding.
+        reading: How the sentence was read (:func:`scenes.language.reading.read_prompt`: the
+            texts grounded, one object or a set, a command); None from a head alone.
+        note: A sentence for the person when the answer is not what was asked for ("no bus
+            here"), else "".
     """
 
     boxes: np.ndarray
@@ -117,6 +123,19 @@ class Predictions:
     prompt: str
     truncated: bool
     timings: GroundTimings
+    reading: Reading | None = None
+    note: str = ""
+
+    def pick(self, rows: Sequence[int]) -> Predictions:
+        """The boxes at ``rows`` only, in that order (the rest of the answer unchanged)."""
+        rows = np.asarray(rows, dtype=np.int64).reshape(-1)
+        return replace(
+            self,
+            boxes=self.boxes[rows],
+            scores=self.scores[rows],
+            labels=self.labels[rows],
+            classes=tuple(self.classes[i] for i in rows),
+        )
 
 
 def as_points(points: PointsLike, num_features: int, name: str) -> Tensor:

@@ -29,6 +29,10 @@ class GroundingHead(nn.Module):
 
     takes_labelled_candidates: ClassVar[bool] = False
     """Whether :meth:`encode` accepts labelled boxes as the only possible answers."""
+    takes_alternatives: ClassVar[bool] = False
+    """Whether :meth:`answer` takes several texts of one sentence (one per class the referent
+    may be: :attr:`scenes.language.reading.Reading.texts`) and answers with the best candidate
+    over them; else only the first text is given."""
 
     @classmethod
     def build(cls, cfg: ModelConfig, text_dim: int, neck_channels: int) -> GroundingHead:

@@ -43,6 +43,7 @@ class ReferentGrounding(GroundingHead):
     """The referent stage (``stage``) over the detector's candidates."""
 
     takes_labelled_candidates = True
+    takes_alternatives = True
 
     def __init__(self, cfg: ModelConfig, text_dim: int, neck_channels: int) -> None:
         super().__init__()
@@ -255,7 +256,10 @@ class ReferentGrounding(GroundingHead):
         clock = Clock(scene.device)
         if len(objects):
             with torch.inference_mode():  # (numbers out: nothing of it is kept for autograd)
-                probs = torch.sigmoid(self.refer(objects, text)[0]).float().cpu().numpy()
+                # one row per text of the sentence's reading: a candidate's probability is
+                # its best over them ("the vehicle": the car, the truck, ...)
+                logits = self.refer(objects, text)
+                probs = torch.sigmoid(logits).amax(dim=0).float().cpu().numpy()
         else:
             probs = np.zeros(0, dtype=np.float32)
         t_ref = clock.lap()

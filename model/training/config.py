@@ -278,6 +278,9 @@ class TrainConfig:
         "commands around their description, Talk2Car style (scenes.language.prompts.commands; "
         "the referent kept), default 0",
     )
+    people_share: float = option(
+        0.0, help="referent path: share of those said as people do (prompts.people), default 0"
+    )
     family_rates: tuple[float, ...] = option(
         (),
         flag="--family-rate",
@@ -370,10 +373,10 @@ class TrainConfig:
                 raise TrainingError(
                     f"--family-rate (given once per family: {', '.join(FAMILIES[1:])}): {exc}"
                 ) from exc
-        if not 0.0 <= self.text_noise <= 1.0:
-            raise TrainingError(f"--text-noise must be in [0, 1], got {self.text_noise}")
-        if not 0.0 <= self.command_share <= 1.0:
-            raise TrainingError(f"--command-share must be in [0, 1], got {self.command_share}")
+        for name in ("text_noise", "command_share", "people_share"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                flag = "--" + name.replace("_", "-")
+                raise TrainingError(f"{flag} must be in [0, 1], got {getattr(self, name)}")
         if self.grounding not in get_args(GroundingKind):
             kinds = " or ".join(get_args(GroundingKind))
             raise TrainingError(f"--grounding must be {kinds}, got {self.grounding!r}")
@@ -397,6 +400,7 @@ class TrainConfig:
             language=self.language,
             p_perturb=self.text_noise,
             command_share=self.command_share,
+            people_share=self.people_share,
             **rates,
         )
         return PromptDraw(self.prompts_per_scene, self.label_prompts, config)

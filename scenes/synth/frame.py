@@ -134,6 +134,13 @@ class SynthSettings:
         "description, Talk2Car style ('pull over behind the cyclist on the right'; "
         "scenes.language.prompts.commands); default %(default)s",
     )
+    people_share: float = option(
+        0.0,
+        metavar="P",
+        help="share of those commands said the way people say them: the manoeuvre first, "
+        "colours and clothes, people's words for the class, context first "
+        "(scenes.language.prompts.people); default %(default)s",
+    )
 
     sensors: str = option(
         "vod",
@@ -185,6 +192,8 @@ class SynthSettings:
                 object.__setattr__(self, "camera", camera)
         if not 0.0 <= self.command_share <= 1.0:
             raise SynthError(f"command_share must be in [0, 1], got {self.command_share}")
+        if not 0.0 <= self.people_share <= 1.0:
+            raise SynthError(f"people_share must be in [0, 1], got {self.people_share}")
         if self.phrasing not in PHRASINGS:
             raise SynthError(f"phrasing must be one of {list(PHRASINGS)}, got {self.phrasing!r}")
         if self.language not in LANGUAGES:
@@ -249,6 +258,7 @@ class SynthSettings:
             **({"sequence_length": self.sequence_length} if self.sequence_length > 1 else {}),
             **({"language": self.language} if self.language != "base" else {}),
             **({"command_share": self.command_share} if self.command_share else {}),
+            **({"people_share": self.people_share} if self.people_share else {}),
             **({"sensors": self.sensors} if self.sensors != "vod" else {}),
             **({"classes": self.classes} if self.classes != "vod" else {}),
             **({"sensor_setup": self.sensor_setup} if self.sensor_setup != IN_DOMAIN.name else {}),
@@ -406,6 +416,17 @@ def synthesize_sequence(
     return frames
 
 
+def sense_world(settings: SynthSettings, world: World, radar_to_lidar: np.ndarray) -> SynthFrame:
+    """Sense a world built elsewhere (e.g. :func:`generate_world`'s, with actors taken out) as
+    :func:`synthesize` senses world ``world.world_id`` of ``settings``: the same weather and
+    sensor streams, no camera image. Its prompts are drawn over the sensed actors as usual."""
+    rngs = world_streams(settings.seed, world.world_id)
+    weather = _pick_weather(settings, rngs["weather"])
+    setup = settings.world_setup(world.world_id)
+    settings = replace(settings, camera=None)
+    return _sense(settings, setup, world, weather, rngs, radar_to_lidar, None)
+
+
 def frame_streams(seed: int, world_index: int, frame: int) -> dict[str, np.random.Generator]:
     """The random streams of frame ``frame >= 1`` of a sequence (named as :func:`world_streams`;
     the world and weather streams go unused: a sequence keeps its first frame's)."""
@@ -450,6 +471,7 @@ def _sense(
                 phrasing=settings.phrasing,
                 language=settings.language,
                 command_share=settings.command_share,
+                people_share=settings.people_share,
                 classes=settings.classes,
             ),
         )

@@ -429,7 +429,7 @@ _FLAG_ORDER: tuple[tuple[type, tuple[str, ...]], ...] = (
     (SynthSettings, ("seed", "weather", "sensors", "radar_scans", "prompts_per_world")),
     (SynthSettings, ("sensor_setup", "sensor_randomise")),
     (SynthCommand, ("split_fractions",)),
-    (SynthSettings, ("phrasing", "language", "command_share", "classes")),
+    (SynthSettings, ("phrasing", "language", "command_share", "people_share", "classes")),
     (SynthCommand, ("no_camera",)),
     (CameraConfig, ("image_scale", "ray_step")),
     (SynthSettings, ("sequence_length",)),

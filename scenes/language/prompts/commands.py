@@ -33,6 +33,7 @@ from dataclasses import replace
 import numpy as np
 
 from scenes.geometry.actors import MOVING_SPEED, Actor
+from scenes.language.prompts.people import people_command
 from scenes.language.prompts.phrasing import PHRASINGS, SLOTS, Slot, split_variants, variant_id
 from scenes.language.prompts.phrasing_more import EXTRA
 from scenes.language.prompts.render import Prompt
@@ -133,6 +134,9 @@ _CLASS_KEY = {
     "Barrier": "barrier",
     "Motorcycle": "motorcycle",
 }
+PEOPLE_FAMILIES = ("attribute", "ordinal", "relation")
+"""The families whose single-referent descriptions are one singular noun phrase, which a
+people's command can point back to with "it" (not "all cars but not ...")."""
 _ROAD_VEHICLES = ("Car", "Cyclist", "Truck", "Bus", "Motorcycle", "Bicycle")
 """Classes a moving one of which can be overtaken ("overtake {np}")."""
 
@@ -301,11 +305,16 @@ def commands_for(
     share: float,
     phrasing: str,
     max_words: int,
+    people_share: float = 0.0,
+    classes: str = "vod",
 ) -> list[Prompt]:
     """``prompts`` with a ``share`` of the single-referent ones (not counting questions) phrased
     as commands about their referent (:func:`draw_command`; the template's id appended to
     :attr:`Prompt.variants`); referents, tags, predicate and family kept. A prompt whose referent
-    is not in ``actors`` is kept as it is."""
+    is not in ``actors`` is kept as it is. ``people_share`` of the commands are said the way
+    people say them (:func:`scenes.language.prompts.people.people_command`: manoeuvre first,
+    colours and clothes, people's words, context first; ``classes``: the class set's name); 0
+    draws nothing, so the commands are those without the option."""
     out = []
     for p in prompts:
         if len(p.referent_ids) != 1 or p.family == "count" or rng.random() >= share:
@@ -314,6 +323,10 @@ def commands_for(
         actor = actors.get(p.referent_ids[0])
         if actor is None:  # its motion unknown (generate_prompts' unknown_motion)
             out.append(p)
+            continue
+        if people_share > 0.0 and rng.random() < people_share and p.family in PEOPLE_FAMILIES:
+            text, vid = people_command(noun_phrase_of(p.text), actor.cls, classes, rng, phrasing)
+            out.append(replace(p, text=text, variants=(*p.variants, vid)))
             continue
         drawn = draw_command(
             p.text, rng, phrasing, cls=actor.cls, moving=is_moving(actor), max_words=max_words

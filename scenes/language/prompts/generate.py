@@ -81,7 +81,14 @@ def generate_prompts(
         commands = np.random.default_rng(int(rng.integers(2**63)))
         by_id = {a.actor_id: a for a in actors if a.actor_id not in unknown}
         out = commands_for(
-            out, by_id, commands, config.command_share, config.phrasing, config.max_words
+            out,
+            by_id,
+            commands,
+            config.command_share,
+            config.phrasing,
+            config.max_words,
+            config.people_share,
+            config.classes,
         )
     if config.p_perturb <= 0.0 or not out:
         return out

@@ -99,6 +99,9 @@ class PromptConfig:
             a driving command about their referent ("follow the car on the left",
             :mod:`scenes.language.prompts.commands`; the wording stream is ``phrasing``'s);
             referents kept. 0 draws nothing, so the prompts are those without the option.
+        people_share: Share of those commands said the way people say them
+            (:mod:`scenes.language.prompts.people`: the manoeuvre first, colours and clothes,
+            people's words for the class, context first); 0 draws nothing.
         classes: The class set the scene's actors are of and the prompts name
             (:data:`scenes.geometry.classes.PRESETS`): ``vod`` draws as the generator always did;
             another set draws each anchor's class uniformly among the classes present (so that
@@ -125,6 +128,7 @@ class PromptConfig:
     p_nonsense: float = 0.1
     p_perturb: float = 0.0
     command_share: float = 0.0
+    people_share: float = 0.0
     classes: str = "vod"
 
     def __post_init__(self) -> None:
@@ -147,6 +151,7 @@ class PromptConfig:
             "p_nonsense",
             "p_perturb",
             "command_share",
+            "people_share",
         )
         for name in probabilities:
             p = getattr(self, name)
