@@ -17,7 +17,9 @@ Nothing is written before the first save. A save rewrites its split's file atomi
 commands already there (read back strictly; a file holding a command that does not resolve
 against the served root is refused, never rewritten without it) and the new one; every key the
 store does not write is kept (a command's keys beyond the release's eleven, top-level keys such
-as ``version``), and the commands already there keep their records as read; saves are
+as ``version``), and the commands already there keep their records as read, byte for byte (the
+file's layout, number spellings and escapes: :func:`scenes.utils.json_splice.splice_object`;
+a new command is written in the file's own layout); saves are
 idempotent per request key, as :meth:`annotate.AnnotationStore.save`'s. The pairs folder's
 ``commands/`` never lies inside the served nuScenes root nor inside a folder the store must not
 write (the app's ``--talk2car`` folder): :func:`check_pairs_folder`. The command file keeps
@@ -218,9 +220,10 @@ class Talk2CarStore:
 
     # ------------------------------------------------------------------ reading
 
-    def _read(self, split: str) -> tuple[dict, tuple[Talk2CarCommand, ...]]:
+    def _read(self, split: str) -> tuple[dict, tuple[Talk2CarCommand, ...], str | None]:
         """One split's file as read (its JSON object, every key in it; an empty one when the file
-        does not exist) and its commands.
+        does not exist), its commands, and its text as it is on disk (None: no file, or not
+        UTF-8), for a rewrite that keeps the bytes of what it does not change.
 
         Raises:
             StoreError: the file is malformed, or holds commands that do not resolve against
@@ -228,19 +231,24 @@ class Talk2CarStore:
         """
         path = commands_file(self.commands_dir, split)
         if not path.is_file():
-            return {"scene_tokens": [], "commands": []}, ()
+            return {"scene_tokens": [], "commands": []}, (), None
         try:
+            raw = path.read_bytes()
             found = read_commands(self.commands_dir, split, self.root, self.classes)
             data = read_json_file(path, "Talk2Car command file", CommandFileError)
         except (NuScenesError, OSError) as exc:
             raise StoreError(str(exc)) from exc
+        try:
+            text: str | None = raw.decode("utf-8")
+        except UnicodeDecodeError:
+            text = None
         if found.skipped:
             reasons = "; ".join(f"{n} x {why}" for why, n in sorted(found.skipped.items()))
             raise StoreError(
                 f"{path}: {sum(found.skipped.values())} command(s) do not resolve against "
                 f"{self.root.path} ({reasons}); the file is not rewritten"
             )
-        return data, found.commands
+        return data, found.commands, text
 
     def commands(self, split: str) -> tuple[Talk2CarCommand, ...]:
         """The commands saved in ``split`` (file order)."""
@@ -329,7 +337,7 @@ class Talk2CarStore:
             (int(cam["width"]), int(cam["height"])),
         )[0]
         with self._lock:
-            data, existing = self._read(split)
+            data, existing, text = self._read(split)
             scene_tokens = list(data.get("scene_tokens", []))
             if sample_rec["scene_token"] not in scene_tokens:
                 scene_tokens.append(sample_rec["scene_token"])
@@ -351,6 +359,7 @@ class Talk2CarStore:
                     self.commands_dir,
                     split,
                     {**data, "scene_tokens": scene_tokens, "commands": records},
+                    text,
                 )
         record = ManifestRecord(
             action=Action.CREATE,
@@ -375,11 +384,13 @@ class Talk2CarStore:
         """
         with self._lock:
             for split in self.splits:
-                data, commands = self._read(split)
+                data, commands, text = self._read(split)
                 if any(c.command_token == sample_id for c in commands):
                     kept = [r for r in data["commands"] if r.get("command_token") != sample_id]
                     with fs_errors(f"writing {commands_file(self.commands_dir, split)}"):
-                        write_command_file(self.commands_dir, split, {**data, "commands": kept})
+                        write_command_file(
+                            self.commands_dir, split, {**data, "commands": kept}, text
+                        )
                     return
         raise StoreError(f"no command {sample_id!r} in {self.commands_dir}")
 

@@ -212,9 +212,11 @@ def run_people_commands(
     limit: int | None = None,
     progress: bool = True,
     root: Path | None = None,
+    cache_dir: Path | None = None,
 ) -> PeopleReport:
     """Place, ground and score the commands of ``commands_file`` (module docstring); with
-    ``root``, also write them as a Talk2Radar root (:func:`write_root`)."""
+    ``root``, also write them as a Talk2Radar root (:func:`write_root`); with ``cache_dir``, keep
+    the searched worlds' index there between runs."""
     from model import class_noun_prompt, load_checkpoint, operating_threshold  # noqa: F401
 
     model = load_checkpoint(checkpoint)
@@ -228,7 +230,7 @@ def run_people_commands(
     by_key: dict[tuple[str, str, int], list[PeopleCommand]] = defaultdict(list)
     for c in placed_cmds:
         by_key[c.bin_key].append(c)
-    cache = WORLD_CACHE / f"worlds-{classes.name}-{seed}.json"
+    cache = None if cache_dir is None else cache_dir / f"worlds-{classes.name}-{seed}.json"
     placer = FramePlacer(classes, seed, frames_per_bin, cache)
     by_class: dict[str, Tally] = {}
     not_placed: Counter[str] = Counter()
@@ -337,7 +339,13 @@ def _run(a: PeopleCommandsOptions) -> int:
     checkpoint = DEFAULT_CHECKPOINT if a.checkpoint is None else a.checkpoint
     try:
         report = run_people_commands(
-            a.commands, checkpoint, a.seed, a.frames_per_bin, a.limit, root=a.root
+            a.commands,
+            checkpoint,
+            a.seed,
+            a.frames_per_bin,
+            a.limit,
+            root=a.root,
+            cache_dir=WORLD_CACHE,
         )
     except (CommandFileError, FolderError) as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -309,13 +309,11 @@ def answer_note(reading: Reading, answered: Sequence[str], classes: ClassSet) ->
     """A sentence for the person when the answer is not what the sentence asked for: a class the
     model does not know, or a command whose object is not there; "" otherwise."""
     if reading.missing:
-        return (
-            f"No {reading.missing} here: this model finds {classes.plural_list()}, "
-            f"not {reading.missing}s."
-        )
+        return f"No {reading.missing} here: this model finds {classes.plural_list()} only."
     if reading.command and not answered:
-        nouns = " or ".join(classes.get(c).noun for c in reading.classes) or "road user"
-        return f"No {nouns} here to carry out the command."
+        named = [classes.get(c).noun for c in reading.classes]
+        what = " or ".join(named) if 0 < len(named) <= 2 else "road user of that kind"
+        return f"No {what} here to carry out the command."
     return ""
 
 

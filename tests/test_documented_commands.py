@@ -45,6 +45,7 @@ PARSERS: dict[str, tuple[str, str]] = {
             "language_suite",
             "latency",
             "model_size",
+            "people_commands",
             "run_all",
             "sensor_shift",
             "sensor_stats",

@@ -119,3 +119,17 @@ def test_generator_sentences_are_read_as_written_and_commands_to_their_descripti
             if reading.single:
                 assert len(prompt.referent_ids) <= 1, prompt.text
     assert seen > 100 and commands > 10 and people > 10
+
+
+def test_a_command_says_what_it_would_have_needed() -> None:
+    from model.tpcnet import answer_note
+    from scenes.language.reading import Reading
+
+    bus = read_prompt("follow the bus", VOD)
+    assert answer_note(bus, (), VOD) == (
+        "No bus here: this model finds cars, pedestrians and cyclists only."
+    )
+    car = Reading(("the car",), single=True, command=True, classes=("Car",))
+    assert answer_note(car, (), VOD) == "No car here to carry out the command."
+    assert answer_note(car, ("Car",), VOD) == ""
+    assert answer_note(read_prompt("the cars", VOD), (), VOD) == ""

@@ -155,3 +155,73 @@ def test_an_empty_folder_is_written_into(source: Path, tmp_path: Path) -> None:
     assert json.loads((out / MARKER).read_text())["writer"] == WRITER
     assert (out / "v1.0-trainval" / "sample.json").is_file()
     assert [p.name for p in tmp_path.iterdir()] == ["empty"]
+
+
+def test_a_marker_naming_files_outside_its_folder_is_no_marker(
+    source: Path, tmp_path: Path
+) -> None:
+    """A hand-edited (or forged) marker listing ``../x`` or an absolute path: the folder is not
+    recognised as an export's, so nothing outside it (nor in it) is removed."""
+    out = tmp_path / "nusc"
+    export(source, out)
+    victim = tmp_path / "victim.txt"
+    for name in ("../victim.txt", str(victim), "a/../../victim.txt", ""):
+        victim.write_text("mine\n")
+        marker = json.loads((out / MARKER).read_text())
+        marker["files"] = [*marker["files"], name]
+        (out / MARKER).write_text(json.dumps(marker))
+        before = _tree(out)
+        with pytest.raises(FolderError, match="was not written by"):
+            export(source, out, seed=5)
+        assert victim.read_text() == "mine\n" and _tree(out) == before, name
+        marker["files"].remove(name)
+        (out / MARKER).write_text(json.dumps(marker))
+
+
+def test_nothing_is_written_or_removed_through_a_link_in_the_output(
+    source: Path, tmp_path: Path
+) -> None:
+    """A folder of an earlier export replaced by a link to the user's folder: the export does
+    not write through it (refused, nothing changed), nor remove the files behind it."""
+    out = tmp_path / "nusc"
+    export(source, out)
+    mine = tmp_path / "mine"
+    (out / "maps").rename(mine)
+    (out / "maps").symlink_to(mine)
+    before, theirs = _tree(out), _tree(mine)
+    with pytest.raises(FolderError, match=r"outside .* once links are resolved"):
+        export(source, out, seed=5)
+    assert _tree(out) == before and _tree(mine) == theirs
+    (out / "maps").unlink()
+    (out / "maps").mkdir()
+    (out / "maps" / "elsewhere").symlink_to(mine, target_is_directory=True)
+    marker = json.loads((out / MARKER).read_text())
+    marker["files"] += [f"maps/elsewhere/{p.name}" for p in mine.iterdir()]
+    (out / MARKER).write_text(json.dumps(marker))  # as if an export had written them
+    export(source, out, seed=5)  # it writes no file there now: the files behind the link stay
+    assert _tree(mine) == theirs
+
+
+def test_the_current_folder_and_a_link_to_an_empty_folder(
+    source: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--out .`` (an empty working folder) is written into in place (the same folder, nothing
+    staged inside it), and ``--out LINK`` to an empty folder writes into that folder, staged
+    beside it, the link kept."""
+    here = tmp_path / "here"
+    here.mkdir()
+    inode = here.stat().st_ino
+    monkeypatch.chdir(here)
+    assert main(["--source", str(source), "--out", "."]) == 0
+    assert here.stat().st_ino == inode and (here / "v1.0-trainval" / "sample.json").is_file()
+    assert not [p for p in here.iterdir() if p.name.endswith(".staging")]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["here"]
+    target = tmp_path / "disk" / "target"
+    target.mkdir(parents=True)
+    link = tmp_path / "link"
+    link.symlink_to(target)
+    export(source, link)
+    assert link.is_symlink() and (target / "v1.0-trainval" / "sample.json").is_file()
+    assert [p.name for p in target.parent.iterdir()] == ["target"]
+    export(source, link, seed=3)  # an earlier export through the link: replaced
+    assert json.loads((target / MARKER).read_text())["writer"] == WRITER

@@ -326,3 +326,35 @@ def test_adapt_on_an_empty_split_names_the_split_list(tmp_path: Path, write_tiny
     message = _one_line(caught.value, str(listed), "val")
     assert "velodyne" not in message
     assert len(UnlabelledFrames(root, split="test")) == 1
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "named"),
+    [
+        (b"VIEWPOINT 0 0 0 1 0 0 0", b"VIEWPOINT 5 0 0 1 0 0 0", "VIEWPOINT"),  # would move
+        (b"VIEWPOINT 0 0 0 1 0 0 0", b"VIEWPOINT 0 0 0 0.7071 0 0 0.7071", "VIEWPOINT"),
+        (b"VIEWPOINT 0 0 0 1 0 0 0", b"VIEWPOINT 0 0 0", "VIEWPOINT"),
+        (b"VIEWPOINT 0 0 0 1 0 0 0", b"VIEWPOINT a b c d e f g", "VIEWPOINT"),
+        (b"VIEWPOINT 0 0 0 1 0 0 0\n", b"", "VIEWPOINT"),  # missing: the devkit reads by place
+        (b"VERSION 0.7", b"VERSION 0.5", "VERSION"),
+        (b"VERSION 0.7\n", b"", "VERSION"),
+        (b"HEIGHT 1\n", b"HEIGHT 1\nWIDTH 3\n", "VIEWPOINT"),  # a line repeated
+        (b"HEIGHT 1\n", b"HEIGHT 1\nCOLOR 1\n", "VIEWPOINT"),  # an unknown line
+        (b"WIDTH 3\nHEIGHT 1\n", b"HEIGHT 1\nWIDTH 3\n", "WIDTH"),  # out of order
+    ],
+)  # fmt: skip
+def test_radar_header_lines_and_viewpoint_are_checked(
+    tmp_path: Path, old: bytes, new: bytes, named: str
+) -> None:
+    """Every header line is the release's, in its place; a VIEWPOINT other than the identity
+    would move every point (read as if it were the identity before) and is refused."""
+    path = tmp_path / "sweep.pcd"
+    _radar(path)
+    raw = path.read_bytes()
+    assert old in raw
+    path.write_bytes(raw.replace(old, new, 1))
+    with pytest.raises(SensorFileError) as caught:
+        read_radar(path)
+    _one_line(caught.value, str(path), named)
+    path.write_bytes(raw.replace(b"VIEWPOINT 0 0 0 1 0 0 0", b"VIEWPOINT 0.0 0 0 1.0 0 0 -0"))
+    assert len(read_radar(path)) == 3  # the identity, however spelled

@@ -175,3 +175,51 @@ def test_train_adapt_and_calibrate_refuse_a_folder_in_use(
             assert sorted(p.name for p in folder.iterdir()) == [LOCK_FILE], name
     finally:
         _stop(proc)
+
+
+def test_a_stale_lock_whose_pid_was_given_again_is_taken_over(
+    tmp_path: Path, capsys: pytest.CaptureFixture
+) -> None:
+    """The holder was killed and its pid now names another live process of this host (one
+    started after the lock was taken): the lock is stale, taken over with one line; a live
+    process that started before the lock's time is still its holder."""
+    import datetime
+
+    folder = tmp_path / "run"
+    folder.mkdir()
+    sleeper = subprocess.Popen(["sleep", "60"])
+    try:
+        now = datetime.datetime.now().astimezone()
+        for started, taken in ((now - datetime.timedelta(hours=1), True), (now, False)):
+            record = {
+                "pid": sleeper.pid,
+                "host": socket.gethostname(),
+                "started": started.isoformat(timespec="seconds"),
+                "command": "model.adapt --out run",
+            }
+            (folder / LOCK_FILE).write_text(json.dumps(record))
+            if taken:
+                with run_lock(folder):
+                    assert read_holder(folder).pid == os.getpid()
+                err = capsys.readouterr().err
+                assert f"took over the stale lock of pid {sleeper.pid}" in err
+            else:
+                refused = pytest.raises(RunLockError, match=f"in use by pid {sleeper.pid}")
+                with refused, run_lock(folder):
+                    pytest.fail("a live holder's lock was taken")
+    finally:
+        sleeper.kill()
+        sleeper.wait()
+
+
+def test_a_lock_file_that_is_a_link_is_not_followed(tmp_path: Path) -> None:
+    """``run.lock`` made a link to another file: refused (an OSError naming it), the file it
+    points to neither truncated nor written."""
+    folder = tmp_path / "run"
+    folder.mkdir()
+    precious = tmp_path / "precious.txt"
+    precious.write_text("mine\n")
+    (folder / LOCK_FILE).symlink_to(precious)
+    with pytest.raises(OSError, match=LOCK_FILE), run_lock(folder):
+        pytest.fail("the lock was taken through a link")
+    assert precious.read_text() == "mine\n" and (folder / LOCK_FILE).is_symlink()

@@ -103,3 +103,54 @@ def test_a_save_keeps_every_key_it_did_not_write(release: Path, tmp_path: Path) 
     assert again["version"] == "1.0" and again["notes"] == {"by": "me"}
     assert again["commands"] == after["commands"][1:]
     np.testing.assert_equal(len(store.commands("train")), len(data["commands"]))
+
+
+@pytest.mark.filterwarnings("ignore:.*byte-order mark")
+def test_a_save_and_its_deletion_keep_the_files_bytes(release: Path, tmp_path: Path) -> None:
+    """A pairs file in another layout (one line, as the release's files are; a byte-order mark,
+    CRLF, numbers and escapes spelled its own way): a save keeps every byte of what it did not
+    change, the new command follows the file's layout, and deleting it gives the file back."""
+    source = NuScenesSource(release, release / "commands")
+    pairs = tmp_path / "pairs"
+    data = json.loads((release / "commands" / "train_commands.json").read_text())
+    data = {"version": "1.0", **data}
+    data["commands"][0]["extra"] = 1.5e-05
+    text = json.dumps(data, separators=(",", ":"), ensure_ascii=False)
+    text = text.replace("1.5e-05", "1.50E-5", 1).replace('"1.0"', '"1\\u002e0"', 1)
+    (pairs / "commands").mkdir(parents=True)
+    file = pairs / "commands" / "train_commands.json"
+    original = b"\xef\xbb\xbf" + text.encode("utf-8") + b"\r\n"
+    file.write_bytes(original)
+    served = serve_root(source, pairs=pairs)
+    store = served.open_store()
+    draft, token = _draft_on(source)
+    saved = store.save(draft, served.source_frame(source.load(token)), split="train")
+    after = file.read_bytes()
+    cut = original.rindex(b"]")  # the end of the commands list
+    assert after.startswith(original[:cut]) and after.endswith(original[cut:])
+    added = after[cut : len(after) - len(original) + cut]
+    assert b"\n" not in added and saved.sample_id.encode() in added  # one line, as the file
+    assert json.loads(after.decode("utf-8-sig"))["commands"][:-1] == data["commands"]
+    store.delete(saved.sample_id)
+    assert file.read_bytes() == original
+
+
+def test_splice_keeps_the_stores_own_layout_and_falls_back() -> None:
+    """A file the store wrote (indent 1) edited by a splice is the file a full rewrite gives;
+    text that cannot be spliced (not an object, NaN, repeated keys) gives None: written whole."""
+    from scenes.utils.json_splice import splice_object
+
+    old = {"scene_tokens": ["a"], "commands": [{"command": "x", "n": 1.5}], "v": "1"}
+    text = json.dumps(old, indent=1) + "\n"
+    for new in (
+        {**old, "scene_tokens": ["a", "b"], "commands": [*old["commands"], {"command": "y"}]},
+        {**old, "commands": []},
+        {**old, "extra": {"k": [1, 2]}},
+        {"scene_tokens": [], "commands": [{"command": "z"}]},
+    ):
+        assert splice_object(text, new) == json.dumps(new, indent=1) + "\n"
+    empty = json.dumps({"scene_tokens": [], "commands": []}, indent=1) + "\n"
+    assert splice_object(empty, old) == text
+    assert splice_object("[1]", old) is None
+    assert splice_object('{"a": NaN}', {"a": float("nan"), "b": 1}) is None
+    assert splice_object('{"a": 1, "a": 2}', {"a": 2, "b": 3}) is None

@@ -37,6 +37,7 @@ from dataclasses import dataclass, replace
 from functools import lru_cache
 
 from scenes.geometry.classes import ClassSet
+from scenes.language.model_phrases import phrase_at
 from scenes.language.phrases import (
     ASKING,
     BE,
@@ -44,7 +45,6 @@ from scenes.language.phrases import (
     BOUNDARIES,
     COLOURS,
     MANOEUVRES,
-    OBJECT_PRONOUNS,
     PLACE_NOUNS,
     SENTENCE,
     SUBJECT_PRONOUNS,
@@ -58,6 +58,7 @@ from scenes.language.phrases import (
     predicates,
     start_of_phrase,
     tokens,
+    words,
 )
 from scenes.language.words import classes_of, generator_nouns, lexicon
 
@@ -183,17 +184,14 @@ def _read(prompt: str, classes: ClassSet) -> Reading:
         inner_nouns = [m for m in inner_found if not m.pronoun]
         if phrase is not None and inner_nouns:  # a command template around a noun phrase
             sentences, found, nouns = inner, inner_found, inner_nouns
-            if _generator_only(nouns, sentences, classes.name):  # the generator's: exact
+            cues = _people_cues(sentences[0])
+            if not cues and _generator_only(nouns, sentences, classes.name):  # the generator's
                 options = classes_of(nouns[0].classes, classes.names)
                 missing = "" if options else _words_of(sentences[0], nouns[0])
                 return Reading((phrase,), not nouns[0].plural, True, options, missing)
     head = choose(found, sentences)
     names = classes.names
-    talk = any(
-        t in MANOEUVRES or t in SUBJECT_PRONOUNS or t in OBJECT_PRONOUNS
-        for s in sentences
-        for t in s
-    )
+    talk = any(t in MANOEUVRES for s in sentences for t in s)  # a driving verb somewhere
     if head is None and not (command and talk):
         return Reading((raw,))  # nonsense, or a thing that is not a road user
     if head is None:
@@ -205,7 +203,8 @@ def _read(prompt: str, classes: ClassSet) -> Reading:
             (SUBJECT_PRONOUNS[t] for s in sentences for t in s if t in SUBJECT_PRONOUNS), ()
         )
         options = classes_of(hint, names) or names
-        return _reading(classes, options, [], [], [], False, command or True)
+        place = next((p for s in sentences if (p := _place_in(s))), [])  # "tom, to our left"
+        return _reading(classes, options, [], [], place, False, command or True)
     toks = sentences[head.sentence]
     options = classes_of(head.classes, names)
     if not options:
@@ -219,6 +218,36 @@ def _read(prompt: str, classes: ClassSet) -> Reading:
         post = cut_post(toks, head.end)
     post += predicates(sentences, head)
     return _reading(classes, options, det, pre, post, head.plural, command)
+
+
+PEOPLE_CUES = words(
+    "wearing dressed carrying holding whose sidewalk pavement corner curb kerb shirt bench "
+    "jacket coat hat vest station lot driveway"
+)
+"""Words people say around a referent that the generator never writes in a command's
+description (what they wear, where they sit or stand): the phrase is then read, not taken as
+written."""
+
+
+def _people_cues(toks: list[str]) -> bool:
+    """Whether a noun phrase says what the generator never says (:data:`PEOPLE_CUES`, or "with"
+    that is not the generator's "with a speed of ...", "with the 2nd highest speed")."""
+    for i, t in enumerate(toks):
+        if t in PEOPLE_CUES:
+            return True
+        if t == "with" and "speed" not in toks[i + 1 : i + 5]:
+            return True
+    return False
+
+
+def _place_in(toks: list[str]) -> list[str]:
+    """The first place phrase of a sentence ("on the left", "to our right"), or []."""
+    for i in range(len(toks)):
+        if places(toks, i):
+            n = phrase_at(toks, i)
+            if n:
+                return toks[i : i + n]
+    return []
 
 
 def _words_of(toks: list[str], mention: Mention) -> str:

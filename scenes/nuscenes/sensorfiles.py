@@ -13,7 +13,9 @@ reader (1.2.0) asserts that bytes remain after every field it reads, so :func:`w
 the file with one byte after the last point (:data:`TRAILER`), as the release's files do; the
 reader here accepts a file with or without it.
 
-The radar reader is strict, naming the file: ``WIDTH`` and ``POINTS`` must be one whole number
+The radar reader is strict, naming the file: the header's lines are the release's, in its order
+(:data:`_HEADER_ORDER`, as the devkit reads them by place), ``VERSION`` 0.7, ``VIEWPOINT`` the
+identity (another would move every point); ``WIDTH`` and ``POINTS`` must be one whole number
 >= 0 each and agree (``HEIGHT`` is 1, ``COUNT`` 1 per field), the file must hold those points and
 not a whole point more, and every float field of every point must be finite, except the one
 point of an empty sweep (a lone point whose ``x``, ``y`` or ``z`` is NaN).
@@ -59,7 +61,12 @@ RADAR_TYPES: tuple[str, ...] = ("F", "F", "F", "I", "I", "F", "F", "F", "F", "F"
 """PCD type per field: F float, I signed integer."""
 TRAILER = b"\x00"
 """The byte :func:`write_radar` puts after the last point (see the module docstring)."""
-_HEADER_KEYS = ("VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT")
+_HEADER_ORDER = (
+    "VERSION", "FIELDS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT", "VIEWPOINT", "POINTS", "DATA",
+)  # fmt: skip
+"""The header's lines after the comment, in the order the release and the devkit have them."""
+IDENTITY_VIEWPOINT = (0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0)
+"""The only ``VIEWPOINT`` read (tx ty tz qw qx qy qz): the points are in the radar's frame."""
 
 
 class SensorFileError(ValueError):
@@ -158,8 +165,9 @@ def read_radar(path: str | Path) -> np.ndarray:
     filter); an empty sweep (a first point with NaN) gives no point.
 
     Raises:
-        SensorFileError: missing, a header other than the 18-field binary layout (names the
-            line), a ``WIDTH`` or ``POINTS`` that is not one whole number >= 0 or that disagree,
+        SensorFileError: missing, a header other than the 18-field binary layout (a line
+            missing, repeated, unknown or out of order: names the line; a ``VERSION`` other
+            than 0.7, a ``VIEWPOINT`` other than the identity), a ``WIDTH`` or ``POINTS`` that is not one whole number >= 0 or that disagree,
             fewer bytes than its points need or a whole point more, or a NaN or infinite float
             field (names the first such point and field) outside an empty sweep.
     """
@@ -169,7 +177,7 @@ def read_radar(path: str | Path) -> np.ndarray:
     except OSError as exc:
         raise SensorFileError(f"{path}: cannot read the radar file ({exc.strerror})") from exc
     offset, header = 0, {}
-    for lineno in range(1, 13):
+    for lineno in range(1, len(_HEADER_ORDER) + 2):
         end = raw.find(b"\n", offset)
         if end < 0:
             raise SensorFileError(f"{path}: the PCD header ends before its DATA line")
@@ -178,14 +186,23 @@ def read_radar(path: str | Path) -> np.ndarray:
         except UnicodeDecodeError as exc:
             raise SensorFileError(f"{path}:{lineno}: the PCD header is not ASCII") from exc
         offset = end + 1
-        if lineno == 1 and not line.startswith("#"):
-            raise SensorFileError(f"{path}:1: expected the PCD comment line, got {line[:40]!r}")
-        key, _, value = line.partition(" ")
-        header[key] = value.split()
-        if key == "DATA":
-            break
-    else:
-        raise SensorFileError(f"{path}: no DATA line in the PCD header")
+        if lineno == 1:
+            if not line.startswith("#"):
+                raise SensorFileError(f"{path}:1: expected the PCD comment line, got {line[:40]!r}")
+            continue
+        key, *value = line.split() or [""]
+        want = _HEADER_ORDER[lineno - 2]
+        if key != want:  # a missing, repeated, unknown or moved line (the devkit reads by place)
+            raise SensorFileError(
+                f"{path}:{lineno}: expected the PCD {want} line (the header's lines are "
+                f"{' '.join(_HEADER_ORDER)}, in that order), got {line[:40]!r}"
+            )
+        header[key] = value
+    if header["VERSION"] not in (["0.7"], [".7"]):
+        raise SensorFileError(
+            f"{path}: PCD VERSION is {' '.join(header['VERSION'])!r}, expected '0.7'"
+        )
+    _check_viewpoint(path, header["VIEWPOINT"])
     expected = {
         "FIELDS": list(RADAR_FIELDS),
         "SIZE": [str(s) for s in RADAR_SIZES],
@@ -221,6 +238,24 @@ def read_radar(path: str | Path) -> np.ndarray:
     floats = tuple(n for n, t in zip(RADAR_FIELDS, RADAR_TYPES, strict=True) if t == "F")
     _check_finite(path, np.stack([~np.isfinite(rec[n]) for n in floats], axis=1), floats)
     return rec
+
+
+def _check_viewpoint(path: Path, value: list[str]) -> None:
+    """A PCD ``VIEWPOINT`` must be the identity (seven numbers): another one would move every
+    point, which the devkit does not do either.
+
+    Raises:
+        SensorFileError: not seven numbers, or not the identity (names the file and value).
+    """
+    try:
+        numbers = tuple(float(v) for v in value)
+    except ValueError:
+        numbers = ()
+    if numbers != IDENTITY_VIEWPOINT:
+        raise SensorFileError(
+            f"{path}: PCD VIEWPOINT is {' '.join(value)!r}, expected '0 0 0 1 0 0 0' (the points "
+            "in the radar's own frame)"
+        )
 
 
 def _header_count(path: Path, header: dict[str, list[str]], key: str) -> int:

@@ -42,6 +42,7 @@ from scenes.nuscenes.classes import model_class
 from scenes.nuscenes.geometry import boxes_from_poses, quaternion_from_matrix, transform
 from scenes.nuscenes.root import NuScenesError, NuScenesFrame, NuScenesRoot
 from scenes.utils.durable import atomic_write_text
+from scenes.utils.json_splice import splice_object
 from scenes.utils.text_policy import COMMAND, TextPolicyError, clean_text
 from scenes.utils.textfile import read_json_file
 
@@ -335,12 +336,23 @@ def command_record(c: Talk2CarCommand) -> dict:
     }
 
 
-def write_command_file(path: str | Path, split: str, data: dict) -> Path:
+def write_command_file(
+    path: str | Path, split: str, data: dict, previous: str | None = None
+) -> Path:
     """Write the JSON object ``data`` (``scene_tokens``, ``commands`` and whatever else a file
-    carries) as ``path/{split}_commands.json``, atomically. Returns the file written."""
+    carries) as ``path/{split}_commands.json``, atomically. Returns the file written.
+
+    ``previous``: the file's text as read (None: a new file). What ``data`` did not change keeps
+    its bytes (:func:`scenes.utils.json_splice.splice_object`: every other key, every command
+    kept, the file's layout; a byte-order mark too); else the whole object is written afresh."""
     out = commands_file(path, split)
     out.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out, json.dumps(data, indent=1) + "\n")
+    text = None if previous is None else splice_object(previous.removeprefix("\ufeff"), data)
+    if text is None:
+        text = json.dumps(data, indent=1) + "\n"
+    elif previous is not None and previous.startswith("\ufeff"):
+        text = "\ufeff" + text
+    atomic_write_text(out, text)
     return out
 
 

@@ -7,12 +7,15 @@ The one home of that rule (:func:`owned_output`), for the exporters that write a
   apart from (the source it is made from: :func:`check_apart`); an existing path that is not a
   folder; a non-empty folder without this writer's :data:`MARKER`. Each is one line naming the
   folder, and nothing is changed.
-- **Staging.** The tree is written into a new hidden folder beside the output
-  (``.<name>.<pid>-<random>.staging``, marked as this writer's staging from its first moment), then
+- **Staging.** The tree is written into a new hidden folder beside the output (beside the folder
+  it links to, for a link: one file system), ``.<name>.<pid>-<random>.staging``, marked as this
+  writer's staging from its first moment, then
   installed: renamed into place when the output does not exist; else moved in file by file over
   the files of the earlier export, whose files that the new one does not write are then removed.
   Files the earlier export did not write (the marker lists its files) are kept, and a file of
-  the new tree that would replace one of them refuses the install before anything is moved.
+  the new tree that would replace one of them, or land outside the output through a link the
+  user made in it, refuses the install before anything is moved; an earlier file behind such a
+  link is kept. A marker that lists a path leaving its folder (``..``, absolute) is no marker.
 - **Failures.** A failed export removes its staging folder (only what it wrote); one killed
   outright leaves it behind, and the next export beside it removes the stagings of this writer
   whose process is gone. While files are moved in, the marker lists the earlier and the new files
@@ -86,9 +89,18 @@ def marker_of(folder: str | Path) -> dict | None:
     if not isinstance(data, dict) or not isinstance(data.get("writer"), str):
         return None
     files = data.get("files", [])
-    if not isinstance(files, list) or not all(isinstance(f, str) for f in files):
-        return None
+    if not isinstance(files, list) or not all(_plain_relative(f) for f in files):
+        return None  # a marker naming a file outside its folder is not one this module wrote
     return data
+
+
+def _plain_relative(name: object) -> bool:
+    """Whether ``name`` is a file a marker may list: a relative ``/``-separated path inside the
+    folder (no ``..``, ``.`` or empty part, not the marker itself)."""
+    if not isinstance(name, str) or not name or name.startswith("/") or "\\" in name:
+        return False
+    parts = name.split("/")
+    return name != MARKER and not any(part in ("", ".", "..") for part in parts)
 
 
 def _write_marker(folder: Path, writer: str, **fields: object) -> None:
@@ -156,9 +168,7 @@ def _install(staging: Path, out: Path, writer: str, old: set[str]) -> None:
     """Move the staged tree into ``out`` (module docstring: the earlier export's files replaced
     or removed, every other file kept)."""
     files = _files(staging)
-    if not old and out.is_dir() and not out.is_symlink() and not any(out.iterdir()):
-        out.rmdir()  # an empty folder: the staged tree takes its place whole
-    if not out.exists():
+    if not out.exists():  # an empty folder is kept (its mode, owner, a shell's cwd in it)
         _write_marker(staging, writer, files=files)
         os.rename(staging, out)
         fsync_dir(out.parent)
@@ -172,6 +182,11 @@ def _install(staging: Path, out: Path, writer: str, old: set[str]) -> None:
                     f"{out / parent}: is in the way of {rel} and was not written by "
                     f"{writer}; move it and export again (nothing was changed)"
                 )
+        if not inside(target.parent, out):
+            raise FolderError(
+                f"{target}: lies outside {out} once links are resolved (a linked folder in it); "
+                "the export writes only into its own folder (nothing was changed)"
+            )
         if (target.exists() or target.is_symlink()) and (rel not in old or target.is_dir()):
             raise FolderError(
                 f"{target}: was not written by {writer} and the export would replace it; move "
@@ -187,6 +202,8 @@ def _install(staging: Path, out: Path, writer: str, old: set[str]) -> None:
         os.replace(staging / rel, target)
     for rel in sorted(old - set(files)):
         target = out / rel
+        if not inside(target.parent, out):  # behind a link the user made: not ours to remove
+            continue
         if target.is_file() or target.is_symlink():
             target.unlink()
         for parent in Path(rel).parents:
@@ -215,12 +232,13 @@ def owned_output(
     Raises:
         FolderError: a refused output (one line naming it; nothing was changed).
     """
-    out = Path(out)
+    out = Path(os.path.abspath(out))  # "." and "a/.." have a name and a parent outside them
     check_apart(out, apart or {})
     old = _check_output(out, writer)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    _remove_stale_stagings(out, writer)
-    staging = out.parent / f".{out.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}{STAGING_SUFFIX}"
+    real = out.resolve()  # a link to a folder: stage beside the folder (one file system)
+    real.parent.mkdir(parents=True, exist_ok=True)
+    _remove_stale_stagings(real, writer)
+    staging = real.parent / f".{real.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}{STAGING_SUFFIX}"
     staging.mkdir()
     try:
         _write_marker(staging, writer, staging=True, pid=os.getpid())

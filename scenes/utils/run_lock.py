@@ -12,7 +12,8 @@ would win silently. :func:`run_lock` holds ``<folder>/run.lock`` for the whole c
   with one line naming who holds it: :class:`RunLockError`, ``error: FOLDER is in use by pid N on
   HOST since T (COMMAND); ...``.
 - **Stale.** A file left by a process that is gone (killed, a lost machine's run on this host:
-  its ``flock`` is free and its pid not alive here) is taken over with one line on stderr
+  its ``flock`` is free and its pid not alive here, or alive but a process that started after
+  the lock was taken: the pid given again) is taken over with one line on stderr
   (``note: FOLDER: took over the stale lock of pid N ...``); ``--resume`` after a ``kill -9``
   goes on.
 - **Re-entrant** within one process (``model.train`` calibrates its run folder at its end):
@@ -49,6 +50,10 @@ LOCK_FILE = "run.lock"
 COMMAND_SHOWN = 300
 """The most characters of the holder's command a refusal shows."""
 
+STARTED_SLACK = 2.0
+"""Seconds a process may seem to have started after the lock's ``started`` and still be its
+holder (``started`` is whole seconds; the boot time /proc gives drifts with the clock)."""
+
 _HELD: dict[str, int] = {}  # resolved folder -> nesting depth, in this process
 _HELD_GUARD = threading.Lock()
 
@@ -62,6 +67,25 @@ def _shown(text: str) -> str:
         else ch
         for ch in " ".join(text.split())
     )
+
+
+def _started_after(pid: int, started: str) -> bool:
+    """Whether process ``pid`` of this host started after ``started`` (a holder's ISO time):
+    then it is not the holder but a later process given the gone holder's pid (False when
+    either time cannot be told: /proc missing, an unreadable time)."""
+    try:
+        when = datetime.datetime.fromisoformat(started).timestamp()
+        stat = Path(f"/proc/{pid}/stat").read_text(encoding="ascii")
+        ticks = int(stat[stat.rindex(")") + 2 :].split()[19])  # field 22, starttime
+        boot = next(
+            int(line.split()[1])
+            for line in Path("/proc/stat").read_text(encoding="ascii").splitlines()
+            if line.startswith("btime ")
+        )
+        begun = boot + ticks / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError, StopIteration, OverflowError):
+        return False
+    return begun > when + STARTED_SLACK
 
 
 class RunLockError(RuntimeError):
@@ -116,8 +140,8 @@ class LockHolder:
         except ProcessLookupError:
             return False
         except PermissionError:  # another user's live process
-            return True
-        return True
+            pass
+        return not _started_after(self.pid, self.started)
 
     def describe(self) -> str:
         """``pid N on HOST since T (COMMAND)``: one line (whitespace collapsed, other control
@@ -164,7 +188,7 @@ def _open_locked(path: Path, folder: Path, what: str) -> int:
     """The lock file opened and ``flock``-ed by this process (the same file as ``path`` names
     now: one removed meanwhile by its holder is opened again)."""
     while True:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o644)
         if not _try_flock(fd):
             os.close(fd)
             raise _refuse(folder, read_holder(folder), what)
