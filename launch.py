@@ -46,7 +46,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Literal
 
-from scenes.utils.cli import add_options, from_args, option
+from scenes.utils.cli import add_options, from_args, option, show_warnings_as_lines
 
 if TYPE_CHECKING:
     from app.served_nuscenes import NuScenesSource
@@ -362,6 +362,7 @@ def load_model(
 def main(argv: Sequence[str] | None = None) -> int:
     flags = parse_args(argv)
     args = from_args(LaunchConfig, flags)
+    show_warnings_as_lines()  # a notice about the root is a sentence, not a UserWarning dump
     logging.basicConfig(
         level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s"
     )

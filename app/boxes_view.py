@@ -7,9 +7,11 @@ diagonals): 12 edges per box plus a *heading tick* from the centre of the top fa
 its front edge, so the heading reads in the bird's-eye view too. Each box gets one label node.
 
 Styles: predictions are drawn 3 px wide in their class colour with a label above the box
-(``"Car 0.87"``, plus ``"IoU 0.64"`` against the best-matching ground-truth box when the sample has
-ground truth); ground truth is drawn thinner in :data:`app.colors.GT_COLOR` with a ``"GT Car"``
-label hanging below the top face, so that a prediction lying on its ground truth stays readable.
+(``"Car 0.87"``, plus ``"IoU 0.64"`` against the best-matching labelled object when the frame has
+labelled objects); the ground truth (:class:`GroundTruthView`) is every labelled object of the
+frame (:class:`app.ground_truth.FrameObjects`) drawn thinner in its class colour with a
+``"#2 Car"`` label hanging below the top face, so that a prediction lying on it stays readable,
+and the referents of the frame's prompt drawn over them thick in :data:`app.colors.GT_COLOR`.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import numpy as np
 import viser
 
 from app.colors import GT_COLOR, RGB, class_color
+from app.ground_truth import FrameObjects
 from scenes.geometry.boxes import box_corners, iou3d
 
 BOX_EDGES: tuple[tuple[int, int], ...] = (
@@ -125,8 +128,13 @@ class BoxStyle:
 PRED_STYLE = BoxStyle()
 """Predicted boxes."""
 
-GT_STYLE = BoxStyle(thickness=1.5, color=GT_COLOR, label_anchor="top-center", label_lift=-0.1)
-"""Ground-truth boxes."""
+GT_STYLE = BoxStyle(thickness=4.0, color=GT_COLOR, max_labels=0)
+"""The referents of the frame's prompt among the ground truth: drawn over their object's box,
+thick and in :data:`app.colors.GT_COLOR` (their label is the object's)."""
+
+OBJECT_STYLE = BoxStyle(thickness=1.5, label_anchor="top-center", label_lift=-0.1)
+"""Every labelled object of the frame (ground truth): thin, in its class colour, its label
+(``"#2 Car"``) hanging below the top face so that a prediction lying on it stays readable."""
 
 
 def segment_colors(classes: Sequence[str], style: BoxStyle) -> np.ndarray:
@@ -228,3 +236,35 @@ class BoxesView:
             self._edges.visible = self._visible
         for label in self._labels:
             label.visible = self._visible
+
+
+class GroundTruthView:
+    """The *Ground truth* layer: every labelled object of the frame (``<prefix>/edges`` and
+    ``<prefix>/labels/<i>``: class colours, numbered labels) and its prompt's referents
+    emphasised over them (``<prefix>/referents/edges``: thick, :data:`app.colors.GT_COLOR`). Not
+    thread-safe by itself (the session serialises calls).
+
+    Args:
+        scene: The scene API to draw into.
+        prefix: Scene-tree prefix.
+    """
+
+    def __init__(self, scene: viser.SceneApi, prefix: str = "/gt") -> None:
+        self.objects = BoxesView(scene, prefix, OBJECT_STYLE)
+        self.referents = BoxesView(scene, f"{prefix}/referents", GT_STYLE)
+
+    def show(self, objects: FrameObjects) -> None:
+        """Draw the frame's ``objects`` (replacing the previous frame's)."""
+        self.objects.show(objects.boxes, objects.classes, objects.labels())
+        mask = np.asarray(objects.referent, dtype=bool)
+        classes = [c for c, ref in zip(objects.classes, mask, strict=True) if ref]
+        self.referents.show(objects.boxes[mask], classes, [""] * len(classes))
+
+    @property
+    def visible(self) -> bool:
+        return self.objects.visible
+
+    @visible.setter
+    def visible(self, value: bool) -> None:
+        self.objects.visible = value
+        self.referents.visible = value

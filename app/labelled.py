@@ -9,6 +9,7 @@ detection, and the fastest way to make a pair on a labelled frame.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -44,6 +45,10 @@ class LabelledFrames:
     def available(self) -> bool:
         """Whether frames have labelled boxes to choose among."""
         return self.own or self.labels is not None
+
+    def source(self) -> Callable[[Sample], LabelledBoxes | None] | None:
+        """:meth:`boxes` where frames have labelled boxes (:attr:`available`), else None."""
+        return self.boxes if self.available else None
 
     def boxes(self, sample: Sample) -> LabelledBoxes | None:
         """The labelled boxes of ``sample``'s frame of the served model's classes (None: none

@@ -25,6 +25,7 @@ from typing import Protocol
 
 import viser
 
+from app.ground_truth import NO_OBJECTS, FrameObjects, frame_objects
 from app.scene_view import estimate_ground_z
 from app.text import md_text
 from scenes.talk2radar.root import RootError, Sample, Talk2RadarRoot
@@ -43,12 +44,14 @@ class Frame:
         ground_z: Ground height estimate (m, LiDAR frame).
         notes: Markdown lines under the frame summary (the root kind's
             :meth:`app.served.ServedRoot.frame_notes`: a nuScenes sample's scene and commands).
+        objects: Its labelled objects (the *Ground truth* layer, the answer's overlaps).
     """
 
     index: int
     sample: Sample
     ground_z: float
     notes: str = ""
+    objects: FrameObjects = NO_OBJECTS
 
     @property
     def sample_id(self) -> str:
@@ -71,6 +74,8 @@ class FrameStore:
         split: The split served.
         cache_size: Frames kept.
         notes: The lines shown under a frame's summary (None: none).
+        objects: A frame's labelled objects (:func:`app.ground_truth.frame_objects`; the app
+            gives it the root's full labels).
 
     Raises:
         RootError: the split is missing or lists no frame.
@@ -82,9 +87,11 @@ class FrameStore:
         split: str,
         cache_size: int = 4,
         notes: Callable[[Sample], str] | None = None,
+        objects: Callable[[Sample], FrameObjects] = frame_objects,
     ) -> None:
         self.root = root
         self._notes = notes
+        self._objects = objects
         self.split = split
         self.ids: tuple[str, ...] = tuple(root.ids(split))
         if not self.ids:
@@ -118,7 +125,8 @@ class FrameStore:
             return cached
         sample = self.root.load(self.ids[index])
         notes = self._notes(sample) if self._notes is not None else ""
-        frame = Frame(index, sample, estimate_ground_z(sample.lidar), notes)
+        ground_z = estimate_ground_z(sample.lidar)
+        frame = Frame(index, sample, ground_z, notes, self._objects(sample))
         self._cache.put(index, frame)
         return frame
 

@@ -37,8 +37,9 @@ import numpy as np
 import viser
 
 from app.answer_words import answer_sentence
-from app.boxes_view import BoxesView, best_iou, box_label
+from app.boxes_view import GroundTruthView, box_label
 from app.engine import MODALITY_LABELS, Answer, Modality, Predictions
+from app.ground_truth import FrameObjects, Overlap
 from app.heatmap_view import HeatmapView
 from app.navigation import Frame
 from app.text import md_text
@@ -60,6 +61,10 @@ RESULT_ROWS = 10
 
 EXAMPLE_PROMPT = "the car about 15 metres ahead"
 """Suggested in the empty-prompt notification."""
+
+OVERLAP_COLUMN = "labelled object it overlaps"
+"""The answer table's column naming, per box, the frame's labelled object it overlaps most
+(absent on a frame without labelled objects)."""
 
 
 @dataclass(frozen=True)
@@ -204,26 +209,34 @@ def modality_label(modality: Modality) -> str:
     return next(label for label, value in MODALITY_LABELS.items() if value == modality)
 
 
-def answer_labels(pred: Predictions, gt_boxes: np.ndarray) -> tuple[np.ndarray, list[str]]:
-    """``(ious (K,), labels)`` of an answer's boxes: each one's best 3D IoU with the ``(G, 7)``
-    ground truth (NaN without any) and its 3D label (class, score, IoU)."""
-    ious = best_iou(pred.boxes, gt_boxes)
+def answer_labels(
+    pred: Predictions, objects: FrameObjects
+) -> tuple[tuple[Overlap | None, ...] | None, list[str]]:
+    """``(overlaps, labels)`` of an answer's boxes: the labelled object of the frame each one
+    overlaps most (:meth:`app.ground_truth.FrameObjects.overlaps`; None for the whole answer on
+    a frame without labelled objects) and its 3D label (class, score, IoU with that object)."""
+    found = objects.overlaps(pred.boxes)
     labels = [
-        box_label(cls, float(score), float(iou))
-        for cls, score, iou in zip(pred.classes, pred.scores, ious, strict=True)
+        box_label(cls, float(score), o.iou if o is not None else (None if objects.empty else 0.0))
+        for cls, score, o in zip(pred.classes, pred.scores, found, strict=True)
     ]
-    return ious, labels
+    return (None if objects.empty else found), labels
 
 
 def results_markdown(
-    answer: Answer, ious: np.ndarray, latency_ms: float, known: ClassSet = VOD
+    answer: Answer,
+    overlaps: Sequence[Overlap | None] | None,
+    latency_ms: float,
+    known: ClassSet = VOD,
 ) -> str:
     """The answer summary: the answer in words (:func:`app.answer_words.answer_sentence`), the
-    latency breakdown and the best boxes with score and IoU.
+    latency breakdown and the best boxes with score and the labelled object each overlaps.
 
     Args:
         answer: The model's answer.
-        ious: ``(K,)`` best 3D IoU of each box with the ground truth (NaN without ground truth).
+        overlaps: Per box, the labelled object of the frame it overlaps most (None: none) from
+            :func:`answer_labels`; None when the frame has no labelled objects (the table then
+            has no such column).
         latency_ms: From the prompt's arrival at the server to the drawn answer.
         known: The served model's class set (the empty answer's words).
     """
@@ -240,14 +253,40 @@ def results_markdown(
     ]
     if getattr(pred, "truncated", False):
         lines.append("*The prompt was truncated to the text encoder's token limit.*")
+    lines += reading_lines(pred, len(scores))
     if len(scores):
-        lines += ["", "| # | class | score | IoU w/ GT |", "|---|---|---|---|"]
+        if overlaps is None:
+            lines += ["", "| # | class | score |", "|---|---|---|"]
+        else:
+            lines += ["", f"| # | class | score | {OVERLAP_COLUMN} |", "|---|---|---|---|"]
         for i in range(min(len(scores), RESULT_ROWS)):
-            iou = f"{ious[i]:.2f}" if np.isfinite(ious[i]) else "-"
-            lines.append(f"| {i} | {md_text(pred.classes[i])} | {scores[i]:.2f} | {iou} |")
+            row = f"| {i} | {md_text(pred.classes[i])} | {scores[i]:.2f} |"
+            if overlaps is not None:
+                found = overlaps[i]
+                row += f" {md_text(found.text()) if found is not None else 'none'} |"
+            lines.append(row)
         if len(scores) > RESULT_ROWS:
             lines.append(f"\n... and {len(scores) - RESULT_ROWS} more")
     return "\n".join(lines)
+
+
+def reading_lines(pred: object, boxes: int) -> list[str]:
+    """What the app says of how the sentence was read (``Predictions.reading``,
+    :mod:`scenes.language.reading`): what was grounded when it is not the sentence as typed, one
+    box for one object, and the answer's note ("No bus here ...")."""
+    reading = getattr(pred, "reading", None)
+    out: list[str] = []
+    if reading is not None and reading.rewritten(getattr(pred, "prompt", "")):
+        shown = " / ".join(f"“{md_text(t)}”" for t in reading.texts[:4])
+        more = f" (and {len(reading.texts) - 4} more)" if len(reading.texts) > 4 else ""
+        out.append(f"*Read as* {shown}{more}")
+    if reading is not None and reading.single and boxes == 1:
+        kind = "A command means one object" if reading.command else "One object is meant"
+        out.append(f"*{kind}: the best box is the answer.*")
+    note = getattr(pred, "note", "")
+    if note:
+        out.append(f"**{md_text(note)}**")
+    return out
 
 
 @dataclass(frozen=True)
@@ -280,7 +319,7 @@ class QueryPanel:
         self,
         lock: AbstractContextManager,
         heatmap: HeatmapView,
-        gt: BoxesView,
+        gt: GroundTruthView,
         show_gt_in_camera: Callable[[bool], None],
     ) -> None:
         """*Heatmap*, *Heatmap opacity* and *Ground truth* show or hide the layers (drawing
@@ -348,7 +387,10 @@ def build_query_panel(
     )
     opacity = gui.add_slider("Heatmap opacity", 0.0, 1.0, 0.05, heatmap_opacity)
     show_gt = gui.add_checkbox(
-        "Ground truth", True, hint="The boxes the sample's own prompt refers to"
+        "Ground truth",
+        True,
+        hint="Every labelled object of the frame in its class colour, numbered from the nearest; "
+        "the referents of the frame's own prompt thick and green",
     )
     results = gui.add_markdown("*Type a prompt and press Enter.*")
     history = gui.add_dropdown("History", (NO_HISTORY,), initial_value=NO_HISTORY)

@@ -38,6 +38,7 @@ from app.colors import (
     velocity_colors,
     velocity_legend,
 )
+from app.point_sizes import Eye, LegibleSizes
 from scenes.geometry.boxes import box_corners
 from scenes.geometry.calib import LIDAR_HEIGHT, Calibration
 from scenes.geometry.classes import VOD
@@ -215,7 +216,9 @@ class ViewSettings:
     Attributes:
         lidar_coloring: ``"height"`` or ``"intensity"``.
         show_lidar, show_radar, show_rings: Layer toggles.
-        lidar_point_size, radar_point_size: Point sizes in metres (perspective-attenuated).
+        lidar_point_size, radar_point_size: Point sizes in metres (perspective-attenuated; never
+            more than keeps the nearest points legible from the camera:
+            :class:`app.point_sizes.LegibleSizes`).
         velocity_range: m/s at which the radar map saturates (``+-``).
     """
 
@@ -258,6 +261,8 @@ class SceneView:
         self._radar: viser.PointCloudHandle | None = None
         self._rings: list[viser.SceneNodeHandle] = []
         self._ego: list[viser.SceneNodeHandle] = []
+        self.sizes = LegibleSizes()
+        """The clouds' point sizes, held legible from the browser's camera."""
 
     def show(self, lidar: np.ndarray, radar: np.ndarray, ground_z: float) -> None:
         """Draw a frame: ``lidar (N, 4)``, ``radar (M, 7)`` (LiDAR frame), ground at ``ground_z``."""
@@ -282,6 +287,8 @@ class SceneView:
             precision="float32",
             visible=s.show_radar,
         )
+        self.sizes.add(self._lidar, self._lidar_pts[:, :3], s.lidar_point_size)
+        self.sizes.add(self._radar, self._radar_pts[:, :3], s.radar_point_size)
         if not self._rings or abs(ground_z - self.ground_z) > 1e-3:
             self.ground_z = ground_z
             self._draw_rings()
@@ -330,12 +337,12 @@ class SceneView:
                 self._lidar.colors = lidar_colors(
                     self._lidar_pts, self.ground_z, settings.lidar_coloring
                 )
-            self._lidar.point_size = settings.lidar_point_size
+            self.sizes.want(self._lidar, settings.lidar_point_size)
             self._lidar.visible = settings.show_lidar
         if self._radar is not None:
             if settings.velocity_range != old.velocity_range:
                 self._radar.colors = radar_colors(self._radar_pts, settings.velocity_range)
-            self._radar.point_size = settings.radar_point_size
+            self.sizes.want(self._radar, settings.radar_point_size)
             self._radar.visible = settings.show_radar
         if settings.show_rings != old.show_rings:
             for node in self._rings:
@@ -415,6 +422,11 @@ class ViewPanel:
 
         for handle in self.inputs():
             handle.on_update(apply_settings)
+
+        @client.camera.on_update
+        def _(camera: viser.CameraHandle) -> None:
+            with lock:
+                view.sizes.view_from(Eye.of(camera))
 
         @self.camera.on_click
         def _(event: viser.GuiEvent) -> None:

@@ -49,6 +49,7 @@ import viser
 
 from app.annotate_tab import AnnotationHub, build_annotation_tab
 from app.engine import GroundingEngine, GroundingModel, initial_threshold
+from app.ground_truth import frame_objects
 from app.guards import InputWarnings, LogGuards, guard_client, guard_server
 from app.keys import add_escape_leaves_fields
 from app.memory import MemoryReaper, freeze_startup_objects
@@ -227,7 +228,13 @@ class Talk2PCApp:
         )
         """The kind of root served, chosen once (:mod:`app.served`)."""
         self.navigator = Navigator(
-            FrameStore(self.served.root, cfg.split, cfg.frame_cache_size, self.served.frame_notes),
+            FrameStore(
+                self.served.root,
+                cfg.split,
+                cfg.frame_cache_size,
+                self.served.frame_notes,
+                objects=partial(frame_objects, labelled=self.served.labelled.source()),
+            ),
             after_move=self._prefetch,
         )
         self.engine = GroundingEngine(

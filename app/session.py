@@ -48,7 +48,7 @@ from dataclasses import dataclass
 
 import viser
 
-from app.boxes_view import GT_STYLE, PRED_STYLE, BoxesView, box_label
+from app.boxes_view import PRED_STYLE, BoxesView, GroundTruthView
 from app.camera_image import BoxLayer
 from app.camera_panel import CameraPanel
 from app.engine import Answer, GroundingEngine, Predictions
@@ -131,7 +131,7 @@ class ClientSession:
         self.history = PromptHistory()
         self.scene_view = SceneView(client.scene)
         self.pred_view = BoxesView(client.scene, "/pred", PRED_STYLE)
-        self.gt_view = BoxesView(client.scene, "/gt", GT_STYLE)
+        self.gt_view = GroundTruthView(client.scene, "/gt")
         self.heatmap_view = HeatmapView(client.scene, "/heatmap", engine.classes.names)
         self.nav: NavigationPanel | None = None
         self.query: QueryPanel | None = None
@@ -304,7 +304,7 @@ class ClientSession:
             self.report_error("Could not draw the frame", exc)
 
     def show_frame(self, frame: Frame, own_move: bool = True) -> None:
-        """Draw ``frame``: points, ground truth, the sample's prompt offered to the prompt box
+        """Draw ``frame``: points, its labelled objects, the sample's prompt offered to the prompt box
         (:meth:`PromptField.offer`); the previous answer is cleared."""
         with self.lock:
             if self.closed:
@@ -317,9 +317,7 @@ class ClientSession:
                 self.scene_view.show(sample.lidar, sample.radar, frame.ground_z)
                 self.pred_view.clear()
                 self.heatmap_view.clear()
-                self.gt_view.show(
-                    sample.boxes, sample.classes, [box_label(c) for c in sample.classes]
-                )
+                self.gt_view.show(frame.objects)
                 if self.query is not None:
                     self.gt_view.visible = self.query.show_gt.value
                     if self.prompt_field is not None:
@@ -458,7 +456,7 @@ class ClientSession:
         """Draw boxes, heatmap, summary and history (holding :attr:`lock`)."""
         assert self.query is not None
         pred = answer.predictions
-        ious, labels = answer_labels(pred, request.frame.sample.boxes)
+        overlaps, labels = answer_labels(pred, request.frame.objects)
         with self.client.atomic():
             self.pred_view.show(pred.boxes, pred.classes, labels)
             self.heatmap_view.visible = self.query.show_heatmap.value
@@ -473,7 +471,9 @@ class ClientSession:
         self.query.rerun.disabled = False
         latency = (time.perf_counter() - request.received) * 1000.0
         self.last_latency_ms = latency
-        self.query.results.content = results_markdown(answer, ious, latency, self.engine.classes)
+        self.query.results.content = results_markdown(
+            answer, overlaps, latency, self.engine.classes
+        )
         log.info(
             "client %s: %r on %s -> %d boxes in %.0f ms",
             self.client_id,

@@ -182,11 +182,8 @@ def run(args: ExportNuScenesCommand) -> int:
     start = time.perf_counter()
     phrasing = None if args.phrasing == "none" else args.phrasing
     report = export(args.source, args.out, args.splits, args.seed, args.version, phrasing)
-    commands = ", ".join(f"{k} {v}" for k, v in report.commands.items())
-    skipped = ", ".join(f"{v} {k}" for k, v in report.skipped.items()) or "none"
     print(
-        f"{args.out}: {report.scenes} scenes, {report.samples} samples in "
-        f"{time.perf_counter() - start:.1f} s; commands: {commands}; prompts left out: {skipped}"
+        f"Wrote {args.out} in {time.perf_counter() - start:.1f} s: {report.summary()}", flush=True
     )
     return 0
 

@@ -300,3 +300,71 @@ def test_browser_reviews_the_pairs_of_a_split(
             assert {states[s].review.reviewer for s in saved} == {"rita"}
             assert approved_ids(root, "train") == tuple(saved)
             assert store.open(saved[1]).classes == ("Pedestrian",)
+
+
+@pytest.mark.browser
+def test_browser_makes_a_second_pair_on_the_frame_as_the_first_and_says_why_a_click_does_nothing(
+    tmp_path, chromium, write_tiny_root, torch_threads, serve_app, gt_box
+) -> None:
+    """Issue 51.6: a Car and a Pedestrian placed with two ground clicks and saved (*Save pair*);
+    on the same frame the next pair is made the same way (Cyclist chosen, one ground click to
+    the right, ahead): the box is placed and the *Box* list names each new box at once, as it
+    did for the first pair; both pairs are saved from that frame. Then, with *Click to place*
+    off, a ground click places nothing and a notice says why."""
+    from playwright.sync_api import sync_playwright
+
+    from model import build_model
+
+    root = write_tiny_root(tmp_path / "root", frames=1)
+    with torch_threads(1):
+        model = build_model("small", text_encoder="gru").eval()
+        with serve_app(root, model, warm_up=False) as app, sync_playwright() as p:
+            store = app.annotations.store
+            browser = p.chromium.launch(executable_path=chromium, headless=True, args=CHROMIUM_ARGS)
+            try:
+                page = browser.new_page(viewport={"width": PAGE_SIZE[0], "height": PAGE_SIZE[1]})
+                panel = open_annotate(page, app, TIMEOUT)
+                ground = panel.frame.ground_z
+                frame = app.frame.sample_id
+                box_list = labelled_field(page, "Box")
+
+                def place(cls: str, x: float, y: float, count: int) -> None:
+                    if panel.w.cls.value != cls:
+                        page.get_by_label("New box class").click()
+                        page.get_by_role("option", name=cls).click()
+                        poll(lambda: panel.w.cls.value == cls, TIMEOUT, f"class {cls}")
+                    camera = panel.session.client.camera
+                    page.mouse.click(*pixel_of(camera, (x, y, ground), PAGE_SIZE))
+                    poll(lambda: len(panel.draft.boxes) == count, TIMEOUT, f"the {cls}")
+                    name = f"#{count} {cls} · "
+                    poll(lambda: box_list.input_value().startswith(name), 10, f"Box list: {name}")
+
+                def save(prompt: str, pairs: int) -> None:
+                    field = labelled_field(page, "Pair prompt")
+                    field.click()
+                    field.type(prompt)
+                    poll(lambda: panel.draft.prompt == prompt, TIMEOUT, "the prompt")
+                    page.keyboard.press("Escape")  # leave the field
+                    page.get_by_role("button", name="Save pair").click()
+                    poll(lambda: len(store.pairs()) == pairs, TIMEOUT, f"pair {pairs} saved")
+                    poll(lambda: box_list.input_value() == "(none)", TIMEOUT, "an empty draft")
+
+                place("Car", gt_box[0], gt_box[1], 1)
+                place("Pedestrian", 10.0, 3.0, 2)
+                save("the car and the pedestrian on the left", 1)
+                place("Cyclist", 12.0, -4.0, 1)  # the next pair, right and ahead
+                save("the cyclist on the right", 2)
+
+                first, second = store.pairs()
+                assert sorted(_label_classes(store.path, first.sample_id)) == ["Car", "Pedestrian"]
+                assert _label_classes(store.path, second.sample_id) == ["Cyclist"]
+                assert panel.frame.name == app.frame.sample_id == frame  # the same frame
+
+                page.get_by_text("Click to place").click()
+                poll(lambda: not panel.w.place.value, TIMEOUT, "Click to place off")
+                camera = panel.session.client.camera
+                page.mouse.click(*pixel_of(camera, (14.0, 0.0, ground), PAGE_SIZE))
+                page.get_by_text("Click to place is off").wait_for(timeout=TIMEOUT * 1000)
+                assert not panel.draft.boxes
+            finally:
+                browser.close()

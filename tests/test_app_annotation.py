@@ -208,7 +208,9 @@ def test_typing_revalidates_without_recounting_points_or_redrawing_boxes(
         )
         monkeypatch.setattr(panel.view, "show", lambda *a: drawn.append(1) or real_show(*a))
         monkeypatch.setattr(
-            panel_module, "checks_markdown", lambda r: checked.append(r.ok) or real_checks(r)
+            panel_module,
+            "checks_markdown",
+            lambda r, **kw: checked.append(r.ok) or real_checks(r, **kw),
         )
         client.set("Pair prompt", "the car ahead")
         client.pump_until(lambda: checked and checked[-1], 5, "the draft revalidated")

@@ -37,6 +37,7 @@ from app.engine import (
     model_modalities,
     sensor_inputs,
 )
+from app.ground_truth import Overlap
 from app.heatmap_view import ground_placement, heatmap_rgba
 from app.navigation import (
     FrameLoadError,
@@ -260,10 +261,15 @@ def test_results_markdown_lists_boxes_and_latency() -> None:
         score_threshold=0.3,
         prompt="the <b>car</b> and the cyclist",
     )
-    text = results_markdown(answer, np.array([0.71, np.nan]), latency_ms=55.4)
+    overlaps = (Overlap(3, "Car", 0.714, True), None)
+    text = results_markdown(answer, overlaps, latency_ms=55.4)
     assert text.startswith(r"1 car and 1 cyclist match\.")  # escaped: shown as text
     assert "**2 boxes** in **55 ms**" in text and "cached" in text and "Radar" in text
-    assert "| 0 | Car | 0.90 | 0.71 |" in text and "| 1 | Cyclist | 0.40 | - |" in text
+    assert r"| 0 | Car | 0.90 | \#3 Car\, IoU 0\.71 \(referent\) |" in text  # as text
+    assert "| 1 | Cyclist | 0.40 | none |" in text
+    # A frame without labelled objects: no overlap column at all.
+    bare = results_markdown(answer, None, latency_ms=55.4)
+    assert "| 0 | Car | 0.90 |\n" in bare and "overlaps" not in bare and "IoU" not in bare
 
 
 def test_the_answer_is_said_in_words() -> None:

@@ -14,7 +14,14 @@ import numpy as np
 import pytest
 
 from app.annotate_tab.keys import HELP_CLOSE
-from tests.browser_helpers import CHROMIUM_ARGS, PAGE_SIZE, open_annotate, pixel_of, poll
+from tests.browser_helpers import (
+    CHROMIUM_ARGS,
+    PAGE_SIZE,
+    labelled_field,
+    open_annotate,
+    pixel_of,
+    poll,
+)
 
 TIMEOUT = 60.0
 
@@ -125,3 +132,48 @@ def test_the_key_list_closes_with_esc_h_and_a_click_outside(annotating_page) -> 
     close.wait_for(state="hidden", timeout=TIMEOUT * 1000)
     page.keyboard.press("3")  # the keys act again
     poll(lambda: panel.w.cls.value == "Cyclist", TIMEOUT, "the New box class")
+
+
+def _camera_pose(panel) -> np.ndarray:
+    camera = panel.session.client.camera
+    return np.r_[np.asarray(camera.position), np.asarray(camera.wxyz)]
+
+
+def _box_list(page) -> str:
+    """What the *Box* list shows in the page."""
+    return labelled_field(page, "Box").input_value()
+
+
+@pytest.mark.browser
+def test_a_selected_boxs_keys_move_the_box_not_the_camera(annotating_page) -> None:
+    """Issue 51.2: with a box selected the arrows, Q / E and Shift+arrows move and turn the box
+    and leave the 3D camera where it is, and the *Box* list names the box all along (its entry's
+    distance changes as it moves); with no box selected the same keys fly the camera."""
+    page, _app, panel = annotating_page
+    _place(page, panel, 12.0, 3.0, 1)
+    page.evaluate("document.activeElement && document.activeElement.blur()")
+    poll(lambda: _box_list(page).startswith("#1 Car"), TIMEOUT, "the Box list naming the box")
+    page.wait_for_timeout(500)  # the camera at rest
+    camera, box = _camera_pose(panel), panel.draft.box_array.copy()
+
+    for key in ("ArrowUp", "ArrowUp", "KeyQ", "Shift+ArrowLeft", "KeyE", "KeyE"):
+        page.keyboard.press(key)
+    poll(lambda: panel.draft.box_array[0, 6] < box[0, 6] - 0.08, TIMEOUT, "the box turned")
+    moved = panel.draft.box_array[0]
+    assert moved[0] == pytest.approx(box[0, 0] + 0.2, abs=1e-6)  # Up twice, away on screen
+    assert moved[1] == pytest.approx(box[0, 1] + 1.0, abs=1e-6)  # Shift+Left: 1 m left
+    page.wait_for_timeout(800)  # a camera move would have been reported by now
+    np.testing.assert_allclose(_camera_pose(panel), camera, atol=1e-6)
+    distance = f"{np.hypot(moved[0], moved[1]):.1f} m"
+    poll(lambda: _box_list(page) == f"#1 Car · {distance}", TIMEOUT, "the Box list after moves")
+    assert panel.w.box.value == f"#1 Car · {distance}"
+
+    page.keyboard.press("Escape")  # no box selected: the keys are the camera's
+    poll(lambda: _box_list(page) == "(none)", TIMEOUT, "no box selected")
+    box = panel.draft.box_array.copy()
+    for key in ("ArrowLeft", "KeyE"):
+        page.keyboard.down(key)
+        page.wait_for_timeout(300)
+        page.keyboard.up(key)
+    poll(lambda: not np.allclose(_camera_pose(panel), camera, atol=1e-3), TIMEOUT, "the camera")
+    np.testing.assert_array_equal(panel.draft.box_array, box)

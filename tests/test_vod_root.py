@@ -71,7 +71,7 @@ def test_a_root_without_image_sets_serves_every_frame(tmp_path, write_vod_root) 
     assert not (path / "lidar" / "ImageSets").exists()
     root = Talk2RadarRoot(path)
     assert root.splits() == ["all"]
-    with pytest.warns(UserWarning, match=r"no ImageSets folder; serving all 3 frames") as notes:
+    with pytest.warns(UserWarning, match=r"has no ImageSets folder, so all 3 frames") as notes:
         assert root.ids("all") == ["00000", "00002", "00549"]
     assert len(notes) == 1 and "\n" not in str(notes[0].message)
     import warnings

@@ -60,10 +60,18 @@ class DraftEdits:
     def _ground_point(
         self, ray_origin: Sequence[float], ray_direction: Sequence[float]
     ) -> tuple[float, float] | None:
-        """Where a click's ray meets the draft's ground (None: no placing now, or no hit, said in
-        a notification). Holds the session's lock."""
+        """Where a click's ray meets the draft's ground (None: no placing now, or no hit; every
+        such click gets a notification saying why). Holds the session's lock."""
         p = self.panel
-        if not p.w.place.value or p.frame is None:
+        if p.frame is None:
+            p.notify("No frame yet", "The frame is still loading: click again once it is shown.")
+            return None
+        if not p.w.place.value:
+            p.notify(
+                "Click to place is off",
+                "A click places, selects or adds no box while Click to place (Annotate tab) is "
+                "off: tick it to go on, or select boxes with N / Shift+N.",
+            )
             return None
         if not p.on_screen():
             p.notify(

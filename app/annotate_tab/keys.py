@@ -21,7 +21,12 @@ frame slider), tab title or list kept its arrows *and* moved the draft's box. Th
 lets the focused control handle the key and stops it on ``document.body``, before the hotkeys,
 when a slider, list or field has the focus (Esc also leaves a slider), when a tab title or a
 button group's choice has it and the key is one they move with (arrows, Home, End, Space,
-Enter), or when the Annotate tab is not the tab shown. The list of keys (H, :class:`HelpWindow`) is a floating
+Enter), or when the Annotate tab is not the tab shown. **A key does one thing**: viser's client
+also flies the 3D camera with the arrows, W / A / S / D and Q / E (:data:`CAMERA_KEYS`, heard on
+``document``, after the hotkeys on the root element); while a box is selected (the hidden
+element of :func:`app.annotate_tab.widgets.selection_marker` says so) a key a hotkey acted on
+(it prevented the key's default) stops at the root element, so it moves the box and not the
+camera; with no box selected the same keys fly the camera. The list of keys (H, :class:`HelpWindow`) is a floating
 window, not a modal: it covers no click on the view; while it is open every key is its own (Esc
 and H close it, the rest act on nothing behind it), and a click outside it closes it and goes
 on to where it was aimed.
@@ -37,7 +42,7 @@ from dataclasses import dataclass
 
 import viser
 
-from app.annotate_tab.widgets import PAIR_PROMPT, class_key
+from app.annotate_tab.widgets import PAIR_PROMPT, SELECTION_ATTRIBUTE, class_key
 from app.text import md_text
 from scenes.geometry.classes import VOD
 
@@ -259,6 +264,13 @@ HELP_TITLE = "Annotate keys"
 HELP_CLOSE = "Close the key list"
 """Its close button's label (the page-side listener clicks it on Esc, H or a click outside)."""
 
+CAMERA_KEYS = (
+    *("KeyW", "KeyA", "KeyS", "KeyD", "KeyQ", "KeyE"),
+    *("ArrowUp", "ArrowDown", "ArrowLeft", "ArrowRight"),
+)
+"""The keys (``KeyboardEvent.code``) that fly viser 1.1.1's 3D camera (its client listens on
+``document``, after the hotkeys on the root element)."""
+
 KEY_OWNER_LISTENER = (
     "if(!window.__talk2pcKeyOwner){window.__talk2pcKeyOwner=true;"
     f"var CLOSE='{HELP_CLOSE}',TITLE='{HELP_TITLE}';"
@@ -283,6 +295,12 @@ KEY_OWNER_LISTENER = (
     "if(own||!annotating())e.__talk2pcOwned=true;},true);"
     "document.body.addEventListener('keydown',function(e){"
     "if(e.__talk2pcOwned)e.stopPropagation();});"
+    f"var CAMERA={list(CAMERA_KEYS)!r},MARK='{SELECTION_ATTRIBUTE}';"
+    "function selected(){var m=document.querySelector('['+MARK+']');"
+    "return !!m&&m.getAttribute(MARK)==='selected';}"
+    "document.documentElement.addEventListener('keydown',function(e){"
+    "if(e.defaultPrevented&&CAMERA.indexOf(e.code)>=0&&annotating()&&selected())"
+    "e.stopPropagation();});"
     "window.addEventListener('pointerdown',function(e){var b=closer();if(!b)return;"
     "if(!win(b).contains(e.target))b.click();},true);}"
 )

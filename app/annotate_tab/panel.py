@@ -56,7 +56,12 @@ from app.annotate_tab.formatting import (
 from app.annotate_tab.hub import AnnotationHub
 from app.annotate_tab.labelled import Labelled, frame_labelled
 from app.annotate_tab.view import DraftView, draft_layer
-from app.annotate_tab.widgets import AnnotationWidgets, build_annotation_widgets
+from app.annotate_tab.widgets import (
+    AnnotationWidgets,
+    build_annotation_widgets,
+    selection_marker,
+)
+from app.annotate_tab.writes import ServerWrites
 from app.session import ClientSession
 from app.text import md_text
 from scenes.talk2radar.root import Sample
@@ -153,8 +158,8 @@ class AnnotationPanel:
         self.last_pair: tuple[Draft, DraftFrame] | None = None
         """The draft this browser saved last and its frame (what *Carry to next frame* carries
         once the draft was emptied by the save)."""
-        self._shown: dict[int, object] = {}
-        """The value the server last wrote into each edit widget (by ``id``), see :meth:`_show`."""
+        self.writes = ServerWrites()
+        """What the server last wrote into each edit widget (never over a pending edit)."""
         self._evidence: tuple[DraftFrame, tuple[object, ...], tuple[BoxEvidence, ...]] | None
         self._evidence = None
         """The last evidence computed: ``(frame, boxes, evidence)``."""
@@ -282,7 +287,7 @@ class AnnotationPanel:
                     )
                 if parts & Part.SENTENCE:
                     if w.prompt is not skip:
-                        self._show(w.prompt, draft.prompt)
+                        self.writes.show(w.prompt, draft.prompt)
                     w.nothing.value = draft.refers_to_nothing
                 if parts & Part.CHECKS:
                     self._show_checks(draft)
@@ -335,14 +340,16 @@ class AnnotationPanel:
         """The *Box* list and the selected box's inputs (disabled while none is selected)."""
         w = self.w
         options = tuple(box_option(i, b.cls, b.box) for i, b in enumerate(draft.boxes))
-        w.box.options = (NO_BOX, *options)
         selected = None
         if self.selected is not None:
             index = draft.index_of(self.selected)
             selected = draft.boxes[index]
-            self._show(w.box, options[index])
+            self.writes.show_choice(w.box, (NO_BOX, *options), options[index])
         else:
-            self._show(w.box, NO_BOX)
+            self.writes.show_choice(w.box, (NO_BOX, *options), NO_BOX)
+        marker = selection_marker(selected is not None)
+        if w.selection.content != marker:
+            w.selection.content = marker
         for handle in w.box_inputs():
             handle.visible = selected is not None
         if selected is None:
@@ -355,7 +362,7 @@ class AnnotationPanel:
             (w.yaw, float(np.degrees(yaw))),
         ):
             if handle is not skip:
-                self._show(handle, round(float(value), 4))
+                self.writes.show(handle, round(float(value), 4))
 
     def _show_checks(self, draft: Draft) -> None:
         """Validate the draft; *Save pair* is enabled only when nothing blocks saving."""
@@ -383,21 +390,10 @@ class AnnotationPanel:
             cached = self._evidence = (frame, boxes, tuple(evidence))
         return cached[2]
 
-    def _show(self, handle: viser.GuiInputHandle, value: object) -> None:
-        """Write the draft's ``value`` into an edit widget, unless the browser has changed the widget
-        since the server last wrote it: that edit's callback is still queued behind the one running
-        now (viser runs callbacks on worker threads, and they read the widget's value when they
-        run), and writing the draft's older value would silently undo what the user typed."""
-        key = id(handle)
-        if key in self._shown and handle.value != self._shown[key]:
-            return
-        handle.value = value
-        self._shown[key] = handle.value
-
     def accept_edit(self, handle: viser.GuiInputHandle) -> None:
         """The browser's value of ``handle`` is being applied now (holding ``session.lock``): it
-        is no longer a pending edit that :meth:`_show` must not overwrite."""
-        self._shown[id(handle)] = handle.value
+        is no longer a pending edit that a redraw must not overwrite (:class:`ServerWrites`)."""
+        self.writes.accept(handle)
 
     def refresh_pairs(self) -> None:
         """Re-read the saved pairs of the root into the *Pair* dropdown and table; a pairs file

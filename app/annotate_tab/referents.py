@@ -5,10 +5,16 @@ On a frame whose objects are labelled (a View-of-Delft release served directly, 
 :attr:`app.session.SessionOptions.labelled_boxes`), making a pair is typing its sentence: while the
 annotator types in *Pair prompt*, :class:`ReferentPicker` runs the referent stage over the
 frame's labelled boxes (``encode_scene(..., candidates=LabelledBoxes)``, through the engine's
-worker pool, :data:`DEBOUNCE_S` after the last keystroke) and puts the boxes whose referent
+worker pool, :data:`DEBOUNCE_S` after the last keystroke: never while the person types) and puts the boxes whose referent
 probability reaches the operating threshold into the draft; the others stay offered as
 ready-made boxes. A click on a labelled box toggles it in or out of the pair (*A* adds the one
 chosen under *Object*, Delete removes the selected one).
+
+**Typing never waits for the model; the newest sentence wins.** A keystroke only restarts the
+pause's timer (the server's keystroke callback does no model work). One pick runs at a time: a
+pause that comes while a pick runs waits for it and then picks the sentence as it is by then; a
+request that a newer keystroke made stale before it ran is dropped without running the model,
+and a pick that a keystroke made stale while it ran changes nothing.
 
 What the annotator decides wins: once they toggle, add, place or delete a box by hand, typing no
 longer changes the boxes (*Pick referents*, key L, or *Use predictions*, U, asks the model again).
@@ -56,6 +62,12 @@ class ReferentPicker:
         self._generation = 0
         self._timer: threading.Timer | None = None
         self._lock = threading.Lock()
+        self._running = False
+        """Whether a pick of the typing runs (or is queued in the engine's pool)."""
+        self._due: int | None = None
+        """The generation a pause asked a pick for while one was running (None: none)."""
+        self.model_runs = 0
+        """Picks that ran the model (what the newest-wins rule saves is counted here)."""
 
     # ------------------------------------------------------------------ state
 
@@ -117,12 +129,37 @@ class ReferentPicker:
             generation = self._generation
             if self._timer is not None:
                 self._timer.cancel()
-            self._timer = threading.Timer(DEBOUNCE_S, self._start, (generation,))
+            self._timer = threading.Timer(DEBOUNCE_S, self._paused, (generation,))
             self._timer.daemon = True
             self._timer.start()
 
-    def _start(self, generation: int) -> None:
-        self.panel.session.engine.submit(self.panel.guarded, lambda: self.pick(generation))
+    def _paused(self, generation: int) -> None:
+        """A pause after keystroke ``generation``: pick now, or after the pick that runs."""
+        with self._lock:
+            if generation != self._generation:
+                return
+            if self._running:
+                self._due = generation
+                return
+            self._running = True
+        self.panel.session.engine.submit(self.panel.guarded, lambda: self._picks(generation))
+
+    def _picks(self, generation: int) -> None:
+        """Pick for ``generation``, then for the pause that came meanwhile, if any (one at a
+        time: the newest request wins, the older ones are dropped)."""
+        while True:
+            try:
+                self.pick(generation)
+            except BaseException:
+                with self._lock:
+                    self._running, self._due = False, None
+                raise
+            with self._lock:
+                due, self._due = self._due, None
+                if due is None or due != self._generation:
+                    self._running = False
+                    return
+            generation = due
 
     def pick(self, generation: int | None = None) -> int | None:
         """Pick the referents of the draft's sentence now (blocking: the model's work); returns
@@ -134,6 +171,9 @@ class ReferentPicker:
             prompt = p.editor.draft.prompt.strip()
         if labelled is None or frame is None or not prompt:
             return None
+        if generation is not None and generation != self._generation:
+            return None  # a newer keystroke: this request is dropped before the model runs
+        self.model_runs += 1
         engine = p.session.engine
         source = p.session.options.labelled_boxes
         candidates = source(frame.sample) if source is not None else None

@@ -54,6 +54,8 @@ class AnnotationWidgets:
     open_pair: viser.GuiButtonHandle
     delete_pair: viser.GuiButtonHandle
     pairs: viser.GuiMarkdownHandle
+    selection: viser.GuiHtmlHandle
+    """A hidden element saying whether a box is selected (:func:`selection_marker`)."""
 
     def box_inputs(self) -> tuple[viser.GuiInputHandle, ...]:
         """The inputs that edit the selected box (hidden while none is selected)."""
@@ -80,6 +82,16 @@ PAIR_PROMPT = "Pair prompt"
 
 NEW_BOX_CLASS, CHANGE_CLASS = "New box class", "Change class"
 """Labels of the two class controls: the next box's class, and the selected box's relabel."""
+
+SELECTION_ATTRIBUTE = "data-talk2pc-box"
+"""The attribute of the hidden element that tells the page whether a box is selected."""
+
+
+def selection_marker(selected: bool) -> str:
+    """The hidden element that tells the page whether a box is selected (``selected`` or
+    ``none``): while one is, the keys that move it are not the 3D camera's too
+    (:data:`app.annotate_tab.keys.KEY_OWNER_LISTENER`). Text of this module only."""
+    return f'<span {SELECTION_ATTRIBUTE}="{"selected" if selected else "none"}" hidden></span>'
 
 
 CLASS_KEYS = 9
@@ -201,6 +213,7 @@ def build_annotation_widgets(
         open_pair = gui.add_button("Open pair", icon=viser.Icon.FOLDER_OPEN, disabled=True)
         delete_pair = gui.add_button("Delete pair", icon=viser.Icon.TRASH, disabled=True)
         pairs = gui.add_markdown("")
+    selection = gui.add_html(selection_marker(False))
     return AnnotationWidgets(
         status=status,
         back=back,
@@ -230,4 +243,5 @@ def build_annotation_widgets(
         open_pair=open_pair,
         delete_pair=delete_pair,
         pairs=pairs,
+        selection=selection,
     )

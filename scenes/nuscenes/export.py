@@ -141,6 +141,30 @@ class ExportReport:
     samples: int
     commands: dict[str, int]
     skipped: Counter[str]
+    """Prompts left out, by reason (a phrase that follows their count: "with 2 referents")."""
+
+    def summary(self) -> str:
+        """What was written, as sentences: ``"3 scenes, 12 samples; commands: 6 in train and 2
+        in val. 16 prompts were left out (a Talk2Car command refers to exactly one object, in
+        front of CAM_FRONT): 14 with 2 referents and 2 with 4 referents."``"""
+        commands = _and([f"{n} in {split}" for split, n in self.commands.items()]) or "none"
+        text = f"{self.scenes} scenes, {self.samples} samples; commands: {commands}."
+        left = sum(self.skipped.values())
+        if not left:
+            return text + " No prompt was left out."
+        reasons = _and([f"{n} {reason}" for reason, n in self.skipped.most_common()])
+        were = "prompt was" if left == 1 else "prompts were"
+        return (
+            f"{text} {left} {were} left out (a Talk2Car command refers to exactly one object, "
+            f"in front of CAM_FRONT): {reasons}."
+        )
+
+
+def _and(parts: list[str]) -> str:
+    """``"a"``, ``"a and b"``, ``"a, b and c"``."""
+    return (
+        ", ".join(parts[:-1]) + (" and " if len(parts) > 1 else "") + (parts[-1] if parts else "")
+    )
 
 
 def ring_index(points: np.ndarray) -> np.ndarray:
@@ -327,12 +351,13 @@ def export_frames(
             if scene_rec["token"] not in split_scenes[prompt.split]:
                 split_scenes[prompt.split].append(scene_rec["token"])
             if len(prompt.referent_ids) != 1:
-                skipped[f"{len(prompt.referent_ids)} referents, not one"] += 1
+                count = len(prompt.referent_ids)
+                skipped[f"with {count} referents" if count else "with no referent"] += 1
                 continue
             actor = by_id[prompt.referent_ids[0]]
             box_2d = _box_2d(to_camera, k_cam, actor.box)
             if box_2d is None:
-                skipped["referent not wholly in front of CAM_FRONT"] += 1
+                skipped["whose referent is not wholly in front of CAM_FRONT"] += 1
                 continue
             n = len(commands.setdefault(prompt.split, []))
             commands[prompt.split].append(Talk2CarCommand(

@@ -241,8 +241,8 @@ class Talk2RadarRoot:
         if not self._all_frames_noted:
             self._all_frames_noted = True
             warnings.warn(
-                f"{split_dir(self.lidar_dir)}: no ImageSets folder; serving all {len(ids)} frames "
-                f"of {folder} as split {split!r} (and as any other split)",
+                f"{self.lidar_dir} has no ImageSets folder, so all {len(ids)} frames of "
+                f"{folder} are served as split {split!r} (and as any other split).",
                 UserWarning,
                 stacklevel=3,
             )

@@ -37,9 +37,10 @@ import dataclasses
 import sys
 import types
 import typing
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Literal, TypeVar
+from typing import Any, Literal, TextIO, TypeVar
 
 C = TypeVar("C")
 
@@ -314,8 +315,36 @@ def report_errors(
         return status
 
 
+def as_sentence(text: str) -> str:
+    """``text`` on one line, spaces collapsed, ending with a full stop (unless it ends with
+    ``.``, ``!`` or ``?`` already)."""
+    line = " ".join(str(text).split())
+    return line if not line or line[-1] in ".!?" else line + "."
+
+
+def show_warnings_as_lines() -> None:
+    """Print each warning this process meets as one ``warning:`` line on stderr: its message as
+    a sentence (:func:`as_sentence`), without the file, line, category and source line that
+    Python's default display adds ("root.py:243: UserWarning: ...", then "warnings.warn(").
+    For commands a person reads; the warnings themselves (their filters, ``pytest.warns``) are
+    unchanged."""
+
+    def show(
+        message: Warning | str,
+        category: type[Warning],
+        filename: str,
+        lineno: int,
+        file: TextIO | None = None,
+        line: str | None = None,
+    ) -> None:
+        print(f"warning: {as_sentence(str(message))}", file=file or sys.stderr, flush=True)
+
+    warnings.showwarning = show
+
+
 __all__ = [
     "add_options",
+    "as_sentence",
     "choices_of",
     "command_parser",
     "error_line",
@@ -325,4 +354,5 @@ __all__ = [
     "report_errors",
     "resumable_fields",
     "run_command",
+    "show_warnings_as_lines",
 ]
