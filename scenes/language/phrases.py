@@ -67,6 +67,10 @@ lane lanes stop stops station park lot lots rack racks path paths shelter wash d
 window space spot spots parking garage route ride driver drivers line depot
 """)
 """Nouns that make a class word part of a place ("bus stop", "bike lane", "car park")."""
+PERSON_WORDS = words("he she him her his hers")
+"""Pronouns that say the referent is a person."""
+PERSON_VERBS = words("pick talk ask wave greet meet say hi drop cross walk")
+"""Verbs said of a person ("pick up tom", "let ann cross")."""
 OBJECT_PRONOUNS = {"him": PERSON_CLASSES, "her": PERSON_CLASSES, "it": THING_CLASSES,
                    "them": ()}
 SUBJECT_PRONOUNS = {"he": PERSON_CLASSES, "she": PERSON_CLASSES, "it": THING_CLASSES,
@@ -163,8 +167,12 @@ def choose(mentions: list[Mention], sentences: list[list[str]]) -> Mention | Non
     pick = (after or [m for m in here if not m.pronoun] or here)[0]
     if not pick.pronoun:
         return pick
-    earlier = [m for m in mentions if not m.pronoun and m.sentence < last]
-    # the nearest sentence before first, and in it the first mention (the one it is about)
+    earlier = [
+        m
+        for m in mentions
+        if not m.pronoun and (m.sentence < last or (m.sentence == last and m.start < pick.start))
+    ]
+    # the nearest sentence first, and in it the first mention (the one it is about)
     earlier.sort(key=lambda m: (-m.sentence, m.start))
     for m in earlier:
         if not m.classes and pick.classes:  # "the object ... move around it": what "it" can be

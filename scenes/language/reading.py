@@ -44,10 +44,12 @@ from scenes.language.phrases import (
     BEFORE_OBJECT,
     BOUNDARIES,
     COLOURS,
+    DETERMINERS,
     MANOEUVRES,
+    PERSON_VERBS,
+    PERSON_WORDS,
     PLACE_NOUNS,
     SENTENCE,
-    SUBJECT_PRONOUNS,
     Mention,
     choose,
     content_start,
@@ -60,7 +62,7 @@ from scenes.language.phrases import (
     tokens,
     words,
 )
-from scenes.language.words import classes_of, generator_nouns, lexicon
+from scenes.language.words import PERSON_CLASSES, classes_of, generator_nouns, lexicon
 
 
 @dataclass(frozen=True)
@@ -194,25 +196,26 @@ def _read(prompt: str, classes: ClassSet) -> Reading:
     talk = any(t in MANOEUVRES for s in sentences for t in s)  # a driving verb somewhere
     if head is None and not (command and talk):
         return Reading((raw,))  # nonsense, or a thing that is not a road user
-    if head is None:
+    said = {t for s in sentences for t in s}
+    person = bool(said & (PERSON_WORDS | PERSON_VERBS))  # "pick up tom", "stop next to her"
+    if head is None and not person:
         other = _other_thing(sentences)
         if other:  # "park next to the fire hydrant": a thing, not a road user
             return Reading((raw,), single=True, command=True, missing=other)
-    if head is None:  # no noun at all ("pull over here", "follow him"): any road user
-        hint = next(
-            (SUBJECT_PRONOUNS[t] for s in sentences for t in s if t in SUBJECT_PRONOUNS), ()
-        )
-        options = classes_of(hint, names) or names
-        place = next((p for s in sentences if (p := _place_in(s))), [])  # "tom, to our left"
-        return _reading(classes, options, [], [], place, False, command or True)
+    place = next((p for s in sentences if (p := _place_in(s))), [])  # "tom, to our left"
+    if head is None or (head.pronoun and not head.classes):
+        # no noun at all ("pull over here", "there is gary, stop next to him"): the most
+        # plausible road user, a person where the sentence speaks of one
+        options = classes_of(PERSON_CLASSES if person else (), names) or names
+        return _reading(classes, options, [], [], place, False, True)
     toks = sentences[head.sentence]
     options = classes_of(head.classes, names)
     if not options:
         word = _words_of(toks, head)
         return Reading((raw,), single=not head.plural, command=command, missing=word)
-    if head.pronoun:  # "let her cross": only where the sentence places her
+    if head.pronoun:  # "let her cross": only where the sentences place her
         det, pre = ["the"], []
-        post = [w for w in cut_post(toks, head.end)] if places(toks, head.end) else []
+        post = cut_post(toks, head.end) if places(toks, head.end) else place
     else:
         det, pre = noun_words(toks, head)
         post = cut_post(toks, head.end)
@@ -281,7 +284,9 @@ def _other_thing(sentences: list[list[str]]) -> str:
     """The first thing the generator names that is not a road user ("fire hydrant"), or ""."""
     known = generator_nouns()
     for toks in sentences:
-        for i in range(len(toks)):
+        for i in range(1, len(toks)):
+            if toks[i - 1] not in DETERMINERS:  # a noun after "the", "a", "that": not "can"
+                continue
             for n in (3, 2, 1):
                 word = " ".join(toks[i : i + n])
                 if word in known and word not in lexicon():
@@ -310,9 +315,20 @@ def _template_phrase(raw: str) -> str | None:
     text = re.sub(r"[\s.!?]+$", "", raw.strip())
     for pattern in _command_templates():
         m = pattern.match(text)
-        if m:
-            return m.group("np").strip()
+        if m:  # people point ("that car"); the generator says "the car"
+            return re.sub(r"^(?:that|this)\b", "the", _one_clause(m.group("np").strip()))
     return None
+
+
+def _one_clause(phrase: str) -> str:
+    """``phrase`` up to a clause that is not the referent's ("that oncoming car, there is a
+    bump behind it" -> "that oncoming car"); as it is where every comma or "and" goes on with a
+    phrase the model reads (the generator's joiners)."""
+    toks = tokens(phrase)
+    for i, t in enumerate(toks):
+        if (t == "," or t in BOUNDARIES) and i and not phrase_at(toks, i + 1):
+            return " ".join(toks[:i])
+    return phrase
 
 
 def _generator_only(nouns: list[Mention], sentences: list[list[str]], class_set: str) -> bool:
