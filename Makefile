@@ -7,7 +7,7 @@ PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-lock
 ARGS ?=
 
-.PHONY: install run test test-fast lint format bench lock clean
+.PHONY: install run test test-fast lint format bench screenshots lock clean
 
 $(STAMP): requirements.lock
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -35,6 +35,9 @@ format: install
 
 bench: install  ## regenerate docs/PERFORMANCE.md
 	$(PY) -m bench.run_all
+
+screenshots: install  ## re-make the README's pictures (docs/images) from the shipped checkpoints
+	$(PY) -m app.screenshots $(ARGS)
 
 lock:  ## re-pin the whole tree after editing requirements.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)

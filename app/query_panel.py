@@ -253,7 +253,8 @@ def results_markdown(
     ]
     if getattr(pred, "truncated", False):
         lines.append("*The prompt was truncated to the text encoder's token limit.*")
-    lines += reading_lines(pred, len(scores))
+    for line in reading_lines(pred, len(scores)):
+        lines += ["", line]  # a paragraph each
     if len(scores):
         if overlaps is None:
             lines += ["", "| # | class | score |", "|---|---|---|"]

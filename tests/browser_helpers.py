@@ -1,53 +1,38 @@
 """Real-browser helpers shared by the browser tests and the screenshot scripts: where Debian's
-Chromium is, the flags it runs with (headless, software rendering), a page-side check of
-viser's scene tree, waiting on the server's state (:func:`poll`), where a world point appears on
-the canvas (:func:`pixel_of`, for ground clicks) and opening the Annotate tab
-(:func:`open_annotate`). Not a test module; the ``chromium`` fixture of ``conftest.py`` uses it.
+Chromium is, the flags it runs with (headless, software rendering) and a page-side check of
+viser's scene tree (from :mod:`app.browser`, which ``python -m app.screenshots`` uses too),
+waiting on the server's state (:func:`poll`), where a world point appears on the canvas
+(:func:`pixel_of`, for ground clicks) and opening the Annotate tab (:func:`open_annotate`). Not
+a test module; the ``chromium`` fixture of ``conftest.py`` uses it.
 """
 
 from __future__ import annotations
 
 import math
-import shutil
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
+from app.browser import CHROMIUM_ARGS, CHROMIUM_CANDIDATES, PAGE_SIZE, find_chromium, scene_has
+
 REPO = Path(__file__).resolve().parents[1]
 ARTIFACTS = REPO / "artifacts"
-PAGE_SIZE = (1400, 860)
-"""The browser tests' page size (CSS pixels): ``viewport={"width": 1400, "height": 860}``."""
-CHROMIUM_CANDIDATES = ("/usr/bin/chromium", "/usr/bin/chromium-browser")
-CHROMIUM_ARGS = [
-    "--no-sandbox",
-    "--disable-gpu",
-    "--enable-unsafe-swiftshader",
-    "--use-angle=swiftshader",
-    "--disable-background-networking",
-    "--disable-component-update",
-    "--disable-sync",
-    "--no-first-run",
-    "--disable-quic",
+
+__all__ = [
+    "ARTIFACTS",
+    "CHROMIUM_ARGS",
+    "CHROMIUM_CANDIDATES",
+    "PAGE_SIZE",
+    "REPO",
+    "find_chromium",
+    "labelled_field",
+    "open_annotate",
+    "pixel_of",
+    "poll",
+    "scene_has",
 ]
-
-
-def find_chromium() -> str | None:
-    """Path of a Chromium executable, or None."""
-    for candidate in CHROMIUM_CANDIDATES:
-        if Path(candidate).is_file():
-            return candidate
-    return shutil.which("chromium")
-
-
-def scene_has(name: str) -> str:
-    """A JavaScript predicate: the browser's own scene tree (``window.__viserSceneTree``, a hook
-    the viser 1.1.1 client exposes) holds the node ``name``."""
-    return (
-        "() => window.__viserSceneTree !== undefined && "
-        f"Object.keys(window.__viserSceneTree.getState()).includes({name!r})"
-    )
 
 
 def poll(condition: Callable[[], object], timeout: float, what: str) -> None:

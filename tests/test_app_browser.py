@@ -4,86 +4,21 @@ It opens the page, types a prompt into the prompt box, presses Enter and waits u
 predicted-box node exists in the browser's own scene tree (``window.__viserSceneTree``, a hook the
 viser 1.1.1 client exposes) and on the server; it saves a screenshot to ``artifacts/``. It skips
 only where no Chromium exists (``apt-get install chromium``; never ``playwright install``).
-
-Run as a script, the same steps produce the documentation screenshot from the default data and
-the bundled checkpoint (or an untrained model when there is none)::
-
-    python -m tests.test_app_browser --out docs/images/app.png
+The browser is driven by :func:`app.browser.drive`, the same steps that make the documentation
+pictures (``python -m app.screenshots``).
 """
 
 from __future__ import annotations
 
-import argparse
-import time
 from pathlib import Path
 
 import pytest
 
+from app.browser import drive
 from scenes.talk2radar.root import Sample
-from tests.browser_helpers import ARTIFACTS, CHROMIUM_ARGS, REPO, find_chromium, scene_has
+from tests.browser_helpers import ARTIFACTS, REPO, find_chromium
 
 PROMPT = "the car about 15 m ahead"
-
-
-def drive(
-    url: str,
-    screenshot: Path,
-    prompt: str,
-    chromium: str,
-    wait_answer=None,
-    before_screenshot=None,
-    timeout_s: float = 40.0,
-    expect_boxes: bool = True,
-) -> float:
-    """Open ``url``, type ``prompt`` + Enter, wait for the boxes, save a screenshot.
-
-    Args:
-        wait_answer: Optional ``() -> bool`` polled until the server has drawn the answer.
-        before_screenshot: Optional ``() -> None`` called just before the screenshot.
-        expect_boxes: Whether the answer has boxes; False: wait for the heatmap only, and check
-            that the browser's scene holds no predicted box once the server has answered.
-
-    Returns:
-        Seconds from pressing Enter to the predicted-box node (or, with ``expect_boxes`` False,
-        the heatmap) existing in the browser.
-    """
-    from playwright.sync_api import sync_playwright
-
-    timeout_ms = timeout_s * 1000
-    with sync_playwright() as p:
-        browser = p.chromium.launch(executable_path=chromium, headless=True, args=CHROMIUM_ARGS)
-        try:
-            page = browser.new_page(viewport={"width": 1400, "height": 860})
-            page.goto(url)
-            page.wait_for_function(
-                "() => !document.body.innerText.includes('Connecting...')", timeout=timeout_ms
-            )
-            page.wait_for_function(scene_has("/scene/lidar"), timeout=timeout_ms)
-            box = page.locator("textarea:not([aria-hidden='true'])").first
-            box.wait_for(timeout=timeout_ms)
-            box.fill(prompt)
-            start = time.perf_counter()
-            box.press("Enter")
-            if expect_boxes:
-                page.wait_for_function(scene_has("/pred/edges"), timeout=timeout_ms)
-            page.wait_for_function(scene_has("/heatmap"), timeout=timeout_ms)
-            elapsed = time.perf_counter() - start
-            if wait_answer is not None:
-                deadline = time.monotonic() + timeout_s
-                while not wait_answer() and time.monotonic() < deadline:
-                    time.sleep(0.05)
-            if not expect_boxes:
-                page.wait_for_timeout(500)  # anything still in flight arrives
-                assert not page.evaluate(scene_has("/pred/edges")), "boxes drawn for no answer"
-            if before_screenshot is not None:
-                before_screenshot()
-            page.add_style_tag(content=".mantine-Notifications-root{display:none !important}")
-            page.wait_for_timeout(2500)  # the scene fades in; SwiftShader renders slowly
-            screenshot.parent.mkdir(parents=True, exist_ok=True)
-            page.screenshot(path=str(screenshot))
-            return elapsed
-        finally:
-            browser.close()
 
 
 @pytest.mark.browser
@@ -211,47 +146,6 @@ def test_browser_attribute_prompt_shows_the_models_answer(tmp_path) -> None:
         np.testing.assert_allclose(got.scores, expected.scores, atol=1e-5)
     finally:
         app.stop()
-
-
-def main() -> int:
-    """Write the documentation screenshot (see the module docstring)."""
-    import launch
-    from app import AppConfig, Talk2PCApp
-    from app.scene_view import apply_pose, bev_pose, chase_pose
-
-    parser = argparse.ArgumentParser(description="Screenshot the app for the docs.")
-    parser.add_argument("--out", type=Path, default=REPO / "docs" / "images" / "app.png")
-    parser.add_argument("--prompt", default=None, help="default: the first frame's own prompt")
-    parser.add_argument("--frame", type=int, default=0, help="frame index to show")
-    parser.add_argument("--camera", default="Chase", choices=("BEV", "Chase"))
-    parser.add_argument("--split", default="test")
-    args = parser.parse_args()
-    chromium = find_chromium()
-    if chromium is None:
-        raise SystemExit("no Chromium found")
-    root = launch.open_root(launch.ensure_default_data(), args.split)
-    model, note = launch.load_model(None, "cpu", threads=1)
-    app = Talk2PCApp(root, model, AppConfig(port=0, split=args.split, model_note=note)).start()
-    try:
-        app.wait_ready(timeout=120)
-        frame = app.go_to(args.frame)
-        assert frame is not None
-        prompt = args.prompt or frame.sample.prompt or "the car ahead"
-        pose = (bev_pose if args.camera == "BEV" else chase_pose)(frame.ground_z)
-
-        def place_camera() -> None:
-            for session in list(app.sessions.values()):
-                apply_pose(session.client.camera, pose)
-
-        elapsed = drive(app.url, args.out, prompt, chromium, before_screenshot=place_camera)
-        print(f"{args.out}: {prompt!r}, boxes in the browser after {elapsed:.2f} s")
-    finally:
-        app.stop()
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
 
 
 @pytest.mark.browser

@@ -29,6 +29,7 @@ PARSERS: dict[str, tuple[str, str]] = {
     "python -m model.results_table": ("model.evaluation.results_table", "build_parser"),
     "python -m model.adapt": ("model.adapt.config", "build_parser"),
     "python -m bench.unlabelled_root": ("bench.unlabelled_root", "build_parser"),
+    "python -m app.screenshots": ("app.screenshots", "build_parser"),
     **{
         command: (f"bench.{name}", "build_parser")
         for name in (
