@@ -32,7 +32,7 @@ PEOPLE = [
     ("overtake the scooter", NUSCENES, ("the motorcycle",)),
     ("park the car behind the parked suv on the right", VOD, ("the parked car on the right",)),
     ("watch out, the worker next to the truck is walking onto the road", NUSCENES,
-     ("the pedestrian next to the truck",)),
+     ("the pedestrian next to the truck that is walking",)),
 ]  # fmt: skip
 
 

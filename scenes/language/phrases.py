@@ -52,6 +52,7 @@ SINGULAR_DETERMINERS = words("the that this a an my our your his her their its")
 KEEP_BEFORE = words("""
 moving parked stationary static stopped motionless approaching oncoming receding crossing
 first second third fourth fifth last next nearest closest farthest furthest leftmost rightmost
+1st 2nd 3rd 4th 5th
 other only same two three four five six seven eight nine ten both all several walking standing
 waiting driving riding turning incoming leading lone single
 """)
@@ -108,8 +109,31 @@ class Mention:
     pronoun: bool = False
 
 
+_CONTRACTIONS = {
+    "that's": ("that", "is"), "who's": ("who", "is"), "which's": ("which", "is"),
+    "there's": ("there", "is"), "it's": ("it", "is"), "he's": ("he", "is"),
+    "she's": ("she", "is"), "what's": ("what", "is"), "where's": ("where", "is"),
+    "here's": ("here", "is"), "they're": ("they", "are"), "who're": ("who", "are"),
+    "isn't": ("is", "not"), "aren't": ("are", "not"),
+}  # fmt: skip
+"""Contractions read as their words (not as a possessive: "the car that's nearest")."""
+
+
+_TWO_WHEELS = ("Cyclist", "Bicycle", "Motorcycle")
+_RIDDEN = {
+    "bike": _TWO_WHEELS, "bicycle": ("Cyclist", "Bicycle"), "cycle": ("Cyclist", "Bicycle"),
+    "motorbike": ("Motorcycle",), "motorcycle": ("Motorcycle",), "scooter": ("Motorcycle",),
+    "moped": ("Motorcycle",),
+}  # fmt: skip
+"""What a person rides ("the man on the bike"): the classes the rider is."""
+
+
 def tokens(sentence: str) -> list[str]:
-    return _TOKEN.findall(sentence.lower().replace("’", "'"))
+    """A sentence's words, lower case (contractions spelt out, commas kept as tokens)."""
+    out: list[str] = []
+    for t in _TOKEN.findall(sentence.lower().replace("’", "'")):
+        out.extend(_CONTRACTIONS.get(t, (t,)))
+    return out
 
 
 def find_mentions(sentences: list[list[str]]) -> list[Mention]:
@@ -136,6 +160,15 @@ def find_mentions(sentences: list[list[str]]) -> list[Mention]:
             before = toks[i - 1] if i else ""
             owners = {"my", "our", "ego"} | ({"the"} if ego_verb(toks, i) else set())
             ego = "Car" in classes and (before in owners or before.startswith("ego"))
+            rides = toks[i + n : i + n + 3]
+            if (
+                classes == ("Pedestrian",)
+                and rides[:1] == ["on"]
+                and rides[2:]
+                and (rides[1] in {"a", "the", "his", "her"} and rides[2] in _RIDDEN)
+            ):  # "the guy on the bike": a rider
+                classes, n = _RIDDEN[rides[2]], n + 3
+                after = toks[i + n] if i + n < len(toks) else ""
             if after not in PLACE_NOUNS and not after.endswith("'s") and not ego:
                 out.append(Mention(s, i, i + n, classes, plural))
             i += n
@@ -195,6 +228,25 @@ def start_of_phrase(toks: list[str], head: int) -> int:
     return i
 
 
+RANKING = words(
+    "furthest farthest nearest closest slowest fastest quickest first second third fourth fifth "
+    "last 2nd 3rd 4th 5th leftmost rightmost most least slowest-moving fastest-moving "
+    "quickest-moving"
+)
+"""Ranking words a person puts after the noun ("the car furthest ahead of us")."""
+PLACE_WORDS = words(
+    "away ahead from of to us me our the on at in left right far side front behind going "
+    "driving moving than less more m metres meters km/h kph mph m/s"
+)
+MOTION = words(
+    "crossing parked moving stopped approaching oncoming walking standing waiting receding "
+    "stationary going driving travelling"
+)
+"""Motion words a person puts after the noun ("the cyclist crossing")."""
+QUANTITY = words("less more within under over")
+"""Words that open a distance or speed ("less than 10 m away")."""
+"""Words that go on a ranking phrase ("furthest away from us", "going the slowest")."""
+
 _AHEAD = {"up ahead": 2, "up front": 2, "in front": 2, "ahead": 1}
 """People's "ahead" (without "of ...") and how many tokens it takes."""
 
@@ -217,7 +269,7 @@ def cut_post(toks: list[str], start: int) -> list[str]:
         if t == "," or t in BOUNDARIES or (t in RELATIVE and nxt not in BE):
             break  # another clause ("and wait", "that looks like mine")
         ahead = _AHEAD.get(" ".join(toks[i : i + 2])) or _AHEAD.get(t)
-        if ahead and nxt != "of":
+        if ahead and toks[i + ahead : i + ahead + 1] != ["of"]:
             out += ["in", "front", "of", "us"]  # "the car up ahead": the generator's words
             i += ahead
             continue
@@ -225,6 +277,10 @@ def cut_post(toks: list[str], start: int) -> list[str]:
             break  # "wait for the man to cross": a purpose, not a place
         if t in BE and not (out and out[-1] in RELATIVE):
             n = phrase_at(["that", "is", *toks[i + 1 :]], 0)
+            if n <= 2 and set(toks[i + 1 : i + 4]) & (RANKING | MOTION):
+                out += ["that", "is"]  # "the car that's third nearest", "who is going slowest"
+                i += 1
+                continue
             if n <= 2:
                 break  # "the truck has passed", "is my friend's": not a modifier
             out += ["that", "is", *toks[i + 1 : i + n - 1]]
@@ -241,9 +297,15 @@ def cut_post(toks: list[str], start: int) -> list[str]:
             out += toks[i:end]
             i = end
             continue
-        if i == start and t not in DROP_STARTS and t not in SEGMENT_STARTS:
+        if i == start and t not in DROP_STARTS | SEGMENT_STARTS | RANKING | MOTION | QUANTITY:
             break  # "the man crossed the street", "this man pass": a verb, not a modifier
-        i += 1  # a word the model does not read: dropped
+        kept = out and (
+            out[-1] in RANKING | PLACE_WORDS | MOTION | QUANTITY or out[-1][:1].isdigit()
+        )
+        if t in RANKING | MOTION | QUANTITY or (kept and (t in PLACE_WORDS or t[:1].isdigit())):
+            out.append(t)  # "furthest away from us", "crossing", "less than 10 m away"
+        i += 1  # else a word the model does not read: dropped
+        continue
     while out and out[-1] in RELATIVE | BE | {"the", "a", "an", "to", "of", ",", "and"}:
         out.pop()
     return out
@@ -293,7 +355,7 @@ def noun_words(toks: list[str], head: Mention) -> tuple[list[str], list[str]]:
     det: list[str] = []
     if words and words[0] in DETERMINERS:
         det, words = [words[0]], words[1:]
-    kept = [w for w in words if w in KEEP_BEFORE or w.isdigit()]
+    kept = [w for w in words if w in KEEP_BEFORE | RANKING or w.isdigit()]
     return det, kept
 
 

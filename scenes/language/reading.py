@@ -284,8 +284,8 @@ def _other_thing(sentences: list[list[str]]) -> str:
     """The first thing the generator names that is not a road user ("fire hydrant"), or ""."""
     known = generator_nouns()
     for toks in sentences:
-        for i in range(1, len(toks)):
-            if toks[i - 1] not in DETERMINERS:  # a noun after "the", "a", "that": not "can"
+        for i in range(len(toks)):
+            if i and toks[i - 1] not in DETERMINERS:  # a noun after "the", "a": not "can"
                 continue
             for n in (3, 2, 1):
                 word = " ".join(toks[i : i + n])
@@ -322,13 +322,21 @@ def _template_phrase(raw: str) -> str | None:
 
 def _one_clause(phrase: str) -> str:
     """``phrase`` up to a clause that is not the referent's ("that oncoming car, there is a
-    bump behind it" -> "that oncoming car"); as it is where every comma or "and" goes on with a
-    phrase the model reads (the generator's joiners)."""
+    bump behind it" -> "that oncoming car", "this car, but wait ..." -> "this car"): a comma or
+    "but" / "so" / "because" before a word that opens a clause (:data:`CLAUSE_STARTS`); the
+    generator's joiners (", on the right", "and 20 m ahead") go on with the phrase."""
     toks = tokens(phrase)
     for i, t in enumerate(toks):
-        if (t == "," or t in BOUNDARIES) and i and not phrase_at(toks, i + 1):
+        nxt = toks[i + 1] if i + 1 < len(toks) else ""
+        if i and (t == "," or t in {"but", "so", "because"}) and nxt in CLAUSE_STARTS:
             return " ".join(toks[:i])
     return phrase
+
+
+CLAUSE_STARTS = frozenset(
+    ["there", "i", "we", "you", "it", "he", "she", "they", "this", "that", "but", "so", "wait"]
+)
+"""Words that open another clause after a comma ("..., there is a bump", "..., but wait")."""
 
 
 def _generator_only(nouns: list[Mention], sentences: list[list[str]], class_set: str) -> bool:
