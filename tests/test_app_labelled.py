@@ -30,11 +30,11 @@ def test_candidates_labelled_boxes_answer_among_the_labels(labelled_app, ws_clie
         assert client.dropdown("Candidates") == ("Detector proposals", "Labelled boxes")
         client.set("Candidates", "Labelled boxes")
         client.set("Score threshold", 0.0)
-        client.set("Prompt", "the pedestrian")
+        client.set("Prompt", "the pedestrians")
         client.click("Run")
         client.pump_until(
             lambda: (
-                (session.answer is not None and session.answer.prompt == "the pedestrian")
+                (session.answer is not None and session.answer.prompt == "the pedestrians")
                 or client.notifications
             ),
             60,
