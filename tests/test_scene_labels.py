@@ -64,7 +64,7 @@ def test_ground_over_labelled_boxes_returns_only_those_boxes(tmp_path, write_vod
     feats = model.encode_scene(sample.lidar, sample.radar, candidates=LabelledBoxes(boxes, labels))
     assert feats.objects is not None and feats.answerable == len(boxes)
     assert len(feats.objects) >= len(boxes)
-    pred = model.ground(feats, "the pedestrian", score_threshold=0.0)
+    pred = model.ground(feats, "the pedestrians", score_threshold=0.0)
     assert len(pred.boxes) == len(boxes)
     for box in pred.boxes:
         assert np.min(np.abs(boxes - box).sum(axis=1)) < 1e-9

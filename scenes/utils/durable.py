@@ -80,6 +80,17 @@ def _sync_file(handle: IO[Any]) -> None:
     os.fsync(handle.fileno())
 
 
+def sync_descriptor(fd: int) -> None:
+    """Flush an open file descriptor's data to the disk (a lock file written in place)."""
+    os.fsync(fd)
+
+
+def move_file(src: str | Path, dst: str | Path) -> None:
+    """Move a finished file into place by one rename (same file system), its folder synced."""
+    os.replace(src, dst)
+    fsync_dir(Path(dst).parent)
+
+
 @contextlib.contextmanager
 def atomic_file(path: str | Path, binary: bool = True) -> Iterator[IO[Any]]:
     """Write ``path`` atomically through the handle this yields (binary, or UTF-8 text with

@@ -37,7 +37,7 @@ import uuid
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 
-from scenes.utils.durable import atomic_write_text, fsync_dir
+from scenes.utils.durable import atomic_write_text, fsync_dir, move_file
 
 __all__ = ["MARKER", "FolderError", "check_apart", "inside", "marker_of", "owned_output"]
 
@@ -199,7 +199,7 @@ def _install(staging: Path, out: Path, writer: str, old: set[str]) -> None:
             if (out / parent).is_file():  # an earlier file of ours where a folder goes now
                 (out / parent).unlink()
         target.parent.mkdir(parents=True, exist_ok=True)
-        os.replace(staging / rel, target)
+        move_file(staging / rel, target)
     for rel in sorted(old - set(files)):
         target = out / rel
         if not inside(target.parent, out):  # behind a link the user made: not ours to remove

@@ -39,6 +39,8 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
+from scenes.utils.durable import sync_descriptor
+
 try:  # POSIX only; elsewhere the pid in the file alone tells a stale lock
     import fcntl
 except ImportError:  # pragma: no cover
@@ -245,7 +247,7 @@ def run_lock(folder: str | Path, what: str = "--out") -> Iterator[None]:
             )
         os.ftruncate(fd, 0)
         os.pwrite(fd, LockHolder.me().text().encode("utf-8"), 0)
-        os.fsync(fd)
+        sync_descriptor(fd)
     except BaseException:
         os.close(fd)
         raise
