@@ -35,20 +35,8 @@ quickly carefully just also right wow look listen
 ASKING = ("can you", "could you", "would you", "will you", "i want", "i need", "we need",
           "you should", "you can", "you need", "i'd like", "let's", "let us", "i would")
 """Openings that ask for something: a command when a driving verb follows."""
-CONTEXT = ("there is", "there's", "there are", "i see", "i want", "i need", "we need", "we have",
-           "i think", "that is", "that's", "this is", "my ", "our ", "let's", "let us", "can you",
-           "could you", "would you", "will you", "i'd like", "i would", "we should", "you should",
-           "you can", "you need", "do not", "don't", "i'm", "we're", "i am", "when", "once", "if",
-           "after", "as soon", "since", "because", "before", "it's", "it is", "he ", "she ",
-           "they ", "bob", "when ", "in front", "behind")
-"""Openings of a sentence people use for context before the command."""
-DESCRIPTION_VERBS = ("where", "show", "find", "locate", "highlight", "point", "select", "mark",
-                     "do you see", "can you locate", "can you spot", "can you find",
-                     "can you show", "which", "what", "identify", "hey, find", "look for")
-"""Openings of the generator's descriptions ("show me the car", "where is the cyclist?")."""
 DETERMINERS = words("the that this those these a an my our your his her their its some any "
                         "all both each every")
-SINGULAR_DETERMINERS = words("the that this a an my our your his her their its")
 KEEP_BEFORE = words("""
 moving parked stationary static stopped motionless approaching oncoming receding crossing
 first second third fourth fifth last next nearest closest farthest furthest leftmost rightmost
@@ -338,14 +326,6 @@ SEGMENT_STARTS = words(
     "roughly approximately faster slower within between beyond up directly straight from "
     "further farther more less going heading travelling riding"
 )
-
-
-def skip_segment(toks: list[str], i: int) -> int:
-    while i < len(toks) and toks[i] not in SEGMENT_STARTS and toks[i] not in BOUNDARIES:
-        if toks[i] == ",":
-            break
-        i += 1
-    return i
 
 
 def noun_words(toks: list[str], head: Mention) -> tuple[list[str], list[str]]:

@@ -147,14 +147,11 @@ def _is_command(sentences: list[list[str]], raw: str) -> bool:
     return not _np_first(toks[i:])
 
 
-def _render(det: list[str], pre: list[str], noun: str, post: list[str], plural: bool) -> str:
-    if det and det[0] in {"all", "both", "each", "every", "some", "any"}:
-        lead = det
-    elif plural:
-        lead = ["the"]
-    else:
-        lead = ["the"]
-    text = " ".join([*lead, *pre, noun, *post])
+def _render(det: list[str], pre: list[str], noun: str, post: list[str]) -> str:
+    """The text grounded: a quantifier kept ("all", "both"), any other determiner read as
+    "the" ("that car", "my friend")."""
+    quantified = det and det[0] in {"all", "both", "each", "every", "some", "any"}
+    text = " ".join([*(det if quantified else ["the"]), *pre, noun, *post])
     return re.sub(r"\s+,", ",", text).strip()
 
 
@@ -266,16 +263,8 @@ def _reading(
     plural: bool,
     command: bool,
 ) -> Reading:
-    texts = tuple(
-        _render(
-            det,
-            pre,
-            classes.get(c).plural if plural else classes.get(c).noun,
-            post,
-            plural,
-        )
-        for c in options
-    )
+    nouns = (classes.get(c).plural if plural else classes.get(c).noun for c in options)
+    texts = tuple(_render(det, pre, noun, post) for noun in nouns)
     counted = plural or (det and det[0] in {"all", "both", "each", "every"})
     return Reading(texts, single=not counted, command=command, classes=options)
 
