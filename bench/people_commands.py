@@ -91,17 +91,23 @@ class Hit:
     best: dict[str, object]
 
 
-def _judge(pred: object, placed: PlacedFrame, threshold: float, classes: Sequence[str]) -> Hit:
-    """Score :class:`model.core.features.Predictions` (boxes sorted by score) on a frame."""
+def _is_referent(cls: str, box: np.ndarray, placed: PlacedFrame) -> bool:
+    """A ``(7,)`` box of class ``cls`` is the referent: its class, and its bird's-eye centre
+    within the Talk2Car top-1 distance of the referent's."""
     from model.evaluation.talk2car.metrics import top1_distance
 
+    gap = float(bev_gap(box.reshape(1, 7), placed.referent)[0])
+    return cls == placed.referent.cls and gap < top1_distance(placed.referent.cls)
+
+
+def _judge(pred: object, placed: PlacedFrame, threshold: float) -> Hit:
+    """Score :class:`model.core.features.Predictions` (boxes sorted by score) on a frame."""
     boxes = np.asarray(pred.boxes, dtype=np.float64).reshape(-1, 7)
     if not len(boxes):
         return Hit(False, False, {"boxes": 0})
+    cls, score = pred.classes[0], float(pred.scores[0])
+    top1 = _is_referent(cls, boxes[0], placed)
     gap = float(bev_gap(boxes[:1], placed.referent)[0])
-    cls = pred.classes[0]
-    top1 = cls == placed.referent.cls and gap < top1_distance(placed.referent.cls)
-    score = float(pred.scores[0])
     best = {"class": cls, "gap_m": round(gap, 2), "score": round(score, 3), "boxes": len(boxes)}
     best["answer_set"] = int(np.sum(np.asarray(pred.scores) >= threshold))
     reading = getattr(pred, "reading", None)
@@ -113,14 +119,11 @@ def _judge(pred: object, placed: PlacedFrame, threshold: float, classes: Sequenc
 
 def _blind(objects: object, placed: PlacedFrame, classes: Sequence[str]) -> bool:
     """The detector's most confident proposal (any class) is the referent."""
-    from model.evaluation.talk2car.metrics import top1_distance
-
     if not len(objects):
         return False
     best = int(np.argmax(objects.scores))
-    gap = float(bev_gap(objects.boxes[best : best + 1], placed.referent)[0])
-    same = classes[int(objects.labels[best])] == placed.referent.cls
-    return same and gap < top1_distance(placed.referent.cls)
+    box = np.asarray(objects.boxes[best], dtype=np.float64)
+    return _is_referent(classes[int(objects.labels[best])], box, placed)
 
 
 @dataclass
@@ -217,7 +220,7 @@ def run_people_commands(
     """Place, ground and score the commands of ``commands_file`` (module docstring); with
     ``root``, also write them as a Talk2Radar root (:func:`write_root`); with ``cache_dir``, keep
     the searched worlds' index there between runs."""
-    from model import class_noun_prompt, load_checkpoint, operating_threshold  # noqa: F401
+    from model import load_checkpoint, operating_threshold
 
     model = load_checkpoint(checkpoint)
     model.eval()
@@ -260,8 +263,8 @@ def run_people_commands(
                 continue
             on_frame.setdefault(id(placed), (placed, []))[1].append(text)
             noun = f"the {classes.get(placed.referent.cls).noun}"
-            model_hit = _judge(model.ground(features, text), placed, threshold, names)
-            noun_hit = _judge(model.ground(features, noun), placed, threshold, names)
+            model_hit = _judge(model.ground(features, text), placed, threshold)
+            noun_hit = _judge(model.ground(features, noun), placed, threshold)
             tally = by_class.setdefault(placed.referent.cls, Tally())
             tally.commands += 1
             tally.top1["model"] += model_hit.top1
@@ -335,7 +338,6 @@ def _run(a: PeopleCommandsOptions) -> int:
         return 0
     from model import DEFAULT_CHECKPOINT
 
-    torch.set_num_threads(max(1, torch.get_num_threads()))
     checkpoint = DEFAULT_CHECKPOINT if a.checkpoint is None else a.checkpoint
     try:
         report = run_people_commands(
