@@ -144,14 +144,12 @@ class PlacedFrame:
         key: The bin it serves (:attr:`PeopleCommand.bin_key`).
         frame: The sensed world (LiDAR ``(N, 4)``, radar ``(M, 7)``, LiDAR frame).
         referent: The referent (its box ``(7,)`` in the LiDAR frame).
-        same_class: Actors of the referent's class in the frame (ahead: the referent only).
         classes: The class set's name the world was made for.
     """
 
     key: tuple[str, str, int]
     frame: SynthFrame
     referent: Actor
-    same_class: int
     classes: str = "vod"
 
 
@@ -248,8 +246,7 @@ class FramePlacer:
         new_id = keep.index(actor_id)
         if new_id not in frame.sensed:
             return None
-        same = sum(1 for a in actors if a.cls == cls)
-        return PlacedFrame(key, frame, actors[new_id], same, self.classes.name)
+        return PlacedFrame(key, frame, actors[new_id], self.classes.name)
 
 
 def frame_of(command: PeopleCommand, frames: Sequence[PlacedFrame]) -> PlacedFrame | None:
