@@ -6,6 +6,8 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-lock
 ARGS ?=
+# pytest-xdist workers for `make test` (auto: one per CPU core; 0: everything in one process)
+WORKERS ?= auto
 
 .PHONY: install run test test-fast lint format bench screenshots lock clean
 
@@ -19,11 +21,11 @@ install: $(STAMP)
 run: install  ## serve the app on the bundled defaults (http://127.0.0.1:8080)
 	$(PY) launch.py $(ARGS)
 
-test: install  ## the whole test suite, real-browser test included
-	$(PY) -m pytest $(ARGS)
+test: install  ## the whole test suite, real-browser test included, a worker per core
+	$(PY) -m pytest -n $(WORKERS) --dist loadfile $(ARGS)
 
 test-fast: install  ## everything but the slow and browser tests
-	$(PY) -m pytest -m "not slow and not browser" $(ARGS)
+	$(PY) -m pytest -n $(WORKERS) --dist loadfile -m "not slow and not browser" $(ARGS)
 
 lint: install
 	$(VENV)/bin/ruff check .

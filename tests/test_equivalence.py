@@ -3,7 +3,8 @@
 ``tests/data/equivalence_*.npz`` hold the inputs (a tiny fixed synthetic root) and the outputs of
 ``detect``, ``encode_scene`` + ``ground`` of each checkpoint, made by
 ``python tests/make_equivalence_reference.py --checkpoint CKPT --out FILE`` on the code before
-model/ was reshaped; a change of shape must keep every one of them (to 1e-5).
+model/ was reshaped; a change of shape must keep every one of them (to 1e-5; the grounding
+heatmap checksums to ``CHECKSUM_RTOL``, which CPUs differ by).
 
 An intended change of arithmetic makes the outputs again on the same inputs (``--inputs`` the
 earlier file) once it is shown to be float rounding. So far once: issue 20 folded one-head BACA's
@@ -30,6 +31,12 @@ CASES = {
     "tpcnet-small-faithful": REPO / "tests" / "data" / "equivalence_small_faithful.npz",
 }
 
+CHECKSUM_RTOL = 3e-4
+"""Relative tolerance of a grounding heatmap checksum (a sum over 6,400 cells after DGGF's
+maxima). The faithful checkpoint's f0_p0 sums move by 1.1e-4 relative between the machine the file
+was made on and an AVX2 machine without AVX-512 (torch picks its kernels by CPU); every box, score
+and label of both files, and every other checksum, stay within 1e-5 there."""
+
 
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_checkpoint_outputs_match_the_reference(name: str, torch_threads) -> None:
@@ -46,7 +53,8 @@ def test_checkpoint_outputs_match_the_reference(name: str, torch_threads) -> Non
         if want.dtype.kind in "iu":
             np.testing.assert_array_equal(have, want, err_msg=key)
         else:
-            np.testing.assert_allclose(have, want, rtol=1e-5, atol=1e-5, err_msg=key)
+            rtol = CHECKSUM_RTOL if key.endswith("_heatmaps") else 1e-5
+            np.testing.assert_allclose(have, want, rtol=rtol, atol=1e-5, err_msg=key)
 
 
 def test_the_comparison_can_fail(torch_threads) -> None:
