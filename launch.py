@@ -49,8 +49,8 @@ from typing import TYPE_CHECKING, Literal
 from scenes.utils.cli import add_options, from_args, option, show_warnings_as_lines
 
 if TYPE_CHECKING:
-    from app.served_nuscenes import NuScenesSource
     from model import TPCNet
+    from scenes.datasets.source import NuScenesSource
     from scenes.talk2radar.root import Talk2RadarRoot
 
 REPO = Path(__file__).resolve().parent
@@ -188,7 +188,7 @@ def missing_files(root: Talk2RadarRoot, split: str) -> list[str]:
 
 def _split_problem(root: Talk2RadarRoot, split: str) -> str | None:
     """Why ``split`` cannot be served (None: it can)."""
-    from scenes.talk2radar.root import RootError
+    from scenes.frame import RootError
 
     try:
         ids = root.ids(split)
@@ -215,8 +215,9 @@ def open_root(path: Path, split: str | None) -> Talk2RadarRoot:
         LaunchError: not a root, an ImageSets folder without lists, an unknown or empty split, or a split listing
             frames whose files are missing (the message names the first such file).
     """
+    from scenes.frame import RootError
     from scenes.talk2radar.layout import split_dir
-    from scenes.talk2radar.root import RootError, Talk2RadarRoot
+    from scenes.talk2radar.root import Talk2RadarRoot
 
     if not path.is_dir():
         raise LaunchError(f"--data {path}: no such folder")
@@ -261,12 +262,20 @@ def choose_split(root: Talk2RadarRoot, split: str | None) -> str:
     raise LaunchError(f"no split can be served; {problems[0]}")
 
 
-def is_nuscenes(path: Path) -> bool:
-    """Whether ``path`` is a nuScenes root as the release comes (it holds a ``v1.0-*`` table
-    folder: :func:`scenes.datasets.nuscenes_frames.is_nuscenes_root`)."""
-    from scenes.datasets.nuscenes_frames import is_nuscenes_root
+def root_family(path: Path, talk2car: Path | None = None) -> str:
+    """The dataset family of ``--data`` given with ``--talk2car``
+    (:func:`scenes.datasets.source.root_family`, the one place that decides it).
 
-    return is_nuscenes_root(path)
+    Raises:
+        LaunchError: ``--talk2car`` with a root that is not a nuScenes root (one line).
+    """
+    from scenes.datasets.source import root_family as family
+    from scenes.frame import RootError
+
+    try:
+        return family(path, talk2car)
+    except RootError as exc:
+        raise LaunchError(str(exc)) from exc
 
 
 def open_nuscenes(
@@ -279,9 +288,9 @@ def open_nuscenes(
     Raises:
         LaunchError: a malformed root or command file, an unknown split (one line).
     """
-    from app.served_nuscenes import NuScenesSource
+    from scenes.datasets.source import NuScenesSource
+    from scenes.frame import RootError
     from scenes.nuscenes.tables import NuScenesError
-    from scenes.talk2radar.root import RootError
 
     try:
         source = NuScenesSource(path, talk2car)
@@ -292,15 +301,16 @@ def open_nuscenes(
 
 def root_classes(path: Path) -> str:
     """The class set a served root talks about: ``nuscenes`` for a nuScenes root
-    (:func:`is_nuscenes`) or a synthetic root whose manifest says so
+    (:func:`root_family`) or a synthetic root whose manifest says so
     (:func:`scenes.synth.manifest.manifest_classes`), else ``vod``.
 
     Raises:
         LaunchError: an unreadable manifest (one line naming it).
     """
+    from scenes.datasets.source import NUSCENES
     from scenes.synth.manifest import manifest_classes
 
-    if is_nuscenes(path):
+    if root_family(path) == NUSCENES:
         return "nuscenes"
     try:
         return manifest_classes(path) or "vod"
@@ -369,20 +379,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     for noisy in ("httpx", "websockets", "urllib3"):
         logging.getLogger(noisy).setLevel(logging.WARNING)
     from app.server import AppConfig, ServerStartError, Talk2PCApp, check_listen_address
-    from scenes.talk2radar.root import RootError
+    from scenes.datasets.source import NUSCENES
+    from scenes.frame import RootError
 
     try:
         app_flags = from_args(AppConfig, flags)
         check_listen_address(app_flags.host, app_flags.port)
         data = args.data if args.data is not None else ensure_default_data()
-        if is_nuscenes(data):
+        if root_family(data, app_flags.talk2car) == NUSCENES:
             root, split = open_nuscenes(data, app_flags.talk2car, args.split)
         else:
-            if app_flags.talk2car is not None:
-                raise LaunchError(
-                    f"--talk2car goes with a nuScenes root as --data (a folder holding v1.0-*/); "
-                    f"{data} is not one"
-                )
             root = open_root(data, args.split)
             split = choose_split(root, args.split)
         model, note = load_model(args.checkpoint, args.device, args.threads, root_classes(data))

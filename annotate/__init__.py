@@ -8,7 +8,6 @@ Dependency direction: ``app -> annotate -> scenes``; nothing here imports ``app`
 """
 
 from annotate.draft import (
-    DEFAULT_SIZES,
     Draft,
     DraftBox,
     DraftError,
@@ -58,7 +57,6 @@ from annotate.validation import (
 )
 
 __all__ = [
-    "DEFAULT_SIZES",
     "DEFAULT_SPLITS",
     "DUPLICATE_IOU",
     "MAX_PROPOSALS",

@@ -19,10 +19,10 @@ further on. Each box is moved in three steps, from the sensors only (never from 
    keeps the size it had (an object does not change size between frames, and the fit of a
    partly seen object is smaller than the object), the fit giving the centre and the heading.
    Where the radar gives the speed, a refit only adds the fit's own error
-   (``python -m bench.carry_accuracy`` measures both).
+   (``python -m bench.studies.carry_accuracy`` measures both).
 
 The result is a proposal for the annotator to check and save (:class:`CarriedBox` says what each
-step did). ``python -m bench.carry_accuracy`` measures the centre error of carried boxes on
+step did). ``python -m bench.studies.carry_accuracy`` measures the centre error of carried boxes on
 synthetic sequences against copying them in place (docs/ANNOTATION.md).
 """
 

@@ -27,22 +27,15 @@ from scenes.geometry.boxes import wrap_yaw
 from scenes.geometry.calib import LIDAR_HEIGHT
 from scenes.geometry.classes import object_class
 
-DEFAULT_SIZES: dict[str, tuple[float, float, float]] = {
-    "Car": (4.2, 1.8, 1.5),
-    "Pedestrian": (0.7, 0.7, 1.75),
-    "Cyclist": (1.8, 0.7, 1.7),
-}
-"""Typical ``(l, w, h)`` in metres of a new box of each class (about VoD's mean sizes)."""
-
 
 def _mean_size(cls: str) -> tuple[float, float, float]:
-    """A new box's size of a class without a :data:`DEFAULT_SIZES` entry: its class set's mean
-    size (:attr:`scenes.geometry.classes.ObjectClass.mean_size`); a pedestrian's for a name of
-    no class set."""
+    """A new box's size ``(l, w, h)`` in metres: its class's mean size
+    (:attr:`scenes.geometry.classes.ObjectClass.mean_size`, of the first preset that has the
+    name); a pedestrian's for a name of no class set."""
     try:
         return object_class(cls).mean_size
     except ValueError:
-        return DEFAULT_SIZES["Pedestrian"]
+        return object_class("Pedestrian").mean_size
 
 
 class DraftError(ValueError):
@@ -75,12 +68,12 @@ def _wrap(yaw: float) -> float:
 def default_box(
     cls: str, x: float, y: float, ground_z: float = -LIDAR_HEIGHT, yaw: float = 0.0
 ) -> tuple[float, float, float, float, float, float, float]:
-    """A box of the class's typical size standing on the ground at ``(x, y)`` (a ground click).
+    """A box of the class's mean size standing on the ground at ``(x, y)`` (a ground click).
 
     ``ground_z`` defaults to the ground of a LiDAR mounted :data:`scenes.geometry.calib.LIDAR_HEIGHT` above
-    it; classes without a typical size get the pedestrian's.
+    it; a name of no class set gets the pedestrian's size.
     """
-    length, width, height = DEFAULT_SIZES.get(cls) or _mean_size(cls)
+    length, width, height = _mean_size(cls)
     x, y, ground_z, yaw = _finite((x, y, ground_z, yaw), "default box")
     return (x, y, ground_z + height / 2.0, length, width, height, _wrap(yaw))
 

@@ -6,10 +6,10 @@ Steps of :func:`fit_box` (all in the LiDAR frame):
    prism, its ``z`` extent ignored, grown by ``margin``) or a disk (centre + radius). The box's own
    height is ignored on purpose: a box placed by a ground click has a default height that may cut
    the object's top.
-2. Ground: ``ground_z`` when given, else the ``ground_percentile`` percentile of the point heights
-   in the region grown by ``ground_margin`` (the ground around an object is almost always seen,
-   even where the object hides the ground beneath it). Points at most ``ground_clearance`` above
-   the ground, or more than ``max_height`` above it, are left out.
+2. Ground: ``ground_z`` when given, else the local ground (:mod:`scenes.geometry.ground`) of the
+   region grown by ``ground_margin``, its own points included (the object may overhang a rough
+   region). Points at most ``ground_clearance`` above the ground, or more than ``max_height``
+   above it, are left out.
 3. Clustering (``cluster_gap``): the points are split into groups whose BEV gaps exceed the gap
    (connected components of a grid of ``cluster_gap`` cells, 8-neighbourhood); the largest group is
    kept, so a kerb or a neighbour's edge caught by a generous region does not inflate the box.
@@ -17,8 +17,8 @@ Steps of :func:`fit_box` (all in the LiDAR frame):
    One side of a minimum-area enclosing rectangle is collinear with a hull edge, so trying each
    hull edge's direction (the rotating-calipers candidates, evaluated at once with NumPy) finds it.
    Near-ties (an L-shaped scan of two sides) go to the rectangle whose edges the points hug.
-5. Class prior (:func:`complete_rectangle`; only with ``cls``, of a class with a typical size in
-   :data:`annotate.draft.DEFAULT_SIZES` and a minimum in ``FitConfig.class_min_sizes``): an object
+5. Class prior (:func:`complete_rectangle`; only with ``cls``, a class whose typical size is its
+   ``ObjectClass.mean_size`` and with a minimum in ``FitConfig.class_min_sizes``): an object
    seen from one side shows one face, a thin slab. When the rectangle is below the class's minimum
    along a side, the hidden part is completed. (a) Orientation: when the short side is under
    ``degenerate_fraction`` of the typical width, the long side is a face: the object's length (a
@@ -46,8 +46,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from annotate.draft import DEFAULT_SIZES
 from scenes.geometry.boxes import points_in_boxes, wrap_yaw
+from scenes.geometry.classes import ALL_CLASSES, object_class
+from scenes.geometry.ground import ground_around, ground_under_boxes
 
 
 class FitError(ValueError):
@@ -91,12 +92,17 @@ class DiskRegion:
 Region = BoxRegion | DiskRegion
 
 
+CLASS_MIN_SIZES: tuple[tuple[str, float, float], ...] = tuple(
+    (n, *f) for n in ALL_CLASSES if (f := object_class(n).min_footprint) is not None
+)
+"""``(class, min_length, min_width)`` of every class with a ``min_footprint`` (m)."""
+
+
 @dataclass(frozen=True)
 class FitConfig:
     """Parameters of :func:`fit_box` (see the module docstring).
 
     Attributes:
-        ground_percentile: Percentile of heights taken as the ground when no ``ground_z`` is given.
         ground_margin: BEV growth of the region (m) for the ground estimate.
         ground_clearance: Points up to this height above the ground (m) count as ground.
         max_height: Points higher than this above the ground (m) are left out (branches, signs).
@@ -106,9 +112,9 @@ class FitConfig:
         extend_to_ground: Let the box reach down to the ground.
         class_min_sizes: ``(class, min_length, min_width)``, metres: the plausible minimum BEV
             size per class, below which a fit with ``cls`` completes the hidden part (step 5);
-            the one home of these minima (typical sizes: :data:`annotate.draft.DEFAULT_SIZES`).
-            Car 3.5 x 1.5 (a small city car; synthetic cars are 3.5-5.0 x 1.6-2.0), Pedestrian
-            0.4 x 0.4 (a child's footprint), Cyclist 1.5 x 0.5 (a bicycle, a rider's shoulders).
+            default: every class's :attr:`~scenes.geometry.classes.ObjectClass.min_footprint`
+            (Car 3.5 x 1.5, Pedestrian 0.4 x 0.4, Cyclist 1.5 x 0.5; typical sizes: the
+            classes' ``mean_size``).
         degenerate_fraction: A short side under this fraction of the class's typical width means
             one face was seen; its orientation then follows the typical length and width.
         width_tolerance: That face is the object's width only if at most ``1 + width_tolerance``
@@ -117,7 +123,6 @@ class FitConfig:
             cars of the default data: median centre error 0.09 m, 0.26 m at the minimum only).
     """
 
-    ground_percentile: float = 5.0
     ground_margin: float = 2.0
     ground_clearance: float = 0.2
     max_height: float = 4.0
@@ -125,20 +130,12 @@ class FitConfig:
     min_points: int = 5
     min_size: float = 0.1
     extend_to_ground: bool = True
-    class_min_sizes: tuple[tuple[str, float, float], ...] = (
-        ("Car", 3.5, 1.5),
-        ("Pedestrian", 0.4, 0.4),
-        ("Cyclist", 1.5, 0.5),
-    )
+    class_min_sizes: tuple[tuple[str, float, float], ...] = CLASS_MIN_SIZES
     degenerate_fraction: float = 0.6
     width_tolerance: float = 0.2
     grow_to_typical: bool = True
 
     def __post_init__(self) -> None:
-        if not 0.0 <= self.ground_percentile <= 100.0:
-            raise ValueError(
-                f"FitConfig: ground_percentile {self.ground_percentile} not in [0, 100]"
-            )
         if self.cluster_gap is not None and self.cluster_gap <= 0:
             raise ValueError(f"FitConfig: cluster_gap must be positive, got {self.cluster_gap}")
         if self.min_points < 1 or self.min_size <= 0 or self.max_height <= 0:
@@ -194,8 +191,8 @@ class Rectangle:
     """A BEV rectangle: ``centre (2,)``, ``length``, ``width`` and ``yaw`` of the length axis.
 
     :func:`min_area_rectangle` returns ``length >= width``; :func:`complete_rectangle` returns the
-    object's length along ``yaw`` (longer than the width for every class of
-    :data:`annotate.draft.DEFAULT_SIZES`).
+    object's length along ``yaw`` (at least the width in the ``mean_size`` of every class with
+    a ``min_footprint``).
     """
 
     centre: np.ndarray
@@ -367,6 +364,14 @@ def complete_rectangle(
     return Rectangle(centre, new_along, new_across, _half_turn(yaw)), True
 
 
+def _local_ground(points: np.ndarray, region: Region, grow: float) -> float:
+    """The local ground (m) of ``region`` grown by ``grow``, its own points included."""
+    if isinstance(region, DiskRegion):
+        return ground_around(points, np.asarray(region.centre), region.radius + grow, min_points=1)
+    ring = region.margin + grow
+    return float(ground_under_boxes(points, region.box, ring, with_footprint=True, min_points=1)[0])
+
+
 def _in_region(xy: np.ndarray, region: Region, grow: float = 0.0) -> np.ndarray:
     if isinstance(region, DiskRegion):
         d = xy - np.asarray(region.centre)
@@ -422,7 +427,7 @@ def fit_box(
         region: Where the object is: a rough :class:`BoxRegion` or a :class:`DiskRegion`.
         ground_z: Ground height (m) when known; else estimated.
         prior_yaw: Heading to stay close to; default the rough box's yaw, or 0 for a disk.
-        cls: The object's class: with a typical size (:data:`annotate.draft.DEFAULT_SIZES`) and a
+        cls: The object's class: with a typical size (its ``ObjectClass.mean_size``) and a
             minimum (``config.class_min_sizes``), a rectangle below the minimum is completed away
             from the sensor (step 5). None (or another class): the points alone decide.
         config: Parameters (default :class:`FitConfig()`).
@@ -441,8 +446,7 @@ def fit_box(
     if not selected.any():
         raise FitError(f"no LiDAR points in {where}: move or enlarge it")
     if ground_z is None:
-        around = _in_region(xy, region, grow=cfg.ground_margin) & finite
-        ground_z = float(np.percentile(z[around], cfg.ground_percentile))
+        ground_z = _local_ground(pts, region, cfg.ground_margin)
     ground_z = float(ground_z)
     above = selected & (z > ground_z + cfg.ground_clearance) & (z <= ground_z + cfg.max_height)
     n_above = int(above.sum())
@@ -466,8 +470,9 @@ def fit_box(
     rect = _at_least(seen, cfg.min_size)
     completed = False
     minimum = cfg.class_minimum(cls) if cls is not None else None
-    if minimum is not None and cls in DEFAULT_SIZES and seen.length > 0:
-        full, completed = complete_rectangle(seen, DEFAULT_SIZES[cls][:2], minimum, cfg)
+    if minimum is not None and cls in ALL_CLASSES and seen.length > 0:
+        typical = object_class(cls).mean_size[:2]
+        full, completed = complete_rectangle(seen, typical, minimum, cfg)
         if completed:
             rect = _at_least(full, cfg.min_size)
     if prior_yaw is None:

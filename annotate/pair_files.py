@@ -13,16 +13,16 @@ from annotate.draft import Draft
 from annotate.errors import StoreError
 from annotate.manifest import ManifestRecord
 from annotate.suggest import SuggestConfig, scene_actors
+from scenes.frame import Sample
+from scenes.frame.image import ImageError
+from scenes.frame.sample_meta import SampleMeta
 from scenes.geometry.classes import VOD, ClassSet
 from scenes.language.prompts import infer_tags
-from scenes.talk2radar.imagefile import ImageError
-from scenes.talk2radar.root import Sample
-from scenes.talk2radar.sample_meta import SampleMeta
 
 
 def frame_image_size(sample: Sample) -> tuple[int, int]:
     """The image size the pair's 2D boxes are clipped to: the frame's camera image's, VoD's
-    without one (:attr:`scenes.talk2radar.root.Sample.image_size`); an unreadable image is a
+    without one (:attr:`scenes.frame.Sample.image_size`); an unreadable image is a
     :class:`~annotate.errors.StoreError` naming the file."""
     try:
         return sample.image_size

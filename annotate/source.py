@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from scenes.frame import Sample
 from scenes.geometry.calib import vod_radar_calibration
 from scenes.talk2radar.layout import (
     CALIB,
@@ -25,7 +26,7 @@ from scenes.talk2radar.layout import (
     sample_file,
     source_dir,
 )
-from scenes.talk2radar.root import Sample, Talk2RadarRoot
+from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.talk2radar.writer import SensorFiles, Talk2RadarWriter
 from scenes.utils.durable import link_or_copy
 

@@ -19,8 +19,7 @@ sidecar), :mod:`annotate.errors`. This module is the public face: :class:`Annota
 - **Atomic files.** Every file is written to a temporary file, fsynced and renamed over the target,
   its folder fsynced (:mod:`scenes.utils.durable`); a reader sees the old or the new content, never a
   part.
-- **Text.** The prompt and the annotator name are written in the text policy's form
-  (:mod:`scenes.utils.text_policy`); a refusal is a :class:`~annotate.validation.ValidationError`.
+- **Text.** Prompt and annotator name in the text policy's form (:mod:`scenes.utils.text_policy`).
 - **Idempotent saves.** A :meth:`AnnotationStore.save` with the ``request`` key of an earlier one
   (the app's: its draft's version) writes nothing and returns that one's result.
 - **Ids.** Allocated under the lock, above the highest id in any ImageSets list, sample folder,
@@ -69,9 +68,10 @@ from annotate.validation import (
     clean_prompt,
     validate,
 )
+from scenes.frame import Sample
+from scenes.frame.kitti import ObjectLabel, labels_to_boxes
 from scenes.geometry.calib import read_calib
 from scenes.geometry.classes import VOD, ClassSet
-from scenes.talk2radar.kitti import ObjectLabel, labels_to_boxes
 from scenes.talk2radar.layout import (
     CALIB,
     RADAR_FOLDERS,
@@ -81,7 +81,7 @@ from scenes.talk2radar.layout import (
     sample_file,
     split_dir,
 )
-from scenes.talk2radar.root import Sample, Talk2RadarRoot
+from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.talk2radar.writer import SampleText, Talk2RadarWriter, sample_text
 from scenes.utils.durable import replace_files
 

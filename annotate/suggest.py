@@ -23,10 +23,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from annotate.evidence import EvidenceConfig, box_evidence, estimate_velocity
+from scenes.frame import Sample
 from scenes.geometry.actors import Actor
 from scenes.geometry.classes import VOD, ClassSet
 from scenes.language.prompts import DEFAULT_REGION, Predicate, ReferableRegion, describe
-from scenes.talk2radar.root import Sample
 
 
 @dataclass(frozen=True)

@@ -3,10 +3,13 @@
 A pair made on a nuScenes sample is one Talk2Car command (docs/TALK2CAR.md, section 9): the
 sentence and the **one** sample_annotation it refers to (a command refers to exactly one object;
 :func:`referred_annotation` says why a draft does not), written in the release's format by
-:func:`scenes.nuscenes.talk2car.write_commands` into ``<pairs>/commands/{split}_commands.json``:
+:func:`scenes.nuscenes.talk2car.write_commands` into ``<pairs>/commands/{split}_commands.json``
+of its sample's split where the served root knows it (``split_of``: the command file listing the
+sample's scene; another split is refused, :meth:`Talk2CarStore.split_for`):
 its ``box_token``, the annotation's box in the CAM_FRONT camera frame
 (:func:`scenes.nuscenes.talk2car.model_box_to_camera`), its 2D box projected into the image with
-the frame's calibration (:func:`scenes.geometry.calib.boxes_2d`), a new ``command_token``, the
+the frame's calibration (:func:`scenes.geometry.calib.boxes_2d`; whole pixels, as the release
+writes it), a new ``command_token``, the
 sample's CAM_FRONT sample_data token as ``sample_token``, the scene's token, ``obj_name`` = the
 annotation's category and ``t2c_img`` ``img_{split}_{n}.jpg``. ``<pairs>`` is laid out as
 Talk2Car's data folder: ``--talk2car <pairs>/commands`` reads the commands back
@@ -36,7 +39,7 @@ from __future__ import annotations
 
 import threading
 import uuid
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from datetime import UTC, datetime
 from pathlib import Path
@@ -188,6 +191,9 @@ class Talk2CarStore:
         classes: The class set (the served model's): a command's box is an annotation whose
             category maps onto the draft box's class of this set.
         protected: Folders never written into (the served ``--talk2car`` folder).
+        split_of: The split a sample token belongs to (the served root's
+            :meth:`scenes.nuscenes.source.NuScenesSource.sample_split`; None: unknown): a command
+            is saved into its sample's split, never another (:meth:`save`).
 
     Raises:
         StoreError: a pairs folder that would write into the root or a protected folder
@@ -202,8 +208,10 @@ class Talk2CarStore:
         validation: ValidationConfig | None = None,
         classes: ClassSet = VOD,
         protected: Sequence[str | Path] = (),
+        split_of: Callable[[str], str | None] | None = None,
     ) -> None:
         check_pairs_folder(path, root.path, protected)
+        self.split_of = split_of
         self.path = Path(path)
         self.classes = classes
         self.commands_dir = self.path / COMMANDS_FOLDER
@@ -291,25 +299,44 @@ class Talk2CarStore:
         source: SourceFrame | None = None,
         *,
         annotator: str = "anonymous",
-        split: str = "train",
+        split: str | None = None,
         request: str | None = None,
     ) -> SaveResult:
-        """Append the draft as a new command of ``split`` (``source.sample_id``: the sample
-        token; ``annotator`` is not kept, the format has no field for it).
+        """Append the draft as a new command of its sample's split (``source.sample_id``: the
+        sample token; ``annotator`` is not kept, the format has no field for it).
+
+        ``split``: the split asked for; None: the sample's (:attr:`split_of`), else ``train``.
+        A sample whose split is known goes there only: asking for another is refused.
 
         Raises:
             annotate.validation.ValidationError: the draft is invalid, or does not refer to
                 exactly one labelled annotation of the sample.
-            SplitError: ``split`` is not offered.
+            SplitError: ``split`` is not offered, or is not the sample's split.
             StoreError: no source frame, a pair being edited, or a file that cannot be read or
                 written (one line naming it).
         """
+        split = self.split_for(source.sample_id if source is not None else None, split)
         if request is None:
             return self._save(draft, source, split)
         result, repeated = self.requests.run(
             request, (draft, split), lambda: self._save(draft, source, split)
         )
         return replace(result, repeated=True) if repeated else result
+
+    def split_for(self, sample_id: str | None, asked: str | None = None) -> str:
+        """The split a command on ``sample_id`` is saved into: its sample's split where
+        :attr:`split_of` knows it, else ``asked`` (else ``train``).
+
+        Raises:
+            SplitError: ``asked`` is not the sample's known split.
+        """
+        known = self.split_of(sample_id) if self.split_of is not None and sample_id else None
+        if known is not None and asked is not None and asked != known:
+            raise SplitError(
+                f"sample {sample_id} is in split {known!r} (its scene is listed in "
+                f"{known}_commands.json): a command goes into its sample's split, not {asked!r}"
+            )
+        return known or asked or "train"
 
     def _save(self, draft: Draft, source: SourceFrame | None, split: str) -> SaveResult:
         if draft.sample_id is not None or source is None or source.sample_id is None:

@@ -17,7 +17,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from annotate.errors import StoreError
-from scenes.talk2radar.kitti import ObjectLabel, read_label_file
+from scenes.frame.kitti import ObjectLabel, read_label_file
 from scenes.talk2radar.layout import (
     LABEL,
     PROMPT,

@@ -11,13 +11,15 @@ Styles: predictions are drawn 3 px wide in their class colour with a label above
 labelled objects); the ground truth (:class:`GroundTruthView`) is every labelled object of the
 frame (:class:`app.ground_truth.FrameObjects`) drawn thinner in its class colour with a
 ``"#2 Car"`` label hanging below the top face, so that a prediction lying on it stays readable,
-and the referents of the frame's prompt drawn over them thick in :data:`app.colors.GT_COLOR`.
+except the referents of the frame's prompt (or of the command in play, :mod:`app.frame_commands`),
+drawn apart: thick in :data:`app.colors.GT_COLOR`, labelled ``"#3 Car (referent)"`` above. The
+objects that are not referents are shown or hidden as one group.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import viser
@@ -129,8 +131,8 @@ PRED_STYLE = BoxStyle()
 """Predicted boxes."""
 
 GT_STYLE = BoxStyle(thickness=4.0, color=GT_COLOR, max_labels=0)
-"""The referents of the frame's prompt among the ground truth: drawn over their object's box,
-thick and in :data:`app.colors.GT_COLOR` (their label is the object's)."""
+"""The referents of the frame's prompt (or of the command in play) among the ground truth: thick
+and in :data:`app.colors.GT_COLOR`, their label (``"#3 Car (referent)"``) above the box."""
 
 OBJECT_STYLE = BoxStyle(thickness=1.5, label_anchor="top-center", label_lift=-0.1)
 """Every labelled object of the frame (ground truth): thin, in its class colour, its label
@@ -239,9 +241,12 @@ class BoxesView:
 
 
 class GroundTruthView:
-    """The *Ground truth* layer: every labelled object of the frame (``<prefix>/edges`` and
-    ``<prefix>/labels/<i>``: class colours, numbered labels) and its prompt's referents
-    emphasised over them (``<prefix>/referents/edges``: thick, :data:`app.colors.GT_COLOR`). Not
+    """The *Ground truth* layer: every labelled object (``<prefix>/edges``: thin, class colours),
+    the frame's referents over theirs (``<prefix>/referents/edges``: thick,
+    :data:`app.colors.GT_COLOR`) and every object's label (``<prefix>/labels/<i>``, numbered from the nearest,
+    ``"#3 Car (referent)"`` for a referent, at most :data:`OBJECT_STYLE`'s ``max_labels`` of the
+    others). :attr:`visible` shows or hides it all (*Ground truth*), :attr:`others_visible` the
+    objects that are not referents, edges and labels, as one group (*Other annotations*). Not
     thread-safe by itself (the session serialises calls).
 
     Args:
@@ -250,21 +255,64 @@ class GroundTruthView:
     """
 
     def __init__(self, scene: viser.SceneApi, prefix: str = "/gt") -> None:
-        self.objects = BoxesView(scene, prefix, OBJECT_STYLE)
+        self.scene = scene
+        self.prefix = prefix
+        self.objects = BoxesView(scene, prefix, replace(OBJECT_STYLE, max_labels=0))
+        """The thin edges of every object (a referent's lie under its thick ones: hiding these
+        hides the others and leaves the referents as they look)."""
         self.referents = BoxesView(scene, f"{prefix}/referents", GT_STYLE)
+        self._labels: list[tuple[viser.LabelHandle, bool]] = []
+        """Each label drawn and whether its object is a referent."""
+        self._visible = True
+        self._others = True
 
     def show(self, objects: FrameObjects) -> None:
         """Draw the frame's ``objects`` (replacing the previous frame's)."""
-        self.objects.show(objects.boxes, objects.classes, objects.labels())
         mask = np.asarray(objects.referent, dtype=bool)
+        self.objects.show(objects.boxes, objects.classes, [""] * len(objects))
         classes = [c for c, ref in zip(objects.classes, mask, strict=True) if ref]
         self.referents.show(objects.boxes[mask], classes, [""] * len(classes))
+        for label, _ in self._labels:
+            label.remove()
+        self._labels = []
+        texts = objects.labels()
+        for i, (box, text, referent) in enumerate(zip(objects.boxes, texts, mask, strict=True)):
+            if not referent and i >= OBJECT_STYLE.max_labels:
+                continue
+            style = GT_STYLE if referent else OBJECT_STYLE
+            top = (box[0], box[1], box[2] + box[5] / 2.0 + style.label_lift)
+            label = self.scene.add_label(
+                f"{self.prefix}/labels/{i}",
+                text,
+                position=top,
+                anchor=style.label_anchor,  # type: ignore[arg-type]
+                font_screen_scale=0.9 if referent else 0.8,
+                visible=self._visible and (referent or self._others),
+            )
+            self._labels.append((label, bool(referent)))
+        self._apply()
+
+    def _apply(self) -> None:
+        self.referents.visible = self._visible
+        self.objects.visible = self._visible and self._others
+        for label, referent in self._labels:
+            label.visible = self._visible and (referent or self._others)
 
     @property
     def visible(self) -> bool:
-        return self.objects.visible
+        return self._visible
 
     @visible.setter
     def visible(self, value: bool) -> None:
-        self.objects.visible = value
-        self.referents.visible = value
+        self._visible = bool(value)
+        self._apply()
+
+    @property
+    def others_visible(self) -> bool:
+        """Whether the objects that are not referents are shown (when :attr:`visible`)."""
+        return self._others
+
+    @others_visible.setter
+    def others_visible(self, value: bool) -> None:
+        self._others = bool(value)
+        self._apply()

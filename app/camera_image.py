@@ -5,7 +5,7 @@ Conventions: boxes are ``(K, 7)`` ``x, y, z, l, w, h, yaw`` and points ``(N, >=3
 frame; :mod:`scenes.geometry.projection` maps them into pixels (continuous coordinates: the image covers
 ``[0, W] x [0, H]``; what lies behind the camera is cut, segments are clipped at the border).
 
-Speed: a camera image is decoded once per frame (:attr:`scenes.talk2radar.root.Sample.image`) and scaled
+Speed: a camera image is decoded once per frame (:attr:`scenes.frame.Sample.image`) and scaled
 down once to :data:`DISPLAY_WIDTH` (VoD's 1936 px halve exactly); its calibration is scaled with
 it (:func:`display_image`), so projections land on the small image directly. The points overlay
 (:func:`paint_points`) is painted into a cached background; each redraw copies that background

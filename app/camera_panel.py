@@ -4,10 +4,13 @@ A floating window of its own (viser's ``gui.add_panel``, placed at the bottom le
 view; the person can move, dock or minimise it), so the image stays in sight whichever tab of
 the control panel is open. It shows:
 
-- the frame's image (``image_2/<id>.jpg``, :attr:`scenes.talk2radar.root.Sample.image`) scaled to
+- the frame's image (``image_2/<id>.jpg``, :attr:`scenes.frame.Sample.image`) scaled to
   :data:`app.camera_image.DISPLAY_WIDTH` pixels;
 - box layers drawn as 3D wireframes (:class:`app.camera_image.BoxLayer`), in the order of
-  :data:`LAYER_ORDER`: the ground truth (thin, green, unlabelled), the current answer (class
+  :data:`LAYER_ORDER`: on a frame with commands the other annotations (``others``: thin, class
+  colours; the Query tab's *Other annotations* hides them) and the referent of the command in
+  play (``gt``: green, labelled ``referent``), elsewhere the sample's own boxes (``gt``: thin,
+  green, unlabelled), then the current answer (class
   colours, score labels) and the annotation draft on top (near-white, the selected box gold);
   extensions set their own layers by name (:meth:`CameraPanel.set_layer`);
 - optionally (*LiDAR on image*, *Radar on image*) the LiDAR points coloured by depth (red near,
@@ -46,14 +49,15 @@ from app.camera_image import (
 )
 from app.colors import GT_COLOR, class_color
 from app.engine import Predictions
+from app.ground_truth import FrameObjects
 from app.scene_view import CameraPose, camera_view_pose
 from app.text import md_text
-from scenes.talk2radar.imagefile import check_principal_point
-from scenes.talk2radar.root import Sample
+from scenes.frame import Sample
+from scenes.frame.image import check_principal_point
 
 log = logging.getLogger(__name__)
 
-LAYER_ORDER = ("gt", "pred", "draft")
+LAYER_ORDER = ("others", "gt", "pred", "draft")
 """Layers drawn bottom to top; other names are drawn after these, in the order they were set."""
 
 PANEL_WIDTH = 560
@@ -73,6 +77,20 @@ def gt_layer(sample: Sample) -> BoxLayer:
     """The sample's ground truth: thin green wireframes, no labels."""
     k = len(sample.boxes)
     return BoxLayer(sample.boxes, (GT_COLOR,) * k, ("",) * k, width=2)
+
+
+def object_layers(objects: FrameObjects) -> tuple[BoxLayer, BoxLayer]:
+    """``(gt, others)`` of a frame with commands: its referents green, 3 px, labelled
+    ``"referent"``; the other labelled objects thin in their class colours, unlabelled."""
+    mask = np.asarray(objects.referent, dtype=bool)
+    k = int(mask.sum())
+    classes = [c for c, ref in zip(objects.classes, mask, strict=True) if not ref]
+    return (
+        BoxLayer(objects.boxes[mask], (GT_COLOR,) * k, ("referent",) * k, width=3),
+        BoxLayer(
+            objects.boxes[~mask], tuple(class_color(c) for c in classes), ("",) * len(classes)
+        ),
+    )
 
 
 def prediction_layer(pred: Predictions) -> BoxLayer:
@@ -138,19 +156,23 @@ class CameraPanel:
 
     # ------------------------------------------------------------------ state
 
-    def show_frame(self, sample: Sample) -> None:
+    def show_frame(self, sample: Sample, objects: FrameObjects | None = None) -> None:
         """Show ``sample``'s image (decoded on first use, scaled once) with its ground truth
-        (layer ``gt``) and no answer (layer ``pred`` removed); the other layers are kept (their
-        owners replace them)."""
+        (layer ``gt``; with ``objects``, those of a frame with commands: :func:`object_layers`)
+        and no answer (layer ``pred`` removed); the other layers are kept (their owners replace
+        them)."""
         self.sample = sample
         self._layers.pop("pred", None)
+        self._layers.pop("others", None)
         self._layers["gt"] = gt_layer(sample)
+        if objects is not None:
+            self._layers["gt"], self._layers["others"] = object_layers(objects)
         self.camera, self.error = None, None
         self._background, self._background_key = None, None
         warning = None
         try:
             image = sample.image
-        except ValueError as exc:  # scenes.talk2radar.imagefile.ImageError names the file
+        except ValueError as exc:  # scenes.frame.image.ImageError names the file
             self.error = str(exc)
             log.warning("camera image of %s: %s", sample.sample_id, exc)
         else:
@@ -175,6 +197,18 @@ class CameraPanel:
             )
         self.image.visible = self.camera is not None
         self.redraw()
+
+    def show_objects(self, objects: FrameObjects) -> None:
+        """Draw a frame with commands' referent and other annotations (:func:`object_layers`)."""
+        gt, others = object_layers(objects)
+        self.set_layer("others", others)
+        self.set_layer("gt", gt)
+
+    def show_gt(self, ground_truth: bool, others: bool) -> None:
+        """The Query tab's *Ground truth* (every layer of labelled boxes) and *Other
+        annotations* (the layer ``others``)."""
+        self.set_layer_visible("gt", ground_truth)
+        self.set_layer_visible("others", ground_truth and others)
 
     def show_predictions(self, pred: Predictions) -> None:
         """Draw an answer's boxes (layer ``pred``, :func:`prediction_layer`)."""

@@ -6,8 +6,11 @@
 - Radar by compensated radial velocity ``v_r_compensated`` (m/s, LiDAR frame): a diverging map
   centred on zero. Negative values (the range shrinks: the object **approaches**) are blue, positive
   values (it **recedes**) red, static returns grey. Values beyond ``+-v_max`` saturate.
-- Classes: one colour per metric class, shared by predicted boxes and the heatmap; ground-truth
-  boxes use :data:`GT_COLOR` whatever their class.
+- Classes: one colour per class, shared by predicted boxes, the labelled objects and the heatmap
+  (:attr:`scenes.geometry.classes.ObjectClass.color`, chosen so that any two of a class set, and
+  each and the referents' :data:`GT_COLOR`, are told apart with normal vision, deuteranopia and
+  protanopia: :mod:`app.color_vision`, ``tests/test_class_colors.py``); the referents of the
+  frame's prompt or command use :data:`GT_COLOR` whatever their class.
 - Depth (the camera panel's LiDAR overlay): warm near, cold far (:func:`depth_colors`), so that
   the depth ordering reads at a glance on a camera image of any colour.
 
@@ -55,7 +58,8 @@ FALLBACK_COLOR: RGB = (200, 200, 200)
 """Colour of a class name that is not in :data:`CLASS_COLORS`."""
 
 GT_COLOR: RGB = (110, 255, 110)
-"""Ground-truth boxes, whatever their class."""
+"""The referents among the ground truth (of the frame's prompt, or the command in play), whatever
+their class."""
 
 DEPTH_STOPS: tuple[RGB, ...] = (
     (255, 40, 40),

@@ -29,8 +29,8 @@ from typing import Any, Generic, Literal, TypeVar
 import numpy as np
 
 from model import GroundingModel, ModelSettings, PredictionsView, model_classes
+from scenes.frame import Sample
 from scenes.geometry.classes import ClassSet
-from scenes.talk2radar.root import Sample
 from scenes.utils.lru import LRUCache
 
 log = logging.getLogger(__name__)

@@ -26,8 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from scenes.frame import Sample
 from scenes.geometry.boxes import iou3d
-from scenes.talk2radar.root import Sample
 
 log = logging.getLogger(__name__)
 

@@ -15,8 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from model import LabelledBoxes
+from scenes.frame import Sample
 from scenes.geometry.classes import VOD, ClassSet
-from scenes.talk2radar.root import Sample, Talk2RadarRoot
+from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.talk2radar.scene_labels import SceneLabels
 
 
@@ -55,7 +56,7 @@ class LabelledFrames:
         known).
 
         Raises:
-            scenes.talk2radar.layout.RootError, scenes.talk2radar.kitti.LabelError: a missing or malformed label file.
+            scenes.frame.RootError, scenes.frame.kitti.LabelError: a missing or malformed label file.
         """
         if self.labels is not None:
             if not self.labels.has(sample.sample_id):

@@ -6,7 +6,7 @@ frees a cycle only in a collection of the generation it has reached, and a sessi
 enough to reach the oldest one, whose full collections are rare in a process holding a model
 (hundreds of thousands of long-lived objects: a full collection waits for a quarter as many new
 survivors). Meanwhile each browser that left kept its point buffers, camera images and viser's
-per-client state (``python -m bench.soak --baseline``: the server before grew from 635 MB to
+per-client state (``python -m bench.perf.soak --baseline``: the server before grew from 635 MB to
 1,752 MB over 300 visits; docs/PERFORMANCE.md, "Memory per connection"). Breaking every cycle by
 hand would be fragile (any new callback brings it back), so the app collects.
 

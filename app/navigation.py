@@ -25,10 +25,12 @@ from typing import Protocol
 
 import viser
 
+from app.frame_commands import FrameCommand, command_objects
 from app.ground_truth import NO_OBJECTS, FrameObjects, frame_objects
 from app.scene_view import estimate_ground_z
 from app.text import md_text
-from scenes.talk2radar.root import RootError, Sample, Talk2RadarRoot
+from scenes.frame import RootError, Sample
+from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.utils.lru import LRUCache
 
 log = logging.getLogger(__name__)
@@ -44,7 +46,11 @@ class Frame:
         ground_z: Ground height estimate (m, LiDAR frame).
         notes: Markdown lines under the frame summary (the root kind's
             :meth:`app.served.ServedRoot.frame_notes`: a nuScenes sample's scene and commands).
-        objects: Its labelled objects (the *Ground truth* layer, the answer's overlaps).
+        objects: Its labelled objects (the *Ground truth* layer, the answer's overlaps); on a
+            frame with commands, the first command's referent is the referent
+            (:func:`app.frame_commands.command_objects`).
+        commands: Its commands (:meth:`app.served.ServedRoot.frame_commands`; None: the root
+            kind has none, and the summary shows the sample's prompt instead).
     """
 
     index: int
@@ -52,6 +58,7 @@ class Frame:
     ground_z: float
     notes: str = ""
     objects: FrameObjects = NO_OBJECTS
+    commands: tuple[FrameCommand, ...] | None = None
 
     @property
     def sample_id(self) -> str:
@@ -76,6 +83,7 @@ class FrameStore:
         notes: The lines shown under a frame's summary (None: none).
         objects: A frame's labelled objects (:func:`app.ground_truth.frame_objects`; the app
             gives it the root's full labels).
+        commands: A frame's commands (None: the root kind has none).
 
     Raises:
         RootError: the split is missing or lists no frame.
@@ -88,10 +96,12 @@ class FrameStore:
         cache_size: int = 4,
         notes: Callable[[Sample], str] | None = None,
         objects: Callable[[Sample], FrameObjects] = frame_objects,
+        commands: Callable[[Sample], tuple[FrameCommand, ...] | None] | None = None,
     ) -> None:
         self.root = root
         self._notes = notes
         self._objects = objects
+        self._commands = commands
         self.split = split
         self.ids: tuple[str, ...] = tuple(root.ids(split))
         if not self.ids:
@@ -126,7 +136,11 @@ class FrameStore:
         sample = self.root.load(self.ids[index])
         notes = self._notes(sample) if self._notes is not None else ""
         ground_z = estimate_ground_z(sample.lidar)
-        frame = Frame(index, sample, ground_z, notes, self._objects(sample))
+        objects = self._objects(sample)
+        commands = self._commands(sample) if self._commands is not None else None
+        if commands is not None:  # the first command's referent, not every annotation
+            objects = command_objects(objects, commands[0] if commands else None)
+        frame = Frame(index, sample, ground_z, notes, objects, commands)
         self._cache.put(index, frame)
         return frame
 
@@ -266,10 +280,12 @@ class Navigator:
 
 
 def frame_markdown(frame: Frame, count: int) -> str:
-    """The frame summary shown under the navigation controls (the sample's text escaped)."""
+    """The frame summary shown under the navigation controls (the sample's text escaped); a
+    frame of a root with commands lists them in its notes instead of a prompt line."""
     s = frame.sample
     gt = md_text(", ".join(s.classes)) if s.classes else "none"
     prompt = md_text(s.prompt) if s.prompt else "(this root has no prompts)"
+    said = "" if frame.commands is not None else f"  \n*Sample prompt:* {prompt}"
     sid = (
         f"`{s.sample_id}`"
         if s.sample_id.isascii() and s.sample_id.isdigit()
@@ -277,8 +293,9 @@ def frame_markdown(frame: Frame, count: int) -> str:
     )
     return (
         f"**Frame {frame.index + 1} / {count}** · sample {sid}  \n"
-        f"{len(s.lidar):,} LiDAR · {len(s.radar):,} radar points · GT: {gt}  \n"
-        f"*Sample prompt:* {prompt}" + (f"  \n{frame.notes}" if frame.notes else "")
+        f"{len(s.lidar):,} LiDAR · {len(s.radar):,} radar points · GT: {gt}"
+        + said
+        + (f"  \n{frame.notes}" if frame.notes else "")
     )
 
 

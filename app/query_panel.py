@@ -43,8 +43,8 @@ from app.ground_truth import FrameObjects, Overlap
 from app.heatmap_view import HeatmapView
 from app.navigation import Frame
 from app.text import md_text
+from scenes.frame import Sample
 from scenes.geometry.classes import VOD, ClassSet
-from scenes.talk2radar.root import Sample
 from scenes.utils.text_policy import PROMPT, TextPolicyError, clean_text, collapse_spaces
 
 CANDIDATE_SOURCES = {"Detector proposals": "detector", "Labelled boxes": "labels"}
@@ -302,6 +302,7 @@ class QueryPanel:
     show_heatmap: viser.GuiCheckboxHandle
     opacity: viser.GuiSliderHandle
     show_gt: viser.GuiCheckboxHandle
+    show_others: viser.GuiCheckboxHandle
     results: viser.GuiMarkdownHandle
     history: viser.GuiDropdownHandle
     rerun: viser.GuiButtonHandle
@@ -316,15 +317,62 @@ class QueryPanel:
             return False
         return CANDIDATE_SOURCES.get(self.candidates.value, "detector") == "labels"
 
+    def wire_prompts(
+        self,
+        run: Callable[..., object],
+        write: Callable[[str], None],
+        sample: Callable[[], Sample | None],
+        rerun_last: Callable[[], None],
+    ) -> None:
+        """Enter in the prompt box, *Run* and *Re-run* call ``run(prompt, write=...)``
+        (:meth:`app.session.ClientSession.run_prompt`); *Use the frame's prompt* and *History*
+        ``write(prompt)``; a changed *Sensors*, *Score threshold* or *Candidates*
+        ``rerun_last()``; ``sample()`` is the sample on screen."""
+
+        @self.prompt.on_update
+        def _(event: viser.GuiEvent) -> None:
+            if event.client is not None and entered(self.prompt.value):
+                # The box is rewritten without the line break (fires this without client).
+                run(self.prompt.value, write=True)
+
+        @self.run.on_click
+        def _(_: viser.GuiEvent) -> None:
+            run(self.prompt.value)
+
+        @self.use_frame_prompt.on_click
+        def _(_: viser.GuiEvent) -> None:
+            shown = sample()
+            if shown is not None and shown.prompt:
+                write(shown.prompt)
+
+        @self.rerun.on_click
+        def _(_: viser.GuiEvent) -> None:
+            if self.history.value != NO_HISTORY:
+                run(self.history.value, write=True)
+
+        @self.history.on_update
+        def _(event: viser.GuiEvent) -> None:
+            if event.client is not None and self.history.value != NO_HISTORY:
+                write(self.history.value)
+
+        def changed(event: viser.GuiEvent) -> None:
+            if event.client is not None:
+                rerun_last()
+
+        for handle in (self.modality, self.threshold, self.candidates):
+            if handle is not None:
+                handle.on_update(changed)
+
     def wire_layers(
         self,
         lock: AbstractContextManager,
         heatmap: HeatmapView,
         gt: GroundTruthView,
-        show_gt_in_camera: Callable[[bool], None],
+        show_gt_in_camera: Callable[[bool, bool], None],
     ) -> None:
-        """*Heatmap*, *Heatmap opacity* and *Ground truth* show or hide the layers (drawing
-        holding ``lock``, the browser's lock); ``show_gt_in_camera(shown)`` for the camera panel."""
+        """*Heatmap*, *Heatmap opacity*, *Ground truth* and *Other annotations* show or hide the
+        layers (drawing holding ``lock``, the browser's lock); ``show_gt_in_camera(ground_truth,
+        others)`` for the camera panel."""
 
         @self.opacity.on_update
         def _(_: viser.GuiEvent) -> None:
@@ -336,11 +384,14 @@ class QueryPanel:
             with lock:
                 heatmap.visible = self.show_heatmap.value
 
-        @self.show_gt.on_update
-        def _(_: viser.GuiEvent) -> None:
+        def ground_truth(_: viser.GuiEvent) -> None:
             with lock:
                 gt.visible = self.show_gt.value
-            show_gt_in_camera(self.show_gt.value)
+                gt.others_visible = self.show_others.value
+            show_gt_in_camera(self.show_gt.value, self.show_others.value)
+
+        self.show_gt.on_update(ground_truth)
+        self.show_others.on_update(ground_truth)
 
 
 def build_query_panel(
@@ -391,7 +442,13 @@ def build_query_panel(
         "Ground truth",
         True,
         hint="Every labelled object of the frame in its class colour, numbered from the nearest; "
-        "the referents of the frame's own prompt thick and green",
+        "the referents of the frame's own prompt (or of the command in play) thick and green",
+    )
+    show_others = gui.add_checkbox(
+        "Other annotations",
+        True,
+        hint="The labelled objects that are not the referents, as one group: in the 3D view, "
+        "the camera image and the Annotate tab's ready-made boxes",
     )
     results = gui.add_markdown("*Type a prompt and press Enter.*")
     history = gui.add_dropdown("History", (NO_HISTORY,), initial_value=NO_HISTORY)
@@ -405,6 +462,7 @@ def build_query_panel(
         show_heatmap=show_heatmap,
         opacity=opacity,
         show_gt=show_gt,
+        show_others=show_others,
         results=results,
         history=history,
         rerun=rerun,

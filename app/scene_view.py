@@ -42,6 +42,7 @@ from app.point_sizes import Eye, LegibleSizes
 from scenes.geometry.boxes import box_corners
 from scenes.geometry.calib import LIDAR_HEIGHT, Calibration
 from scenes.geometry.classes import VOD
+from scenes.geometry.ground import sensor_ground_height
 
 log = logging.getLogger(__name__)
 
@@ -63,24 +64,17 @@ EGO_CENTRE_X = -0.8
 
 
 def estimate_ground_z(lidar: np.ndarray, default: float = -LIDAR_HEIGHT) -> float:
-    """Height of the ground plane (m, LiDAR frame) under the ego vehicle.
-
-    The 10th percentile of the ``z`` of LiDAR points between 3 and 30 m horizontal range (in a
-    driving scene most of them are road), clipped to ``[-4, 0.5]``; ``default`` (the synthetic
-    sensor height) when fewer than 20 such points exist.
+    """Height of the ground (m, LiDAR frame) under the ego vehicle: the ground plane's height
+    under the sensor (:func:`scenes.geometry.ground.sensor_ground_height`); ``default`` (the
+    synthetic sensor's ground) when the cloud tells no plane.
 
     Args:
         lidar: ``(N, >=3)`` points, LiDAR frame.
     """
     pts = np.asarray(lidar, dtype=np.float64)
-    if pts.ndim != 2 or len(pts) == 0:
+    if pts.ndim != 2 or pts.shape[1] < 3:
         return float(default)
-    rng = np.hypot(pts[:, 0], pts[:, 1])
-    near = pts[(rng > 3.0) & (rng < 30.0), 2]
-    near = near[np.isfinite(near)]
-    if len(near) < 20:
-        return float(default)
-    return float(np.clip(np.percentile(near, 10), -4.0, 0.5))
+    return sensor_ground_height(pts, -float(default))
 
 
 def ring_segments(

@@ -42,8 +42,9 @@ if TYPE_CHECKING:
     import argparse
 
     from app.server import Talk2PCApp
+    from scenes.frame import Sample
     from scenes.synth.generate import SynthSettings
-    from scenes.talk2radar.root import Sample, Talk2RadarRoot
+    from scenes.talk2radar.root import Talk2RadarRoot
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = REPO / "docs" / "images"

@@ -16,7 +16,10 @@ in branches elsewhere:
   the store that writes them (``open_store``: an :class:`annotate.AnnotationStore` of Talk2Radar
   pairs, or an :class:`annotate.talk2car.Talk2CarStore` of Talk2Car commands), the frame a new
   pair is made on (``source_frame``), what a pair must be beyond :func:`annotate.validate`
-  (``draft_issues``: a Talk2Car command refers to exactly one labelled annotation);
+  (``draft_issues``: a Talk2Car command refers to exactly one labelled annotation), the split a
+  pair must go into (``pair_split``: a Talk2Car command, its sample's);
+- ``frame_commands(sample)``: the commands listed under the frame summary, a click on one runs
+  it (:mod:`app.frame_commands`; None on a Talk2Radar root);
 - ``drives(ids)``: the drives the Annotate tab's *Sequence* folder plays.
 """
 
@@ -28,13 +31,14 @@ from typing import Any, Protocol
 
 from annotate import AnnotationStore, Draft, SourceFrame
 from annotate.validation import Issue, ValidationConfig
+from app.frame_commands import FrameCommand
 from app.labelled import LabelledFrames
 from app.text import md_text
+from scenes.frame import RootError, Sample
+from scenes.frame.kitti import outside_class_counts, outside_class_phrase
 from scenes.geometry.classes import VOD, ClassSet
 from scenes.talk2radar.drives import Drives, find_drives
-from scenes.talk2radar.kitti import outside_class_counts, outside_class_phrase
-from scenes.talk2radar.layout import RootError
-from scenes.talk2radar.root import Sample, Talk2RadarRoot
+from scenes.talk2radar.root import Talk2RadarRoot
 
 __all__ = [
     "PAIRS_SUFFIX",
@@ -84,6 +88,13 @@ class ServedRoot(Protocol):
 
     def draft_issues(self, draft: Draft, sample: Sample) -> tuple[Issue, ...]:
         """Errors that block saving ``draft`` on ``sample`` beyond :func:`annotate.validate`."""
+
+    def pair_split(self, sample: Sample) -> str | None:
+        """The split a new pair on ``sample`` must go into (None: the person chooses)."""
+
+    def frame_commands(self, sample: Sample) -> tuple[FrameCommand, ...] | None:
+        """The commands of ``sample`` the app lists and runs with a click (None: the root kind
+        has no commands, :mod:`app.frame_commands`)."""
 
     def frame_notes(self, sample: Sample) -> str:
         """Markdown lines shown under the frame summary ("" for none)."""
@@ -157,6 +168,13 @@ class Talk2RadarServed:
     def draft_issues(self, draft: Draft, sample: Sample) -> tuple[Issue, ...]:
         return ()
 
+    def pair_split(self, sample: Sample) -> str | None:
+        return None
+
+    def frame_commands(self, sample: Sample) -> tuple[FrameCommand, ...] | None:
+        """None: a Talk2Radar prompt is the frame's prompt, not a list of commands."""
+        return None
+
     def frame_notes(self, sample: Sample) -> str:
         """The line of a sample whose referents (its ``label_2`` on a root with prompts) fall
         outside the served model's class set: how many, of which classes, and that the model
@@ -186,18 +204,20 @@ def serve_root(
     classes: ClassSet = VOD,
 ) -> ServedRoot:
     """The :class:`ServedRoot` of ``root``: a :class:`Talk2RadarRoot`, an
-    :class:`app.served_nuscenes.NuScenesSource`, or a path to either (a folder holding a
+    :class:`scenes.nuscenes.source.NuScenesSource`, or a path to either (a folder holding a
     ``v1.0-*`` table folder is a nuScenes root, read with its ``talk2car`` commands).
 
     Raises:
         RootError: not a root; ``talk2car`` or a split problem on the wrong kind of root.
         scenes.nuscenes.tables.NuScenesError: a malformed nuScenes root or command file.
     """
-    from app.served_nuscenes import NuScenesServed, NuScenesSource
-    from scenes.datasets.nuscenes_frames import is_nuscenes_root
+    from app.served_nuscenes import NuScenesServed
+    from scenes.datasets.source import NuScenesSource, open_source, root_family
 
-    if not isinstance(root, Talk2RadarRoot | NuScenesSource) and is_nuscenes_root(root):
-        root = NuScenesSource(root, talk2car, classes)
+    if isinstance(root, str | Path):  # the family decided once (RootError: --talk2car misplaced)
+        root = open_source(root, talk2car, classes)
+    elif isinstance(root, Talk2RadarRoot):
+        root_family(root.path, talk2car)
     if isinstance(root, NuScenesSource):
         if root.classes != classes:  # its boxes: the served model's classes
             root = NuScenesSource(root.path, root.talk2car, classes)
@@ -207,11 +227,4 @@ def serve_root(
                 "(its own annotations are its labelled boxes)"
             )
         return NuScenesServed(root, pairs)
-    if talk2car is not None:
-        raise RootError(
-            f"--talk2car {talk2car}: Talk2Car commands go with a nuScenes root (a folder holding "
-            f"v1.0-*/), not {root if isinstance(root, str | Path) else root.path}"
-        )
-    if not isinstance(root, Talk2RadarRoot):
-        root = Talk2RadarRoot(root, classes=classes)
     return Talk2RadarServed(root, pairs, scene_labels, classes)

@@ -68,7 +68,7 @@ from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.utils.cli import option
 
 if TYPE_CHECKING:
-    from app.served_nuscenes import NuScenesSource
+    from scenes.datasets.source import NuScenesSource
 
 log = logging.getLogger(__name__)
 
@@ -202,7 +202,7 @@ class Talk2PCApp:
 
     Args:
         root: A Talk2Radar root, a View-of-Delft release, a nuScenes root
-            (:class:`app.served_nuscenes.NuScenesSource`, with ``config.talk2car``'s commands), or
+            (:class:`scenes.nuscenes.source.NuScenesSource`, with ``config.talk2car``'s commands), or
             the path of one (the kind is chosen once: :func:`app.served.serve_root`).
         model: The grounding model, in eval mode (``model.tpcnet.TPCNet``).
         config: Server and display settings.
@@ -234,6 +234,7 @@ class Talk2PCApp:
                 cfg.frame_cache_size,
                 self.served.frame_notes,
                 objects=partial(frame_objects, labelled=self.served.labelled.source()),
+                commands=self.served.frame_commands,
             ),
             after_move=self._prefetch,
         )

@@ -44,7 +44,6 @@ import threading
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future
-from dataclasses import dataclass
 
 import viser
 
@@ -52,6 +51,8 @@ from app.boxes_view import PRED_STYLE, BoxesView, GroundTruthView
 from app.camera_image import BoxLayer
 from app.camera_panel import CameraPanel
 from app.engine import Answer, GroundingEngine, Predictions
+from app.frame_commands import CommandList, command_in_play, command_objects
+from app.ground_truth import NO_OBJECTS, FrameObjects
 from app.heatmap_view import HeatmapView
 from app.messages import error_body, notify
 from app.navigation import (
@@ -63,44 +64,25 @@ from app.navigation import (
     build_navigation_panel,
 )
 from app.query_panel import (
-    NO_HISTORY,
     PromptField,
     PromptHistory,
     QueryPanel,
     QueryRequest,
     answer_labels,
     build_query_panel,
-    entered,
     one_line,
     prompt_to_run,
     results_markdown,
 )
 from app.scene_view import SceneView, ViewPanel, build_view_panel
-from app.session_options import SessionOptions
+from app.session_options import ExtraTab, SessionOptions
 from app.text import md_text
-from scenes.talk2radar.root import Sample
+from scenes.frame import Sample
 from scenes.utils.text_policy import collapse_spaces
 
 log = logging.getLogger(__name__)
 
 Listener = Callable[["ClientSession"], None]
-
-
-@dataclass(frozen=True)
-class ExtraTab:
-    """A tab added after Query and View (see the module docstring).
-
-    Attributes:
-        label: The tab's title.
-        icon: Its icon (a ``viser.Icon``).
-        build: Fills the tab of one browser: ``build(session)``.
-        name: What the tab is called in the message shown when ``build`` fails.
-    """
-
-    label: str
-    icon: str
-    build: Callable[[ClientSession], object]
-    name: str = "panel"
 
 
 class ClientSession:
@@ -134,6 +116,11 @@ class ClientSession:
         self.gt_view = GroundTruthView(client.scene, "/gt")
         self.heatmap_view = HeatmapView(client.scene, "/heatmap", engine.classes.names)
         self.nav: NavigationPanel | None = None
+        self.commands: CommandList | None = None
+        self.command: int | None = None
+        """The frame's command in play (:mod:`app.frame_commands`; None: none)."""
+        self.objects: FrameObjects = NO_OBJECTS
+        """The frame's labelled objects as drawn here (the command in play's referent marked)."""
         self.query: QueryPanel | None = None
         self.prompt_field: PromptField | None = None
         self.view: ViewPanel | None = None
@@ -198,6 +185,7 @@ class ClientSession:
             gui.add_markdown(f"**Warning: {md_text(self.options.model_note)}**")
         with gui.add_folder("Scene"):
             self.nav = build_navigation_panel(gui, len(self.navigator))
+            self.commands = CommandList(gui, self.run_command)
         tabs = gui.add_tab_group()
         shown = self.frame or self.navigator.frame  # the frame this panel will show first
         sample_prompt = (shown.sample.prompt or "") if shown is not None else ""
@@ -231,50 +219,25 @@ class ClientSession:
                     )
 
     def _wire_query(self, q: QueryPanel) -> None:
-        @q.prompt.on_update
-        def _(event: viser.GuiEvent) -> None:
-            if event.client is not None and entered(q.prompt.value):
-                # The box is rewritten without the line break (fires this without client).
-                self.run_prompt(q.prompt.value, write=True)
-
-        @q.run.on_click
-        def _(_: viser.GuiEvent) -> None:
-            self.run_prompt(q.prompt.value)
-
-        @q.use_frame_prompt.on_click
-        def _(_: viser.GuiEvent) -> None:
-            sample = self.sample
-            if sample is not None and sample.prompt:
-                self.write_prompt(sample.prompt)
-
-        @q.rerun.on_click
-        def _(_: viser.GuiEvent) -> None:
-            if q.history.value != NO_HISTORY:
-                self.run_prompt(q.history.value, write=True)
-
-        @q.history.on_update
-        def _(event: viser.GuiEvent) -> None:
-            if event.client is not None and q.history.value != NO_HISTORY:
-                self.write_prompt(q.history.value)
-
-        def rerun_last(event: viser.GuiEvent) -> None:
-            if event.client is None:
-                return
-            if self.answer is not None:
-                self.run_prompt(self.answer.prompt)
-            elif self.sample is not None:
-                self.engine.prefetch(self.sample, q.selected_modality())
-
-        q.modality.on_update(rerun_last)
-        q.threshold.on_update(rerun_last)
-        if q.candidates is not None:
-            q.candidates.on_update(rerun_last)
+        q.wire_prompts(self.run_prompt, self.write_prompt, lambda: self.sample, self._rerun_last)
         q.wire_layers(
             self.lock,
             self.heatmap_view,
             self.gt_view,
-            lambda shown: self._with_camera(lambda camera: camera.set_layer_visible("gt", shown)),
+            lambda gt, others: self._with_camera(lambda camera: camera.show_gt(gt, others)),
         )
+
+    def _rerun_last(self) -> None:
+        """A setting changed: run the last prompt again (none yet: encode the frame for it)."""
+        if self.answer is not None:
+            self.run_prompt(self.answer.prompt)
+        elif self.sample is not None and self.query is not None:
+            self.engine.prefetch(self.sample, self.query.selected_modality())
+
+    @property
+    def others_visible(self) -> bool:
+        """Whether *Other annotations* shows the labelled objects that are not referents."""
+        return self.query is None or bool(self.query.show_others.value)
 
     # ------------------------------------------------------------------ frames
 
@@ -317,17 +280,40 @@ class ClientSession:
                 self.scene_view.show(sample.lidar, sample.radar, frame.ground_z)
                 self.pred_view.clear()
                 self.heatmap_view.clear()
-                self.gt_view.show(frame.objects)
+                if self.commands is not None:
+                    self.commands.show(frame.commands, 0 if frame.commands else None)
+                self._mark_command(0 if frame.commands else None, camera=False)
                 if self.query is not None:
                     self.gt_view.visible = self.query.show_gt.value
+                    self.gt_view.others_visible = self.query.show_others.value
                     if self.prompt_field is not None:
                         self.prompt_field.offer(sample.prompt or "", own_move)
                     self.query.use_frame_prompt.disabled = not sample.prompt
                     self.query.results.content = "*Type a prompt and press Enter.*"
                 if self.nav is not None:
                     self.nav.show(frame, len(self.navigator))
-            self._with_camera(lambda camera: camera.show_frame(sample))
+            objects = self.objects if frame.commands is not None else None
+            self._with_camera(lambda camera: camera.show_frame(sample, objects))
             self._call(self._frame_listeners)
+
+    def _mark_command(self, index: int | None, camera: bool = True) -> None:
+        """Make command ``index`` of the frame on screen the one in play (holding :attr:`lock`):
+        its referent drawn apart, its button marked (``camera``: the camera image too)."""
+        frame = self.frame
+        if frame is None:
+            return
+        commands = frame.commands
+        self.command = index
+        self.objects = (
+            command_objects(frame.objects, commands[index])
+            if commands and index is not None and index > 0
+            else frame.objects  # (a frame's objects are marked for its first command)
+        )
+        self.gt_view.show(self.objects)
+        if self.commands is not None:
+            self.commands.mark(index)
+        if camera and commands is not None:
+            self._with_camera(lambda panel: panel.show_objects(self.objects))
 
     def split_changed(self) -> None:
         """Refresh the navigation widgets after the split was re-read (called by the navigator)."""
@@ -376,6 +362,16 @@ class ClientSession:
             if self.prompt_field is not None and not self.closed:
                 self.prompt_field.write(text)
 
+    def run_command(self, index: int) -> Future | None:
+        """Run command ``index`` of the frame on screen as if typed into the prompt box and run
+        (:mod:`app.frame_commands`); it becomes the command in play."""
+        with self.lock:
+            commands = self.frame.commands if self.frame is not None else None
+            if not commands or not 0 <= index < len(commands) or self.closed:
+                return None
+            self._mark_command(index)
+        return self.run_prompt(commands[index].text, write=True)
+
     def run_prompt(self, prompt: str | None, write: bool = False) -> Future | None:
         """Answer ``prompt`` on the frame on screen, in the engine's worker pool: the one way the
         Query tab runs a prompt (Enter, *Run*, *Re-run*, a changed setting), cleaned here, once
@@ -393,6 +389,9 @@ class ClientSession:
         with self.lock:
             if self.frame is None or self.query is None or self.closed:
                 return None
+            found = command_in_play(self.frame.commands, self.command, text)
+            if found != self.command:
+                self._mark_command(found)
             self._generation += 1
             request = QueryRequest(
                 prompt=text,
@@ -456,7 +455,7 @@ class ClientSession:
         """Draw boxes, heatmap, summary and history (holding :attr:`lock`)."""
         assert self.query is not None
         pred = answer.predictions
-        overlaps, labels = answer_labels(pred, request.frame.objects)
+        overlaps, labels = answer_labels(pred, self.objects)
         with self.client.atomic():
             self.pred_view.show(pred.boxes, pred.classes, labels)
             self.heatmap_view.visible = self.query.show_heatmap.value

@@ -1,12 +1,14 @@
-"""What every browser's session shows the same way: :class:`SessionOptions` (its own module so
-that :mod:`app.session` stays one screenful of concerns; imported from there as before)."""
+"""What every browser's session shows the same way: :class:`SessionOptions`, and the tabs added
+to every panel, :class:`ExtraTab` (their own module so that :mod:`app.session` stays one
+screenful of concerns; imported from there as before)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
-from scenes.talk2radar.root import Sample
+from scenes.frame import Sample
 
 
 @dataclass(frozen=True)
@@ -25,4 +27,22 @@ class SessionOptions:
     labelled_boxes: Callable[[Sample], object | None] | None = None
 
 
-__all__ = ["SessionOptions"]
+@dataclass(frozen=True)
+class ExtraTab:
+    """A tab added after Query and View (see :mod:`app.session`).
+
+    Attributes:
+        label: The tab's title.
+        icon: Its icon (a ``viser.Icon``).
+        build: Fills the tab of one browser: ``build(session)`` (an
+            :class:`app.session.ClientSession`).
+        name: What the tab is called in the message shown when ``build`` fails.
+    """
+
+    label: str
+    icon: str
+    build: Callable[[Any], object]
+    name: str = "panel"
+
+
+__all__ = ["ExtraTab", "SessionOptions"]

@@ -116,7 +116,7 @@ __all__ = [
 
 
 def command_line(module: str, argv: Sequence[str]) -> str:
-    """The command that reproduces this run, e.g. ``python -m bench.latency --quick``."""
+    """The command that reproduces this run, e.g. ``python -m bench.perf.latency --quick``."""
     return shlex.join(["python", "-m", module, *argv])
 
 

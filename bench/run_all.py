@@ -1,10 +1,10 @@
 """Run every benchmark and regenerate ``docs/PERFORMANCE.md``: ``python -m bench.run_all``
 (what ``make bench`` runs).
 
-Each benchmark runs in its own process (``python -m bench.<name>``, so that one benchmark's
-allocations do not disturb the next one's timings and each table's command can be repeated as
+Each benchmark runs in its own process (``python -m`` its module of :data:`MODULES`, so that
+one benchmark's allocations do not disturb the next one's timings and each table's command can be repeated as
 is) and writes ``bench/results/<name>.json``; scene generation speed comes from
-``bench/bench_synth.py`` (``bench/results/synth.json``). ``docs/PERFORMANCE.md`` is then written
+``bench/perf/bench_synth.py`` (``bench/results/synth.json``). ``docs/PERFORMANCE.md`` is then written
 from those JSON files alone: a summary of the targets, then one section per benchmark headed by
 the machine and the exact command that made it.
 
@@ -41,24 +41,26 @@ from scenes.utils.cli import command_parser, from_args, option
 from scenes.utils.durable import atomic_write_text
 from scenes.utils.textfile import read_text_file
 
-BENCHMARKS = (
-    "latency",
-    "floor",
-    "fusion_cost",
-    "graph_cost",
-    "model_size",
-    "train_throughput",
-    "soak",
-    "sensor_shift",
-)
-"""Benchmarks of this package, in the order of the document (``bench/<name>.py``)."""
+MODULES = {
+    "latency": "bench.perf.latency",
+    "floor": "bench.perf.floor",
+    "fusion_cost": "bench.perf.fusion_cost",
+    "graph_cost": "bench.perf.graph_cost",
+    "model_size": "bench.perf.model_size",
+    "train_throughput": "bench.perf.train_throughput",
+    "soak": "bench.perf.soak",
+    "sensor_shift": "bench.studies.sensor_shift",
+}
+"""Each benchmark's name and module (``python -m MODULE``), in the order of the document."""
+BENCHMARKS = tuple(MODULES)
+"""Benchmarks of this package, in the order of the document."""
 MANUAL = ("floor_1thread", "eval_throughput", "eval_throughput_1thread")
 """Sections that come from their stored results only, run by hand with the command in their
 section: the floor benchmark on one thread (``python -m bench.floor --threads 1 --name
 floor_1thread``) and the evaluation throughput (it compares with an older checkout)."""
 
 SYNTH = "synth"
-SYNTH_SCRIPT = REPO / "bench" / "bench_synth.py"
+SYNTH_SCRIPT = REPO / "bench" / "perf" / "bench_synth.py"
 SYNTH_ARGS = {False: ("--worlds", "10", "--frames", "20"), True: ("--worlds", "2", "--frames", "4")}
 
 MISS_NOTES: dict[str, str] = {
@@ -175,7 +177,7 @@ def run_benchmarks(names: Sequence[str], quick: bool, threads: int | None = None
                 continue
             cmd = [sys.executable, str(SYNTH_SCRIPT.relative_to(REPO)), *SYNTH_ARGS[quick]]
         else:
-            cmd = [sys.executable, "-m", f"bench.{name}"]
+            cmd = [sys.executable, "-m", MODULES[name]]
             cmd += ["--quick"] if quick else []
             cmd += ["--threads", str(threads)] if threads is not None else []
         code, seconds = _run(cmd)
@@ -205,7 +207,7 @@ def _synth_section(path: Path, failure: str | None) -> str:
             [
                 *lines,
                 f"*Not measured:* `{_rel(path)}` is missing (HOOK: run "
-                "`python bench/bench_synth.py`).",
+                "`python bench/perf/bench_synth.py`).",
                 "",
             ]
         )

@@ -54,12 +54,12 @@ if TYPE_CHECKING:
     from model.head.decode import decode
     from model.head.losses import grounding_loss
     from model.head.targets import collate_targets, draw_targets
-    from model.nets.baca import build_fusion
     from model.nets.dggf import (
         dynamic_max_relative,
         dynamic_max_relative_loop,
         static_max_relative,
     )
+    from model.nets.fusion import build_fusion
     from model.nets.text import load_minilm, tokenize
     from model.protocol import (
         GridExtent,
@@ -98,7 +98,7 @@ _EXPORTS = {
     # The parts the benchmarks (bench/) time or count on their own:
     "FusionConfig": "model.config",
     "preset": "model.config",
-    "build_fusion": "model.nets.baca",
+    "build_fusion": "model.nets.fusion",
     "dynamic_max_relative": "model.nets.dggf",
     "dynamic_max_relative_loop": "model.nets.dggf",
     "static_max_relative": "model.nets.dggf",

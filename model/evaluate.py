@@ -6,7 +6,10 @@ files (``<frame id>.txt``, one detection per line with a 16th score field) again
 the bundled one), writes and scores its prediction files, and adds the per-prompt grounding metrics
 (:mod:`model.evaluation.grounding`) with the class-noun and language-blind oracle baselines beside them.
 ``--data NUSC --talk2car NUSC/commands`` grounds a nuScenes root's Talk2Car commands instead
-(:func:`model.evaluation.talk2car.report.run_talk2car`: table II, ``OUT/{split}_predictions.json``).
+(table II, ``OUT/{split}_predictions.json``). Both go through one pipeline
+(:mod:`model.evaluation.pipeline`) with the root's kind as its plug-in (:func:`evaluation_kind`);
+files mode reads and scores written folders (:mod:`model.evaluation.files`). This module is the
+command line: its flags (:class:`EvaluateConfig`), its modes and which one runs.
 
 Decisions (the devkit behaves differently, see the spec §2.2):
 
@@ -39,38 +42,23 @@ Decisions (the devkit behaves differently, see the spec §2.2):
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Literal
+from typing import Literal
 
 from model.checkpoint import DEFAULT_CHECKPOINT
 from model.config import ClassSetName
-from model.evaluation.files import (
-    EvaluationInputError,
-    load_prediction_dir,
-    score_directories,
-)
+from model.evaluation.files import score_directories
 from model.evaluation.grounding import CandidateSource
-from model.evaluation.metrics import VodResult
+from model.evaluation.pipeline import EvaluationKind, run_evaluation, write_json
 from model.evaluation.worker_watch import PredictionWorkerError
 from scenes.geometry.classes import class_set
 from scenes.utils.cli import command_parser, from_args, option, report_errors
 
-if TYPE_CHECKING:
-    from model.evaluation.report import GroundingReport
-
 DEFAULT_EVAL_DIR = Path("runs") / "eval"
 """Model mode's default output folder's parent (relative to the working directory)."""
-
-
-def write_json(path: str | Path, result: VodResult | GroundingReport) -> None:
-    """Write the result's ``to_dict()`` as indented JSON (parent folders created)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(result.to_dict(), indent=2) + "\n")
 
 
 FILES_MODE = "score prediction files"
@@ -190,13 +178,10 @@ class EvaluateConfig:
                 raise ValueError(
                     "--classes goes with --labels/--preds; --data scores the checkpoint's class set"
                 )
-            from scenes.datasets.nuscenes_frames import is_nuscenes_root
+            from scenes.datasets.source import root_family
 
-            if self.talk2car is None and is_nuscenes_root(self.data):
-                raise ValueError(
-                    f"--data {self.data} is a nuScenes root (it holds a v1.0-* folder): give its "
-                    "Talk2Car command folder with --talk2car DIR"
-                )
+            if self.talk2car is None:  # a nuScenes root needs its commands (RootError: ValueError)
+                root_family(self.data, None, commands_required=True)
             return "model"
         if self.talk2car is not None:
             raise ValueError("--talk2car goes with --data NUSC (a nuScenes root)")
@@ -259,115 +244,59 @@ def default_out_dir(data: Path, split: str) -> Path:
     return DEFAULT_EVAL_DIR / f"{data.resolve().name}-{split}"
 
 
-def _run_model_mode(cfg: EvaluateConfig) -> int:
-    """Ground every sample of a split, write one prediction file per frame, score them, and print
-    the official table, the per-prompt-type and per-depth tables, and the grounding tables (model,
-    class-noun prompt and language-blind oracle side by side)."""
-    from model.checkpoint import load_checkpoint
-    from model.evaluation.predict import operating_threshold, write_predictions
-    from model.evaluation.predict_pool import auto_workers, frame_groups
-    from model.evaluation.report import evaluate_predictions
-    from model.evaluation.worker_watch import Liveness
-    from scenes.talk2radar.root import Talk2RadarRoot
+def evaluation_kind(cfg: EvaluateConfig) -> EvaluationKind:
+    """Model mode's plug-in of :func:`model.evaluation.pipeline.run_evaluation` for the root's
+    kind: a nuScenes root's Talk2Car commands (``--talk2car``) or a Talk2Radar root, with the
+    command line's settings and output paths (without ``--out``: :func:`default_out_dir`, and for a
+    Talk2Radar root the JSON beside it as ``<that folder>.json`` unless ``--json`` is given)."""
+    out = cfg.out or default_out_dir(cfg.data, cfg.split)
+    if cfg.talk2car is not None:
+        from model.evaluation.talk2car.kind import Talk2CarEvaluation
 
-    json_path, out_dir = cfg.json, cfg.out
-    if out_dir is None:
-        out_dir = default_out_dir(cfg.data, cfg.split)
-        if json_path is None:
-            json_path = out_dir.with_name(out_dir.name + ".json")
-    if cfg.threshold is not None and not 0.0 <= cfg.threshold < 1.0:
-        raise EvaluationInputError(f"--threshold must be in [0, 1), got {cfg.threshold}")
-    if cfg.workers < 0:
-        raise EvaluationInputError(f"--workers must be 0 (automatic) or more, got {cfg.workers}")
-    if cfg.workers > 1 and cfg.device != "cpu":
-        raise EvaluationInputError(f"--workers {cfg.workers} runs on the CPU, not {cfg.device}")
-    if not cfg.worker_timeout > 0:
-        raise EvaluationInputError(f"--worker-timeout must be > 0 s, got {cfg.worker_timeout}")
-
-    from scenes.talk2radar.scene_labels import SceneLabels
-
-    radar = None if cfg.radar_folder == "none" else cfg.radar_folder
-    if cfg.candidates == "labels" and cfg.scene_labels is None:
-        raise EvaluationInputError(
-            "--candidates labels needs --scene-labels VOD_ROOT (a Talk2Radar label_2 lists only "
-            "the referents, which would give the answer away)"
+        return Talk2CarEvaluation(
+            data=cfg.data,
+            talk2car=cfg.talk2car,
+            split=cfg.split,
+            checkpoint=cfg.checkpoint,
+            out=out,
+            json=cfg.json,
+            threshold=cfg.threshold,
+            device=cfg.device,
+            limit=cfg.limit,
         )
-    scene_labels = None if cfg.scene_labels is None else SceneLabels(cfg.scene_labels)
-    root = Talk2RadarRoot(cfg.data, radar=radar, sidecar=scene_labels is None)
-    ids = root.ids(cfg.split)
-    if cfg.limit:
-        ids = ids[: cfg.limit]
-    if not ids:
-        raise EvaluationInputError(f"{cfg.data}: split {cfg.split!r} has no samples")
-    model = load_checkpoint(cfg.checkpoint, device=cfg.device)
-    classes = model.cfg.class_set  # the checkpoint's: the labels are read into its classes
-    if classes != root.classes:
-        root = Talk2RadarRoot(cfg.data, radar=radar, sidecar=root.sidecar, classes=classes)
-        if scene_labels is not None:
-            scene_labels = SceneLabels(cfg.scene_labels, classes)
-    operating = operating_threshold(model) if cfg.threshold is None else cfg.threshold
-    if cfg.candidates == "labels" and not model.takes_labelled_candidates:
-        raise EvaluationInputError(
-            f"{cfg.checkpoint}: --candidates labels needs a referent-path checkpoint"
-        )
-    workers = cfg.workers or auto_workers(len(frame_groups(root, ids)), cfg.device)
-    report = evaluate_predictions(
-        model,
-        root,
-        ids,
-        operating=operating,
+    from model.evaluation.talk2radar import Talk2RadarEvaluation
+
+    json_path = cfg.json
+    if cfg.out is None and json_path is None:
+        json_path = out.with_name(out.name + ".json")
+    return Talk2RadarEvaluation(
+        data=cfg.data,
+        split=cfg.split,
+        checkpoint=cfg.checkpoint,
+        out=out,
+        json=json_path,
+        threshold=cfg.threshold,
         baselines=cfg.baselines,
-        scene_labels=scene_labels,
+        radar_folder=cfg.radar_folder,
+        scene_labels=cfg.scene_labels,
         candidates=cfg.candidates,
-        workers=workers,
-        liveness=Liveness.with_floor(cfg.worker_timeout),
-    )
-    out = write_predictions(report.predictions, out_dir)
-    # Score the files as written (4 decimals), as the official devkit reads them.
-    from_files, missing = load_prediction_dir(out, tuple(sorted(ids)))
-    if missing:
-        raise EvaluationInputError(f"{out}: prediction files missing for {list(missing)[:5]}")
-    report = report.rescored(from_files)
-    print(
-        f"data: {cfg.data} split {cfg.split} ({len(ids)} frames); checkpoint {cfg.checkpoint}; "
-        f"candidates: {cfg.candidates}; {workers} prediction process(es)"
-        + ("" if scene_labels is None else f"; scene labels {cfg.scene_labels}")
-    )
-    source = "--threshold" if cfg.threshold is not None else "checkpoint"
-    print(f"predictions written to {out}; operating threshold {operating:g} ({source})")
-    print(report.format_tables(), end="")
-    if json_path is not None:
-        write_json(json_path, report)
-        print(f"wrote {json_path}")
-    return 0
-
-
-def _run_talk2car_mode(cfg: EvaluateConfig) -> int:
-    """:func:`model.evaluation.talk2car.report.run_talk2car` with the command line's settings."""
-    from model.evaluation.talk2car.report import run_talk2car
-
-    if cfg.threshold is not None:
-        raise EvaluationInputError("--threshold is not used with --talk2car (AP ranks every box)")
-    report = run_talk2car(
-        cfg.data,
-        cfg.talk2car,
-        cfg.split,
-        cfg.checkpoint,
-        cfg.out or default_out_dir(cfg.data, cfg.split),
         device=cfg.device,
+        workers=cfg.workers,
+        worker_timeout=cfg.worker_timeout,
         limit=cfg.limit,
     )
-    if cfg.json is not None:
-        write_json(cfg.json, report)
-        print(f"wrote {cfg.json}")
+
+
+def _run_model_mode(cfg: EvaluateConfig) -> int:
+    """Ground the split with the checkpoint, write and score its predictions, print the tables
+    (:mod:`model.evaluation.pipeline`, with :func:`evaluation_kind`'s plug-in)."""
+    run_evaluation(evaluation_kind(cfg))
     return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     cfg = parse_args(argv)
     runner = _run_model_mode if cfg.mode() == "model" else _run_files_mode
-    if cfg.talk2car is not None:
-        runner = _run_talk2car_mode
     return report_errors(lambda: runner(cfg), (ValueError, PredictionWorkerError, OSError))
 
 

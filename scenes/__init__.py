@@ -6,6 +6,9 @@ docs/DESIGN.md. The names below are the ones other packages use most; those of t
 no more than the formats.
 """
 
+from scenes.frame import RootError, Sample
+from scenes.frame.kitti import ObjectLabel, read_label_file, write_label_file
+from scenes.frame.sample_meta import SampleMeta
 from scenes.geometry.actors import CLASSES, Actor
 from scenes.geometry.calib import (
     Calibration,
@@ -13,16 +16,7 @@ from scenes.geometry.calib import (
     vod_lidar_calibration,
     vod_radar_calibration,
 )
-from scenes.talk2radar.kitti import ObjectLabel, read_label_file, write_label_file
-from scenes.talk2radar.root import (
-    RootError,
-    Sample,
-    SampleMeta,
-    SensorFiles,
-    Talk2RadarRoot,
-    Talk2RadarWriter,
-    format_id,
-)
+from scenes.talk2radar.root import SensorFiles, Talk2RadarRoot, Talk2RadarWriter, format_id
 from scenes.utils.lazy import lazy_exports
 
 _LAZY = {

@@ -49,10 +49,11 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from scenes.frame import RootError
+from scenes.frame.image import label_image_size
+from scenes.frame.kitti import ObjectLabel, label_file_text, read_label_file
 from scenes.geometry.calib import read_calib
 from scenes.synth.vod_labels import frame_labels, frame_objects
-from scenes.talk2radar.imagefile import label_image_size
-from scenes.talk2radar.kitti import ObjectLabel, label_file_text, read_label_file
 from scenes.talk2radar.layout import (
     CALIB,
     LABEL,
@@ -64,7 +65,6 @@ from scenes.talk2radar.layout import (
     SOURCES,
     TRAIN_VAL,
     VELODYNE,
-    RootError,
     meta_file,
     sample_dir,
     sample_file,

@@ -10,7 +10,7 @@ which rewrites :data:`REFERENCE` and records in it the commit it ran on (``commi
 generator version and torch's version; ``python -m tests.decode_reference --compare`` prints
 how far the code as it is now is from the file, per kind of output. The committed file was
 first made on the code before issue 20's speed-ups, then regenerated on its inference forms of the network (the change of
-outputs between the two: docs/RESULTS.md, "Issue 20's inference forms"), and again when the
+outputs between the two: docs/RESULTS_HISTORY.md, "Issue 20's inference forms"), and again when the
 shipped checkpoint changed (its referent stage's weights; see ``commit`` in the file: the
 last, stage 3i, was made on the model code of commit 2d4e681, before the inference fast paths of
 ``tests/test_inference_fast_paths.py``, which are held to it).

@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 import torch
 
-from bench.unlabelled_root import sensor_only_copy
 from model.adapt.__main__ import main
 from model.adapt.augment import View
 from model.adapt.config import DEFAULT_THRESHOLDS, AdaptConfig, AdaptError
@@ -23,6 +22,7 @@ from model.checkpoint import load_checkpoint, save_checkpoint
 from model.training.referent_step import in_bev_footprint
 from scenes.geometry.classes import NUSCENES, VOD
 from scenes.talk2radar.layout import LABEL, LIDAR_FOLDER, PROMPT, sample_dir
+from tools.unlabelled_root import sensor_only_copy
 
 LOW = ["--class-threshold", "Car=0.09", "--class-threshold", "Pedestrian=0.09"]
 LOW += ["--class-threshold", "Cyclist=0.09"]

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from annotate.carry import CarryConfig, carry_boxes, speed_known
+from scenes.frame import RootError
 from scenes.geometry.calib import sensor_to_lidar, vod_lidar_calibration
 from scenes.synth.generate import SynthSettings, generate_root, synthesize
 from scenes.talk2radar.drives import find_drives
-from scenes.talk2radar.layout import RootError
 from scenes.talk2radar.poses import (
     FRAME_RATE,
     consecutive,

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from app.browser import drive
-from scenes.talk2radar.root import Sample
+from scenes.frame import Sample
 from tests.browser_helpers import ARTIFACTS, REPO, find_chromium
 
 PROMPT = "the car about 15 m ahead"
@@ -154,12 +154,12 @@ def test_browser_camera_panel_shows_projected_boxes(
 ) -> None:
     """On a View-of-Delft-layout root: the camera panel shows the image with the answer, the
     ground truth and the draft projected (screenshot ``artifacts/camera-browser.png``; the docs'
-    ``docs/images/camera.png`` comes from ``python -m tests.camera_shot``); *Save pair* is in
+    ``docs/images/camera.png`` comes from ``python -m tools.camera_shot``); *Save pair* is in
     sight at 1400 x 860 and disabled for an empty draft; Esc leaves *Pair prompt*; Enter saves."""
     from app import AppConfig, Talk2PCApp
     from model import build_model
     from scenes.talk2radar.root import Talk2RadarRoot
-    from tests.camera_shot import drive_camera
+    from tools.camera_shot import drive_camera
 
     root = write_vod_root(tmp_path / "vod", frames=1, splits={"val": [0]})
     with torch_threads(1):

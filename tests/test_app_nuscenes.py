@@ -128,7 +128,7 @@ def test_browser_shows_the_commands_and_the_camera_image(nusc_app, chromium, chr
     from playwright.sync_api import sync_playwright
 
     from tests.browser_helpers import ARTIFACTS, scene_has
-    from tests.camera_shot import CAMERA_IMAGE_WIDTH
+    from tools.camera_shot import CAMERA_IMAGE_WIDTH
 
     app = nusc_app
     commands = app.frames.root.commands(app.frame.sample.sample_id)

@@ -61,9 +61,10 @@ from app.scene_view import (
     ring_segments,
 )
 from model.checkpoint_meta import CheckpointMeta
+from scenes.frame import RootError
 from scenes.geometry.classes import NUSCENES
 from scenes.talk2radar.layout import VELODYNE, sample_file
-from scenes.talk2radar.root import RootError, Talk2RadarRoot
+from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.utils.text_policy import collapse_spaces
 
 # ---------------------------------------------------------------------------- colours

@@ -180,8 +180,8 @@ def test_read_result_names_the_file_and_the_field(tmp_path) -> None:
 
 
 def test_machine_info_records_the_command() -> None:
-    m = machine_info("python -m bench.latency")
-    assert m.command == "python -m bench.latency"
+    m = machine_info("python -m bench.perf.latency")
+    assert m.command == "python -m bench.perf.latency"
     affinity = getattr(os, "sched_getaffinity", None)
     assert m.cores == (len(affinity(0)) if affinity else os.cpu_count())
     assert m.torch_threads == torch.get_num_threads()
@@ -288,7 +288,7 @@ def test_render_includes_scene_generation_results(tmp_path) -> None:
     synth.write_text(
         json.dumps(
             {
-                "command": "python bench/bench_synth.py --worlds 2 --frames 4",
+                "command": "python bench/perf/bench_synth.py --worlds 2 --frames 4",
                 "machine": {"load_average_before": 2.5},
                 "markdown": "| stage | s |\n| --- | ---: |\n| world | 0.1 |",
             }
@@ -296,7 +296,7 @@ def test_render_includes_scene_generation_results(tmp_path) -> None:
     )
     text = render({}, {}, synth, "python -m bench.run_all", None)
     assert "## Scene generation speed" in text
-    assert "`python bench/bench_synth.py --worlds 2 --frames 4`" in text
+    assert "`python bench/perf/bench_synth.py --worlds 2 --frames 4`" in text
     assert "load average 2.50 at the start" in text
     assert "| world | 0.1 |" in text
     failed = render({}, {"latency": "exit code 1"}, synth, "python -m bench.run_all", 1.0)
@@ -307,7 +307,7 @@ def test_render_includes_scene_generation_results(tmp_path) -> None:
 
 
 def _calls(walls: list[float], stages: dict[str, list[float]]):
-    from bench.latency_measure import Call
+    from bench.perf.latency_measure import Call
 
     return [
         Call(w, {k: v[i] for k, v in stages.items()}, boxes=3, answer=1)
@@ -316,7 +316,7 @@ def _calls(walls: list[float], stages: dict[str, list[float]]):
 
 
 def _path_calls(cached: list[float], fresh: list[float], repeated: list[float], spec):
-    from bench.latency_measure import PathCalls
+    from bench.perf.latency_measure import PathCalls
 
     ground = {k: [1.0] * len(cached) for k in spec.ground_stages}
     scene = {k: [2.0] * len(fresh) for k in spec.scene_stages + spec.ground_stages}
@@ -328,8 +328,8 @@ def _path_calls(cached: list[float], fresh: list[float], repeated: list[float], 
 
 
 def test_latency_targets_and_side_by_side_table() -> None:
-    from bench.latency_measure import REFERENT, TPCNET
-    from bench.latency_report import side_by_side_table, targets
+    from bench.perf.latency_measure import REFERENT, TPCNET
+    from bench.perf.latency_report import side_by_side_table, targets
 
     calls = {
         "referent": _path_calls([20.0, 24.0, 30.0], [140.0, 150.0, 170.0], [8.0], REFERENT),
@@ -355,8 +355,8 @@ def test_latency_targets_and_side_by_side_table() -> None:
 
 
 def test_latency_stage_check_and_detect_tables() -> None:
-    from bench.latency_measure import DETECT_NAMES, REFERENT
-    from bench.latency_report import calls_data, check_table, detect_table, stage_table
+    from bench.perf.latency_measure import DETECT_NAMES, REFERENT
+    from bench.perf.latency_report import calls_data, check_table, detect_table, stage_table
 
     calls = _calls([10.0, 12.0], {"text": [6.0, 7.0], "referent": [2.0, 3.0], "decode": [1.0, 1.0]})
     table = stage_table("t", calls, REFERENT.ground_stages, REFERENT.stage_names)
@@ -384,7 +384,7 @@ def test_latency_stage_check_and_detect_tables() -> None:
 
 
 def test_latency_model_choice_follows_the_checkpoints_grounding(tmp_path, monkeypatch) -> None:
-    import bench.latency_measure as lm
+    import bench.perf.latency_measure as lm
     from model import build_model
     from model.checkpoint import save_checkpoint
 

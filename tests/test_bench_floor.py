@@ -7,8 +7,8 @@ import math
 
 import numpy as np
 
-from bench.floor_measure import ENCODE_STAGES, TimedCall, encode_flops, matmul_rate
-from bench.vod_frames import LIDAR_POINTS, RADAR_POINTS, vod_frames
+from bench.perf.floor_measure import ENCODE_STAGES, TimedCall, encode_flops, matmul_rate
+from bench.perf.vod_frames import LIDAR_POINTS, RADAR_POINTS, vod_frames
 from model.checkpoint import load_checkpoint
 from scenes.talk2radar.layout import VELODYNE, sample_file
 from tests.decode_reference import CHECKPOINT

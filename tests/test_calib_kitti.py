@@ -3,6 +3,14 @@
 import numpy as np
 import pytest
 
+from scenes.frame.kitti import (
+    LabelError,
+    boxes_to_labels,
+    format_label_line,
+    labels_to_boxes,
+    parse_label_line,
+    read_label_file,
+)
 from scenes.geometry.calib import (
     Calibration,
     CalibrationError,
@@ -14,14 +22,6 @@ from scenes.geometry.calib import (
     sensor_to_lidar,
     vod_lidar_calibration,
     vod_radar_calibration,
-)
-from scenes.talk2radar.kitti import (
-    LabelError,
-    boxes_to_labels,
-    format_label_line,
-    labels_to_boxes,
-    parse_label_line,
-    read_label_file,
 )
 
 VOD_LINE = (

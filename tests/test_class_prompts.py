@@ -21,9 +21,9 @@ from model.evaluation.class_prompt_counts import (
     count_prompt,
 )
 from model.evaluation.class_prompts import ScoringConfig, main, score_root
+from scenes.frame.kitti import boxes_to_labels
 from scenes.geometry.calib import vod_lidar_calibration, vod_radar_calibration
 from scenes.geometry.projection import in_camera_view
-from scenes.talk2radar.kitti import boxes_to_labels
 from scenes.talk2radar.layout import CALIB, LABEL, LIDAR_FOLDER, PROMPT, sample_dir, sample_file
 from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.talk2radar.vod_writer import VodWriter

@@ -26,14 +26,10 @@ from model.head.targets import collate_targets, draw_targets
 from model.training.config import TrainConfig, TrainingError
 from model.training.loop import train
 from model.training.start import start_model
+from scenes.frame.kitti import boxes_to_labels, labels_to_boxes, outside_class_counts
 from scenes.geometry.calib import IMAGE_SIZE
 from scenes.geometry.classes import NUSCENES, VOD, class_set
 from scenes.synth.generate import SynthSettings, generate_root
-from scenes.talk2radar.kitti import (
-    boxes_to_labels,
-    labels_to_boxes,
-    outside_class_counts,
-)
 from tests.vod_fixtures import vod_lidar_calibration
 
 GRID = BevGrid(x_min=0.0, x_max=51.2, y_min=-25.6, y_max=25.6, cell=0.64)
@@ -301,7 +297,7 @@ def test_nuscenes_categories_map_onto_the_served_set(nuscenes_training_root):
     ridden bicycle a Bicycle (nuScenes' mapping), not a Cyclist."""
     from collections import Counter
 
-    from app.served_nuscenes import NuScenesSource
+    from scenes.datasets.source import NuScenesSource
 
     root = nuscenes_training_root
     vod = NuScenesSource(root, root / "commands")

@@ -218,7 +218,7 @@ def test_command_share_flags_reach_the_generator(tmp_path):
 def test_suite_commands_are_hand_typed_not_the_templates_and_come_in_pairs():
     import json
 
-    from bench.language_cases import SUITE_FILE, SuiteError, load_suite, parse_suite
+    from bench.studies.language_cases import SUITE_FILE, SuiteError, load_suite, parse_suite
 
     suite = load_suite()
     commands = [s for s in suite.sentences if s.family == "command"]

@@ -1,5 +1,5 @@
 """Every command line README.md and docs/*.md show (``python -m <module> ...``, ``python
-launch.py ...`` and ``python bench/<name>.py ...``) parses with its command's parser, without running the command; a synopsis
+launch.py ...`` and ``python bench/<kind>/<name>.py ...``) parses with its command's parser, without running the command; a synopsis
 (``[--flag VALUE]``) names only flags and choices that exist. A command the docs show that is not
 listed here fails the test, so that a new one gets checked too. (``tests/test_evaluate_config.py``
 also checks what ``model.evaluate``'s lines parse to.)"""
@@ -17,6 +17,16 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 
+STABLE_ENTRIES = (
+    "eval_throughput",
+    "floor",
+    "language_suite",
+    "people_commands",
+    "sensor_shift",
+    "talk2car_recall",
+)
+"""Benchmarks whose old command line ``python -m bench.<name>`` stays (an entry module)."""
+
 PARSERS: dict[str, tuple[str, str]] = {
     "python launch.py": ("launch", "build_parser"),
     "python -m scenes.synth": ("scenes.synth.generate", "_parser"),
@@ -28,42 +38,56 @@ PARSERS: dict[str, tuple[str, str]] = {
     "python -m model.class_prompts": ("model.evaluation.class_prompts", "_parser"),
     "python -m model.results_table": ("model.evaluation.results_table", "build_parser"),
     "python -m model.adapt": ("model.adapt.config", "build_parser"),
-    "python -m bench.unlabelled_root": ("bench.unlabelled_root", "build_parser"),
+    "python -m tools.unlabelled_root": ("tools.unlabelled_root", "build_parser"),
     "python -m app.screenshots": ("app.screenshots", "build_parser"),
+    "python -m tools.nuscenes_converter": ("tools.nuscenes_converter", "build_parser"),
+    "python -m tools.camera_shot": ("tools.camera_shot", "build_parser"),
+    "python -m bench.run_all": ("bench.run_all", "build_parser"),
+    "python bench/run_all.py": ("bench.run_all", "build_parser"),
     **{
-        command: (f"bench.{name}", "build_parser")
-        for name in (
-            "bench_synth",
-            "carry_accuracy",
-            "compare_nuscenes_devkit",
-            "compare_vod_devkit",
-            "eval_throughput",
-            "fit_accuracy",
-            "floor",
-            "fusion_cost",
-            "graph_cost",
-            "labelled_shift",
-            "language_suite",
-            "latency",
-            "model_size",
-            "people_commands",
-            "run_all",
-            "sensor_shift",
-            "sensor_stats",
-            "soak",
-            "talk2car_recall",
-            "train_throughput",
+        command: (f"bench.{home}.{name}", "build_parser")
+        for home, names in {
+            "perf": (
+                "bench_synth",
+                "eval_throughput",
+                "floor",
+                "fusion_cost",
+                "graph_cost",
+                "latency",
+                "model_size",
+                "soak",
+                "train_throughput",
+            ),
+            "studies": (
+                "carry_accuracy",
+                "fit_accuracy",
+                "labelled_shift",
+                "language_suite",
+                "people_commands",
+                "sensor_shift",
+                "sensor_stats",
+                "talk2car_recall",
+            ),
+            "devkit": ("compare_nuscenes_devkit", "compare_vod_devkit"),
+        }.items()
+        for name in names
+        for command in (
+            f"python -m bench.{home}.{name}",
+            f"python bench/{home}/{name}.py",
+            # the stable command lines of bench/<name>.py (which calls the moved module's main)
+            *([f"python -m bench.{name}"] if name in STABLE_ENTRIES else []),
         )
-        for command in (f"python -m bench.{name}", f"python bench/{name}.py")
     },
 }
 """Each documented command and where its parser is made (module, function)."""
 
-HELPERS = ("python -m tests.",)
-"""Test helpers the docs mention (their own scripts, not the product's commands)."""
+HELPERS: tuple[str, ...] = ()
+"""Test helpers the docs may show as commands: none. Nothing outside tests/ runs a ``tests.*``
+module; a fixture's regeneration is in its test module's docstring, and a figure a doc quotes from
+a test is cited as ``python -m pytest tests/<file>.py``."""
 
 COMMAND = re.compile(
-    r"python (?:-m [a-z_][a-z0-9_.]*[a-z0-9_]|launch\.py|bench/[a-z0-9_]+\.py)(?=[\s`]|$)"
+    r"python (?:-m [a-z_][a-z0-9_.]*[a-z0-9_]|launch\.py|bench/(?:[a-z]+/)?[a-z0-9_]+\.py)(?=[\s`]|$)"
 )
 
 
@@ -104,6 +128,15 @@ def test_the_docs_show_every_kind_of_command() -> None:
     assert {"python launch.py", "python -m scenes.synth", "python -m model.train"} <= shown
     unknown = {c for c in shown if c not in PARSERS and not c.startswith(HELPERS)}
     assert not unknown, f"documented commands without a parser in PARSERS: {sorted(unknown)}"
+
+
+def test_no_documented_command_runs_a_test_module() -> None:
+    shown = [
+        f"{path.name}: {m.group(0)}"
+        for path in [REPO / "README.md", *sorted((REPO / "docs").glob("*.md"))]
+        for m in re.finditer(r"python (?:-m tests\.|tests/)\S*", path.read_text())
+    ]
+    assert not shown, f"docs run tests.* modules: {shown}"
 
 
 @pytest.mark.parametrize(

@@ -237,11 +237,11 @@ def test_unreadable_lines_are_reported_never_fatal(tmp_path: Path) -> None:
 
 
 def test_every_writer_of_the_project_uses_this_module() -> None:
-    """No other module of scenes/, annotate/, app/, model/, bench/ or launch.py renames files
+    """No other module of scenes/, annotate/, app/, model/, bench/, tools/ or launch.py renames files
     itself or names temporaries."""
     root = Path(durable.__file__).parents[2]
     offenders = []
-    packages = ("scenes", "annotate", "app", "model", "bench")
+    packages = ("scenes", "annotate", "app", "model", "bench", "tools")
     files = [p for package in packages for p in sorted((root / package).rglob("*.py"))]
     for path in [*files, root / "launch.py"]:
         if path.name == "durable.py":

@@ -13,7 +13,7 @@ import pytest
 
 from model.evaluate import main
 from model.evaluation.files import score_directories
-from scenes.talk2radar.kitti import ObjectLabel, format_label_line, read_label_file
+from scenes.frame.kitti import ObjectLabel, format_label_line, read_label_file
 from scenes.talk2radar.layout import LIDAR_FOLDER, PROMPT, sample_file
 
 REPO = Path(__file__).resolve().parents[1]

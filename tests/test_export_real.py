@@ -16,15 +16,15 @@ import numpy as np
 import pytest
 
 from scenes.export_real import export, main
+from scenes.frame.kitti import read_label_file
+from scenes.frame.sample_meta import SampleMeta
 from scenes.geometry.calib import boxes_lidar_to_camera
 from scenes.synth.vod_labels import ABSENT_CLASSES, VOD_CLASSES, frame_objects
 from scenes.synth.world import RIDER_IN_CYCLIST, cyclist_mesh, rider_boxes
 from scenes.synth.world.materials import Mat
-from scenes.talk2radar.kitti import read_label_file
 from scenes.talk2radar.layout import TRAIN_VAL
 from scenes.talk2radar.pointcloud import read_points
 from scenes.talk2radar.root import Talk2RadarRoot
-from scenes.talk2radar.sample_meta import SampleMeta
 from scenes.talk2radar.scene_labels import SceneLabels, objects_from_labels
 
 TREES = ("lidar", "radar", "radar_5frames")

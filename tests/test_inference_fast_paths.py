@@ -182,7 +182,7 @@ def test_ground_draws_on_the_scene_canvas_kept_from_the_last_prompt(untrained_mo
 
 
 def test_baca_blocked_attention_equals_the_unblocked_one(monkeypatch):
-    from model.nets import baca, baca_cpu
+    from model.nets.fusion import baca, baca_cpu
 
     torch.manual_seed(0)
     attention = baca.AgentCrossAttention(16, (5, 7), heads=1).eval()
@@ -204,11 +204,11 @@ def test_baca_blocked_attention_equals_the_unblocked_one(monkeypatch):
 @pytest.mark.parametrize("shape", [(16, 30, 40), (24, 9, 11)])
 @pytest.mark.parametrize("block", [1 << 18, 12000])
 def test_one_head_baca_with_folded_projections_equals_the_module_form(monkeypatch, shape, block):
-    # CPU inference folds one-head BACA's projections into its agents (model.nets.baca_cpu:
+    # CPU inference folds one-head BACA's projections into its agents (model.nets.fusion.baca_cpu:
     # the softmax drops the keys' bias term, a softmax row sums to 1, the output bias goes to
     # the merge); with gradients on the module form runs every projection. Random biases and
     # BatchNorm statistics, so that every folded term matters; blocked and whole.
-    from model.nets import baca, baca_cpu
+    from model.nets.fusion import baca, baca_cpu
 
     monkeypatch.setattr(baca_cpu, "BLOCK_SCORES", block)
     torch.manual_seed(1)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from bench.labelled_shift import blind_detector as blind
+from bench.studies.labelled_shift import blind_detector as blind
 from model import LabelledBoxes
 from model.checkpoint import load_checkpoint
 from model.core.candidates import SceneCandidates

@@ -1,4 +1,4 @@
-"""The language suite (bench.language_cases / language_score / language_suite): the data file's
+"""The language suite (bench.studies.language_cases / language_score / language_suite): the data file's
 schema and independence from the generator's sentences, the scoring rules, the fingerprint check,
 and the runner end to end on two tiny scenes with a freshly built referent-path model."""
 
@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bench.language_cases import (
+from bench.studies.language_cases import (
     FAMILIES,
     SUITE_FILE,
     SuiteError,
@@ -21,8 +21,8 @@ from bench.language_cases import (
     load_suite,
     parse_suite,
 )
-from bench.language_score import Answer, oracle_outcome, score
-from bench.language_suite import main
+from bench.studies.language_score import Answer, oracle_outcome, score
+from bench.studies.language_suite import main
 from scenes.geometry.actors import Actor
 from scenes.language.prompts import PromptConfig, generate_prompts
 from scenes.language.resolve import resolve

@@ -221,3 +221,89 @@ def test_an_upward_import_of_each_kind_is_found(
     assert len(found) == 5, found
     assert all("fakepkg.low.a (fakepkg.low) imports fakepkg.top" in f for f in found)
     assert [int(re.search(r"a\.py:(\d+)", f).group(1)) for f in found] == [3, 5, 7, 8, 9]
+
+
+TOP_LEVEL = ("annotate", "app", "bench", "launch", "model", "scenes", "tools")
+"""Every top-level package (and ``launch.py``) of the project; tests/ sits above them all."""
+
+
+def read_package_order(text: str, where: str = "docs/DESIGN.md") -> dict[str, tuple[int, int]]:
+    """The fenced ``packages`` block of a markdown text: top-level package -> ``(layer counted
+    from the bottom, its line)``; packages on one line are peers.
+
+    Raises:
+        ValueError: no block, or a package named twice (names the line).
+    """
+    lines = text.splitlines()
+    try:
+        start = next(i for i, line in enumerate(lines) if line.strip() == "```packages")
+    except StopIteration:
+        raise ValueError(f"{where}: no ```packages block") from None
+    rows = []
+    for i in range(start + 1, len(lines)):
+        if lines[i].strip() == "```":
+            break
+        names = lines[i].split("#", 1)[0].split()
+        if names:
+            rows.append((i + 1, names))
+    out: dict[str, tuple[int, int]] = {}
+    for row, (lineno, names) in enumerate(rows):
+        for name in names:
+            if name in out:
+                raise ValueError(f"{where}:{lineno}: package {name!r} named twice")
+            out[name] = (len(rows) - 1 - row, lineno)
+    return out
+
+
+def package_violations(order: dict[str, tuple[int, int]], root: Path = ROOT) -> list[str]:
+    """One line per import of one top-level package by another at its level or above."""
+    out = []
+    for top in order:
+        files = [root / f"{top}.py"] if (root / f"{top}.py").is_file() else []
+        files += sorted(p for p in (root / top).rglob("*.py") if "__pycache__" not in p.parts)
+        for path in files:
+            for node in ast.walk(ast.parse(path.read_text(), str(path))):
+                if isinstance(node, ast.Import):
+                    names = [a.name for a in node.names]
+                elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                    names = [node.module]
+                else:
+                    continue
+                for name in names:
+                    other = name.split(".")[0]
+                    if other == top or other not in order:
+                        continue
+                    if order[other][0] >= order[top][0]:
+                        out.append(
+                            f"{path.relative_to(root)}:{node.lineno}: {top} imports {name} "
+                            f"({other}: DESIGN.md line {order[other][1]}, not below {top})"
+                        )
+    return out
+
+
+def test_every_top_level_package_keeps_the_package_order() -> None:
+    """DESIGN.md's ``packages`` block orders every top-level package; none imports one at its
+    level or above (scenes at the bottom, the model and the annotation store on it, the app,
+    launch.py, the benchmarks and tools on top)."""
+    order = read_package_order(DESIGN.read_text())
+    assert sorted(order) == sorted(TOP_LEVEL)
+    found = package_violations(order)
+    assert not found, "imports against DESIGN.md's package order:\n" + "\n".join(found)
+
+
+def test_an_upward_import_between_packages_is_found(tmp_path: Path) -> None:
+    """A fake tree where the bottom package imports the top one, and two peers import each
+    other: three violations, each naming its file and line."""
+    for name in ("low", "mid_a", "mid_b", "high"):
+        (tmp_path / name).mkdir()
+    (tmp_path / "low" / "__init__.py").write_text("import os\nfrom high import x\n")
+    (tmp_path / "mid_a" / "m.py").write_text("import low\nimport mid_b.m\n")
+    (tmp_path / "mid_b" / "m.py").write_text("from mid_a import m\n")
+    (tmp_path / "high" / "__init__.py").write_text("import mid_a, low\n")
+    order = read_package_order("```packages\nhigh\nmid_a mid_b\nlow\n```\n")
+    found = package_violations(order, tmp_path)
+    assert sorted(f.split(":")[0] for f in found) == [
+        "low/__init__.py",
+        "mid_a/m.py",
+        "mid_b/m.py",
+    ], found

@@ -21,7 +21,7 @@ from model.evaluation.metrics import (
     image_iou,
     score_thresholds,
 )
-from scenes.talk2radar.kitti import ObjectLabel
+from scenes.frame.kitti import ObjectLabel
 
 CAR_HWL = (1.5, 1.8, 4.0)
 

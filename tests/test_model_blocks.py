@@ -23,15 +23,6 @@ from model.config import (
     preset,
 )
 from model.core.grid import BevGrid
-from model.nets.baca import (
-    AgentCrossAttention,
-    BidirectionalAgentCrossAttention,
-    BidirectionalCrossAttention,
-    ConvGateFusion,
-    UnidirectionalAgentCrossAttention,
-    build_fusion,
-    sinusoidal_position_encoding,
-)
 from model.nets.backbone import SecondBackbone
 from model.nets.dggf import (
     DynamicGatedGraphFusion,
@@ -44,6 +35,15 @@ from model.nets.dggf import (
     static_max_relative,
 )
 from model.nets.fpn import SecondFpn
+from model.nets.fusion import (
+    BidirectionalAgentCrossAttention,
+    BidirectionalCrossAttention,
+    ConvGateFusion,
+    UnidirectionalAgentCrossAttention,
+    build_fusion,
+)
+from model.nets.fusion.baca import AgentCrossAttention
+from model.nets.fusion.shared import sinusoidal_position_encoding
 from model.nets.pillars import PillarEncoder, _stable_order, voxelize
 from model.nets.text import (
     BiGRUTextEncoder,

@@ -1,5 +1,5 @@
 """A nuScenes root with Talk2Car commands written by a converter that is not the project's
-(tests/nuscenes_converter.py: the release's field names and frames, uuid tokens, shuffled
+(tools/nuscenes_converter.py: the release's field names and frames, uuid tokens, shuffled
 tables, the release's tilted LIDAR_TOP and CAM_FRONT poses, a random global pose per sample,
 CAM_FRONT sample_data tokens, junk radar points, wrapped command wording) is read back exactly as
 the synthetic source has it, and trains and evaluates through the command lines."""
@@ -17,7 +17,7 @@ from scipy.spatial import cKDTree
 from scenes.nuscenes.root import NuScenesRoot
 from scenes.nuscenes.talk2car import read_commands
 from scenes.talk2radar.root import Talk2RadarRoot
-from tests.nuscenes_converter import convert
+from tools.nuscenes_converter import convert
 
 
 @pytest.fixture(scope="module")

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from bench.people_commands import main, run_people_commands
-from bench.people_frames import CommandFileError, FramePlacer, read_people_commands, side_of
+from bench.studies.people_commands import main, run_people_commands
+from bench.studies.people_frames import CommandFileError, FramePlacer, read_people_commands, side_of
 from model import DEFAULT_CHECKPOINT
 from scenes.geometry.classes import VOD
 from scenes.talk2radar.root import Talk2RadarRoot

@@ -15,8 +15,8 @@ from model.evaluation.predict import (
     scene_key,
     write_predictions,
 )
+from scenes.frame.kitti import read_label_file
 from scenes.geometry.calib import vod_lidar_calibration, vod_radar_calibration
-from scenes.talk2radar.kitti import read_label_file
 from scenes.talk2radar.root import Talk2RadarRoot, Talk2RadarWriter
 
 

@@ -26,8 +26,8 @@ from model.evaluation.predict_pool import (
     frame_groups,
     predictions,
 )
-from model.evaluation.report import class_noun_of, evaluate_predictions
 from model.evaluation.report_file import SECONDS
+from model.evaluation.talk2radar import class_noun_of, evaluate_predictions
 from model.evaluation.worker_watch import Liveness, PredictionWorkerError, WorkerWatch
 from scenes.talk2radar.root import Talk2RadarRoot
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 
 from model.evaluate import main as evaluate_main
-from scenes.talk2radar.kitti import outside_class_phrase
+from scenes.frame.kitti import outside_class_phrase
 from scenes.talk2radar.layout import LABEL, LIDAR_FOLDER, sample_file
 
 REPO = Path(__file__).resolve().parents[1]

@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 
 from app.navigation import FrameLoadError, FrameStore, Navigator
-from app.served_nuscenes import NuScenesSource
 from model.adapt.config import AdaptError
 from model.adapt.frames import UnlabelledFrames
 from scenes.datasets.nuscenes_frames import open_talk2car
+from scenes.datasets.source import NuScenesSource
 from scenes.geometry.classes import VOD
 from scenes.nuscenes.root import CAM_FRONT, LIDAR_TOP, NuScenesRoot
 from scenes.nuscenes.sensorfiles import (

@@ -19,8 +19,8 @@ from annotate.validation import ValidationReport
 from app.annotate_tab.formatting import checks_markdown, status_markdown
 from app.annotate_tab.hub import AnnotationHub
 from app.served import serve_root
-from app.served_nuscenes import NuScenesSource
 from app.text import md_text
+from scenes.datasets.source import NuScenesSource
 
 
 def test_status_and_checks_say_nothing_is_saved_when_saving_is_unavailable() -> None:

@@ -17,9 +17,10 @@ import pytest
 from annotate import Draft, StoreError
 from annotate.talk2car import Talk2CarStore
 from app.served import serve_root
-from app.served_nuscenes import NuScenesServed, NuScenesSource
+from app.served_nuscenes import NuScenesServed
+from scenes.datasets.source import NuScenesSource
+from scenes.frame import RootError
 from scenes.nuscenes.classes import model_class
-from scenes.talk2radar.layout import RootError
 
 
 @pytest.fixture()

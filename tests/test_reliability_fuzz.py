@@ -25,9 +25,11 @@ import pytest
 
 from model.evaluate import main
 from model.evaluation.files import EvaluationInputError, score_directories
+from scenes.frame import RootError
+from scenes.frame.kitti import LabelError, format_label_line, read_label_file
+from scenes.frame.sample_meta import SampleMeta
 from scenes.geometry.actors import Actor
 from scenes.geometry.calib import CalibrationError
-from scenes.talk2radar.kitti import LabelError, format_label_line, read_label_file
 from scenes.talk2radar.layout import (
     CALIB,
     LABEL,
@@ -41,7 +43,7 @@ from scenes.talk2radar.layout import (
     split_file,
 )
 from scenes.talk2radar.pointcloud import PointCloudError
-from scenes.talk2radar.root import RootError, SampleMeta, Talk2RadarRoot
+from scenes.talk2radar.root import Talk2RadarRoot
 
 SEED = 11
 CASES_PER_FILE = 40

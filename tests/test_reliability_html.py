@@ -17,8 +17,8 @@ from annotate.validation import Issue, Severity, ValidationReport
 from app.annotate_tab.formatting import checks_markdown, evidence_markdown, pairs_markdown
 from app.navigation import Frame, frame_markdown
 from app.text import md_text
+from scenes.frame import Sample
 from scenes.geometry.calib import vod_lidar_calibration
-from scenes.talk2radar.root import Sample
 from tests.markdown_helpers import OWN_TAGS, render, tags, visible
 
 HOSTILE = (

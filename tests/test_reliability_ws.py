@@ -314,7 +314,7 @@ SOAK_BOUND_MB = 40.0
 """RSS may grow at most this much from the first check to the last. Here (tiny frames, no camera
 image, this process's own allocations triggering full collections now and then) the code before
 the fix kept 8 to 30 departed sessions in memory at the checks and grew by about 18 MB; the
-long measurement with camera images: ``python -m bench.soak`` (docs/PERFORMANCE.md)."""
+long measurement with camera images: ``python -m bench.perf.soak`` (docs/PERFORMANCE.md)."""
 
 REAP_SECONDS = 10.0
 """How long a check waits for the departed sessions to be collected (the app's reaper runs 0.5 s

@@ -10,8 +10,8 @@ import pytest
 
 from model.evaluation.metrics import evaluate_frames
 from model.evaluation.report import DEPTH_BINS, PROMPT_TYPES, breakdown_by_depth, breakdown_by_type
+from scenes.frame.kitti import ObjectLabel, boxes_to_labels
 from scenes.geometry.calib import vod_lidar_calibration
-from scenes.talk2radar.kitti import ObjectLabel, boxes_to_labels
 
 FRAMES = 8
 """Frames per group, one object each."""

@@ -20,7 +20,7 @@ from model.evaluation.grounding import (
 from model.evaluation.report import ROW_NAMES, BaselineResult, build_report
 from model.evaluation.report_file import ReportFile, ReportFileError, SummaryFigures
 from model.evaluation.results_table import Row, by_depth_table, grounding_table, overall_table
-from scenes.talk2radar.kitti import ObjectLabel
+from scenes.frame.kitti import ObjectLabel
 
 REPO = Path(__file__).resolve().parents[1]
 

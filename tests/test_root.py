@@ -4,11 +4,12 @@ import numpy as np
 import pytest
 
 from scenes import Actor, SampleMeta, Talk2RadarRoot, Talk2RadarWriter
+from scenes.frame import RootError
+from scenes.frame.kitti import LabelError
 from scenes.geometry.calib import CalibrationError, vod_lidar_calibration, vod_radar_calibration
 from scenes.talk2radar import layout
-from scenes.talk2radar.kitti import LabelError
 from scenes.talk2radar.pointcloud import PointCloudError, read_points
-from scenes.talk2radar.root import RootError, sample_text
+from scenes.talk2radar.root import sample_text
 
 BOXES = np.array([[12.0, 3.0, -0.9, 4.2, 1.8, 1.5, 0.4], [20.0, -5.0, -0.85, 0.7, 0.6, 1.7, -2.9]])
 

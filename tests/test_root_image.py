@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from scenes import Talk2RadarRoot, Talk2RadarWriter
+from scenes.frame.image import ImageError, encode_jpeg, read_image
 from scenes.geometry.calib import vod_lidar_calibration, vod_radar_calibration
 from scenes.geometry.projection import scale_calibration
-from scenes.talk2radar.imagefile import ImageError, encode_jpeg, read_image
 
 BOX = np.array([[12.0, 3.0, -0.9, 4.2, 1.8, 1.5, 0.4]])
 

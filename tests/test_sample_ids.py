@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenes.talk2radar.layout import RootError, format_id, is_frame_id, parse_id, parse_split_list
+from scenes.frame import RootError
+from scenes.talk2radar.layout import format_id, is_frame_id, parse_id, parse_split_list
 from scenes.talk2radar.root import Talk2RadarRoot
 
 BAD = [

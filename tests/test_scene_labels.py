@@ -7,9 +7,9 @@ import pytest
 
 from model import LabelledBoxes
 from model.checkpoint import load_checkpoint
+from scenes.frame import RootError
 from scenes.geometry.actors import CLASSES
 from scenes.geometry.calib import IMAGE_SIZE, vod_lidar_calibration
-from scenes.talk2radar.layout import RootError
 from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.talk2radar.scene_labels import SceneLabels, class_index, fov_mask
 

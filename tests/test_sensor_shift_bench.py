@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from bench.sensor_shift import FrameCounts, main, prompt_f1, summarise
+from bench.studies.sensor_shift import FrameCounts, main, prompt_f1, summarise
 from model.checkpoint import save_checkpoint
 from model.evaluation.class_prompt_counts import PromptCount
 

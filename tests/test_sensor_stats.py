@@ -1,4 +1,4 @@
-"""bench.sensor_stats: the tolerance rule, the three-frame sampling interval and the table."""
+"""bench.studies.sensor_stats: the tolerance rule, the three-frame sampling interval and the table."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from bench.sensor_stats import (
+from bench.studies.sensor_stats import (
     REAL_FRAMES,
     FrameStats,
     Row,

@@ -14,7 +14,8 @@ import torch
 
 from model.training.data import DataSpecError, root_specs
 from model.training.referent_step import detection_targets, frame_prompts, in_bev_footprint
-from scenes.datasets.nuscenes_frames import NuScenesFrames, is_nuscenes_root
+from scenes.datasets.nuscenes_frames import NuScenesFrames
+from scenes.datasets.source import is_nuscenes_root
 from scenes.geometry.classes import NUSCENES
 from scenes.language.prompts import PromptConfig
 from scenes.nuscenes.root import NuScenesRoot
@@ -303,9 +304,9 @@ def _points(root, token):
 
 
 def test_detector_recall_counts_each_command_once_per_class_and_subset(nusc):
-    """``bench.talk2car_recall``: every kept val command counts once under ``all``, once under
+    """``bench.studies.talk2car_recall``: every kept val command counts once under ``all``, once under
     its referent's class and once under each subset its scene's description names."""
-    from bench.talk2car_recall import detector_recall
+    from bench.studies.talk2car_recall import detector_recall
     from model.evaluation.talk2car.report import subset_of
 
     root = NuScenesRoot(nusc)
@@ -330,7 +331,7 @@ def test_detector_recall_counts_each_command_once_per_class_and_subset(nusc):
 def test_detector_recall_of_a_nuscenes_class_checkpoint(nusc):
     """The referents are read into the checkpoint's classes (a ridden bicycle is a Bicycle) and
     scored at the distance of the class they are scored as."""
-    from bench.talk2car_recall import detector_recall
+    from bench.studies.talk2car_recall import detector_recall
 
     root = NuScenesRoot(nusc)
     # the train split's referents: a car and a ridden bicycle

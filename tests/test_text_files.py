@@ -20,12 +20,14 @@ import pytest
 from annotate import AnnotationStore, SourceFrame, default_box
 from annotate.draft import Draft
 from annotate.review import record_review
-from bench.language_cases import SUITE_FILE, SuiteError, load_suite
-from model.evaluate import write_json
+from bench.studies.language_cases import SUITE_FILE, SuiteError, load_suite
 from model.evaluation.files import load_label_dir, score_directories
+from model.evaluation.pipeline import write_json
 from model.evaluation.results_table import load_row
+from scenes.frame import RootError
+from scenes.frame.kitti import LabelError, read_label_file
+from scenes.frame.sample_meta import SampleMeta
 from scenes.geometry.calib import CalibrationError, read_calib
-from scenes.talk2radar.kitti import LabelError, read_label_file
 from scenes.talk2radar.layout import (
     CALIB,
     LABEL,
@@ -37,7 +39,7 @@ from scenes.talk2radar.layout import (
 )
 from scenes.talk2radar.poses import Pose, read_pose, write_pose
 from scenes.talk2radar.reviews import approved_ids
-from scenes.talk2radar.root import RootError, SampleMeta, Talk2RadarRoot
+from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.talk2radar.scene_labels import SceneLabels
 from scenes.utils.textfile import BOM, read_text_file, root_of
 

@@ -12,8 +12,8 @@ import torch
 from model.checkpoint import load_checkpoint
 from model.training.loop import TrainConfig, cosine_lr, epoch_batches, train
 from model.training.state import RunStateError
+from scenes.frame.kitti import read_label_file
 from scenes.synth.generate import SynthSettings, generate_root
-from scenes.talk2radar.kitti import read_label_file
 from scenes.talk2radar.layout import LIDAR_FOLDER, split_file
 from scenes.talk2radar.root import Talk2RadarRoot
 

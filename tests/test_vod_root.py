@@ -15,7 +15,8 @@ import pytest
 
 import launch
 from app.served import default_pairs_root
-from scenes.talk2radar.root import RootError, Talk2RadarRoot
+from scenes.frame import RootError
+from scenes.talk2radar.root import Talk2RadarRoot
 
 
 def _files(root: Path) -> dict[str, tuple[int, int]]:

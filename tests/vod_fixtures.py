@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw
 
+from scenes.frame.kitti import boxes_to_labels
 from scenes.geometry.calib import IMAGE_SIZE, vod_lidar_calibration, vod_radar_calibration
 from scenes.geometry.projection import project_box_edges
-from scenes.talk2radar.kitti import boxes_to_labels
 from scenes.talk2radar.vod_writer import VodWriter
 
 GROUND_Z = -1.7

@@ -123,7 +123,8 @@ class DraftEdits:
                 p.selected = draft.boxes[index].box_id
                 p.refresh(Part.SELECTION)
                 return
-            ready = box_at(p.ready_boxes, *hit) if p.offers_ready() else None
+            shown = p.offers_ready() and p.view.ready.visible  # (*Other annotations*)
+            ready = box_at(p.ready_boxes, *hit) if shown else None
             if ready is not None:
                 self.referents.by_hand()
                 self._add(p.ready_boxes[ready], p.ready_classes[ready], "ready-made box")

@@ -28,8 +28,8 @@ from annotate import AnnotationStore, StoreError
 from annotate.talk2car import Talk2CarStore
 from app.served import ServedRoot
 from app.session import ClientSession
+from scenes.frame import RootError
 from scenes.talk2radar.drives import Drives
-from scenes.talk2radar.layout import RootError
 
 log = logging.getLogger(__name__)
 

@@ -14,8 +14,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from app.session import SessionOptions
+from scenes.frame import Sample
 from scenes.geometry.boxes import wrap_yaw
-from scenes.talk2radar.root import Sample
 
 MATCH = 1e-6
 """Largest difference (m, rad) between a draft box and a labelled box that is the same box."""
@@ -44,7 +44,7 @@ def frame_labelled(options: SessionOptions, sample: Sample) -> Labelled | None:
     app has no labelled boxes, or no referent model, or the frame has none).
 
     Raises:
-        scenes.talk2radar.layout.RootError, scenes.talk2radar.kitti.LabelError: a missing or malformed label file.
+        scenes.frame.RootError, scenes.frame.kitti.LabelError: a missing or malformed label file.
     """
     source = options.labelled_boxes
     if source is None:

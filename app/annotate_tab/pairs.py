@@ -68,7 +68,7 @@ class PairActions:
         store = p.store
         with p.session.lock:
             draft, frame, version = p.editor.draft, p.frame, p.editor.version
-            split, annotator = p.w.split.value, p.w.annotator.value
+            split, annotator = p.pair_split() or p.w.split.value, p.w.annotator.value
             last = self._last_save
         if last is not None and last[0] == version:  # saved, nothing edited since
             self._tell_saved(last[1], again=True)

@@ -64,7 +64,7 @@ from app.annotate_tab.widgets import (
 from app.annotate_tab.writes import ServerWrites
 from app.session import ClientSession
 from app.text import md_text
-from scenes.talk2radar.root import Sample
+from scenes.frame import Sample
 
 log = logging.getLogger(__name__)
 
@@ -270,6 +270,7 @@ class AnnotationPanel:
                     )
                 if parts & Part.STATUS:
                     w.status.content = self._status(draft, visible)
+                    self._show_split()
                     w.back.visible = (
                         not visible and self.frame is not None and not is_pristine(draft)
                     )
@@ -305,6 +306,22 @@ class AnnotationPanel:
             note=self.note(),
         )
 
+    def pair_split(self) -> str | None:
+        """The split a new pair on the draft's frame must go into (a Talk2Car command: its
+        sample's, :meth:`app.served.ServedRoot.pair_split`); None: the person's *Split*."""
+        if self.frame is None or self.draft.sample_id is not None:
+            return None
+        return self.hub.served.pair_split(self.frame.sample)
+
+    def _show_split(self) -> None:
+        """*Split* shows a split the draft's frame fixes (it cannot be changed then:
+        :meth:`_show_checks`)."""
+        fixed, w = self.pair_split(), self.w
+        if fixed is not None and fixed not in w.split.options:
+            w.split.options = (*w.split.options, fixed)
+        if fixed is not None and w.split.value != fixed:
+            w.split.value = fixed
+
     def _show_ready(self, draft: Draft) -> None:
         """The ready-made boxes not in the draft: in the 3D view and the *Object* list."""
         w = self.w
@@ -326,6 +343,7 @@ class AnnotationPanel:
             boxes, classes = np.zeros((0, 7)), ()
         self.ready_boxes, self.ready_classes = boxes, classes
         self.view.show_ready(boxes, classes)
+        self.view.ready.visible = self.session.others_visible  # the Query tab's group toggle
         options = tuple(
             ready_option(i, c, b) for i, (c, b) in enumerate(zip(classes, boxes, strict=True))
         )
@@ -377,7 +395,7 @@ class AnnotationPanel:
         self.report = report
         w.checks.content = checks_markdown(self.report, saving=self.store is not None)
         w.save.disabled = self.store is None or self.frame is None or not self.report.ok
-        w.split.disabled = draft.sample_id is not None
+        w.split.disabled = draft.sample_id is not None or self.pair_split() is not None
 
     def _box_evidence(self, draft: Draft) -> tuple[BoxEvidence, ...]:
         """The evidence of the draft's boxes on its frame (cached for the same frame and boxes)."""

@@ -49,6 +49,8 @@ def build_annotation_tab(session: ClientSession, hub: AnnotationHub) -> Annotati
     session.add_frame_listener(lambda _session: referents.prefetch())
     referents.prefetch()
     session.add_answer_listener(panel.on_answer)
+    if session.query is not None:  # *Other annotations* shows or hides the ready-made boxes
+        session.query.show_others.on_update(lambda _: panel.guarded(panel.refresh))
     return panel
 
 

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Literal
 
-from scenes.geometry.classes import ALL_CLASSES
+from scenes.geometry.classes import ALL_CLASSES, object_class
 from scenes.utils.cli import add_options, from_args, option
 
 RadarChoice = Literal["auto", "radar_5frames", "radar_3frames", "radar", "none"]
@@ -28,13 +28,12 @@ NormStatistics = Literal["keep", "follow"]
 mode, AdaBN-like)."""
 
 DEFAULT_THRESHOLDS: dict[str, tuple[float, float]] = {
-    "Car": (0.5, 0.35),
-    "Pedestrian": (0.4, 0.3),
-    "Cyclist": (0.4, 0.3),
+    name: pair for name in ALL_CLASSES if (pair := object_class(name).pseudo_thresholds)
 }
-"""Positive threshold of each class in the first and in the last round (``--class-threshold``
-overrides one); a class not listed (a nuScenes-class checkpoint's trucks, cones...) takes
-``--threshold-start`` / ``--threshold-end``."""
+"""Positive threshold of each class in the first and in the last round, by class name: its
+:attr:`~scenes.geometry.classes.ObjectClass.pseudo_thresholds` (Car 0.5 to 0.35, Pedestrian and
+Cyclist 0.4 to 0.3); ``--class-threshold`` overrides one; a class without (a nuScenes-class
+checkpoint's trucks, cones...) takes ``--threshold-start`` / ``--threshold-end``."""
 
 
 class AdaptError(ValueError):

@@ -16,8 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from model.adapt.config import AdaptError
+from scenes.frame import RootError
 from scenes.geometry.ground import level_clouds
-from scenes.talk2radar.layout import VELODYNE, RootError, sample_dir, split_file
+from scenes.talk2radar.layout import VELODYNE, sample_dir, split_file
 from scenes.talk2radar.root import Talk2RadarRoot
 
 

@@ -35,6 +35,7 @@ import numpy as np
 
 from model.adapt.config import RoundPlan
 from scenes.geometry.boxes import bev_iou
+from scenes.geometry.ground import ground_under_boxes
 
 
 @dataclass(frozen=True)
@@ -202,11 +203,6 @@ __all__ = [
 ]
 
 
-GROUND_RING = 1.5
-"""Metres around a box's footprint whose LiDAR points tell the ground under it
-(:func:`ground_heights`)."""
-GROUND_MIN_POINTS = 8
-"""Fewer ring points than this: the box keeps its own height."""
 MAX_SEAT_SHIFT = 0.3
 """Metres a box may move in z to rest on the ground; a larger move (a ring without road points:
 a sidewalk, an occluded ground) leaves it where it was."""
@@ -214,32 +210,9 @@ a sidewalk, an occluded ground) leaves it where it was."""
 
 def ground_heights(boxes: np.ndarray, lidar: np.ndarray) -> np.ndarray:
     """``(K,)`` the ground height under each box ``(K, 7)`` (LiDAR frame) from the LiDAR points
-    ``(N, >=3)`` in a ring of :data:`GROUND_RING` m around its footprint: the median of the
-    lowest third of the ring's point heights (the road, not the objects standing on it); NaN
-    where the ring holds fewer than :data:`GROUND_MIN_POINTS` points."""
-    boxes = np.asarray(boxes, np.float64).reshape(-1, 7)
-    out = np.full(len(boxes), np.nan)
-    if not len(boxes) or not len(lidar):
-        return out
-    xyz = np.asarray(lidar[:, :3], np.float64)
-    for k, box in enumerate(boxes):
-        d = xyz[:, :2] - box[:2]
-        reach = np.hypot(box[3], box[4]) / 2 + GROUND_RING
-        near = np.flatnonzero((np.abs(d[:, 0]) <= reach) & (np.abs(d[:, 1]) <= reach))
-        if len(near) < GROUND_MIN_POINTS:
-            continue
-        c, s = np.cos(box[6]), np.sin(box[6])
-        along = d[near, 0] * c + d[near, 1] * s
-        across = -d[near, 0] * s + d[near, 1] * c
-        half_l, half_w = box[3] / 2, box[4] / 2
-        outside = (np.abs(along) > half_l) | (np.abs(across) > half_w)
-        inside_ring = (np.abs(along) <= half_l + GROUND_RING) & (
-            np.abs(across) <= half_w + GROUND_RING
-        )
-        z = np.sort(xyz[near[outside & inside_ring], 2])
-        if len(z) >= GROUND_MIN_POINTS:
-            out[k] = float(np.median(z[: max(1, len(z) // 3)]))
-    return out
+    ``(N, >=3)`` in a ring around its footprint (:func:`scenes.geometry.ground.ground_under_boxes`:
+    the object inside is left out); NaN where the ring holds too few points."""
+    return ground_under_boxes(lidar, boxes)
 
 
 def seat_on_ground(boxes: np.ndarray, lidar: np.ndarray) -> np.ndarray:

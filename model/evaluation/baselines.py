@@ -23,10 +23,10 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 
 from model.evaluation.grounding import CLASS_TAG, PromptBoxes
+from scenes.frame.sample_meta import SampleMeta
 from scenes.geometry.actors import Actor
 from scenes.geometry.classes import object_class
 from scenes.language.prompts import DEFAULT_REGION, ActorFeatures, ReferableRegion
-from scenes.talk2radar.root import SampleMeta
 
 NO_CLASS_NOUN = "the objects"
 """The class-noun prompt of a prompt that names no class."""

@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from model.evaluation.metrics import MIN_OVERLAPS
+from scenes.frame.kitti import ObjectLabel
 from scenes.geometry.boxes import bev_iou, iou3d
 from scenes.geometry.calib import (
     Calibration,
@@ -21,7 +22,6 @@ from scenes.geometry.calib import (
     boxes_camera_to_lidar,
 )
 from scenes.geometry.classes import VOD, ClassSet, object_class
-from scenes.talk2radar.kitti import ObjectLabel
 
 if TYPE_CHECKING:
     from model.core.features import SceneFeatures

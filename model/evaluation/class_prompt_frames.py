@@ -7,9 +7,10 @@ from collections.abc import Sequence
 
 from PIL import Image
 
+from scenes.frame import RootError, Sample
 from scenes.geometry.calib import IMAGE_SIZE
 from scenes.talk2radar.layout import ID_WIDTH, LABEL, is_frame_id, sample_dir
-from scenes.talk2radar.root import RootError, Sample, Talk2RadarRoot
+from scenes.talk2radar.root import Talk2RadarRoot
 
 
 def image_size_of(sample: Sample) -> tuple[int, int]:

@@ -66,9 +66,10 @@ from model.evaluation.class_prompt_counts import (
 )
 from model.evaluation.class_prompt_frames import distinct_scenes, image_size_of, root_frame_ids
 from model.protocol import GroundingModel, model_classes
+from scenes.frame import RootError, Sample
 from scenes.geometry.calib import IMAGE_SIZE
 from scenes.geometry.projection import in_camera_view
-from scenes.talk2radar.root import LIDAR_FOLDER, RADAR_FOLDERS, RootError, Sample, Talk2RadarRoot
+from scenes.talk2radar.root import LIDAR_FOLDER, RADAR_FOLDERS, Talk2RadarRoot
 from scenes.utils.cli import add_options, from_args, option, report_errors
 from scenes.utils.durable import atomic_write_text
 

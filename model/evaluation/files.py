@@ -9,8 +9,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from model.evaluation.metrics import VodResult, evaluate_frames
+from scenes.frame.kitti import LabelError, ObjectLabel, parse_label_line, read_label_file
 from scenes.geometry.classes import VOD, ClassSet
-from scenes.talk2radar.kitti import LabelError, ObjectLabel, parse_label_line, read_label_file
 from scenes.talk2radar.layout import ID_WIDTH, format_id, is_frame_id
 from scenes.utils.textfile import read_text_file
 
@@ -84,7 +84,7 @@ def load_label_dir(folder: str | Path) -> dict[str, list[ObjectLabel]]:
     Raises:
         EvaluationInputError: the folder is missing, holds no ``.txt`` files, or holds an entry
             that is not a readable ``<5-digit id>.txt`` file (see :func:`_frame_files`).
-        scenes.talk2radar.kitti.LabelError: an unreadable, non-UTF-8 or binary file, or a malformed line
+        scenes.frame.kitti.LabelError: an unreadable, non-UTF-8 or binary file, or a malformed line
             (file and line named).
     """
     folder = Path(folder)
@@ -101,7 +101,7 @@ def read_prediction_file(path: str | Path) -> list[ObjectLabel]:
     which silently ranks it last, so here it is an error.
 
     Raises:
-        scenes.talk2radar.kitti.LabelError: an unreadable, non-UTF-8 or binary file, a malformed line, or a
+        scenes.frame.kitti.LabelError: an unreadable, non-UTF-8 or binary file, a malformed line, or a
             line without a score.
     """
     path = Path(path)
@@ -132,7 +132,7 @@ def load_prediction_dir(
     Raises:
         EvaluationInputError: ``folder`` is missing, holds files for frames not in
             ``frame_ids``, or an entry that is not a readable ``<5-digit id>.txt`` file.
-        scenes.talk2radar.kitti.LabelError: an unreadable file, a malformed line or a line without a score
+        scenes.frame.kitti.LabelError: an unreadable file, a malformed line or a line without a score
             (file and line named).
     """
     folder = Path(folder)

@@ -27,8 +27,8 @@ from model.evaluation.protocol import (
     unknown_class_counts,
 )
 from model.evaluation.results import APValue, AreaResult, ClassResult, VodResult
+from scenes.frame.kitti import ObjectLabel
 from scenes.geometry.classes import VOD, ClassSet
-from scenes.talk2radar.kitti import ObjectLabel
 
 
 def evaluate_area(

@@ -2,9 +2,9 @@
 score (issue 50 item 4).
 
 A Talk2Radar ``label_2`` lists a prompt's referents. They are read into the model's class set
-(:func:`scenes.talk2radar.kitti.labels_to_boxes`): the three-class checkpoint reads no
+(:func:`scenes.frame.kitti.labels_to_boxes`): the three-class checkpoint reads no
 ``Bicycle`` of a ``--classes nuscenes`` root, and a ``Truck`` or ``Tram`` label of a three-class
-root is no box of its set. :func:`scenes.talk2radar.kitti.outside_class_counts` counts what is
+root is no box of its set. :func:`scenes.frame.kitti.outside_class_counts` counts what is
 left out (``DontCare`` aside), and ``python -m model.evaluate`` decides:
 
 - **All referents outside the set** (a prompt about three bicycles for the three-class model):
@@ -38,7 +38,7 @@ from model.evaluation.report_file import (
     OUTSIDE_REFERENTS,
     OUTSIDE_SCORED,
 )
-from scenes.talk2radar.kitti import outside_class_phrase
+from scenes.frame.kitti import outside_class_phrase
 
 SHOWN_IDS = 5
 """Sample ids of the prompts reported apart that the line names (the JSON lists all)."""

@@ -30,9 +30,10 @@ from tqdm import tqdm
 from model.checkpoint_meta import CheckpointMeta
 from model.core.labelled import LabelledBoxes
 from model.evaluation.grounding import PromptBoxes
+from scenes.frame import Sample
+from scenes.frame.kitti import ObjectLabel, boxes_to_labels, write_label_file
 from scenes.geometry.calib import IMAGE_SIZE, Calibration, bottom_centres
-from scenes.talk2radar.kitti import ObjectLabel, boxes_to_labels, write_label_file
-from scenes.talk2radar.root import Sample, Talk2RadarRoot
+from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.utils.lru import LRUCache
 
 if TYPE_CHECKING:

@@ -67,7 +67,8 @@ from model.evaluation.worker_watch import (
     StartQueue,
     WorkerWatch,
 )
-from scenes.talk2radar.root import Sample, Talk2RadarRoot
+from scenes.frame import Sample
+from scenes.talk2radar.root import Talk2RadarRoot
 
 if TYPE_CHECKING:
     from model.tpcnet import TPCNet

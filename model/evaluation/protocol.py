@@ -74,8 +74,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from scenes.frame.kitti import ObjectLabel
 from scenes.geometry.classes import PRESETS, VOD, ClassSet
-from scenes.talk2radar.kitti import ObjectLabel
 
 NUM_SAMPLE_POINTS = 41
 """Slots of the precision / recall / aos curves (recall 0, 1/40, ..., 1)."""

@@ -1,4 +1,6 @@
-"""Ground a whole split and score it: the official VoD result plus the paper's breakdowns.
+"""The figures of a Talk2Radar split (:class:`GroundingReport`): the official VoD result plus the
+paper's breakdowns, the grounding metrics and the baselines beside them; the split is grounded and
+scored by :mod:`model.evaluation.talk2radar`.
 
 - Overall: :func:`model.evaluation.metrics.evaluate_frames` over every frame of the split.
 - Per prompt type (the paper's table III): frames grouped by their prompt's type tags (``depth``,
@@ -18,44 +20,21 @@
   (:mod:`model.evaluation.outside_classes`: a prompt with only such referents is reported apart,
   one with some keeps them as referents the model cannot answer).
 
-Thresholds: the model grounds each prompt once, decoding at ``min(decode, operating)``; the boxes
-scoring at least the decode threshold (``score_threshold``, default
-:func:`model.evaluation.predict.decode_threshold`, what ``ground`` returns by itself) make the prediction files and the mAP (unchanged by the operating
-threshold), the boxes scoring at least the operating threshold make the answer set.
+Thresholds: :mod:`model.evaluation.talk2radar`.
 
 All AP values are the entire-area 3D mAP at 11 recall points unless a table says otherwise.
 """
 
 from __future__ import annotations
 
-import contextlib
-import typing
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 
-from model.core.labelled import LabelledBoxes
-from model.evaluation.baselines import class_noun_prompt, named_class, oracle_boxes, unsensed_ids
-from model.evaluation.grounding import (
-    CandidateSource,
-    GroundingMetrics,
-    PromptBoxes,
-    PromptOutcome,
-    format_grounding_tables,
-    grounding_metrics,
-    prompt_outcome,
-)
+from model.evaluation.grounding import GroundingMetrics, format_grounding_tables
 from model.evaluation.metrics import VodResult, evaluate_frames
 from model.evaluation.outside_classes import OutsideClasses
-from model.evaluation.predict import (
-    PredictSettings,
-    decode_threshold,
-    operating_threshold,
-    prediction_labels,
-)
-from model.evaluation.predict_pool import predictions
 from model.evaluation.report_file import (
     BASELINES,
     BASELINES_KEY,
@@ -70,22 +49,8 @@ from model.evaluation.report_file import (
     SECONDS,
     BaselineName,
 )
-from model.evaluation.worker_watch import DEFAULT_LIVENESS, Liveness
-from model.protocol import model_classes
-from scenes.geometry.actors import Actor
+from scenes.frame.kitti import ObjectLabel
 from scenes.geometry.classes import VOD, ClassSet
-from scenes.language.prompts import infer_tags
-from scenes.talk2radar.kitti import (
-    ObjectLabel,
-    format_label_line,
-    outside_class_counts,
-    parse_label_line,
-)
-from scenes.talk2radar.root import Sample, Talk2RadarRoot
-from scenes.talk2radar.scene_labels import SceneLabels
-
-if TYPE_CHECKING:
-    from model.tpcnet import TPCNet
 
 PROMPT_TYPES: tuple[str, ...] = ("depth", "velocity", "motion", "position")
 DEPTH_BINS: tuple[tuple[float, float], ...] = tuple((10.0 * i, 10.0 * (i + 1)) for i in range(6))
@@ -93,20 +58,6 @@ DEPTH_BINS: tuple[tuple[float, float], ...] = tuple((10.0 * i, 10.0 * (i + 1)) f
 
 ROW_NAMES: dict[str, str] = {"model": "model", "class_noun": "class noun", "oracle": "oracle"}
 """Row labels of the printed grounding tables."""
-
-
-@dataclass
-class AnswerSet:
-    """What one answerer (the model or a baseline) gave on a split, prompt after prompt.
-
-    Attributes:
-        outcomes: Its outcome per prompt (:func:`model.evaluation.grounding.prompt_outcome`).
-        labels: Frame id -> its answer as prediction labels (baselines: what their files would
-            hold, scored with the official metric).
-    """
-
-    outcomes: list[PromptOutcome] = field(default_factory=list)
-    labels: dict[str, list[ObjectLabel]] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -263,194 +214,6 @@ def breakdown_by_depth(
         count = sum(len(v) for v in gt_bin.values())
         out[f"{lo:g}-{hi:g}"] = (count, evaluate_frames(gt_bin, dt_bin, classes=classes))
     return out
-
-
-def _as_written(labels: Sequence[ObjectLabel]) -> list[ObjectLabel]:
-    """Labels rounded as a prediction file holds them (4 decimals), so that baselines are scored
-    on the same footing as the model's files."""
-    return [parse_label_line(format_label_line(lab, decimals=4)) for lab in labels]
-
-
-def _labels(boxes: PromptBoxes, min_score: float, sample: Sample) -> list[ObjectLabel]:
-    kept = boxes.above(min_score)
-    return _as_written(prediction_labels(kept.boxes, kept.classes, kept.scores, sample.calib))
-
-
-def sample_tags(sample: Sample) -> frozenset[str]:
-    """The sidecar's prompt type tags, else :func:`scenes.language.prompts.infer_tags` of the prompt."""
-    meta = sample.meta
-    if meta is not None and meta.tags:
-        return frozenset(meta.tags)
-    return infer_tags(sample.prompt or "")
-
-
-def class_noun_of(sample: Sample) -> tuple[str]:
-    """The class-noun baseline's prompt for a sample (:func:`model.evaluation.baselines.
-    class_noun_prompt` of the class its prompt names): the extra prompt grounded on its scene."""
-    return (class_noun_prompt(named_class(sample_tags(sample), sample.classes)),)
-
-
-@dataclass(frozen=True)
-class SceneLabelCandidates:
-    """The candidates of ``--candidates labels``: a frame's labelled boxes from the scene labels
-    (a picklable callable, for prediction workers)."""
-
-    scene_labels: SceneLabels
-
-    def __call__(self, sample: Sample) -> LabelledBoxes:
-        objects = self.scene_labels.load(sample.sample_id)
-        return LabelledBoxes(*objects.metric(), objects.classes)
-
-
-def evaluate_predictions(
-    model: TPCNet,
-    root: Talk2RadarRoot,
-    ids: Sequence[str],
-    progress: bool = True,
-    score_threshold: float | None = None,
-    operating: float | None = None,
-    baselines: bool = False,
-    scene_labels: SceneLabels | None = None,
-    candidates: CandidateSource = "detector",
-    workers: int = 1,
-    liveness: Liveness = DEFAULT_LIVENESS,
-) -> GroundingReport:
-    """Ground every sample of ``ids`` and score the answers.
-
-    Args:
-        score_threshold: Decode threshold of the prediction files and the mAP (None:
-            :func:`model.evaluation.predict.decode_threshold`).
-        operating: Operating threshold of the set metrics (None:
-            :func:`model.evaluation.predict.operating_threshold`).
-        baselines: Also score the class-noun prompt and the language-blind oracle (the oracle
-            needs every frame's objects: the scene labels where given, else the sidecar; without
-            either it is left out with a note).
-        scene_labels: The View-of-Delft root with every frame's full labels. Where given, nothing
-            under the root's ``meta/`` is read.
-        candidates: ``"detector"`` (the detector's proposals) or ``"labels"`` (the frame's
-            labelled boxes of the three classes: grounding apart from detection; needs
-            ``scene_labels``).
-        workers: Processes that predict (:func:`model.evaluation.predict_pool.predictions`;
-            1: this process, the model as given; more: CPU only, the same predictions).
-        liveness: How long workers may go without a result
-            (:class:`model.evaluation.worker_watch.Liveness`).
-    """
-    if not ids:
-        raise ValueError(f"{root.path}: no samples to evaluate")
-    decode = decode_threshold(model) if score_threshold is None else float(score_threshold)
-    op = operating_threshold(model) if operating is None else float(operating)
-    if not 0.0 <= op < 1.0:
-        raise ValueError(f"operating threshold must be in [0, 1), got {op}")
-    ground_at = min(decode, op)
-    if candidates not in typing.get_args(CandidateSource):
-        raise ValueError(f"candidates must be detector or labels, got {candidates!r}")
-    if candidates == "labels" and scene_labels is None:
-        raise ValueError(
-            "candidates 'labels' need the frames' full labels (--scene-labels VOD_ROOT): a "
-            "Talk2Radar label_2 lists only the referents"
-        )
-    classes = model_classes(model)
-    if root.classes != classes or (scene_labels is not None and scene_labels.classes != classes):
-        raise ValueError(
-            f"{root.path}: labels read into the {root.classes.name!r} class set given to a "
-            f"model of the {classes.name!r} class set (open the root with the model's)"
-        )
-    if scene_labels is not None and root.sidecar:
-        root = Talk2RadarRoot(root.path, radar=root.radar_folder, sidecar=False, classes=classes)
-
-    gt: dict[str, list[ObjectLabel]] = {}
-    dt: dict[str, list[ObjectLabel]] = {}
-    tags: dict[str, frozenset[str]] = {}
-    seconds = []
-    answers = AnswerSet()
-    base: dict[BaselineName, AnswerSet] = {name: AnswerSet() for name in BASELINES}
-    no_meta: list[str] = []
-    outside: dict[str, dict[str, int]] = {}  # sample id -> its referents outside the set
-    apart: list[str] = []  # prompts whose referents all lie outside the set: not scored
-    settings = PredictSettings(
-        score_threshold=ground_at,
-        min_label_score=decode,
-        candidates=None
-        if scene_labels is None or candidates != "labels"
-        else SceneLabelCandidates(scene_labels),
-        extra_prompts=class_noun_of if baselines else None,
-    )
-    stream = predictions(
-        model, root, ids, settings, workers=workers, progress=progress, liveness=liveness
-    )
-    with contextlib.closing(stream):  # an error or Ctrl-C here stops the workers at once
-        for pred in stream:
-            sample = pred.sample
-            sid = sample.sample_id
-            gt[sid] = list(sample.labels)
-            dt[sid] = _as_written(pred.labels)  # as the files will hold them (rescored at no cost)
-            tags[sid] = sample_tags(sample)
-            seconds.append(pred.seconds)
-            where = f"{root.path}: sample {sid}"
-            referents = PromptBoxes.make(sample.boxes, sample.classes, source=f"{where} label_2")
-            answer = PromptBoxes.make(
-                pred.boxes, pred.classes, pred.scores, source=f"{where} model"
-            )
-            beyond = outside_class_counts(sample.labels, classes)
-            if beyond:
-                outside[sid] = beyond
-            scored = not beyond or len(referents) > 0  # else: reported apart, never scored
-            if not scored:
-                apart.append(sid)
-            missed = sum(beyond.values())
-            if scored:
-                answers.outcomes.append(
-                    prompt_outcome(sid, tags[sid], answer, referents, op, missed)
-                )
-            if not baselines:
-                continue
-            cls = named_class(tags[sid], sample.classes)
-            noun_boxes = pred.extra[class_noun_prompt(cls)]
-            base["class_noun"].labels[sid] = _labels(noun_boxes, decode, sample)
-            if scored:
-                base["class_noun"].outcomes.append(
-                    prompt_outcome(sid, tags[sid], noun_boxes, referents, op, missed)
-                )
-            if scene_labels is not None:
-                boxes, labels = scene_labels.load(sid).metric()
-                objects = [
-                    Actor(i, classes.names[int(lab)], box, np.zeros(2))
-                    for i, (box, lab) in enumerate(zip(boxes, labels, strict=True))
-                ]
-                oracle = oracle_boxes(objects, cls)
-            elif sample.meta is None:
-                no_meta.append(sid)
-                continue
-            else:
-                skip = unsensed_ids(sample.meta, source=f"{root.path / 'meta' / sid}.json")
-                oracle = oracle_boxes(sample.meta.actors, cls, exclude=skip)
-            base["oracle"].labels[sid] = _labels(oracle, decode, sample)
-            if scored:
-                base["oracle"].outcomes.append(
-                    prompt_outcome(sid, tags[sid], oracle, referents, op, missed)
-                )
-    report = build_report(gt, dt, tags, tuple(seconds), classes)
-    found: dict[BaselineName, BaselineResult] = {}
-    notes: dict[BaselineName, str] = {}
-    if baselines:
-        if no_meta:
-            notes["oracle"] = (
-                f"{len(no_meta)} sample(s) have no meta sidecar listing the frame's actors "
-                f"(e.g. {root.path / 'meta' / (no_meta[0] + '.json')})"
-            )
-        for name in BASELINES:
-            if name not in notes:
-                found[name] = BaselineResult(
-                    result=evaluate_frames(gt, base[name].labels, classes=classes),
-                    grounding=grounding_metrics(base[name].outcomes, op),
-                )
-    return replace(
-        report,
-        grounding=grounding_metrics(answers.outcomes, op),
-        baselines=found,
-        notes=notes,
-        outside=OutsideClasses.of(classes.name, outside, tuple(apart)),
-    )
 
 
 def build_report(

@@ -46,9 +46,9 @@ from model.core.features import (
 from model.core.labelled import anchor_scores
 from model.head.detector import C3DRecHead, HeadOutput
 from model.head.targets import BatchTargets, collate_targets, draw_targets
-from model.nets.baca import build_fusion
 from model.nets.backbone import SecondBackbone
 from model.nets.fpn import SecondFpn
+from model.nets.fusion import build_fusion
 from model.nets.pillars import PillarEncoder
 
 

@@ -46,7 +46,7 @@ def default_device() -> str:
 
 LABEL_PROMPTS = 24
 """``--label-prompts`` when a root has scene labels and the flag is not given: prompts generated
-per frame from its labelled boxes beside its given one (docs/RESULTS.md, "Real-format roots":
+per frame from its labelled boxes beside its given one (docs/RESULTS_HISTORY.md, "Real-format roots":
 with 1,080 given prompts the referent stage learns the class and little more; with 24 such
 prompts it learns the attributes)."""
 
@@ -61,14 +61,14 @@ TALK2CAR_PROMPTS_PER_SCENE = 16
 """``--prompts-per-scene`` when every root is a nuScenes root with Talk2Car commands and the flag
 is not given: a sample holds several commands beside its :data:`LABEL_PROMPTS` label prompts, and
 with 4 a step a command was drawn about 4 times in a 30-epoch ``--freeze-scene`` run (docs/
-RESULTS.md, "Talk2Car on synthetic nuScenes roots": top-1 and the step's cost measured)."""
+RESULTS_HISTORY.md, "Talk2Car on synthetic nuScenes roots": top-1 and the step's cost measured)."""
 
 TALK2CAR_LABEL_PROMPTS = 96
 """The most ``--label-prompts`` a run on nuScenes roots with Talk2Car commands gets when the flag is
 not given (:func:`talk2car_label_prompts`): a Talk2Car root of few samples teaches a referent stage
 learnt from it (``--freeze-scene --init-detector``) more the more sentences about each sample it
 reads: 96 label prompts a sample instead of :data:`LABEL_PROMPTS` gave 69.0 % top-1 against 68.0 %
-on 2,125 val commands of another seed (docs/RESULTS.md, "Talk2Car on synthetic nuScenes roots"),
+on 2,125 val commands of another seed (docs/RESULTS_HISTORY.md, "Talk2Car on synthetic nuScenes roots"),
 for about a minute more of prompt encoding."""
 
 TALK2CAR_LABEL_BUDGET = 96 * 170
@@ -90,7 +90,7 @@ TALK2CAR_REFERENT_DROPOUT = 0.0
 """``--referent-dropout`` when every root is a nuScenes root with Talk2Car commands and the flag is
 not given (the preset's ``ReferentConfig.dropout`` otherwise). A referent stage learnt on a
 root's cached samples gains nothing from dropout inside its attention blocks, and dropout's random
-masks are a third of a cached step's time on the CPU (docs/RESULTS.md, "Talk2Car on synthetic
+masks are a third of a cached step's time on the CPU (docs/RESULTS_HISTORY.md, "Talk2Car on synthetic
 nuScenes roots")."""
 
 
@@ -441,7 +441,7 @@ FREEZE_SCENE_THREADS = 1
 hold the cores (:func:`freeze_scene_threads`). Its steps are many small operations on cached
 candidates, and torch's thread pool slows down several times over when another job takes a core:
 measured on the 2-core machine with another training job running, 8 cached nuScenes scenes and
-80 steps took 50 s with 1 thread against 209 s with 2 (docs/RESULTS.md, "Talk2Car on synthetic
+80 steps took 50 s with 1 thread against 209 s with 2 (docs/RESULTS_HISTORY.md, "Talk2Car on synthetic
 nuScenes roots")."""
 
 IDLE_LOAD = 0.5

@@ -11,7 +11,7 @@ never reads a sidecar; a synthetic root with its sidecar trains on generated pro
 fine-tune on a user's: ``--data data/synth --data T2R --scene-labels none --scene-labels VOD``.
 
 A ``--data`` root holding a ``v1.0-*`` folder is a nuScenes root (found automatically,
-:func:`scenes.datasets.nuscenes_frames.is_nuscenes_root`); it trains on the Talk2Car commands of
+:func:`scenes.datasets.source.root_family`); it trains on the Talk2Car commands of
 the matching ``--talk2car`` folder (paired with the ``--data`` roots in order, ``none`` for a
 Talk2Radar root), every annotation of a commanded sample a detection target
 (:class:`scenes.datasets.nuscenes_frames.NuScenesFrames`).
@@ -32,7 +32,9 @@ import numpy as np
 from torch.utils.data import Dataset
 
 from scenes.datasets.frames import FrameDataset, FrameItem
-from scenes.datasets.nuscenes_frames import NuScenesFrames, is_nuscenes_root, open_talk2car
+from scenes.datasets.nuscenes_frames import NuScenesFrames, open_talk2car
+from scenes.datasets.source import NUSCENES, root_family
+from scenes.frame import RootError
 from scenes.geometry.classes import VOD, ClassSet
 from scenes.nuscenes.talk2car import CommandFileError, commanded_samples
 from scenes.talk2radar.scene_labels import SceneLabels
@@ -47,7 +49,7 @@ is this over its commanded training samples, between 1 and :data:`TALK2CAR_MAX_W
 seen several times an epoch, since one pass an epoch under-trains a referent stage learnt from
 its commands (``--freeze-scene --init-detector``: 30 epochs of one pass over 170 samples reach
 63.7 % top-1 on 2,125 val commands of another seed, of two passes 66.7 %, of three 70.1 % with
-:data:`model.training.config.TALK2CAR_LABEL_PROMPTS` label prompts; docs/RESULTS.md, "Talk2Car on
+:data:`model.training.config.TALK2CAR_LABEL_PROMPTS` label prompts; docs/RESULTS_HISTORY.md, "Talk2Car on
 synthetic nuScenes roots"); a root of 510 samples or more (the release: about 7,000) is seen once,
 so that a 30-epoch run's length grows with its samples no faster than it must."""
 
@@ -123,11 +125,14 @@ def root_specs(
             )
     out = []
     for i, path in enumerate(data):
-        nuscenes = is_nuscenes_root(path)
         labels = scene_labels[i] if i < len(scene_labels) else None
         labels = None if labels in (None, NO_SCENE_LABELS) else labels
         commands = talk2car[i] if i < len(talk2car) else None
         commands = None if commands in (None, NO_SCENE_LABELS) else commands
+        try:
+            nuscenes = root_family(path, commands, commands_required=True) == NUSCENES
+        except RootError as exc:
+            raise DataSpecError(str(exc)) from exc
         samples = None
         if nuscenes and commands is not None:
             try:
@@ -140,16 +145,6 @@ def root_specs(
             weight = talk2car_weight(samples) if samples is not None else 1.0
         if not math.isfinite(weight) or weight <= 0:
             raise DataSpecError(f"--data-weight {weights[i]!r} of {path}: must be a number > 0")
-        if nuscenes and commands is None:
-            raise DataSpecError(
-                f"--data {path} is a nuScenes root (it holds a v1.0-* folder): give its Talk2Car "
-                "command folder with --talk2car DIR (the folder holding {split}_commands.json)"
-            )
-        if commands is not None and not nuscenes:
-            raise DataSpecError(
-                f"--talk2car {commands} pairs with --data {path}, which is not a nuScenes root "
-                "(no v1.0-* folder in it); give 'none' for a Talk2Radar root"
-            )
         if nuscenes and labels is not None:
             raise DataSpecError(
                 f"--scene-labels {labels} pairs with the nuScenes root {path}, whose own "

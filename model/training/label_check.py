@@ -2,7 +2,7 @@
 
 :func:`check_labels` refuses a root none of whose training frames has a label of the model's class
 set (it would train to nothing and report mAP 0), and counts the labels it holds of classes outside
-that set: what the readers leave out (:func:`scenes.talk2radar.kitti.labels_to_boxes`; a ``Truck``
+that set: what the readers leave out (:func:`scenes.frame.kitti.labels_to_boxes`; a ``Truck``
 referent of a three-class root, the bicycles of a ``--classes nuscenes`` root for a three-class
 model, VoD's riders and bicycle racks in ``--scene-labels``). ``python -m model.train`` says that
 count once, on rank 0 (:func:`outside_line`), so that no label is dropped without a word.
@@ -14,8 +14,8 @@ from pathlib import Path
 
 from model.training.config import TrainingError
 from model.training.data import RootSpec
+from scenes.frame.kitti import outside_class_counts, outside_class_phrase, read_label_file
 from scenes.geometry.classes import VOD, ClassSet
-from scenes.talk2radar.kitti import outside_class_counts, outside_class_phrase, read_label_file
 from scenes.talk2radar.layout import LABEL, sample_dir, sample_file, split_file
 from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.talk2radar.scene_labels import SceneLabels

@@ -107,7 +107,7 @@ def _log(out: Path, record: dict) -> None:
 
 def validate(model: torch.nn.Module, cfg: TrainConfig, root: Talk2RadarRoot) -> dict:
     """3D mAP (entire area, 11-point) of ``model`` on the validation split."""
-    from model.evaluation.report import evaluate_predictions  # late: only rank 0 validates
+    from model.evaluation.talk2radar import evaluate_predictions  # late: only rank 0 validates
 
     ids = root.ids(cfg.val_split)
     if cfg.val_limit:

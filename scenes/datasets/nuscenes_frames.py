@@ -47,18 +47,6 @@ RADAR_SWEEPS = 5
 k-th older one): the model's radar channels are View-of-Delft's five accumulated scans with their
 scan index, and nuScenes' single sweeps are sparse (docs/TALK2CAR.md, sections 3 and 4)."""
 
-VERSION_PREFIX = "v1.0-"
-"""A nuScenes root holds one folder named ``v1.0-<version>`` (trainval, mini, test) of tables."""
-
-
-def is_nuscenes_root(path: str | Path) -> bool:
-    """Whether ``path`` is a folder holding a ``v1.0-*`` table folder (a nuScenes root as the
-    release comes); a Talk2Radar root never does."""
-    folder = Path(path)
-    if not folder.is_dir():
-        return False
-    return any(p.is_dir() and p.name.startswith(VERSION_PREFIX) for p in folder.iterdir())
-
 
 class ReferentLike(Protocol):
     """What is read of ``scenes.nuscenes.talk2car.Referent``: the referred annotation."""
@@ -252,6 +240,5 @@ __all__ = [
     "RADAR_SWEEPS",
     "NuScenesFrames",
     "frame_actors",
-    "is_nuscenes_root",
     "open_talk2car",
 ]

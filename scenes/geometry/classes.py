@@ -14,11 +14,14 @@ Facts per class (:class:`ObjectClass`): the name (model, label files, tables), t
 uses for it (the answer words of the app), the mean size ``(l, w, h)`` in metres, the evaluator's
 minimum overlaps and KITTI's neighbouring label, the centre distances of a match (training's and
 the class-prompt evaluation's), the legend colour, whether it has a heading, and the label names
-and nuScenes categories that map onto it. The size statistics of the nuScenes
+and nuScenes categories that map onto it, and the per-class numbers of the tools that treat
+classes differently (a box fit's minimum footprint, self-training's pseudo-label thresholds,
+Talk2Car's overlaps and top-1 distance). The size statistics of the nuScenes
 classes are the training-set means nuScenes-based detectors publish as anchor sizes; those of the
 three VoD classes are the ones this project's synthetic world draws around. The detector has no
 size prior (it regresses ``log l, log w, log h`` directly), so the mean size is the synthetic
-world's and the documentation's. Each fact has one home, here.
+world's, the documentation's and the typical size of a box an annotator places or fits. Each
+fact has one home, here.
 """
 
 from __future__ import annotations
@@ -58,7 +61,10 @@ class ObjectClass:
             ``(0.5, 0.25, 0.25)``.
         match_distance: Metres within which a detection's BEV centre is this class's actor
             (training's candidate matching, the language suite's scoring).
-        color: ``(r, g, b)`` of the app's legend, boxes and heatmap channel.
+        color: ``(r, g, b)`` of the app's legend, boxes and heatmap channel. The colours of a
+            set are told apart by a reader with normal vision, deuteranopia or protanopia
+            (CIEDE2000 at least 20 / 10 between any two, and from the app's referent green:
+            ``tests/test_class_colors.py``, :mod:`app.color_vision`).
         heading: Whether the class has a heading: False for a rotationally symmetric object
             (a traffic cone), whose yaw target is 0 and whose decoded yaw is 0.
         label_names: Lower-case label-file names (KITTI / View-of-Delft) that map onto the class;
@@ -81,6 +87,20 @@ class ObjectClass:
             ``pedestrian.moving`` / ``pedestrian.standing``, ``cycle.with_rider`` /
             ``cycle.without_rider``: a still two-wheeler counts as parked, a VoD Cyclist is
             ridden by definition); empty: the class takes none (traffic cones, barriers).
+        min_footprint: The plausible minimum ``(length, width)`` in metres of the class's box
+            seen from above, below which a box fit with the class completes the hidden part
+            (:mod:`annotate.fitting`, ``FitConfig.class_min_sizes``), or None (no completion).
+            Car 3.5 x 1.5 (a small city car; synthetic cars are 3.5-5.0 x 1.6-2.0), Pedestrian
+            0.4 x 0.4 (a child's footprint), Cyclist 1.5 x 0.5 (a bicycle, a rider's shoulders).
+        pseudo_thresholds: The positive score threshold of a pseudo-label of the class in the
+            first and in the last self-training round (:mod:`model.adapt`), or None (the run's
+            ``--threshold-start`` / ``--threshold-end``).
+        talk2car_overlaps: MSSG's IoU thresholds ``(AP_A, AP_B)`` of a Talk2Car referent of the
+            class (:mod:`model.evaluation.talk2car.metrics`: KITTI's moderate and loose
+            overlaps), on the classes the metric is defined for (those every class is
+            ``scored_as``); None on the others.
+        top1_distance: Talk2Car's top-1: the largest BEV centre distance (m) of the best box from
+            a referent of the class, on the same classes; None on the others.
     """
 
     name: str
@@ -98,6 +118,10 @@ class ObjectClass:
     neighbour: str | None = None
     scored_as: str = ""
     attributes: tuple[str, str] | tuple[()] = ()
+    min_footprint: tuple[float, float] | None = None
+    pseudo_thresholds: tuple[float, float] | None = None
+    talk2car_overlaps: tuple[float, float] | None = None
+    top1_distance: float | None = None
 
     def __post_init__(self) -> None:
         if not self.scored_as:
@@ -114,6 +138,18 @@ class ObjectClass:
             raise ValueError(f"class {self.name}: match_distance must be positive")
         if len(self.attributes) not in (0, 2):
             raise ValueError(f"class {self.name}: attributes must be (moving, still) or empty")
+        if self.min_footprint is not None and (
+            len(self.min_footprint) != 2 or min(self.min_footprint) <= 0
+        ):
+            raise ValueError(f"class {self.name}: min_footprint must be 2 positive lengths")
+        for what, pair in (
+            ("pseudo_thresholds", self.pseudo_thresholds),
+            ("talk2car_overlaps", self.talk2car_overlaps),
+        ):
+            if pair is not None and (len(pair) != 2 or not all(0 < v < 1 for v in pair)):
+                raise ValueError(f"class {self.name}: {what} must be 2 values in (0, 1)")
+        if self.top1_distance is not None and not self.top1_distance > 0:
+            raise ValueError(f"class {self.name}: top1_distance must be positive")
         object.__setattr__(
             self, "label_names", tuple(dict.fromkeys((self.name.lower(), *self.label_names)))
         )
@@ -215,6 +251,20 @@ _AS_SMALL = (0.5, 0.25, 0.25)
 _VEHICLE = ("vehicle.moving", "vehicle.parked")
 _WALKING = ("pedestrian.moving", "pedestrian.standing")
 _CYCLE = (WITH_RIDER, "cycle.without_rider")
+_CAR_RULES = {
+    "min_footprint": (3.5, 1.5),
+    "pseudo_thresholds": (0.5, 0.35),
+    "talk2car_overlaps": (0.7, 0.5),
+    "top1_distance": 1.0,
+}
+"""A car's tool numbers (the same in every preset: a name means one class to these tools)."""
+_PEDESTRIAN_RULES = {
+    "min_footprint": (0.4, 0.4),
+    "pseudo_thresholds": (0.4, 0.3),
+    "talk2car_overlaps": (0.5, 0.25),
+    "top1_distance": 0.5,
+}
+"""A pedestrian's tool numbers (as :data:`_CAR_RULES`)."""
 _PEDESTRIANS = (
     "human.pedestrian.adult",
     "human.pedestrian.child",
@@ -228,16 +278,18 @@ VOD = ClassSet(
         ObjectClass(
             "Car", "car", "cars", (4.2, 1.8, 1.6), _AS_CAR, 2.0, (255, 150, 0),
             categories=("vehicle.car",), neighbour="van", find_radius=2.0, attributes=_VEHICLE,
+            **_CAR_RULES,
         ),
         ObjectClass(
             "Pedestrian", "pedestrian", "pedestrians", (0.6, 0.6, 1.75), _AS_SMALL, 1.0,
             (255, 70, 170), categories=_PEDESTRIANS, neighbour="person_sitting",
-            attributes=_WALKING,
+            attributes=_WALKING, **_PEDESTRIAN_RULES,
         ),
         ObjectClass(
             "Cyclist", "cyclist", "cyclists", (1.8, 0.6, 1.7), _AS_SMALL, 1.2, (70, 200, 255),
             categories=("vehicle.bicycle",), with_rider_only=True,
-            attributes=(WITH_RIDER, WITH_RIDER),
+            attributes=(WITH_RIDER, WITH_RIDER), min_footprint=(1.5, 0.5),
+            pseudo_thresholds=(0.4, 0.3), talk2car_overlaps=(0.5, 0.25), top1_distance=0.5,
         ),
     ),
 )  # fmt: skip
@@ -250,36 +302,37 @@ NUSCENES = ClassSet(
         ObjectClass(
             "Car", "car", "cars", (4.63, 1.97, 1.74), _AS_CAR, 2.0, (255, 150, 0),
             categories=("vehicle.car",), neighbour="van", find_radius=2.0, attributes=_VEHICLE,
+            **_CAR_RULES,
         ),
         ObjectClass(
-            "Truck", "truck", "trucks", (6.93, 2.51, 2.84), _AS_CAR, 3.0, (230, 60, 40),
+            "Truck", "truck", "trucks", (6.93, 2.51, 2.84), _AS_CAR, 3.0, (240, 120, 105),
             categories=("vehicle.truck",), find_radius=3.0, scored_as="Car",
             attributes=_VEHICLE,
         ),
         ObjectClass(
-            "Bus", "bus", "buses", (10.5, 2.94, 3.47), _AS_CAR, 4.0, (250, 220, 40),
+            "Bus", "bus", "buses", (10.5, 2.94, 3.47), _AS_CAR, 4.0, (0, 255, 255),
             categories=("vehicle.bus.rigid", "vehicle.bus.bendy"), find_radius=4.0,
             scored_as="Car", attributes=_VEHICLE,
         ),
         ObjectClass(
-            "Trailer", "trailer", "trailers", (12.29, 2.90, 3.87), _AS_CAR, 4.0, (160, 110, 60),
+            "Trailer", "trailer", "trailers", (12.29, 2.90, 3.87), _AS_CAR, 4.0, (180, 165, 150),
             categories=("vehicle.trailer",), find_radius=4.0, scored_as="Car",
             attributes=_VEHICLE,
         ),
         ObjectClass(
             "ConstructionVehicle", "construction vehicle", "construction vehicles",
-            (6.37, 2.85, 3.19), _AS_CAR, 3.0, (200, 170, 110),
+            (6.37, 2.85, 3.19), _AS_CAR, 3.0, (105, 135, 30),
             label_names=("construction_vehicle",), categories=("vehicle.construction",),
             find_radius=3.0, scored_as="Car", attributes=_VEHICLE,
         ),
         ObjectClass(
             "Pedestrian", "pedestrian", "pedestrians", (0.73, 0.67, 1.77), _AS_SMALL, 1.0,
             (255, 70, 170), categories=_PEDESTRIANS, neighbour="person_sitting",
-            attributes=_WALKING,
+            attributes=_WALKING, **_PEDESTRIAN_RULES,
         ),
         ObjectClass(
             "Motorcycle", "motorcycle", "motorcycles", (2.11, 0.77, 1.47), _AS_SMALL, 1.2,
-            (150, 90, 255), label_names=("motor", "moped_scooter"),
+            (135, 120, 255), label_names=("motor", "moped_scooter"),
             categories=("vehicle.motorcycle",), scored_as="Cyclist", attributes=_CYCLE,
         ),
         ObjectClass(
@@ -289,11 +342,11 @@ NUSCENES = ClassSet(
         ),
         ObjectClass(
             "TrafficCone", "traffic cone", "traffic cones", (0.41, 0.41, 1.07), _AS_SMALL, 0.6,
-            (255, 120, 60), heading=False, label_names=("traffic_cone",),
+            (240, 180, 210), heading=False, label_names=("traffic_cone",),
             categories=("movable_object.trafficcone",), find_radius=0.6, scored_as="Pedestrian",
         ),
         ObjectClass(
-            "Barrier", "barrier", "barriers", (0.50, 2.53, 0.98), _AS_SMALL, 1.2, (180, 180, 200),
+            "Barrier", "barrier", "barriers", (0.50, 2.53, 0.98), _AS_SMALL, 1.2, (255, 255, 210),
             categories=("movable_object.barrier",), scored_as="Pedestrian",
         ),
     ),
@@ -317,10 +370,24 @@ MATCH_DISTANCE: dict[str, float] = {
 """:attr:`ObjectClass.match_distance` by class name, over every preset (a name means one class
 in every set that has it: checked below)."""
 
+_BY_NAME = (
+    "match_distance",
+    "min_footprint",
+    "pseudo_thresholds",
+    "talk2car_overlaps",
+    "top1_distance",
+)
+"""Facts the tools look up by class name: the same in every preset that has the name."""
+
+_FIRST: dict[str, ObjectClass] = {}
 for _set in PRESETS.values():
     for _c in _set.classes:
-        if MATCH_DISTANCE[_c.name] != _c.match_distance:
-            raise ValueError(f"class {_c.name}: match_distance differs between the presets")
+        _FIRST.setdefault(_c.name, _c)
+        for _fact in _BY_NAME:
+            if getattr(_c, _fact) != getattr(_FIRST[_c.name], _fact):
+                raise ValueError(f"class {_c.name}: {_fact} differs between the presets")
+        if _set is VOD and (_c.talk2car_overlaps is None or _c.top1_distance is None):
+            raise ValueError(f"class {_c.name}: a View-of-Delft class needs its Talk2Car numbers")
 
 
 for _set in PRESETS.values():

@@ -13,6 +13,25 @@ squares plane through the lower half of them, then twice again through those wit
 (kerbs, cars' undersides and walls' feet fall away), and last through every point within 0.15 m
 (a cell's lowest point lies below the ground by the range noise). Fewer than 20 cells: the level
 plane at the reference height (no estimate).
+
+The one home of ground estimation: every module that needs the ground's height asks here.
+
+- The global plane (:func:`estimate_ground`): what the model's input is levelled on.
+- The ground's height under the sensor (:func:`sensor_ground_height`): the plane's ``c``, one
+  number a flat display stands on (the app's range rings, ego marker, heatmap; the default bottom
+  of a box placed by a ground click).
+- The local ground under a box (:func:`ground_under_boxes`) or around a point
+  (:func:`ground_around`): the :data:`LOCAL_PERCENTILE` percentile of the point heights near it,
+  where a kerb, a slope or a pitched sensor moves the ground away from the global plane (a fitted
+  box's bottom, a pseudo-label seated on the ground). Measured on the synthetic world
+  (``python -m scenes.synth`` settings, seeds 7 and 38, ten frames each, the labelled boxes
+  within 45 m; estimate minus the box's bottom): the 5th percentile of a 2 m ring around the
+  footprint has a mean absolute error of 0.029 / 0.111 m, the median of the lowest third of a
+  1.5 m ring (the pseudo-labels' former estimate) 0.074 / 0.188 m, and the 5th percentile over
+  the footprint grown by 2 m (the box fit's, kept for a rough region) 0.033 / 0.114 m. For the
+  height under the sensor the plane's ``c`` has a mean error of -0.027 / -0.018 m and a 90th
+  percentile absolute error of 0.12 / 0.10 m; the 10th percentile of the points 3 to 30 m away
+  (the app's former estimate) -0.052 / -0.057 m and 0.14 / 0.15 m.
 """
 
 from __future__ import annotations
@@ -29,6 +48,15 @@ INLIER = 0.15
 """Metres from the plane a candidate may lie to count in the refits."""
 MIN_CELLS = 20
 """Fewer candidate cells: no estimate."""
+LOCAL_RING = 2.0
+"""Metres around a footprint whose points tell the local ground (:func:`ground_under_boxes`)."""
+LOCAL_PERCENTILE = 5.0
+"""Percentile of the nearby point heights taken as the local ground (the ground around an object
+is almost always seen; objects stand above it; the lowest few per cent are range noise)."""
+LOCAL_MIN_POINTS = 8
+"""Fewer nearby points than this: no local estimate (NaN)."""
+SENSOR_GROUND_RANGE = (-4.0, 0.5)
+"""Bounds (m, LiDAR frame) of :func:`sensor_ground_height` (a sensor mounted 4 m up at most)."""
 
 
 @dataclass(frozen=True)
@@ -125,3 +153,77 @@ def unlevel_boxes(boxes: np.ndarray, plane: GroundPlane, reference_height: float
     if len(out):
         out[:, 2] = out[:, 2] + plane.height_at(out[:, :2]) + reference_height
     return out
+
+
+def sensor_ground_height(points: np.ndarray, reference_height: float) -> float:
+    """The ground's height under the sensor (m, LiDAR frame): ``c`` of :func:`estimate_ground`
+    of ``points (N, >=3)``, clipped to :data:`SENSOR_GROUND_RANGE`; ``-reference_height`` where
+    the cloud tells no plane. One number for a flat display (module docstring)."""
+    plane = estimate_ground(points, reference_height)
+    if not plane.cells:
+        return float(-reference_height)
+    low, high = SENSOR_GROUND_RANGE
+    return float(np.clip(plane.c, low, high))
+
+
+def _local_height(z: np.ndarray, min_points: int) -> float:
+    """:data:`LOCAL_PERCENTILE` percentile of the heights ``z (n,)``; NaN under ``min_points``."""
+    if len(z) < max(1, min_points):
+        return float("nan")
+    return float(np.percentile(z, LOCAL_PERCENTILE))
+
+
+def _finite_xyz(points: np.ndarray) -> np.ndarray:
+    p = np.asarray(points, dtype=np.float64)
+    if p.size == 0:
+        return np.zeros((0, 3))
+    if p.ndim != 2 or p.shape[1] < 3:
+        raise ValueError(f"points must have shape (N, >=3), got {p.shape}")
+    p = p[:, :3]
+    return p[np.isfinite(p).all(1)]
+
+
+def ground_under_boxes(
+    points: np.ndarray,
+    boxes: np.ndarray,
+    ring: float = LOCAL_RING,
+    *,
+    with_footprint: bool = False,
+    min_points: int = LOCAL_MIN_POINTS,
+) -> np.ndarray:
+    """``(K,)`` float64: the local ground height (m, LiDAR frame) under each box ``(K, 7)``
+    (``x, y, z, l, w, h, yaw``, LiDAR frame; ``z`` and ``h`` unread) from the LiDAR points
+    ``(N, >=3)``: the :data:`LOCAL_PERCENTILE` percentile of the heights of the points whose BEV
+    position lies in the footprint grown by ``ring`` metres per side and not in the footprint
+    itself (an accurate box: what is inside is the object, and the ground under it is hidden);
+    ``with_footprint``: the footprint's points count too (a rough box, which the object may
+    overhang). NaN where fewer than ``min_points`` such points exist."""
+    boxes = np.asarray(boxes, np.float64).reshape(-1, 7)
+    out = np.full(len(boxes), np.nan)
+    xyz = _finite_xyz(points)
+    if not len(boxes) or not len(xyz):
+        return out
+    for k, box in enumerate(boxes):
+        d = xyz[:, :2] - box[:2]
+        reach = np.hypot(box[3], box[4]) / 2 + ring
+        near = np.flatnonzero((np.abs(d[:, 0]) <= reach) & (np.abs(d[:, 1]) <= reach))
+        c, s = np.cos(box[6]), np.sin(box[6])
+        along = np.abs(d[near, 0] * c + d[near, 1] * s)
+        across = np.abs(-d[near, 0] * s + d[near, 1] * c)
+        half_l, half_w = box[3] / 2, box[4] / 2
+        keep = (along <= half_l + ring) & (across <= half_w + ring)
+        if not with_footprint:
+            keep &= (along > half_l) | (across > half_w)
+        out[k] = _local_height(xyz[near[keep], 2], min_points)
+    return out
+
+
+def ground_around(
+    points: np.ndarray, centre: np.ndarray, radius: float, *, min_points: int = LOCAL_MIN_POINTS
+) -> float:
+    """The local ground height (m, LiDAR frame) around the BEV point ``centre (2,)`` (LiDAR
+    frame): the :data:`LOCAL_PERCENTILE` percentile of the heights of the points ``(N, >=3)``
+    within ``radius`` metres of it (BEV); NaN where fewer than ``min_points`` are."""
+    xyz = _finite_xyz(points)
+    d = xyz[:, :2] - np.asarray(centre, np.float64).reshape(2)
+    return _local_height(xyz[np.hypot(d[:, 0], d[:, 1]) <= radius, 2], min_points)

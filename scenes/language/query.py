@@ -1,6 +1,6 @@
 """The hand-written meaning of a sentence of the language suite: a small query over a frame's actors.
 
-The language suite (``tests/data/language_suite.json``, run by ``python -m bench.language_suite``)
+The language suite (``bench/data/language_suite.json``, run by ``python -m bench.language_suite``)
 pairs sentences written by a person with a query written by the same person; this module is the
 query's form and its strict JSON reader, :mod:`scenes.language.resolve` its exact meaning. Neither
 imports :mod:`scenes.language.prompts`: the suite measures language the generator did not write, so its

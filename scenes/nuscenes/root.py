@@ -30,6 +30,7 @@ from scenes.nuscenes.motion import (
 from scenes.nuscenes.radar import RADAR_CHANNELS, default_filter, model_channels
 from scenes.nuscenes.sensorfiles import read_lidar, read_radar
 from scenes.nuscenes.tables import NuScenesError, Tables, read_tables, version_folder
+from scenes.utils.textfile import claim_root
 
 __all__ = ["CAM_FRONT", "LIDAR_TOP", "NuScenesError", "NuScenesFrame", "NuScenesRoot"]
 
@@ -117,6 +118,7 @@ class NuScenesRoot:
         if lidar_sweeps < 1 or radar_sweeps < 1:
             raise ValueError(f"sweeps must be >= 1, got lidar {lidar_sweeps}, radar {radar_sweeps}")
         self.path = Path(path)
+        claim_root(self.path)
         folder = version_folder(self.path, version)
         self.version = folder.name
         self.lidar_sweeps = lidar_sweeps

@@ -16,6 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from scenes.utils.errors import RootError
 from scenes.utils.textfile import read_json_file
 
 __all__ = ["SCHEMA", "TABLES", "NuScenesError", "Tables", "read_tables", "version_folder"]
@@ -27,7 +28,7 @@ TABLES: tuple[str, ...] = (
 """The 13 tables of nuScenes v1.0, ``<name>.json`` each."""
 
 
-class NuScenesError(ValueError):
+class NuScenesError(RootError):
     """A nuScenes root or table is malformed; the message names the file, record and field."""
 
 

@@ -5,7 +5,8 @@ release's format.
 one object: ``command`` (the sentence), ``obj_name`` (its nuScenes category), ``box_token`` (its
 sample_annotation), ``translation`` / ``size`` (w, l, h) / ``rotation`` (w, x, y, z, four
 *strings* in the release) in the CAM_FRONT camera frame (x right, y down, z forward),
-``2d_box`` ``[x, y, w, h]`` pixels, ``sample_token`` (a **CAM_FRONT sample_data** token, not a
+``2d_box`` ``[x, y, w, h]`` whole pixels (integers in the release; read as any numbers,
+written as integers: :func:`pixel_box`), ``sample_token`` (a **CAM_FRONT sample_data** token, not a
 sample token), ``scene_token``, ``command_token``, ``t2c_img``.
 
 :func:`read_commands` refuses a malformed file with one line naming the file, the command index
@@ -29,6 +30,7 @@ never fed to the model, the app or training.
 from __future__ import annotations
 
 import json
+import math
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -58,6 +60,7 @@ __all__ = [
     "commanded_samples",
     "commands_file",
     "model_box_to_camera",
+    "pixel_box",
     "read_commands",
     "write_command_file",
     "write_commands",
@@ -139,12 +142,15 @@ class CommandSet:
         referent: command_token -> its :class:`Referent`.
         skipped: reason -> count of commands left out (a command refused by the text policy
             has a reason of its own naming the file, the command and why: count 1).
+        scene_tokens: The file's ``scene_tokens``: the scenes of the split (Talk2Car splits by
+            scene), with or without commands.
     """
 
     split: str
     commands: tuple[Talk2CarCommand, ...]
     referent: dict[str, Referent]
     skipped: Counter[str]
+    scene_tokens: tuple[str, ...] = ()
 
 
 def _numbers(value: object, n: int, *, strings: bool = False) -> np.ndarray | None:
@@ -314,12 +320,22 @@ def read_commands(
             continue
         kept.append(replace(cmd, sample_token=sample))
         referent[cmd.command_token] = Referent(box.copy(), cls, index)
-    return CommandSet(split, tuple(kept), referent, skipped)
+    return CommandSet(split, tuple(kept), referent, skipped, tuple(scenes))
+
+
+def pixel_box(box_2d: Sequence[float]) -> list[int]:
+    """``[x, y, w, h]`` as the release writes ``2d_box``: the smallest box of whole pixels
+    holding ``box_2d`` (its corners floored and ceiled; a box of whole pixels is kept)."""
+    x, y, w, h = (float(v) for v in box_2d)
+    left, top = math.floor(x + 1e-6), math.floor(y + 1e-6)
+    right, bottom = math.ceil(x + w - 1e-6), math.ceil(y + h - 1e-6)
+    return [left, top, max(right - left, 0), max(bottom - top, 0)]
 
 
 def command_record(c: Talk2CarCommand) -> dict:
     """A command as the release's file writes it: its field names and order, ``sample_token`` =
-    the CAM_FRONT sample_data token, ``rotation`` as four strings."""
+    the CAM_FRONT sample_data token, ``rotation`` as four strings, ``2d_box`` as four integers
+    (:func:`pixel_box`)."""
     translation, size, rotation = (np.asarray(v, dtype=np.float64) for v in c.box_camera)
     return {
         "scene_token": c.scene_token,
@@ -331,7 +347,7 @@ def command_record(c: Talk2CarCommand) -> dict:
         "obj_name": c.category,
         "box_token": c.box_token,
         "command_token": c.command_token,
-        "2d_box": [float(v) for v in c.box_2d],
+        "2d_box": pixel_box(c.box_2d),
         "t2c_img": c.t2c_img,
     }
 

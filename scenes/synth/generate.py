@@ -71,6 +71,7 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
+from scenes.frame.sample_meta import SampleMeta
 from scenes.geometry.calib import Calibration, sensor_to_lidar
 from scenes.synth.camera import CAMERA_SCALES, CameraConfig
 from scenes.synth.frame import (
@@ -90,7 +91,6 @@ from scenes.synth.manifest import MANIFEST
 from scenes.synth.sequence import sequence_pose
 from scenes.talk2radar.layout import LABEL, LIDAR_FOLDER, sample_file
 from scenes.talk2radar.poses import FRAME_RATE, write_pose
-from scenes.talk2radar.sample_meta import SampleMeta
 from scenes.talk2radar.writer import Talk2RadarWriter
 from scenes.utils.cli import add_options, from_args, option
 from scenes.utils.durable import append_json_line, drop_torn_tail, read_json_lines

@@ -24,7 +24,7 @@ Detections
     Calibrated to View-of-Delft's single scans (issue 14): about 200-240 points in the camera's
     field of view, RCS p10 / p50 / p90 near -27 / -13 / +2 dBsm (mostly weak returns from the
     road, facades, vegetation and parked bicycles), 3-6 points on a pedestrian or cyclist within
-    30 m; ``python -m bench.sensor_stats`` measures them.
+    30 m; ``python -m bench.studies.sensor_stats`` measures them.
     Positions get range / azimuth / elevation noise in the radar frame.
 
 Velocities (sign: positive = receding)

@@ -17,7 +17,7 @@ written with it (:func:`lidar_calibration_at`) has the camera (and, through it, 
 lower in the LiDAR frame, so the radar points still land where the radar saw them. A pitched
 LiDAR reports its points in its own pitched frame (the ground rises ahead of a sensor pitched nose
 down); :meth:`SensorSetup.boxes_in_lidar_frame` gives the actors' boxes in that frame, which
-``bench.sensor_shift`` scores against. A root written with such a rig keeps its labels, radar and
+``bench.studies.sensor_shift`` scores against. A root written with such a rig keeps its labels, radar and
 camera in the car's level frame at the LiDAR's origin (its calibration does not know the pitch).
 
 The held-out rigs:

@@ -41,12 +41,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from scenes.frame.kitti import ObjectLabel, boxes_to_labels
+from scenes.frame.sample_meta import SampleMeta
 from scenes.geometry.actors import CLASSES
 from scenes.geometry.calib import IMAGE_SIZE, Calibration
 from scenes.geometry.projection import in_annotated_area
 from scenes.synth.world.actor_meshes import rider_boxes
-from scenes.talk2radar.kitti import ObjectLabel, boxes_to_labels
-from scenes.talk2radar.sample_meta import SampleMeta
 
 RIDER = "rider"
 """VoD's class of the person riding a bicycle (or a moped, a motorbike), labelled on its own too."""

@@ -79,7 +79,7 @@ def find_drives(root: Talk2RadarRoot, ids: Sequence[str]) -> Drives:
     """The drives of the samples ``ids`` (a split's list, in order; see the module docstring).
 
     Raises:
-        scenes.talk2radar.layout.RootError: a pose file is malformed, or a sample's sensor files are missing.
+        scenes.frame.RootError: a pose file is malformed, or a sample's sensor files are missing.
     """
     drives: list[Drive] = []
     frames: list[DriveFrame] = []

@@ -33,6 +33,8 @@ from __future__ import annotations
 import operator
 from pathlib import Path
 
+from scenes.utils.errors import RootError
+
 LIDAR_FOLDER = "lidar"
 """The LiDAR tree."""
 RADAR_FOLDERS = ("radar_5frames", "radar_3frames", "radar")
@@ -88,10 +90,6 @@ SOURCE_RADAR_CALIB = "radar_calib.txt"
 SOURCE_IMAGE = "image.jpg"
 SOURCE_SENSORS = (SOURCE_LIDAR, SOURCE_RADAR, SOURCE_LIDAR_CALIB, SOURCE_RADAR_CALIB)
 """The four sensor files every ``sources/<frame>/`` folder has (the image is optional)."""
-
-
-class RootError(ValueError):
-    """A Talk2Radar root is incomplete or malformed; the message names the file."""
 
 
 ID_WIDTH = 5

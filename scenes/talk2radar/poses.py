@@ -13,7 +13,7 @@ LiDAR frame) and :func:`consecutive` (whether two frames can be consecutive 10 H
 drive: their cameras at most :data:`MAX_STEP` metres apart in UTM; another drive, or another
 synthetic world, is far away).
 
-Nothing here reads a sidecar; reading fails with :class:`~scenes.talk2radar.layout.RootError` naming the file
+Nothing here reads a sidecar; reading fails with :class:`~scenes.frame.RootError` naming the file
 and line.
 """
 
@@ -27,8 +27,9 @@ from pathlib import Path
 import numpy as np
 
 from scenes.geometry.calib import Calibration
-from scenes.talk2radar.layout import POSE, RootError, format_id, sample_file
+from scenes.talk2radar.layout import POSE, format_id, sample_file
 from scenes.utils.durable import atomic_write_text
+from scenes.utils.errors import RootError
 from scenes.utils.textfile import read_text_file
 
 FRAME_RATE = 10.0

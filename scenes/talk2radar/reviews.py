@@ -22,13 +22,13 @@ from pathlib import Path
 
 from scenes.talk2radar.layout import (
     LIDAR_FOLDER,
-    RootError,
     format_id,
     manifest_file,
     parse_split_list,
     split_file,
 )
 from scenes.utils.durable import read_json_lines
+from scenes.utils.errors import RootError
 from scenes.utils.textfile import read_text_file
 
 REVIEW = "review"

@@ -1,7 +1,7 @@
 """Reading a Talk2Radar root: :class:`Talk2RadarRoot` and the :class:`Sample` it loads.
 
 The layout (every path) is :mod:`scenes.talk2radar.layout`; the writer is :mod:`scenes.talk2radar.writer` and the sidecar
-:mod:`scenes.talk2radar.sample_meta` (both re-exported here, with the layout names readers use). Each sample is
+:mod:`scenes.frame.sample_meta` (both re-exported here, with the layout names readers use). Each sample is
 one frame id with one prompt and the boxes it refers to (``label_2``). The radar ``.bin`` files are
 in the radar frame as in VoD; :meth:`Talk2RadarRoot.load` brings them into the LiDAR frame with both
 calibration files. ``training/image_2/<id>.jpg`` is the camera image where a root has one (VoD's,
@@ -12,16 +12,15 @@ access, and the 2D boxes of ``label_2`` are clipped to its size (:attr:`Sample.i
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, field
-from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 
-from scenes.geometry.calib import Calibration, read_calib, sensor_to_lidar, transform_points
+from scenes.frame.kitti import labels_to_boxes, read_label_file
+from scenes.frame.sample import Sample
+from scenes.frame.sample_meta import SampleMeta
+from scenes.geometry.calib import read_calib, sensor_to_lidar, transform_points
 from scenes.geometry.classes import VOD, ClassSet
-from scenes.talk2radar.imagefile import label_image_size, read_image, warn_principal_point
-from scenes.talk2radar.kitti import ObjectLabel, labels_to_boxes, read_label_file
 from scenes.talk2radar.layout import (
     CALIB,
     FOLDER_SUFFIX,
@@ -32,7 +31,6 @@ from scenes.talk2radar.layout import (
     PROMPT,
     RADAR_FOLDERS,
     VELODYNE,
-    RootError,
     format_id,
     meta_file,
     parse_id,
@@ -44,7 +42,6 @@ from scenes.talk2radar.layout import (
     split_file,
 )
 from scenes.talk2radar.pointcloud import LIDAR_FEATURES, RADAR_FEATURES, read_points
-from scenes.talk2radar.sample_meta import SampleMeta
 from scenes.talk2radar.writer import (
     LABEL_DECIMALS,
     SampleText,
@@ -52,16 +49,14 @@ from scenes.talk2radar.writer import (
     Talk2RadarWriter,
     sample_text,
 )
-from scenes.utils.textfile import read_json_file, read_prompt_file, read_text_file
+from scenes.utils.errors import RootError
+from scenes.utils.textfile import claim_root, read_json_file, read_prompt_file, read_text_file
 
-__all__ = [  # with the writer, the sidecar and the layout names readers use, re-exported
+__all__ = [  # with the writer and the layout names readers use, re-exported
     "ALL_FRAMES",
     "LABEL_DECIMALS",
     "LIDAR_FOLDER",
     "RADAR_FOLDERS",
-    "RootError",
-    "Sample",
-    "SampleMeta",
     "SampleText",
     "SensorFiles",
     "Talk2RadarRoot",
@@ -72,67 +67,6 @@ __all__ = [  # with the writer, the sidecar and the layout names readers use, re
 
 ALL_FRAMES = "all"
 """The split name :meth:`Talk2RadarRoot.splits` gives a root without an ImageSets folder."""
-
-
-@dataclass(frozen=True)
-class Sample:
-    """One grounding sample: a frame's sensors, one prompt and the boxes it refers to.
-
-    Attributes:
-        sample_id: 5-digit frame id.
-        lidar: ``(N, 4)`` float32 ``x, y, z, intensity``, LiDAR frame.
-        radar: ``(M, 7)`` float32 ``x, y, z, rcs, v_r, v_r_compensated, time``, LiDAR frame.
-        boxes: ``(K, 7)`` float64 referred boxes of the root's class set, LiDAR frame.
-        classes: ``K`` class names of that set (Car, Pedestrian, Cyclist for ``vod``).
-        prompt: The sentence, or None where the root has no prompt folder.
-        calib: LiDAR calibration (LiDAR -> camera).
-        radar_calib: Radar calibration (radar -> camera), or None without a radar tree.
-        labels: Every ``label_2`` line, non-metric classes included.
-        meta: The sidecar, where present.
-        image_path: The camera image file (``image_2/<id>.jpg``), or None where there is none;
-            :attr:`image` reads it.
-    """
-
-    sample_id: str
-    lidar: np.ndarray = field(repr=False)
-    radar: np.ndarray = field(repr=False)
-    boxes: np.ndarray = field(repr=False)
-    classes: tuple[str, ...]
-    prompt: str | None
-    calib: Calibration = field(repr=False)
-    radar_calib: Calibration | None = field(repr=False, default=None)
-    labels: tuple[ObjectLabel, ...] = field(repr=False, default=())
-    meta: SampleMeta | None = field(repr=False, default=None)
-    image_path: Path | None = field(repr=False, default=None)
-
-    @cached_property
-    def image(self) -> np.ndarray | None:
-        """The camera image ``(H, W, 3)`` uint8 RGB (row 0 at the top; pixel coordinates as
-        ``calib.P2`` projects), read on first access and kept; None without an image file.
-
-        Warns (``UserWarning``, naming the file) when the image size puts P2's principal point
-        far from the image centre (:func:`scenes.talk2radar.imagefile.check_principal_point`).
-
-        Raises:
-            scenes.talk2radar.imagefile.ImageError: the file is unreadable, corrupt or truncated.
-        """
-        if self.image_path is None:
-            return None
-        image = read_image(self.image_path)
-        height, width = image.shape[:2]
-        principal = (float(self.calib.P2[0, 2]), float(self.calib.P2[1, 2]))
-        warn_principal_point((width, height), principal, str(self.image_path))
-        return image
-
-    @cached_property
-    def image_size(self) -> tuple[int, int]:
-        """``(width, height)`` the 2D boxes of this sample's ``label_2`` are clipped to: its camera
-        image's (header only), VoD's 1936 x 1216 without one (:func:`label_image_size`).
-
-        Raises:
-            scenes.talk2radar.imagefile.ImageError: the image file is unreadable.
-        """
-        return label_image_size(self.image_path)
 
 
 def _is_file(path: Path) -> bool:
@@ -183,6 +117,7 @@ class Talk2RadarRoot:
         self.radar_dir = self.path / radar if radar else None
         self._has_prompts = self.has_prompts
         self._all_frames_noted = False
+        claim_root(self.path)
 
     @property
     def has_prompts(self) -> bool:

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from scenes.frame.kitti import ObjectLabel, read_label_file
 from scenes.geometry.calib import (
     IMAGE_SIZE,
     Calibration,
@@ -30,16 +31,8 @@ from scenes.geometry.calib import (
 )
 from scenes.geometry.classes import VOD, ClassSet
 from scenes.geometry.projection import in_annotated_area
-from scenes.talk2radar.kitti import ObjectLabel, read_label_file
-from scenes.talk2radar.layout import (
-    CALIB,
-    LABEL,
-    LIDAR_FOLDER,
-    RootError,
-    format_id,
-    sample_dir,
-    sample_file,
-)
+from scenes.talk2radar.layout import CALIB, LABEL, LIDAR_FOLDER, format_id, sample_dir, sample_file
+from scenes.utils.errors import RootError
 
 DONT_CARE = "DontCare"
 """VoD's name for a region whose objects are neither positives nor negatives."""
@@ -140,7 +133,7 @@ class SceneLabels:
 
         Raises:
             RootError: the label or calibration file is missing.
-            scenes.talk2radar.kitti.LabelError, scenes.geometry.calib.CalibError: a malformed file (named).
+            scenes.frame.kitti.LabelError, scenes.geometry.calib.CalibError: a malformed file (named).
         """
         sid = format_id(sample_id)
         path = self.label_path(sid)

@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
+from scenes.frame.image import write_jpeg
+from scenes.frame.kitti import ObjectLabel, label_file_text
 from scenes.geometry.calib import Calibration, sensor_to_lidar, transform_points
-from scenes.talk2radar.imagefile import write_jpeg
-from scenes.talk2radar.kitti import ObjectLabel, label_file_text
 from scenes.talk2radar.layout import (
     CALIB,
     IMAGE,

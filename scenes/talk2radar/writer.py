@@ -15,9 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
+from scenes.frame.image import check_principal_point, label_image_size, write_jpeg
+from scenes.frame.kitti import ObjectLabel, boxes_to_labels, label_file_text
+from scenes.frame.sample_meta import SampleMeta
 from scenes.geometry.calib import Calibration, read_calib, sensor_to_lidar, transform_points
-from scenes.talk2radar.imagefile import check_principal_point, label_image_size, write_jpeg
-from scenes.talk2radar.kitti import ObjectLabel, boxes_to_labels, label_file_text
 from scenes.talk2radar.layout import (
     CALIB,
     IMAGE,
@@ -35,8 +36,8 @@ from scenes.talk2radar.layout import (
     split_file,
 )
 from scenes.talk2radar.pointcloud import write_points
-from scenes.talk2radar.sample_meta import SampleMeta
 from scenes.utils.durable import atomic_write_text, link_or_copy
+from scenes.utils.textfile import claim_root
 
 __all__ = [
     "LABEL_DECIMALS",
@@ -143,6 +144,7 @@ class Talk2RadarWriter:
         if radar_folder not in RADAR_FOLDERS:
             raise ValueError(f"radar_folder must be one of {RADAR_FOLDERS}, got {radar_folder!r}")
         self.root = Path(root)
+        claim_root(self.root)
         self.radar_folder = radar_folder
         self.trees = (self.root / LIDAR_FOLDER, self.root / radar_folder)
 

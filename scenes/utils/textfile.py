@@ -7,8 +7,8 @@ and :func:`read_prompt_file` a prompt file. One error type per kind of file, one
 file (and its line where one applies). The policy, for files as people save them:
 
 1. **A leading UTF-8 byte-order mark is removed**, and said once per root (a ``UserWarning``
-   naming the root and the first such file; :func:`root_of` says which root a file is in), not
-   once per file: editors on Windows save one, and left in place it sticks to the first field
+   naming the root and the first such file; :func:`root_of` says which root a file is in: the
+   nearest folder a reader opened as a root, :func:`claim_root`), not once per file: editors on Windows save one, and left in place it sticks to the first field
    (``'\\ufeffCar'``: a label's first object dropped, a prompt that the app refuses fed to
    training as it is).
 2. **CRLF line ends are accepted** (read as LF).
@@ -37,15 +37,6 @@ import threading
 import warnings
 from pathlib import Path
 
-from scenes.talk2radar.layout import (
-    ANNOTATIONS,
-    IMAGE_SETS,
-    LIDAR_FOLDER,
-    META,
-    RADAR_FOLDERS,
-    SAMPLES,
-    SOURCES,
-)
 from scenes.utils.text_policy import (
     PROMPT,
     TextPolicyError,
@@ -61,9 +52,8 @@ _BOM_ROOTS: set[Path] = set()
 """The roots whose byte-order marks were already said (this process)."""
 _BOM_LOCK = threading.Lock()
 
-_TREES = frozenset((LIDAR_FOLDER, *RADAR_FOLDERS))
-_TREE_CHILDREN = frozenset((SAMPLES, IMAGE_SETS))
-_ROOT_CHILDREN = frozenset((META, ANNOTATIONS, SOURCES))
+_CLAIMED_ROOTS: set[Path] = set()
+"""The folders readers opened as roots (this process): :func:`root_of` groups files by them."""
 
 
 def read_file_bytes(path: str | Path, what: str, error: type[Exception]) -> bytes:
@@ -87,18 +77,25 @@ def read_file_bytes(path: str | Path, what: str, error: type[Exception]) -> byte
         raise error(f"{path}: cannot read the {what} ({exc.strerror or exc})") from exc
 
 
+def claim_root(path: str | Path) -> None:
+    """Say that the files under ``path`` belong to one root (a dataset family's reader calls it
+    when it opens a root), so that what is said once per root is said once for them all. This
+    module knows no layout: which folder is a root is the family's to say."""
+    with _BOM_LOCK:
+        _CLAIMED_ROOTS.add(Path(os.path.abspath(path)))
+
+
 def root_of(path: str | Path) -> Path:
-    """The root a file belongs to, for saying things once per root: the folder holding the tree
-    (``lidar/``, ``radar*/``) of ``<tree>/training/...`` or ``<tree>/ImageSets/...``, or holding
-    ``meta/``, ``annotations/`` or ``sources/``; else the file's own folder (a file outside any
-    root: a suite, a report). Absolute, symlinks not resolved."""
+    """The root a file belongs to, for saying things once per root: the nearest folder above it
+    that a reader opened as a root (:func:`claim_root`); else the file's own folder (a file
+    outside any opened root: a label folder scored alone, a suite, a report). Absolute, symlinks
+    not resolved."""
     path = Path(os.path.abspath(path))
-    parts = path.parts
-    for i in range(len(parts) - 2, 0, -1):
-        if parts[i] in _TREES and parts[i + 1] in _TREE_CHILDREN:
-            return Path(*parts[:i])
-        if parts[i] in _ROOT_CHILDREN:
-            return Path(*parts[:i])
+    with _BOM_LOCK:
+        claimed = set(_CLAIMED_ROOTS)
+    for folder in path.parents:
+        if folder in claimed:
+            return folder
     return path.parent
 
 
@@ -166,7 +163,7 @@ def read_text_file(path: str | Path, what: str, error: type[Exception]) -> str:
     Args:
         path: The file.
         what: What it is, for the message (``"label file"``).
-        error: The exception type to raise (e.g. :class:`scenes.talk2radar.kitti.LabelError`).
+        error: The exception type to raise (e.g. :class:`scenes.frame.kitti.LabelError`).
 
     Raises:
         error: the file is missing, unreadable (a folder, a symlink loop, no permission), not
@@ -215,6 +212,7 @@ def read_prompt_file(path: str | Path, error: type[Exception], what: str = "prom
 
 __all__ = [
     "BOM",
+    "claim_root",
     "decode_text",
     "note_bom",
     "read_file_bytes",

@@ -11,7 +11,8 @@ Table II of the paper reports, per command of a split (one referred object each)
   abstract and unrelated KITTI tables only); :data:`MSSG_THRESHOLDS` holds the two sets of
   the KITTI protocol MSSG evaluates with (AP_A: IoU 0.7 for a car, 0.5 for a pedestrian or
   cyclist, KITTI's official "moderate" overlaps; AP_B: 0.5 and 0.25, KITTI's loose ones), one
-  place to change should the paper's text say otherwise. AP is KITTI's 40-recall-point
+  place to change should the paper's text say otherwise (the classes' ``talk2car_overlaps``,
+  :mod:`scenes.geometry.classes`). AP is KITTI's 40-recall-point
   interpolated AP over every command's ranked boxes pooled by score (:func:`grounding_ap`): a box
   is a true positive when its overlap with its command's referent is **strictly greater** than
   the referent class's threshold and no higher-scored box of that command already was; every
@@ -38,16 +39,22 @@ from dataclasses import dataclass
 import numpy as np
 
 from scenes.geometry.boxes import bev_iou, iou3d
-from scenes.geometry.classes import ALL_CLASSES, object_class
+from scenes.geometry.classes import ALL_CLASSES, VOD, object_class
 
 MSSG_THRESHOLDS: dict[str, dict[str, float]] = {
-    "AP_A": {"Car": 0.7, "Pedestrian": 0.5, "Cyclist": 0.5},
-    "AP_B": {"Car": 0.5, "Pedestrian": 0.25, "Cyclist": 0.25},
+    name: {c.name: c.talk2car_overlaps[k] for c in VOD.classes if c.talk2car_overlaps}
+    for k, name in enumerate(("AP_A", "AP_B"))
 }
-"""IoU thresholds per referent class of MSSG's two AP definitions (module docstring)."""
+"""IoU thresholds per referent class of MSSG's two AP definitions (module docstring): the
+classes' :attr:`~scenes.geometry.classes.ObjectClass.talk2car_overlaps` (AP_A: Car 0.7,
+Pedestrian and Cyclist 0.5; AP_B: 0.5 and 0.25)."""
 
-TOP1_DISTANCE: dict[str, float] = {"Car": 1.0, "Pedestrian": 0.5, "Cyclist": 0.5}
-"""Top-1: largest bird's-eye centre distance (m) from the referent, per referent class."""
+TOP1_DISTANCE: dict[str, float] = {
+    c.name: c.top1_distance for c in VOD.classes if c.top1_distance is not None
+}
+"""Top-1: largest bird's-eye centre distance (m) from the referent, per referent class: the
+classes' :attr:`~scenes.geometry.classes.ObjectClass.top1_distance` (Car 1.0, Pedestrian and
+Cyclist 0.5)."""
 
 RECALL_POINTS = 40
 """KITTI's R40: precision interpolated at recall 1/40, 2/40, ..., 1."""

@@ -13,7 +13,7 @@ scoring at least the smallest score kept (the referent stage's ``min_score``), o
 best-ranked one alone, however unsure the stage is (``min_score`` and the operating threshold are
 for the answer *set* of a Talk2Radar prompt, which may be empty). With ``min_score`` alone, 11 to
 14 of 211 val commands got no box, top-1 misses whatever their ranking; keeping every candidate
-instead made the evaluation five times slower (docs/RESULTS.md, "Talk2Car on synthetic nuScenes
+instead made the evaluation five times slower (docs/RESULTS_HISTORY.md, "Talk2Car on synthetic nuScenes
 roots").
 """
 

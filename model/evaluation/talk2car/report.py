@@ -1,16 +1,13 @@
-"""The report of ``python -m model.evaluate --talk2car``: table II's figures over a split's
-commands (:mod:`model.evaluation.talk2car.metrics`), overall and on the rain and night subsets
-(:func:`subset_of`, from the nuScenes scene descriptions; fog too, which only synthetic roots
-have), Talk2Car's AP50, and top-1 beside the
-class-noun and language-blind baselines."""
+"""The report of ``python -m model.evaluate --talk2car`` (:mod:`model.evaluation.talk2car.kind`):
+table II's figures over a split's commands (:mod:`model.evaluation.talk2car.metrics`), overall and
+on the rain and night subsets (:func:`subset_of`, from the nuScenes scene descriptions; fog too,
+which only synthetic roots have), Talk2Car's AP50, and top-1 beside the class-noun and
+language-blind baselines."""
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
-from dataclasses import dataclass
-from functools import partial
-from pathlib import Path
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -37,11 +34,13 @@ class Talk2CarReport:
     Attributes:
         rows: subset -> ``{"commands", "BEV AP_A", "3D AP_A", "BEV AP_B", "3D AP_B", "AP50 2D",
             "top-1", "top-1 class noun", "top-1 language-blind"}``.
+        predictions: The predictions scored (what the predictions file holds).
     """
 
     rows: dict[str, dict[str, float]]
+    predictions: tuple[CommandPrediction, ...] = field(default=(), repr=False, compare=False)
 
-    def format_table(self) -> str:
+    def format_tables(self) -> str:
         """The printed table: one line per subset."""
         names = (
             "commands",
@@ -96,53 +95,7 @@ def build_report(predictions: Sequence[CommandPrediction]) -> Talk2CarReport:
         chosen = [p for p in predictions if subset in subset_of(p.description)]
         if chosen or subset == "all":
             rows[subset] = figures(chosen)
-    return Talk2CarReport(rows)
+    return Talk2CarReport(rows, tuple(predictions))
 
 
-def run_talk2car(
-    data: str | Path,
-    talk2car: str | Path,
-    split: str,
-    checkpoint: str | Path,
-    out: Path,
-    device: str = "cpu",
-    limit: int = 0,
-) -> Talk2CarReport:
-    """``python -m model.evaluate --data NUSC --talk2car CMDS``: ground the split's commands with
-    the checkpoint, print the table, write ``out/{split}_predictions.json``; returns the report.
-
-    Raises:
-        ValueError: no command of the split has a referent in the class set; the loader's and
-            the checkpoint's errors.
-    """
-    from model.checkpoint import load_checkpoint
-    from model.evaluation.talk2car.predict import iterate_command_predictions, predictions_json
-    from scenes.datasets.nuscenes_frames import open_talk2car
-    from scenes.nuscenes.classes import model_class
-    from scenes.nuscenes.talk2car import model_box_to_camera
-    from scenes.utils.durable import atomic_write_text
-
-    model = load_checkpoint(checkpoint, device=device)
-    root, commands = open_talk2car(data, talk2car, split, model.cfg.class_set)
-    classes = partial(model_class, classes=model.cfg.class_set)  # the checkpoint's class set
-    predictions = list(iterate_command_predictions(model, root, commands, classes, limit=limit))
-    if not predictions:
-        raise ValueError(
-            f"{Path(talk2car) / f'{split}_commands.json'}: no command with a referent in the "
-            "class set"
-        )
-    report = build_report(predictions)
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / f"{split}_predictions.json"
-    atomic_write_text(path, json.dumps(predictions_json(predictions, model_box_to_camera)) + "\n")
-    skipped = sum(commands.skipped.values())
-    print(
-        f"data: {data} commands {talk2car} split {split} ({len(predictions)} commands scored, "
-        f"{skipped} skipped); checkpoint {checkpoint}"
-    )
-    print(report.format_table(), end="")
-    print(f"predictions written to {path}")
-    return report
-
-
-__all__ = ["SUBSETS", "Talk2CarReport", "build_report", "figures", "run_talk2car", "subset_of"]
+__all__ = ["SUBSETS", "Talk2CarReport", "build_report", "figures", "subset_of"]
