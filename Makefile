@@ -21,11 +21,12 @@ install: $(STAMP)
 run: install  ## serve the app on the bundled defaults (http://127.0.0.1:8080)
 	$(PY) launch.py $(ARGS)
 
-test: install  ## the whole test suite, real-browser test included, a worker per core
-	$(PY) -m pytest -n $(WORKERS) --dist loadfile $(ARGS)
+test: install  ## the whole test suite, real-browser test included: a worker per core, then the tests that race a clock alone
+	$(PY) -m pytest -n $(WORKERS) --dist loadfile -m "not serial" $(ARGS)
+	$(PY) -m pytest -m serial $(ARGS) || test $$? -eq 5
 
-test-fast: install  ## everything but the slow and browser tests
-	$(PY) -m pytest -n $(WORKERS) --dist loadfile -m "not slow and not browser" $(ARGS)
+test-fast: install  ## everything but the slow, browser and clock-racing tests
+	$(PY) -m pytest -n $(WORKERS) --dist loadfile -m "not slow and not browser and not serial" $(ARGS)
 
 lint: install
 	$(VENV)/bin/ruff check .

@@ -14,7 +14,7 @@
 - Annotation saves pairs into ``--pairs DIR`` (created by the first save); by default into the
   served root when it has prompts (a Talk2Radar root). A root without prompts (a release as it
   comes) is never written into or beside: without ``--pairs`` the Annotate tab does not save and
-  suggests ``--pairs <ROOT>-talk2radar`` (:func:`app.served.default_pairs_root`). Serving writes
+  suggests ``--pairs <ROOT>-talk2radar`` (:func:`app.serving.served.default_pairs_root`). Serving writes
   nothing until the first save.
 - ``--data`` may be a nuScenes root as released (``v1.0-*/``, ``samples/``, ``sweeps/``) with
   ``--talk2car CMDS`` (the folder holding Talk2Car's ``{split}_commands.json``): every sample
@@ -30,6 +30,10 @@
   on stderr and exit code 2, within seconds (the host and port are checked before anything else).
 
 The URL is printed once the server listens; Ctrl-C (or SIGTERM) stops it cleanly (exit code 0).
+
+Roots are reached through the dataset layer (:mod:`scenes.datasets.source`); which split of a
+Talk2Radar root can be served is that reader's knowledge of its layout, so the split checks are
+:mod:`scenes.talk2radar.splits`' (the one family module imported here).
 """
 
 from __future__ import annotations
@@ -50,8 +54,7 @@ from scenes.utils.cli import add_options, from_args, option, show_warnings_as_li
 
 if TYPE_CHECKING:
     from model import TPCNet
-    from scenes.datasets.source import NuScenesSource
-    from scenes.talk2radar.root import Talk2RadarRoot
+    from scenes.datasets.source import NuScenesSource, Talk2RadarRoot
 
 REPO = Path(__file__).resolve().parent
 DEFAULT_DATA = REPO / "data" / "default"
@@ -161,105 +164,50 @@ def ensure_default_data(
     return out
 
 
-SPLIT_PREFERENCE = ("test", "val", "train")
-"""Splits tried, in order, when ``--split`` is not given (then the others, sorted)."""
-
-
-def missing_files(root: Talk2RadarRoot, split: str) -> list[str]:
-    """One message per frame of ``split`` that lacks a file the reader needs (LiDAR points and
-    calib, label_2, the radar tree's points and calib), naming the first missing file."""
-    from scenes.talk2radar.layout import CALIB, LABEL, VELODYNE, sample_file
-    from scenes.talk2radar.root import format_id
-
-    trees = [(root.lidar_dir, (VELODYNE, CALIB, LABEL))]
-    if root.radar_dir is not None:
-        trees.append((root.radar_dir, (VELODYNE, CALIB)))
-    out = []
-    for sid in root.ids(split):
-        sid = format_id(sid)
-        for tree, folders in trees:
-            gone = [sample_file(tree, folder, sid) for folder in folders]
-            gone = [f for f in gone if not (f.exists() or f.is_symlink())]
-            if gone:
-                out.append(f"{gone[0]}: missing {gone[0].parent.name} file for sample {sid}")
-                break
-    return out
-
-
-def _split_problem(root: Talk2RadarRoot, split: str) -> str | None:
-    """Why ``split`` cannot be served (None: it can)."""
-    from scenes.frame import RootError
-
-    try:
-        ids = root.ids(split)
-        missing = missing_files(root, split)
-    except RootError as exc:
-        return str(exc)
-    if not ids:
-        return f"{root.path}: split {split!r} lists no frame (splits: {root.splits()})"
-    if missing:
-        from scenes.talk2radar.layout import VELODYNE, sample_dir, split_dir, split_file
-
-        if split_dir(root.lidar_dir).is_dir():
-            where = f"listed in {split_file(root.lidar_dir, split)}"
-        else:
-            where = f"of {sample_dir(root.lidar_dir, VELODYNE)}"
-        return f"{missing[0]} ({len(missing)} of the {len(ids)} frames {where} miss files)"
-    return None
-
-
 def open_root(path: Path, split: str | None) -> Talk2RadarRoot:
-    """Open a root and check ``split`` (None: only that the root has a split list).
+    """Open a root and check ``split`` (None: only that the root has a split list); the checks
+    are the reader's (:mod:`scenes.talk2radar.splits`).
 
     Raises:
         LaunchError: not a root, an ImageSets folder without lists, an unknown or empty split, or a split listing
             frames whose files are missing (the message names the first such file).
     """
+    from scenes.datasets.source import Talk2RadarRoot
     from scenes.frame import RootError
-    from scenes.talk2radar.layout import split_dir
-    from scenes.talk2radar.root import Talk2RadarRoot
+    from scenes.talk2radar.splits import no_split_lists, split_problem
 
     if not path.is_dir():
         raise LaunchError(f"--data {path}: no such folder")
     try:
         root = Talk2RadarRoot(path)
-        present = root.splits()
+        problem = no_split_lists(root)
     except RootError as exc:
         raise LaunchError(str(exc)) from exc
-    if not present:
-        raise LaunchError(
-            f"{split_dir(root.lidar_dir)}: no split list (<split>.txt with one frame id a "
-            "line); write one, e.g. all.txt listing the ids of lidar/training/velodyne, and pass "
-            "--split all, or remove the empty folder to serve every frame"
-        )
-    if split is not None:
-        problem = _split_problem(root, split)
-        if problem is not None:
-            raise LaunchError(problem)
+    if problem is None and split is not None:
+        problem = split_problem(root, split)
+    if problem is not None:
+        raise LaunchError(problem)
     return root
 
 
 def choose_split(root: Talk2RadarRoot, split: str | None) -> str:
     """``split`` when given (checked by :func:`open_root`), else the first of
-    :data:`SPLIT_PREFERENCE` (then the other lists, sorted) whose frames all have their files.
+    :data:`scenes.talk2radar.splits.SPLIT_PREFERENCE` (then the other lists, sorted) whose
+    frames all have their files (:func:`scenes.talk2radar.splits.first_servable_split`).
 
     Raises:
         LaunchError: no split can be served (the first candidate's problem is named).
     """
+    from scenes.talk2radar.splits import first_servable_split
+
     if split is not None:
         return split
-    present = root.splits()
-    candidates = [s for s in SPLIT_PREFERENCE if s in present]
-    candidates += [s for s in present if s not in SPLIT_PREFERENCE]
-    problems = []
-    for candidate in candidates:
-        problem = _split_problem(root, candidate)
-        if problem is None:
-            if problems:
-                log.info("serving split %r (%s)", candidate, "; ".join(problems))
-            return candidate
-        problems.append(f"{candidate!r}: {problem}")
-    raise LaunchError(f"no split can be served; {problems[0]}")
+    chosen, problems = first_servable_split(root)
+    if chosen is None:
+        raise LaunchError(f"no split can be served; {problems[0]}")
+    if problems:
+        log.info("serving split %r (%s)", chosen, "; ".join(problems))
+    return chosen
 
 
 def root_family(path: Path, talk2car: Path | None = None) -> str:
@@ -290,12 +238,11 @@ def open_nuscenes(
     """
     from scenes.datasets.source import NuScenesSource
     from scenes.frame import RootError
-    from scenes.nuscenes.tables import NuScenesError
 
     try:
         source = NuScenesSource(path, talk2car)
         return source, source.choose_split(split)
-    except (NuScenesError, RootError, OSError) as exc:
+    except (RootError, OSError) as exc:  # a nuScenes table or command file error is a RootError
         raise LaunchError(str(exc)) from exc
 
 

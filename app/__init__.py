@@ -1,4 +1,6 @@
-"""The viser front: scene rendering, colour maps, the query panel, navigation.
+"""The viser front, cut by concept: the Query tab (:mod:`app.query`), what a browser sees of a
+frame (:mod:`app.view`), what the app serves (:mod:`app.serving`) and the Annotate tab
+(:mod:`app.annotate_tab`), under the app object and one browser's session.
 
 ``python launch.py`` serves it; :class:`Talk2PCApp` is the app object (start / stop, port 0 for
 tests; it owns everything shared: navigation, engine, annotation store) and :class:`ClientSession`

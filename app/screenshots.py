@@ -35,16 +35,16 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 
 from app.browser import find_chromium
-from app.scene_view import CameraPose, apply_pose
+from app.view.scene_view import CameraPose, apply_pose
 from scenes.utils.cli import command_parser, option, report_errors, run_command
 
 if TYPE_CHECKING:
     import argparse
 
     from app.server import Talk2PCApp
+    from scenes.datasets.source import Talk2RadarRoot
     from scenes.frame import Sample
     from scenes.synth.generate import SynthSettings
-    from scenes.talk2radar.root import Talk2RadarRoot
 
 REPO = Path(__file__).resolve().parents[1]
 DEFAULT_OUT = REPO / "docs" / "images"
@@ -294,7 +294,7 @@ def choose_in_app(app: Talk2PCApp, root: Path, cfg: ScreenshotConfig) -> Choice:
     model, first sensor choice and initial threshold, as the browser asks; the app need not be
     started)."""
     from model import model_classes
-    from scenes.talk2radar.root import Talk2RadarRoot
+    from scenes.datasets.source import Talk2RadarRoot
 
     modality = app.engine.modalities[0]
     threshold = app.score_threshold

@@ -1,8 +1,8 @@
 """The app object: :class:`Talk2PCApp` serves one split of a root with one model (a Talk2Radar
-root, a View-of-Delft release or a nuScenes root with its Talk2Car commands: :mod:`app.served`).
+root, a View-of-Delft release or a nuScenes root with its Talk2Car commands: :mod:`app.serving.served`).
 
 Shared by every browser, owned here: the viser server, the current frame and the frame cache
-(:class:`app.navigation.Navigator`: navigation is shared), the model engine
+(:class:`app.serving.navigation.Navigator`: navigation is shared), the model engine
 (:class:`app.engine.GroundingEngine`: worker pool, model lock, scene-feature cache) and the
 annotation store with the open Annotate tabs (:class:`app.annotate_tab.AnnotationHub`). Per
 browser: a :class:`app.session.ClientSession` with its own panel, boxes, heatmap, history and
@@ -49,26 +49,25 @@ import viser
 
 from app.annotate_tab import AnnotationHub, build_annotation_tab
 from app.engine import GroundingEngine, GroundingModel, initial_threshold
-from app.ground_truth import frame_objects
 from app.guards import InputWarnings, LogGuards, guard_client, guard_server
 from app.keys import add_escape_leaves_fields
 from app.memory import MemoryReaper, freeze_startup_objects
-from app.navigation import (
+from app.serving.ground_truth import frame_objects
+from app.serving.navigation import (
     Frame,
     FrameLoadError,
     FrameStore,
     NavigationError,
     Navigator,
 )
-from app.scene_view import chase_pose
-from app.served import ServedRoot, serve_root
+from app.serving.served import ServedRoot, serve_root
 from app.session import ClientSession, ExtraTab, SessionOptions
+from app.view.scene_view import chase_pose
 from model import model_classes
-from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.utils.cli import option
 
 if TYPE_CHECKING:
-    from scenes.datasets.source import NuScenesSource
+    from scenes.datasets.source import NuScenesSource, Talk2RadarRoot
 
 log = logging.getLogger(__name__)
 
@@ -151,7 +150,7 @@ class AppConfig:
         pairs_root: Where the Annotate tab saves pairs (a Talk2Radar root, created by the
             first save; on a nuScenes root, Talk2Car commands in ``DIR/commands/``); None: the
             served root when it has prompts, else no saving (the tab suggests
-            :func:`app.served.default_pairs_root`, or ``<root>-talk2car``).
+            :func:`app.serving.served.default_pairs_root`, or ``<root>-talk2car``).
         freeze_startup: Freeze the objects alive at start before any browser connects
             (:func:`app.memory.freeze_startup_objects`: cheap collections after disconnects);
             process-wide, so for the process that serves (``launch.py``), not for tests.
@@ -202,8 +201,8 @@ class Talk2PCApp:
 
     Args:
         root: A Talk2Radar root, a View-of-Delft release, a nuScenes root
-            (:class:`scenes.nuscenes.source.NuScenesSource`, with ``config.talk2car``'s commands), or
-            the path of one (the kind is chosen once: :func:`app.served.serve_root`).
+            (:class:`scenes.datasets.source.NuScenesSource`, with ``config.talk2car``'s commands), or
+            the path of one (the kind is chosen once: :func:`app.serving.served.serve_root`).
         model: The grounding model, in eval mode (``model.tpcnet.TPCNet``).
         config: Server and display settings.
 
@@ -226,7 +225,7 @@ class Talk2PCApp:
             talk2car=cfg.talk2car,
             classes=model_classes(model),
         )
-        """The kind of root served, chosen once (:mod:`app.served`)."""
+        """The kind of root served, chosen once (:mod:`app.serving.served`)."""
         self.navigator = Navigator(
             FrameStore(
                 self.served.root,

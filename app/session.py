@@ -1,9 +1,13 @@
 """Per-browser state of the app: :class:`ClientSession`.
 
 One session per viser client (websocket connection), created when the browser connects and closed
-when it leaves. It owns that browser's GUI (``client.gui``) and scene nodes (``client.scene``):
-points, ground-truth and predicted boxes, heatmap. It knows nothing of the app object: what every
-browser shares comes in as the :class:`~app.navigation.Navigator` (the current frame: the session
+when it leaves. It coordinates; the concepts live in their packages: the Query tab in
+:mod:`app.query` (the text read once at :meth:`ClientSession.run_prompt`, the one door, by
+:func:`app.query.prompt.read_prompt`; the run, :mod:`app.query.request`; the answer drawn,
+:class:`app.query.answer.AnswerView`), the 3D scene and the camera image in :mod:`app.view`,
+the frames in :mod:`app.serving`. It owns that browser's GUI (``client.gui``) and scene nodes
+(``client.scene``): points, ground-truth and predicted boxes, heatmap. It knows nothing of the app object: what every
+browser shares comes in as the :class:`~app.serving.navigation.Navigator` (the current frame: the session
 subscribes to its moves, :meth:`ClientSession.frame_shown`, and shows a failed move as a notification), the
 :class:`~app.engine.GroundingEngine` (model, worker pool, scene-feature cache) and
 :class:`SessionOptions`.
@@ -20,7 +24,7 @@ app passes the Annotate tab, :func:`app.annotate_tab.build_annotation_tab`); eac
 there. What a tab may use:
 
 - ``session.client`` (``client.gui``, ``client.scene`` for per-browser drafts and gizmos,
-  ``client.camera``), ``session.navigator`` (``frames``: the :class:`~app.navigation.FrameStore`
+  ``client.camera``), ``session.navigator`` (``frames``: the :class:`~app.serving.navigation.FrameStore`
   and its ``root``; ``reload()`` after saving a sample into the root being served),
   ``session.go_to(i)`` (a move, its errors shown in this browser), ``session.engine``;
 - ``session.frame`` / ``session.sample`` (the frame on screen), ``session.answer`` /
@@ -30,7 +34,7 @@ there. What a tab may use:
 - ``session.notify(title, body)``, ``session.report_error(title, error)``: messages in this browser;
 - ``session.lock``: hold it while drawing into ``client.scene`` from a worker thread;
 - ``session.set_camera_layer(name, layer)``: boxes drawn into the camera panel
-  (:class:`app.camera_panel.CameraPanel`, an :class:`app.camera_image.BoxLayer`; None removes
+  (:class:`app.view.camera_panel.CameraPanel`, an :class:`app.view.camera_image.BoxLayer`; None removes
   them); the session itself draws the layers ``gt`` and ``pred``.
 
 Scene-tree names used here (avoid them): ``/scene/...``, ``/pred/...``, ``/gt/...``, ``/heatmap``.
@@ -47,15 +51,15 @@ from concurrent.futures import Future
 
 import viser
 
-from app.boxes_view import PRED_STYLE, BoxesView, GroundTruthView
-from app.camera_image import BoxLayer
-from app.camera_panel import CameraPanel
 from app.engine import Answer, GroundingEngine, Predictions
-from app.frame_commands import CommandList, command_in_play, command_objects
-from app.ground_truth import NO_OBJECTS, FrameObjects
-from app.heatmap_view import HeatmapView
 from app.messages import error_body, notify
-from app.navigation import (
+from app.query.answer import AnswerView
+from app.query.panel import PromptField, QueryPanel, build_query_panel
+from app.query.prompt import Prompt, Refused, read_prompt
+from app.query.request import QueryRequest, answer_request
+from app.serving.frame_commands import CommandList, command_in_play, command_objects
+from app.serving.ground_truth import NO_OBJECTS, FrameObjects
+from app.serving.navigation import (
     Frame,
     FrameLoadError,
     NavigationError,
@@ -63,22 +67,13 @@ from app.navigation import (
     Navigator,
     build_navigation_panel,
 )
-from app.query_panel import (
-    PromptField,
-    PromptHistory,
-    QueryPanel,
-    QueryRequest,
-    answer_labels,
-    build_query_panel,
-    one_line,
-    prompt_to_run,
-    results_markdown,
-)
-from app.scene_view import SceneView, ViewPanel, build_view_panel
 from app.session_options import ExtraTab, SessionOptions
 from app.text import md_text
+from app.view.boxes_view import GroundTruthView
+from app.view.camera_image import BoxLayer
+from app.view.camera_panel import CameraPanel
+from app.view.scene_view import SceneView, ViewPanel, build_view_panel
 from scenes.frame import Sample
-from scenes.utils.text_policy import collapse_spaces
 
 log = logging.getLogger(__name__)
 
@@ -110,15 +105,17 @@ class ClientSession:
         self.frame: Frame | None = None
         self.answer: Answer | None = None
         self.last_latency_ms: float | None = None
-        self.history = PromptHistory()
         self.scene_view = SceneView(client.scene)
-        self.pred_view = BoxesView(client.scene, "/pred", PRED_STYLE)
+        self.answers = AnswerView(client.scene, engine.classes)
+        """The answer on screen: boxes, heatmap, the prompts run, the summary."""
+        self.pred_view = self.answers.boxes
+        """The answer's boxes as drawn (``count``: how many)."""
+        self.heatmap_view = self.answers.heatmap
         self.gt_view = GroundTruthView(client.scene, "/gt")
-        self.heatmap_view = HeatmapView(client.scene, "/heatmap", engine.classes.names)
         self.nav: NavigationPanel | None = None
         self.commands: CommandList | None = None
         self.command: int | None = None
-        """The frame's command in play (:mod:`app.frame_commands`; None: none)."""
+        """The frame's command in play (:mod:`app.serving.frame_commands`; None: none)."""
         self.objects: FrameObjects = NO_OBJECTS
         """The frame's labelled objects as drawn here (the command in play's referent marked)."""
         self.query: QueryPanel | None = None
@@ -222,7 +219,7 @@ class ClientSession:
         q.wire_prompts(self.run_prompt, self.write_prompt, lambda: self.sample, self._rerun_last)
         q.wire_layers(
             self.lock,
-            self.heatmap_view,
+            self.answers.heatmap,
             self.gt_view,
             lambda gt, others: self._with_camera(lambda camera: camera.show_gt(gt, others)),
         )
@@ -230,7 +227,7 @@ class ClientSession:
     def _rerun_last(self) -> None:
         """A setting changed: run the last prompt again (none yet: encode the frame for it)."""
         if self.answer is not None:
-            self.run_prompt(self.answer.prompt)
+            self._ask(Prompt(self.answer.prompt))  # read when it entered: run as it is
         elif self.sample is not None and self.query is not None:
             self.engine.prefetch(self.sample, self.query.selected_modality())
 
@@ -255,7 +252,7 @@ class ClientSession:
 
     def set_camera_layer(self, name: str, layer: BoxLayer | None) -> None:
         """Draw ``layer`` (None: nothing) as the camera panel's box layer ``name`` (see
-        :data:`app.camera_panel.LAYER_ORDER`); redrawn only when it changed."""
+        :data:`app.view.camera_panel.LAYER_ORDER`); redrawn only when it changed."""
         self._with_camera(lambda camera: camera.set_layer(name, layer))
 
     def frame_shown(self, frame: Frame) -> None:
@@ -278,8 +275,7 @@ class ClientSession:
             sample = frame.sample
             with self.client.atomic():
                 self.scene_view.show(sample.lidar, sample.radar, frame.ground_z)
-                self.pred_view.clear()
-                self.heatmap_view.clear()
+                self.answers.clear()
                 if self.commands is not None:
                     self.commands.show(frame.commands, 0 if frame.commands else None)
                 self._mark_command(0 if frame.commands else None, camera=False)
@@ -364,7 +360,7 @@ class ClientSession:
 
     def run_command(self, index: int) -> Future | None:
         """Run command ``index`` of the frame on screen as if typed into the prompt box and run
-        (:mod:`app.frame_commands`); it becomes the command in play."""
+        (:mod:`app.serving.frame_commands`); it becomes the command in play."""
         with self.lock:
             commands = self.frame.commands if self.frame is not None else None
             if not commands or not 0 <= index < len(commands) or self.closed:
@@ -372,37 +368,35 @@ class ClientSession:
             self._mark_command(index)
         return self.run_prompt(commands[index].text, write=True)
 
-    def run_prompt(self, prompt: str | None, write: bool = False) -> Future | None:
-        """Answer ``prompt`` on the frame on screen, in the engine's worker pool: the one way the
-        Query tab runs a prompt (Enter, *Run*, *Re-run*, a changed setting), cleaned here, once
-        (:func:`prompt_to_run`: the text policy); one it refuses, or an empty one, gets a
-        notification. ``write``: the prompt box shows the prompt as run (when refused: as typed,
-        line breaks and runs of spaces made one). Returns the job's future (or None)."""
+    def run_prompt(self, typed: str | None, write: bool = False) -> Future | None:
+        """The one door of the Query tab's text (Enter, *Run*, *Re-run*, a frame's command): read
+        once (:func:`app.query.prompt.read_prompt`: the text policy) and answered on the frame on
+        screen, in the engine's worker pool; a text it refuses, or an empty one, gets a
+        notification and clears the answer shown. ``write``: the prompt box shows the prompt as
+        run (when refused: as typed, line breaks and runs of spaces made one). Returns the job's
+        future (or None)."""
         received = time.perf_counter()
-        text, problem = prompt_to_run(prompt)
+        prompt = read_prompt(typed)
         if write:
-            self.write_prompt(text if problem is None else collapse_spaces(one_line(prompt or "")))
-        if problem is not None:  # refused: the previous answer goes too (not left as this one's)
-            self.notify(*problem, color="yellow")
-            self.clear_answer(f"*Not run:* {md_text(problem[1])}")
+            self.write_prompt(prompt.shown if isinstance(prompt, Refused) else prompt)
+        if isinstance(prompt, Refused):  # the previous answer goes too (not left as this one's)
+            self.notify(prompt.title, prompt.body, color="yellow")
+            self.clear_answer(f"*Not run:* {md_text(prompt.body)}")
             return None
+        return self._ask(prompt, received)
+
+    def _ask(self, prompt: Prompt, received: float | None = None) -> Future | None:
+        """Answer ``prompt`` (read already: run as it is) with the Query tab's settings."""
+        received = time.perf_counter() if received is None else received
         with self.lock:
             if self.frame is None or self.query is None or self.closed:
                 return None
-            found = command_in_play(self.frame.commands, self.command, text)
+            found = command_in_play(self.frame.commands, self.command, prompt)
             if found != self.command:
                 self._mark_command(found)
             self._generation += 1
-            request = QueryRequest(
-                prompt=text,
-                modality=self.query.selected_modality(),
-                score_threshold=float(self.query.threshold.value),
-                labelled=self.query.labelled_selected(),
-                frame=self.frame,
-                generation=self._generation,
-                received=received,
-            )
-            self.query.results.content = f"*Running:* {md_text(text)}"
+            request = QueryRequest.of(self.query, prompt, self.frame, self._generation, received)
+            self.query.results.content = f"*Running:* {md_text(prompt)}"
         self.client.flush()  # viser sends only a widget's latest value: a fast answer hid the line
         return self.engine.submit(self._answer_job, request)
 
@@ -415,8 +409,7 @@ class ClientSession:
             self._generation += 1
             self.answer = None
             with self.client.atomic():
-                self.pred_view.clear()
-                self.heatmap_view.clear()
+                self.answers.clear()
                 self.query.results.content = note
             self._with_camera(lambda camera: camera.set_layer("pred", None))
             self._call(self._answer_listeners)
@@ -428,13 +421,7 @@ class ClientSession:
         if self._stale(request):
             return
         try:
-            answer = self.engine.answer(
-                request.frame.sample,
-                request.modality,
-                request.prompt,
-                request.score_threshold,
-                request.candidates(self.options.labelled_boxes),
-            )
+            answer = answer_request(self.engine, request, self.options.labelled_boxes)
         except Exception as exc:
             self.report_error("Model error", exc)
             with self.lock:
@@ -452,33 +439,22 @@ class ClientSession:
             self._call(self._answer_listeners)
 
     def _draw_answer(self, answer: Answer, request: QueryRequest) -> None:
-        """Draw boxes, heatmap, summary and history (holding :attr:`lock`)."""
+        """Draw the answer (:meth:`AnswerView.draw <app.query.answer.AnswerView.draw>`; holding
+        :attr:`lock`)."""
         assert self.query is not None
-        pred = answer.predictions
-        overlaps, labels = answer_labels(pred, self.objects)
-        with self.client.atomic():
-            self.pred_view.show(pred.boxes, pred.classes, labels)
-            self.heatmap_view.visible = self.query.show_heatmap.value
-            self.heatmap_view.show(
-                pred.heatmaps, pred.grid, request.frame.ground_z, self.query.opacity.value
-            )
-        self.answer = answer
-        self._with_camera(lambda camera: camera.show_predictions(pred))
-        self.history.add(request.prompt)
-        self.query.history.options = self.history.options()
-        self.query.history.value = self.history.items[0]
-        self.query.rerun.disabled = False
-        latency = (time.perf_counter() - request.received) * 1000.0
+
+        def drawn() -> None:
+            self.answer = answer
+            self._with_camera(lambda camera: camera.show_predictions(answer.predictions))
+
+        latency = self.answers.draw(self.client, self.query, answer, request, self.objects, drawn)
         self.last_latency_ms = latency
-        self.query.results.content = results_markdown(
-            answer, overlaps, latency, self.engine.classes
-        )
         log.info(
             "client %s: %r on %s -> %d boxes in %.0f ms",
             self.client_id,
             request.prompt,
             answer.sample_id,
-            len(pred.scores),
+            len(answer.predictions.scores),
             latency,
         )
 

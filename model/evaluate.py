@@ -250,41 +250,24 @@ def evaluation_kind(cfg: EvaluateConfig) -> EvaluationKind:
     command line's settings and output paths (without ``--out``: :func:`default_out_dir`, and for a
     Talk2Radar root the JSON beside it as ``<that folder>.json`` unless ``--json`` is given)."""
     out = cfg.out or default_out_dir(cfg.data, cfg.split)
+    shared = ("data", "split", "checkpoint", "threshold", "device", "limit")
+    common = {"out": out, **_fields(cfg, *shared)}
     if cfg.talk2car is not None:
         from model.evaluation.talk2car.kind import Talk2CarEvaluation
 
-        return Talk2CarEvaluation(
-            data=cfg.data,
-            talk2car=cfg.talk2car,
-            split=cfg.split,
-            checkpoint=cfg.checkpoint,
-            out=out,
-            json=cfg.json,
-            threshold=cfg.threshold,
-            device=cfg.device,
-            limit=cfg.limit,
-        )
+        return Talk2CarEvaluation(talk2car=cfg.talk2car, json=cfg.json, **common)
     from model.evaluation.talk2radar import Talk2RadarEvaluation
 
     json_path = cfg.json
     if cfg.out is None and json_path is None:
         json_path = out.with_name(out.name + ".json")
-    return Talk2RadarEvaluation(
-        data=cfg.data,
-        split=cfg.split,
-        checkpoint=cfg.checkpoint,
-        out=out,
-        json=json_path,
-        threshold=cfg.threshold,
-        baselines=cfg.baselines,
-        radar_folder=cfg.radar_folder,
-        scene_labels=cfg.scene_labels,
-        candidates=cfg.candidates,
-        device=cfg.device,
-        workers=cfg.workers,
-        worker_timeout=cfg.worker_timeout,
-        limit=cfg.limit,
-    )
+    own = _fields(cfg, "baselines", "radar_folder", "scene_labels", "candidates", "workers")
+    return Talk2RadarEvaluation(json=json_path, worker_timeout=cfg.worker_timeout, **own, **common)
+
+
+def _fields(cfg: EvaluateConfig, *names: str) -> dict[str, object]:
+    """``{name: cfg.name}`` for ``names``: the settings an evaluation kind takes as they are."""
+    return {name: getattr(cfg, name) for name in names}
 
 
 def _run_model_mode(cfg: EvaluateConfig) -> int:

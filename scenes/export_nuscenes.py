@@ -28,7 +28,7 @@ import numpy as np
 
 from scenes.geometry.actors import Actor
 from scenes.language.prompts.commands import as_command
-from scenes.language.prompts.phrasing import PHRASINGS
+from scenes.language.prompts.phrasing.split import PHRASINGS
 from scenes.nuscenes.export import (
     ExportReport,
     Sentence,

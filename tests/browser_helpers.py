@@ -2,8 +2,9 @@
 Chromium is, the flags it runs with (headless, software rendering) and a page-side check of
 viser's scene tree (from :mod:`app.browser`, which ``python -m app.screenshots`` uses too),
 waiting on the server's state (:func:`poll`), where a world point appears on the canvas
-(:func:`pixel_of`, for ground clicks) and opening the Annotate tab (:func:`open_annotate`). Not
-a test module; the ``chromium`` fixture of ``conftest.py`` uses it.
+(:func:`pixel_of`, for ground clicks), opening the Annotate tab (:func:`open_annotate`), a page
+on a served app with its session (:func:`open_session_page`) and a screenshot without the
+notifications (:func:`screenshot`). Not a test module; the ``chromium`` fixture of ``conftest.py`` uses it.
 """
 
 from __future__ import annotations
@@ -11,13 +12,19 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from pathlib import Path
 
 import numpy as np
 
-from app.browser import CHROMIUM_ARGS, CHROMIUM_CANDIDATES, PAGE_SIZE, find_chromium, scene_has
+from app.browser import (
+    CHROMIUM_ARGS,
+    CHROMIUM_CANDIDATES,
+    HIDE_NOTIFICATIONS,
+    PAGE_SIZE,
+    find_chromium,
+    scene_has,
+)
+from tests.paths import REPO
 
-REPO = Path(__file__).resolve().parents[1]
 ARTIFACTS = REPO / "artifacts"
 
 __all__ = [
@@ -29,9 +36,11 @@ __all__ = [
     "find_chromium",
     "labelled_field",
     "open_annotate",
+    "open_session_page",
     "pixel_of",
     "poll",
     "scene_has",
+    "screenshot",
 ]
 
 
@@ -42,6 +51,26 @@ def poll(condition: Callable[[], object], timeout: float, what: str) -> None:
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out after {timeout} s waiting for {what}")
         time.sleep(0.05)
+
+
+def open_session_page(browser, app, node: str, timeout: float = 90.0):
+    """A new page of ``PAGE_SIZE`` on ``app``, once its scene tree holds ``node``, and the
+    server's session of that page: ``(page, session)``."""
+    page = browser.new_page(viewport={"width": PAGE_SIZE[0], "height": PAGE_SIZE[1]})
+    before = set(app.sessions)
+    page.goto(app.url)
+    page.wait_for_function(scene_has(node), timeout=timeout * 1000)
+    poll(lambda: set(app.sessions) - before, timeout, "the page's session")
+    return page, app.sessions[max(set(app.sessions) - before)]
+
+
+def screenshot(page, name: str) -> None:
+    """``artifacts/<name>`` of ``page``, notifications hidden, after the software renderer has
+    drawn (SwiftShader renders slowly)."""
+    page.add_style_tag(content=HIDE_NOTIFICATIONS)
+    page.wait_for_timeout(1500)
+    ARTIFACTS.mkdir(exist_ok=True)
+    page.screenshot(path=str(ARTIFACTS / name))
 
 
 def pixel_of(camera, point, page_size: tuple[float, float] | None = None) -> tuple[float, float]:

@@ -25,6 +25,8 @@ Fixtures (test modules take them by name; none imports another test module):
   into the file ``log``; its exit code (the process group is killed if it outlives ``timeout``).
 - ``nuscenes_root``: a tiny nuScenes root with Talk2Car commands (train, val) written by
   ``scenes.export_nuscenes``, a ``vehicle.truck`` added to every sample (read only).
+- ``serve_nuscenes(split)``: a context manager serving ``nuscenes_root`` with its commands
+  (the small untrained referent-path model).
 """
 
 from __future__ import annotations
@@ -51,6 +53,7 @@ from model.checkpoint_meta import CheckpointMeta
 from scenes.geometry.calib import vod_lidar_calibration, vod_radar_calibration
 from scenes.talk2radar.root import Talk2RadarWriter
 from tests.browser_helpers import CHROMIUM_ARGS, find_chromium
+from tests.paths import REPO
 
 _EXIT_STATUS: list[int] = []
 
@@ -234,8 +237,6 @@ def _serve_app() -> Callable[..., contextlib.AbstractContextManager]:
 
 
 # ---------------------------------------------------------------------------- torchrun
-
-REPO = Path(__file__).resolve().parents[1]
 
 
 def free_port() -> int:
@@ -533,6 +534,28 @@ def nuscenes_root(tmp_path_factory: pytest.TempPathFactory) -> Path:
     generate_root(base / "synth", spec["frames"], settings, split_fractions=(0.5, 0.25, 0.25))
     export(base / "synth", base / "nusc", seed=3)
     return base / "nusc"
+
+
+@pytest.fixture(scope="session")
+def serve_nuscenes(
+    nuscenes_root: Path,
+    tmp_path_factory: pytest.TempPathFactory,
+    untrained_model: Callable[..., torch.nn.Module],
+) -> Callable[[str], contextlib.AbstractContextManager]:
+    """``serve_nuscenes(split)``: the app serving :func:`nuscenes_root` with its Talk2Car
+    commands on ``split`` (the small referent-path TPCNet, GRU text, untrained, every proposal
+    kept; pairs into a fresh folder; no warm-up), one torch thread; stopped on exit."""
+
+    @contextlib.contextmanager
+    def serve(split: str) -> Iterator:
+        pairs = tmp_path_factory.mktemp("nusc-pairs") / "pairs"
+        with torch_threads(1):
+            model = untrained_model("referent", text_encoder="gru", head__score_threshold=0.0)
+            config = {"talk2car": nuscenes_root / "commands", "pairs_root": pairs}
+            with serve_app(nuscenes_root, model, split=split, warm_up=False, **config) as app:
+                yield app
+
+    return serve
 
 
 @pytest.fixture(scope="session")

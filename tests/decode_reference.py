@@ -1,5 +1,5 @@
 """Reference outputs of decoding, candidate description and ``ground`` (issue 20): the inputs, the
-outputs and their file. Not a test module; ``tests/test_decode_reference.py`` compares today's
+outputs and their file. Not a test module; ``tests/model/test_decode_reference.py`` compares today's
 code with the file.
 
 Regenerate (only when a change of the outputs is intended, and say so in docs/RESULTS.md)::
@@ -13,7 +13,7 @@ first made on the code before issue 20's speed-ups, then regenerated on its infe
 outputs between the two: docs/RESULTS_HISTORY.md, "Issue 20's inference forms"), and again when the
 shipped checkpoint changed (its referent stage's weights; see ``commit`` in the file: the
 last, stage 3i, was made on the model code of commit 2d4e681, before the inference fast paths of
-``tests/test_inference_fast_paths.py``, which are held to it).
+``tests/model/test_inference_fast_paths.py``, which are held to it).
 
 Inputs, all on this machine's CPU with one torch thread:
 
@@ -31,13 +31,13 @@ from __future__ import annotations
 
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import torch
 
-REPO = Path(__file__).resolve().parents[1]
-REFERENCE = Path(__file__).resolve().parent / "data" / "decode_reference.npz"
+from tests.paths import REPO, TEST_DATA
+
+REFERENCE = TEST_DATA / "decode_reference.npz"
 CHECKPOINT = REPO / "checkpoints" / "tpcnet-small.pt"
 SEED = 3
 WORLDS = (0, 1, 2)

@@ -38,8 +38,9 @@ from PIL import Image
 from scenes.synth.camera import CameraConfig
 from scenes.synth.generate import SynthSettings, generate_root
 from scenes.synth.generate import main as synth_main
+from tests.paths import TEST_DATA
 
-PINS = Path(__file__).parent / "data" / "synth_pins.json"
+PINS = TEST_DATA / "synth_pins.json"
 
 RAY_CAST = (
     "lidar/*/velodyne/*.bin",

@@ -1,6 +1,6 @@
 """The camera panel in a real browser: Debian's headless Chromium, driven by Playwright, uses the
 app as a person annotating a View-of-Delft frame would. Not a test module: the browser test of
-``tests/test_app_browser.py`` calls :func:`drive_camera`, and run as a script it writes the
+``tests/app/browser/test_app_browser.py`` calls :func:`drive_camera`, and run as a script it writes the
 documentation screenshot::
 
     python -m tools.camera_shot --out docs/images/camera.png

@@ -20,9 +20,9 @@ The parts:
 
 Pairs are saved into the root being served when it is a Talk2Radar root with prompts, else
 into the folder named with ``launch.py --pairs`` (a root without prompts served without it saves
-nothing and suggests :func:`app.served.default_pairs_root`); the status line says where. Nothing
+nothing and suggests :func:`app.serving.served.default_pairs_root`); the status line says where. Nothing
 is written before the first save. After a save or a deletion into the served root its split is re-read
-(:meth:`app.navigation.Navigator.reload`); every browser's list of saved pairs is refreshed.
+(:meth:`app.serving.navigation.Navigator.reload`); every browser's list of saved pairs is refreshed.
 
 Using it (a one-box pair: a click and the sentence; see docs/ANNOTATION.md):
 

@@ -37,7 +37,7 @@ from app.annotate_tab.formatting import option_index, option_ready_index, placem
 from app.annotate_tab.panel import AnnotationPanel, Part
 from app.annotate_tab.referents import ReferentPicker
 from app.annotate_tab.view import box_at, box_tag, ground_hit, screen_axes, wxyz_to_yaw
-from app.query_panel import submitted_prompt
+from app.query.prompt import submitted_prompt
 
 
 class DraftEdits:
@@ -314,7 +314,7 @@ class DraftEdits:
 
     def set_prompt(self) -> bool:
         """*Pair prompt* changed; returns whether Enter was pressed (a line break in the value:
-        the field is multi-line, see :mod:`app.query_panel`), which the line break's removal
+        the field is multi-line, see :mod:`app.query.panel`), which the line break's removal
         and the save follow (:meth:`app.annotate_tab.pairs.PairActions.submit`)."""
         p = self.panel
         with p.session.lock:

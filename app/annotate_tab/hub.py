@@ -10,10 +10,12 @@ the first save, so a page that only looks leaves the disk as it was.
 The store's root is the served root (a Talk2Radar root with prompts) or the folder named with
 ``--pairs``: :attr:`AnnotationHub.separate` says which, and the tab says where pairs go. A root
 without prompts (a View-of-Delft release served directly) without ``--pairs`` gets no store: the
-folder beside it (:func:`app.served.default_pairs_root`) is only suggested, never written, and
+folder beside it (:func:`app.serving.served.default_pairs_root`) is only suggested, never written, and
 the tab says how to name one (:attr:`AnnotationHub.error`). A nuScenes root's pairs are Talk2Car
 commands (:class:`annotate.talk2car.Talk2CarStore`), saved only into ``--pairs DIR``. What
-differs between the kinds is the root kind's (:mod:`app.served`).
+differs between the kinds is the root kind's (:mod:`app.serving.served`).
+Family specifics: the drives the *Sequence* folder plays are :class:`scenes.talk2radar.drives.Drives`
+(the one drive type, which the root kind gives for every family), imported from that room.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from typing import Protocol
 
 from annotate import AnnotationStore, StoreError
 from annotate.talk2car import Talk2CarStore
-from app.served import ServedRoot
+from app.serving.served import ServedRoot
 from app.session import ClientSession
 from scenes.frame import RootError
 from scenes.talk2radar.drives import Drives
@@ -47,7 +49,7 @@ class AnnotationHub:
     """The store of one served root and the open Annotate tabs (see the module docstring).
 
     Args:
-        served: The root kind served (:class:`app.served.ServedRoot`): where pairs go
+        served: The root kind served (:class:`app.serving.served.ServedRoot`): where pairs go
             (``pairs_path``; ``named`` False: only a suggestion, never written, no store), the
             store it opens there, the frame a pair is made on, the rules a pair must meet beyond
             :func:`annotate.validate`, and the drives of a split.
@@ -110,7 +112,7 @@ class AnnotationHub:
         return self._error
 
     def drives(self, ids: tuple[str, ...]) -> Drives:
-        """The drives of a split list of the served root (:meth:`app.served.ServedRoot.drives`),
+        """The drives of a split list of the served root (:meth:`app.serving.served.ServedRoot.drives`),
         computed once per list and shared by every browser; none when a pose file is malformed
         (:attr:`drives_error` says which)."""
         key = tuple(ids)

@@ -26,8 +26,8 @@ from annotate import (
 )
 from app.annotate_tab.formatting import option_pair_id
 from app.annotate_tab.panel import AnnotationPanel, DraftFrame
-from app.scene_view import estimate_ground_z
-from scenes.talk2radar.root import Talk2RadarRoot
+from app.serving.navigation import estimate_ground_z
+from scenes.datasets.source import Talk2RadarRoot
 
 log = logging.getLogger(__name__)
 

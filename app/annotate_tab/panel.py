@@ -308,7 +308,7 @@ class AnnotationPanel:
 
     def pair_split(self) -> str | None:
         """The split a new pair on the draft's frame must go into (a Talk2Car command: its
-        sample's, :meth:`app.served.ServedRoot.pair_split`); None: the person's *Split*."""
+        sample's, :meth:`app.serving.served.ServedRoot.pair_split`); None: the person's *Split*."""
         if self.frame is None or self.draft.sample_id is not None:
             return None
         return self.hub.served.pair_split(self.frame.sample)

@@ -24,6 +24,8 @@ someone else decided after it was shown here is refused with who decided what, a
 shown again with that verdict. Approving with unsaved edits is refused (save them as a fix, or undo them); a pair changed
 by someone else since it was opened is refused too (reopen it). Training and evaluation read the
 approved pairs of a split with :func:`scenes.talk2radar.reviews.approved_ids`.
+Family specifics: a pair's review state (:class:`scenes.talk2radar.reviews.PairState`, read from
+the annotation manifest of a Talk2Radar pairs root) is that family's, imported from its room.
 """
 
 from __future__ import annotations

@@ -16,6 +16,9 @@ it. Undo takes the carried boxes back (an empty draft on the new frame).
 
 Keys (in :data:`app.annotate_tab.keys.KEYS`): Space plays / pauses, Page Up / Page Down step
 through the drive, T carries.
+Family specifics: a drive and the ego motion between two of its frames are the Talk2Radar
+family's (:mod:`scenes.talk2radar.drives`, :mod:`scenes.talk2radar.poses`: View-of-Delft's ego
+poses and frame rate; a nuScenes root's scenes come as the same drives), imported from that room.
 """
 
 from __future__ import annotations

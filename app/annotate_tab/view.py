@@ -4,7 +4,7 @@ the geometry of a ground click.
 Per browser (``client.scene``), under ``/annotate``:
 
 - ``/annotate/boxes/edges`` and ``/annotate/boxes/labels/<i>``: the draft boxes that are not
-  selected, drawn as :mod:`app.boxes_view` draws boxes (12 edges and a heading tick each) in
+  selected, drawn as :mod:`app.view.boxes_view` draws boxes (12 edges and a heading tick each) in
   :data:`DRAFT_COLOR`, a near-white that no class, ground-truth or radar colour uses, with a
   ``"#2 Car"`` label (the box's number in the panel's list).
 - ``/annotate/gizmo``: viser's transform gizmo, restricted to what a box on the ground needs: the
@@ -34,8 +34,8 @@ import numpy as np
 import viser
 
 from annotate import Draft
-from app.boxes_view import BoxesView, BoxStyle
-from app.camera_image import BoxLayer
+from app.view.boxes_view import BoxesView, BoxStyle
+from app.view.camera_image import BoxLayer
 from scenes.geometry.boxes import points_in_boxes
 
 DRAFT_COLOR = (235, 235, 255)

@@ -39,7 +39,6 @@ if str(_REPO) not in sys.path:
 from scenes.geometry.calib import sensor_to_lidar  # noqa: E402
 from scenes.synth.camera import CameraConfig  # noqa: E402
 from scenes.synth.generate import (  # noqa: E402
-    RADAR_FOLDER,
     SynthSettings,
     generate_root,
     synthesize,
@@ -61,7 +60,7 @@ def bench_stages(settings: SynthSettings, worlds: int) -> dict:
     samples, lidar_pts, radar_pts, actors = 0, [], [], []
     cpu0 = time.process_time()
     with tempfile.TemporaryDirectory() as tmp:
-        writer = Talk2RadarWriter(tmp, radar_folder=RADAR_FOLDER[settings.radar_scans])
+        writer = Talk2RadarWriter.for_radar_scans(tmp, settings.radar_scans)
         for index in range(worlds):
             frame = synthesize(settings, index, radar_to_lidar, lidar_calib)
             t0 = time.perf_counter()

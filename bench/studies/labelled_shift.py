@@ -136,15 +136,15 @@ def run(
     from tqdm import tqdm
 
     from model.checkpoint import load_checkpoint
-    from model.evaluation.class_prompt_frames import root_frame_ids
     from model.evaluation.predict import operating_threshold
+    from scenes.datasets.family_files import labelled_frame_ids
     from scenes.talk2radar.root import Talk2RadarRoot
 
     model = load_checkpoint(checkpoint)
     model.eval()
     threshold = operating_threshold(model)
     root = Talk2RadarRoot(root_dir)
-    ids = root_frame_ids(root, "all")
+    ids = labelled_frame_ids(root, "all")
     ids = ids[:limit] if limit else ids
     counts: dict[str, list] = {c: [] for c in CONDITIONS}
     with torch.no_grad():

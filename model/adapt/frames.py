@@ -3,7 +3,9 @@
 A root is a Talk2Radar or View-of-Delft layout root (``lidar/training/{velodyne,calib}`` and
 optionally a radar tree); it needs no ``label_2/``, ``prompt/``, ``ImageSets/`` or ``meta/``, and
 where they exist they are never read: frames come from
-:meth:`scenes.talk2radar.root.Talk2RadarRoot.load_sensors` with ``sidecar=False``. Without
+:meth:`scenes.datasets.source.Talk2RadarRoot.load_sensors` with ``sidecar=False`` (the
+Talk2Radar reader itself: a sensor-only read is that family's, not every
+:class:`~scenes.frame.FrameSource`'s). Without
 ``--split`` every frame of the LiDAR folder is used (as a recording comes); samples sharing their
 sensor files (several prompts on one frame, :meth:`Talk2RadarRoot.frame_key`) are one frame.
 """
@@ -16,10 +18,10 @@ from pathlib import Path
 import numpy as np
 
 from model.adapt.config import AdaptError
+from scenes.datasets.family_files import point_folder, split_list_file
+from scenes.datasets.source import Talk2RadarRoot
 from scenes.frame import RootError
 from scenes.geometry.ground import level_clouds
-from scenes.talk2radar.layout import VELODYNE, sample_dir, split_file
-from scenes.talk2radar.root import Talk2RadarRoot
 
 
 @dataclass(frozen=True)
@@ -79,10 +81,10 @@ class UnlabelledFrames:
         if max_frames:
             self.ids = self.ids[:max_frames]
         if not self.ids:
-            listed = split_file(self.root.lidar_dir, split)
-            if split and listed.is_file():
+            listed = split_list_file(self.root, split)
+            if split and listed is not None and listed.is_file():
                 raise AdaptError(f"--split {split}: no frame to adapt on ({listed} lists no frame)")
-            folder = sample_dir(self.root.lidar_dir, VELODYNE)
+            folder = point_folder(self.root)
             raise AdaptError(f"--data {path}: no frame to adapt on (no .bin file in {folder})")
 
     def __len__(self) -> int:

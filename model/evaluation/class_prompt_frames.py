@@ -1,4 +1,5 @@
-"""Which frames of a root the class prompts are asked on, and their camera's image size
+"""Which frames of a root the class prompts are asked on (distinct scenes of the frames
+:func:`scenes.datasets.family_files.labelled_frame_ids` gives), and their camera's image size
 (:mod:`model.evaluation.class_prompts`' inputs)."""
 
 from __future__ import annotations
@@ -7,10 +8,8 @@ from collections.abc import Sequence
 
 from PIL import Image
 
-from scenes.frame import RootError, Sample
+from scenes.frame import FrameSource, RootError, Sample
 from scenes.geometry.calib import IMAGE_SIZE
-from scenes.talk2radar.layout import ID_WIDTH, LABEL, is_frame_id, sample_dir
-from scenes.talk2radar.root import Talk2RadarRoot
 
 
 def image_size_of(sample: Sample) -> tuple[int, int]:
@@ -28,31 +27,7 @@ def image_size_of(sample: Sample) -> tuple[int, int]:
         raise RootError(f"{sample.image_path}: unreadable camera image ({exc})") from exc
 
 
-def root_frame_ids(root: Talk2RadarRoot, split: str) -> list[str]:
-    """The frames to score: ``all`` = every ``label_2`` file of the LiDAR tree (frames with
-    labels; VoD withholds its test labels), else the ids of ``ImageSets/<split>.txt``.
-
-    Raises:
-        RootError: no label folder, no label file, or a split list problem (names the file).
-    """
-    if split != "all":
-        return root.ids(split)
-    label_dir = sample_dir(root.lidar_dir, LABEL)
-    if not label_dir.is_dir():
-        raise RootError(f"{label_dir}: no label folder (a root with full labels has one)")
-    ids = sorted(path.stem for path in label_dir.glob("*.txt"))
-    for sid in ids:
-        if not is_frame_id(sid):
-            raise RootError(
-                f"{label_dir / (sid + '.txt')}: not named by a {ID_WIDTH}-digit frame id "
-                "(ASCII digits)"
-            )
-    if not ids:
-        raise RootError(f"{label_dir}: no label files")
-    return ids
-
-
-def distinct_scenes(root: Talk2RadarRoot, ids: Sequence[str]) -> list[str]:
+def distinct_scenes(root: FrameSource, ids: Sequence[str]) -> list[str]:
     """The first id of each distinct set of sensor files (:func:`model.evaluation.predict.scene_key`):
     Talk2Radar samples of one frame share them; a VoD root's frames are all distinct."""
     from model.evaluation.predict import scene_key

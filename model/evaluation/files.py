@@ -1,6 +1,10 @@
 """Scoring written prediction files (``python -m model.evaluate --labels DIR --preds DIR``):
 reading a label folder and a prediction folder as strictly as :mod:`model.evaluate`'s docstring
-says, and the official View-of-Delft figures of them (:func:`score_directories`)."""
+says, and the official View-of-Delft figures of them (:func:`score_directories`).
+
+The folders are View-of-Delft's KITTI label folders, one ``<frame id>.txt`` per frame, so the
+frame id's format is the Talk2Radar layout's (:mod:`scenes.talk2radar.layout`: ``ID_WIDTH``,
+``is_frame_id``, ``format_id``), imported here as the format these files are named in."""
 
 from __future__ import annotations
 

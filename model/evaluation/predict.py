@@ -30,10 +30,9 @@ from tqdm import tqdm
 from model.checkpoint_meta import CheckpointMeta
 from model.core.labelled import LabelledBoxes
 from model.evaluation.grounding import PromptBoxes
-from scenes.frame import Sample
+from scenes.frame import FrameSource, Sample
 from scenes.frame.kitti import ObjectLabel, boxes_to_labels, write_label_file
 from scenes.geometry.calib import IMAGE_SIZE, Calibration, bottom_centres
-from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.utils.lru import LRUCache
 
 if TYPE_CHECKING:
@@ -122,8 +121,8 @@ SceneKey = tuple[object, ...]
 """Identity of a sample's sensor data (see :func:`scene_key`)."""
 
 
-def scene_key(root: Talk2RadarRoot, sample_id: str) -> SceneKey:
-    """The identity of a sample's frame: :meth:`scenes.talk2radar.root.Talk2RadarRoot.frame_key`."""
+def scene_key(root: FrameSource, sample_id: str) -> SceneKey:
+    """The identity of a sample's frame: :meth:`scenes.frame.FrameSource.frame_key`."""
     return root.frame_key(sample_id)
 
 
@@ -211,7 +210,7 @@ class FramePredictor:
     read a sample, encode its scene once (an LRU cache of :attr:`PredictSettings.cache_scenes`
     scenes), ground its prompt and the extra prompts, turn the answer into labels."""
 
-    def __init__(self, model: TPCNet, root: Talk2RadarRoot, settings: PredictSettings) -> None:
+    def __init__(self, model: TPCNet, root: FrameSource, settings: PredictSettings) -> None:
         self.model = model
         self.root = root
         self.settings = settings
@@ -282,7 +281,7 @@ class FramePredictor:
 
 def iterate_predictions(
     model: TPCNet,
-    root: Talk2RadarRoot,
+    root: FrameSource,
     ids: Sequence[str],
     score_threshold: float | None = None,
     progress: bool = True,

@@ -67,8 +67,7 @@ from model.evaluation.worker_watch import (
     StartQueue,
     WorkerWatch,
 )
-from scenes.frame import Sample
-from scenes.talk2radar.root import Talk2RadarRoot
+from scenes.frame import FrameSource, Sample
 
 if TYPE_CHECKING:
     from model.tpcnet import TPCNet
@@ -99,7 +98,7 @@ def auto_workers(frames: int, device: str = "cpu", cores: int | None = None) -> 
     return max(1, min(cores, frames // MIN_FRAMES_PER_WORKER))
 
 
-def frame_groups(root: Talk2RadarRoot, ids: Sequence[str]) -> list[tuple[str, ...]]:
+def frame_groups(root: FrameSource, ids: Sequence[str]) -> list[tuple[str, ...]]:
     """``ids`` cut into runs of consecutive samples of one frame (one :func:`scene_key`), in
     order: each run is one worker task, so its scene is encoded once."""
     groups: list[list[str]] = []
@@ -146,7 +145,7 @@ _STARTS: StartQueue | None = None
 
 
 def _start_worker(
-    source: ModelSource, root: Talk2RadarRoot, settings: PredictSettings, starts: StartQueue
+    source: ModelSource, root: FrameSource, settings: PredictSettings, starts: StartQueue
 ) -> None:
     """Worker initializer: one torch thread, SIGINT left to the main process, the model built."""
     global _WORKER, _STARTS
@@ -236,7 +235,7 @@ def _stop_pool(
 
 def predictions(
     model: TPCNet,
-    root: Talk2RadarRoot,
+    root: FrameSource,
     ids: Sequence[str],
     settings: PredictSettings,
     workers: int = 1,

@@ -9,6 +9,11 @@ scoring at least the decode threshold (``score_threshold``, default
 :func:`model.evaluation.predict.decode_threshold`, what ``ground`` returns by itself) make the
 prediction files and the mAP (unchanged by the operating threshold), the boxes scoring at least
 the operating threshold make the answer set.
+
+This kind is the Talk2Radar family's, so it reads that family's own formats directly: a
+Talk2Radar root's radar tree and sidecar choices (:class:`scenes.talk2radar.root.Talk2RadarRoot`)
+and a View-of-Delft root's full scene labels (:class:`scenes.talk2radar.scene_labels.SceneLabels`,
+``--scene-labels``), which no other family has.
 """
 
 from __future__ import annotations

@@ -32,7 +32,6 @@ import sys
 import traceback
 from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -124,15 +123,15 @@ def calibrate(
             referent (module docstring).
     """
     from model.evaluation.predict import decode_threshold
-    from scenes.talk2radar.layout import split_file
-    from scenes.talk2radar.root import Talk2RadarRoot
+    from scenes.datasets.family_files import split_list_file
+    from scenes.datasets.source import open_source
 
     low = min(decode_threshold(model), CANDIDATES[0])
     if talk2car is not None:
         answers = talk2car_answers(model, data, talk2car, split, limit, low)
         where = f"{Path(talk2car) / f'{split}_commands.json'}"
     else:
-        root = Talk2RadarRoot(data, classes=model.cfg.class_set)
+        root = open_source(data, classes=model.cfg.class_set)  # a Talk2Radar root
         ids = root.ids(split)[: limit or None]
         answers = []
         for fp in iterate_predictions(model, root, ids, score_threshold=low):
@@ -140,7 +139,7 @@ def calibrate(
             predicted = PromptBoxes.make(fp.boxes, fp.classes, fp.scores, source=source)
             referents = PromptBoxes.make(fp.sample.boxes, fp.sample.classes)
             answers.append((predicted, referents))
-        where = str(split_file(root.lidar_dir, split))
+        where = str(split_list_file(root, split))
     referred = sum(len(r.boxes) > 0 for _, r in answers)
     if referred < max(1, min_prompts):
         raise CalibrationError(
@@ -162,8 +161,8 @@ def talk2car_answers(
     """``(answer, referent)`` of each command of a nuScenes root's ``split`` with a referent in
     the class set (:func:`model.evaluation.talk2car.predict.iterate_command_predictions`)."""
     from model.evaluation.talk2car.predict import iterate_command_predictions
+    from scenes.datasets.family_files import nuscenes_class_mapping
     from scenes.datasets.nuscenes_frames import open_talk2car
-    from scenes.nuscenes.classes import model_class
 
     root, commands = open_talk2car(data, talk2car, split, model.cfg.class_set)
     answers = []
@@ -171,7 +170,7 @@ def talk2car_answers(
         model,
         root,
         commands,
-        partial(model_class, classes=model.cfg.class_set),  # the model's class set
+        nuscenes_class_mapping(model.cfg.class_set),  # the model's class set
         score_threshold,
         progress=False,
         limit=limit,

@@ -49,8 +49,8 @@ from model.training.steps import (
 from scenes.datasets.augment import AugmentConfig
 from scenes.datasets.frames import SensorAugment
 from scenes.datasets.grounding import GroundingDataset
+from scenes.frame import FrameSource
 from scenes.geometry.classes import class_set
-from scenes.talk2radar.root import Talk2RadarRoot
 
 TrainingData = GroundingDataset | MixedFrames
 """A run's training items: indexed by :func:`model.training.loop.epoch_batches`, ``set_epoch``."""
@@ -66,7 +66,7 @@ class TrainingKind(Protocol):
         """Raise :class:`TrainingError` for a setting this kind does not take."""
 
     def dataset(
-        self, cfg: TrainConfig, specs: Sequence[RootSpec], root: Talk2RadarRoot | None
+        self, cfg: TrainConfig, specs: Sequence[RootSpec], root: FrameSource | None
     ) -> TrainingData:
         """The training items of ``cfg.train_split`` (``root``: the first of ``specs``, read)."""
 
@@ -128,7 +128,7 @@ class PaperTraining:
             )
 
     def dataset(
-        self, cfg: TrainConfig, specs: Sequence[RootSpec], root: Talk2RadarRoot | None
+        self, cfg: TrainConfig, specs: Sequence[RootSpec], root: FrameSource | None
     ) -> TrainingData:
         return GroundingDataset(root, cfg.train_split, augment=_augment(cfg), seed=cfg.seed)
 
@@ -167,7 +167,7 @@ class ReferentTraining:
         return None
 
     def dataset(
-        self, cfg: TrainConfig, specs: Sequence[RootSpec], root: Talk2RadarRoot | None
+        self, cfg: TrainConfig, specs: Sequence[RootSpec], root: FrameSource | None
     ) -> TrainingData:
         sensors = SensorAugment() if cfg.sensor_augment else None
         augment = _augment(cfg)

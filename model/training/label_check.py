@@ -14,11 +14,9 @@ from pathlib import Path
 
 from model.training.config import TrainingError
 from model.training.data import RootSpec
+from scenes.datasets.family_files import split_label_files
 from scenes.frame.kitti import outside_class_counts, outside_class_phrase, read_label_file
 from scenes.geometry.classes import VOD, ClassSet
-from scenes.talk2radar.layout import LABEL, sample_dir, sample_file, split_file
-from scenes.talk2radar.root import Talk2RadarRoot
-from scenes.talk2radar.scene_labels import SceneLabels
 
 
 def _add(total: dict[str, int], counts: dict[str, int]) -> None:
@@ -37,14 +35,12 @@ def check_labels(spec: RootSpec, split: str, classes: ClassSet = VOD) -> dict[st
     """
     if spec.talk2car is not None:
         return {}  # a nuScenes root: NuScenesFrames refuses a split without a referred command
-    root = Talk2RadarRoot(spec.path, radar=None)
-    ids = root.ids(split)
+    split_labels = split_label_files(spec.path, split, spec.scene_labels)
+    ids = split_labels.ids
     if not ids:
-        raise TrainingError(f"{split_file(root.lidar_dir, split)}: split {split!r} is empty")
-    scene = None if spec.scene_labels is None else SceneLabels(spec.scene_labels)
+        raise TrainingError(f"{split_labels.split_list}: split {split!r} is empty")
     found, outside, seen = False, {}, set()
-    for sid in ids:
-        path = sample_file(root.lidar_dir, LABEL, sid) if scene is None else scene.label_path(sid)
+    for path in split_labels.files:
         if path in seen or not path.is_file():
             continue
         seen.add(path)
@@ -52,9 +48,8 @@ def check_labels(spec: RootSpec, split: str, classes: ClassSet = VOD) -> dict[st
         found = found or any(classes.label_index(x.name) >= 0 for x in labels)
         _add(outside, outside_class_counts(labels, classes))
     if not found:
-        folder = sample_dir(root.lidar_dir if scene is None else scene.tree, LABEL)
         raise TrainingError(
-            f"{folder}: no label of the {len(ids)} samples of split {split!r} has a "
+            f"{split_labels.folder}: no label of the {len(ids)} samples of split {split!r} has a "
             f"{', '.join(classes.names)} box ({classes.name!r} class set): nothing to train on"
         )
     return dict(sorted(outside.items()))

@@ -72,8 +72,9 @@ from model.training.state import (
 )
 from model.training.steps import TrainStep
 from model.training.stop_signal import StopRequest, TrainingInterrupted
+from scenes.datasets.source import open_source
+from scenes.frame import FrameSource
 from scenes.geometry.classes import class_set
-from scenes.talk2radar.root import Talk2RadarRoot
 from scenes.utils.durable import append_json_line
 from scenes.utils.run_lock import RunLockError
 
@@ -105,7 +106,7 @@ def _log(out: Path, record: dict) -> None:
     append_json_line(out / LOG_FILE, record)
 
 
-def validate(model: torch.nn.Module, cfg: TrainConfig, root: Talk2RadarRoot) -> dict:
+def validate(model: torch.nn.Module, cfg: TrainConfig, root: FrameSource) -> dict:
     """3D mAP (entire area, 11-point) of ``model`` on the validation split."""
     from model.evaluation.talk2radar import evaluate_predictions  # late: only rank 0 validates
 
@@ -168,7 +169,7 @@ class Run:
     kind: TrainingKind
     rank: int
     world: int
-    root: Talk2RadarRoot | None
+    root: FrameSource | None
     dataset: TrainingData
     model: TPCNet
     params: list[torch.nn.Parameter]
@@ -244,7 +245,7 @@ def set_up(cfg: TrainConfig, resume: bool, stop: StopRequest) -> Run:
     root = None
     if specs[0].talk2car is None:
         sidecar = specs[0].scene_labels is None
-        root = Talk2RadarRoot(
+        root = open_source(  # a Talk2Radar root (a nuScenes one comes with its commands)
             specs[0].path, radar=radar_folder, sidecar=sidecar, classes=class_set(cfg.classes)
         )
     elif cfg.val_every:

@@ -64,7 +64,7 @@ class ObjectClass:
         color: ``(r, g, b)`` of the app's legend, boxes and heatmap channel. The colours of a
             set are told apart by a reader with normal vision, deuteranopia or protanopia
             (CIEDE2000 at least 20 / 10 between any two, and from the app's referent green:
-            ``tests/test_class_colors.py``, :mod:`app.color_vision`).
+            ``tests/app/test_class_colors.py``, :mod:`app.view.color_vision`).
         heading: Whether the class has a heading: False for a rotationally symmetric object
             (a traffic cone), whose yaw target is 0 and whose decoded yaw is 0.
         label_names: Lower-case label-file names (KITTI / View-of-Delft) that map onto the class;

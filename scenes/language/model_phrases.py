@@ -30,8 +30,8 @@ def _alternatives(values: list[str]) -> str:
 
 @lru_cache(maxsize=1)
 def _patterns() -> tuple[re.Pattern[str], ...]:
-    from scenes.language.prompts.phrasing import SLOTS
-    from scenes.language.prompts.phrasing_more import EXTRA
+    from scenes.language.prompts.phrasing.extra import EXTRA
+    from scenes.language.prompts.phrasing.slots import SLOTS
 
     def variants(key: str) -> list[str]:
         slot = SLOTS[key]

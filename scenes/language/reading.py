@@ -27,7 +27,7 @@ him", "the taxi on the right". The model grounds referring expressions ("the car
 A sentence the generator could have written (a description: no driving verb first, one sentence,
 only the generator's nouns) is left exactly as it is: :attr:`Reading.texts` is ``(text,)``.
 Every rule here is about English words; nothing is learnt, so the reading is the same for every
-checkpoint and is tested on its own (``tests/test_reading.py``).
+checkpoint and is tested on its own (``tests/scenes/language/test_reading.py``).
 """
 
 from __future__ import annotations
@@ -94,8 +94,8 @@ class Reading:
 def _frames() -> tuple[str, ...]:
     """The generator's sentence frames before the noun phrase ("show me", "where is", ""),
     lower case, longest first."""
-    from scenes.language.prompts.phrasing import SLOTS
-    from scenes.language.prompts.phrasing_more import EXTRA
+    from scenes.language.prompts.phrasing.extra import EXTRA
+    from scenes.language.prompts.phrasing.slots import SLOTS
 
     out = set()
     for frame in (*SLOTS["frame"].core, *SLOTS["frame"].more, *EXTRA["frame"]):

@@ -158,8 +158,8 @@ GENERATOR_NOUN_CLASSES: dict[str, tuple[str, ...]] = {
 
 def _generator_noun_slots() -> dict[str, tuple[str, ...]]:
     """The generator's noun slots (``noun.*``), every variant (train, held-out, extra)."""
-    from scenes.language.prompts.phrasing import SLOTS
-    from scenes.language.prompts.phrasing_more import EXTRA
+    from scenes.language.prompts.phrasing.extra import EXTRA
+    from scenes.language.prompts.phrasing.slots import SLOTS
 
     return {
         key: (*slot.core, *slot.more, *EXTRA.get(key, ()))
@@ -190,7 +190,7 @@ def generator_nouns(class_set: str = "vod") -> frozenset[str]:
     trained on, and is grounded as written."""
     from scenes.geometry.classes import class_set as named_set
     from scenes.language.prompts.nouns import OUT_OF_CLASS
-    from scenes.language.prompts.phrasing import WIDER_THAN_CLASS
+    from scenes.language.prompts.phrasing.slot_choice import WIDER_THAN_CLASS
 
     names = named_set(class_set).names
     wide = {v.partition(":")[2] for v in WIDER_THAN_CLASS.get(class_set, ())}

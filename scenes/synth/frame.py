@@ -24,12 +24,10 @@ from scenes.synth.sequence import world_at
 from scenes.synth.setups import IN_DOMAIN, SETUPS, SensorSetup, lidar_calibration_at, sensor_setup
 from scenes.synth.weather import WEATHERS, Weather
 from scenes.synth.world import RayCaster, World, WorldConfig, generate_world
-from scenes.talk2radar.layout import RADAR_FOLDER_OF_SCANS
 from scenes.talk2radar.poses import FRAME_RATE
+from scenes.talk2radar.writer import RADAR_SCANS
 from scenes.utils.cli import option
 
-RADAR_FOLDER = RADAR_FOLDER_OF_SCANS
-"""Radar tree per number of accumulated scans (:data:`scenes.talk2radar.layout.RADAR_FOLDER_OF_SCANS`)."""
 MIXED = "mixed"
 MIXED_WEATHER = (("clear", 0.6), ("rain", 0.2), ("fog", 0.2))
 
@@ -95,7 +93,7 @@ class SynthSettings:
     )
     radar_scans: int = option(
         5,
-        choices=sorted(RADAR_FOLDER),
+        choices=sorted(RADAR_SCANS),
         help="accumulated radar scans: tree radar, radar_3frames or radar_5frames (default "
         "%(default)s)",
     )
@@ -202,7 +200,7 @@ class SynthSettings:
             raise SynthError(f"seed must be >= 0, got {self.seed}")
         if self.weather != MIXED and self.weather not in WEATHERS:
             raise SynthError(f"weather must be one of {[*WEATHERS, MIXED]}, got {self.weather!r}")
-        if self.radar_scans not in RADAR_FOLDER:
+        if self.radar_scans not in RADAR_SCANS:
             raise SynthError(f"radar_scans must be 1, 3 or 5, got {self.radar_scans}")
         if self.prompts_per_world < 1:
             raise SynthError(f"prompts_per_world must be >= 1, got {self.prompts_per_world}")

@@ -46,7 +46,7 @@ Sensor rigs (issue 38)
     default rig of the seed), ``--sensor-randomise`` each world through a rig drawn by
     :mod:`scenes.synth.randomise` (each world's LiDAR calibration at its drawn height). Either
     records the rig in the sidecar's ``extra["sensor_setup"]``; without them the output is that
-    of the generator before them, byte for byte (``tests/test_synth_pinned.py``).
+    of the generator before them, byte for byte (``tests/scenes/synth/test_synth_pinned.py``).
 
 Sequences
     ``--sequence-length N`` writes ``N`` consecutive 10 Hz frames of each world
@@ -77,7 +77,6 @@ from scenes.synth.camera import CAMERA_SCALES, CameraConfig
 from scenes.synth.frame import (
     MIXED,
     MIXED_WEATHER,
-    RADAR_FOLDER,
     StageTimes,
     SynthError,
     SynthFrame,
@@ -89,8 +88,7 @@ from scenes.synth.frame import (
 )
 from scenes.synth.manifest import MANIFEST
 from scenes.synth.sequence import sequence_pose
-from scenes.talk2radar.layout import LABEL, LIDAR_FOLDER, sample_file
-from scenes.talk2radar.poses import FRAME_RATE, write_pose
+from scenes.talk2radar.poses import FRAME_RATE
 from scenes.talk2radar.writer import Talk2RadarWriter
 from scenes.utils.cli import add_options, from_args, option
 from scenes.utils.durable import append_json_line, drop_torn_tail, read_json_lines
@@ -103,7 +101,6 @@ __all__ = [  # with the settings and one frame from scenes.synth.frame, re-expor
     "MAX_SAMPLES",
     "MIXED",
     "MIXED_WEATHER",
-    "RADAR_FOLDER",
     "SPLITS",
     "GenerationReport",
     "StageTimes",
@@ -223,8 +220,7 @@ def write_frame(
         ego_x = frame.world.ego_speed * sequence_frame / FRAME_RATE
         pose = sequence_pose(frame.world.world_id, ego_x, lidar_calib)
         for sid in ids:
-            for tree in writer.trees:
-                write_pose(tree, sid, pose)
+            writer.write_pose(sid, pose)
     return ids
 
 
@@ -255,7 +251,7 @@ def _read_manifest(out: Path, settings: SynthSettings) -> dict[int, dict]:
     last line (an interrupted append) is cut off: that world is redone."""
     path = out / MANIFEST
     if not path.is_file():
-        if (out / LIDAR_FOLDER).exists():
+        if Talk2RadarWriter.holds_root(out):
             raise SynthError(
                 f"{out}: holds a Talk2Radar root without {MANIFEST}; refusing to write into it"
             )
@@ -295,10 +291,6 @@ def _prompted_frames(frames: Sequence[SynthFrame]) -> list[SynthFrame]:
     return out
 
 
-def _complete_on_disk(writer: Talk2RadarWriter, ids: Sequence[str]) -> bool:
-    return all(sample_file(tree, LABEL, sid).is_file() for tree in writer.trees for sid in ids)
-
-
 def generate_root(
     out: str | Path,
     frames: int,
@@ -322,7 +314,7 @@ def generate_root(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     manifest = _read_manifest(out, settings)
-    writer = Talk2RadarWriter(out, radar_folder=RADAR_FOLDER[settings.radar_scans])
+    writer = Talk2RadarWriter.for_radar_scans(out, settings.radar_scans)
     lidar_calib, radar_calib = settings.calibrations()
     radar_to_lidar = sensor_to_lidar(lidar_calib, radar_calib)
 
@@ -338,7 +330,7 @@ def generate_root(
             entry is not None
             and entry["first_id"] == next_id
             and len(entry["ids"]) == min(entry["available"], remaining)
-            and _complete_on_disk(writer, entry["ids"])
+            and writer.has_samples(entry["ids"])
         ):
             ids = list(entry["ids"])
             skipped += 1

@@ -24,8 +24,8 @@ Talk2Radar and View-of-Delft write them (``00042``). Split lists and file names 
 (:func:`parse_id`, :func:`parse_split_list`: ``42``, ``0_0010``, ``+4``, ``-6``, other scripts'
 digits, whitespace and 6-digit ids are refused, naming the file and line); code that holds a number
 formats it with :func:`format_id`. The reader (:class:`scenes.talk2radar.root.Talk2RadarRoot`),
-the writer (:class:`scenes.talk2radar.writer.Talk2RadarWriter`), the synthetic generator and the annotation
-store take every path from here. Nothing here touches the disk but :func:`radar_folders_in`.
+the writer (:class:`scenes.talk2radar.writer.Talk2RadarWriter`, through which the synthetic
+generator writes) and the annotation store take every path from here. Nothing here touches the disk but :func:`radar_folders_in`.
 """
 
 from __future__ import annotations

@@ -25,6 +25,7 @@ from scenes.talk2radar.layout import (
     LABEL,
     LIDAR_FOLDER,
     PROMPT,
+    RADAR_FOLDER_OF_SCANS,
     RADAR_FOLDERS,
     SOURCE_IMAGE,
     SOURCE_SENSORS,
@@ -36,11 +37,13 @@ from scenes.talk2radar.layout import (
     split_file,
 )
 from scenes.talk2radar.pointcloud import write_points
+from scenes.talk2radar.poses import Pose, write_pose
 from scenes.utils.durable import atomic_write_text, link_or_copy
 from scenes.utils.textfile import claim_root
 
 __all__ = [
     "LABEL_DECIMALS",
+    "RADAR_SCANS",
     "SampleText",
     "SensorFiles",
     "Talk2RadarWriter",
@@ -49,6 +52,10 @@ __all__ = [
 
 LABEL_DECIMALS = 6
 """Decimals of the numbers of every ``label_2`` line a root is written with (creates and edits)."""
+
+RADAR_SCANS = tuple(sorted(RADAR_FOLDER_OF_SCANS))
+"""The numbers of accumulated radar scans a root can hold (one radar tree each, as VoD:
+:meth:`Talk2RadarWriter.for_radar_scans`)."""
 
 
 @dataclass(frozen=True)
@@ -147,6 +154,33 @@ class Talk2RadarWriter:
         claim_root(self.root)
         self.radar_folder = radar_folder
         self.trees = (self.root / LIDAR_FOLDER, self.root / radar_folder)
+
+    @classmethod
+    def for_radar_scans(cls, root: str | Path, radar_scans: int) -> Talk2RadarWriter:
+        """A writer whose radar tree holds ``radar_scans`` accumulated scans (:data:`RADAR_SCANS`:
+        ``radar``, ``radar_3frames``, ``radar_5frames``)."""
+        if radar_scans not in RADAR_FOLDER_OF_SCANS:
+            raise ValueError(f"radar_scans must be one of {RADAR_SCANS}, got {radar_scans!r}")
+        return cls(root, radar_folder=RADAR_FOLDER_OF_SCANS[radar_scans])
+
+    @staticmethod
+    def holds_root(path: str | Path) -> bool:
+        """Whether ``path`` already holds a Talk2Radar root (its LiDAR tree exists)."""
+        return (Path(path) / LIDAR_FOLDER).exists()
+
+    def has_samples(self, sample_ids: Sequence[str | int]) -> bool:
+        """Whether every sample of ``sample_ids`` is complete in both trees (its ``label_2``, the
+        last file :meth:`write_sample_text` writes, exists)."""
+        return all(
+            sample_file(tree, LABEL, format_id(sid)).is_file()
+            for tree in self.trees
+            for sid in sample_ids
+        )
+
+    def write_pose(self, sample_id: str | int, pose: Pose) -> None:
+        """Write a sample's ego pose file into both trees (:func:`scenes.talk2radar.poses.write_pose`)."""
+        for tree in self.trees:
+            write_pose(tree, sample_id, pose)
 
     def write_sensors(
         self,

@@ -1,7 +1,7 @@
 """The one least-recently-used cache: bounded by a count of entries and, optionally, by bytes.
 
 Every cache of the project that keeps "the last few" of something uses it: the app's loaded
-frames (:class:`app.navigation.FrameStore`) and encoded scenes (:class:`app.engine.GroundingEngine`),
+frames (:class:`app.serving.navigation.FrameStore`) and encoded scenes (:class:`app.engine.GroundingEngine`),
 prediction's encoded scenes and the text encoder's token features (``model/``). It lives in
 ``scenes/`` because every package may import ``scenes`` and it imports nothing of the project.
 

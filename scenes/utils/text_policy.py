@@ -2,7 +2,7 @@
 annotator names.
 
 Every path that takes such text applies :func:`clean_text` on the server: the Query tab before a
-prompt runs (:mod:`app.session`), :func:`annotate.validation.validate` for a draft's prompt (the
+prompt runs (:mod:`app.query.prompt`), :func:`annotate.validation.validate` for a draft's prompt (the
 Annotate tab's live checks and every save) and :class:`annotate.AnnotationStore` for what it
 writes (the prompt file, the sidecar, the manifest's prompt and annotator), and
 :func:`annotate.review.record_review` for a reviewer's name and note. The rule:
@@ -19,7 +19,7 @@ writes (the prompt file, the sidecar, the manifest's prompt and annotator), and
    character ``str.splitlines`` breaks at (so a saved prompt file is one line for every reader)
    and every one that is invisible or reorders text in a table cell. A line break is refused
    too: a Talk2Radar prompt is one sentence. (The GUI's multi-line fields turn the line break of
-   Enter into a space before this rule sees the text: :func:`app.query_panel.one_line`.)
+   Enter into a space before this rule sees the text: :func:`app.query.prompt.one_line`.)
 3. **Spaces collapse**: runs of spaces and tabs become one space, and the ends are stripped
    (:func:`collapse_spaces`).
 4. **Length caps** (after 1-3): :data:`PROMPT` 500 characters (a Talk2Radar prompt has about 30

@@ -2,14 +2,17 @@
 (:mod:`model.evaluation.pipeline`'s stages): a nuScenes root's commands of a split grounded
 (:mod:`model.evaluation.talk2car.predict`), scored into table II
 (:mod:`model.evaluation.talk2car.report`), and written as ``OUT/{split}_predictions.json`` in the
-command file's CAM_FRONT frame."""
+command file's CAM_FRONT frame.
+
+The predictions file is Talk2Car's format, so its boxes are turned into the command file's
+CAM_FRONT frame by the nuScenes family's one conversion
+(:func:`scenes.nuscenes.talk2car.model_box_to_camera`), imported here for the file it writes."""
 
 from __future__ import annotations
 
 import json
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
-from functools import partial
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -59,8 +62,8 @@ class Talk2CarEvaluation:
                 checkpoint's errors.
         """
         from model.checkpoint import load_checkpoint
+        from scenes.datasets.family_files import nuscenes_class_mapping
         from scenes.datasets.nuscenes_frames import open_talk2car
-        from scenes.nuscenes.classes import model_class
 
         if self.threshold is not None:
             raise EvaluationInputError(
@@ -68,7 +71,7 @@ class Talk2CarEvaluation:
             )
         model = load_checkpoint(self.checkpoint, device=self.device)
         root, commands = open_talk2car(self.data, self.talk2car, self.split, model.cfg.class_set)
-        classes = partial(model_class, classes=model.cfg.class_set)  # the checkpoint's class set
+        classes = nuscenes_class_mapping(model.cfg.class_set)  # the checkpoint's class set
         return Talk2CarRun(model, root, commands, classes)
 
     def predict(self, run: Talk2CarRun) -> Iterator[CommandPrediction]:

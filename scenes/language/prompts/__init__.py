@@ -20,11 +20,12 @@ Modules, in import order (each imports only those above it):
 * :mod:`~scenes.language.prompts.atoms` -- the atoms, superlatives and their exact semantics.
 * :mod:`~scenes.language.prompts.predicate` -- :class:`Predicate`, :func:`analyse`, :func:`resolve`,
   ambiguity and crispness.
-* :mod:`~scenes.language.prompts.phrasing` -- the phrasing variant tables and their train / held-out split.
+* :mod:`~scenes.language.prompts.phrasing` -- the wording: the slot vocabularies (``slots``), their
+  train / held-out split (``split``), which slot says what (``slot_choice``), the extended
+  language's extra variants (``extra``) and the compositional families' templates
+  (``family_slots``).
 * :mod:`~scenes.language.prompts.sampling` -- :class:`PromptConfig`, the families and languages, and
   predicates sampled from an anchor actor.
-* :mod:`~scenes.language.prompts.phrasing_more` -- the extended language's extra variants and the
-  compositional families' templates.
 * :mod:`~scenes.language.prompts.render` -- :class:`Prompt` and :func:`render` (predicate -> sentence).
 * :mod:`~scenes.language.prompts.families` -- the compositional families' exact semantics: :class:`Not`,
   :class:`Exclusion`, :class:`Ordinal`, :class:`Related`, :class:`Count`, unsatisfiable.
@@ -85,7 +86,7 @@ from scenes.language.prompts.features import DEFAULT_REGION, ActorFeatures, Refe
 from scenes.language.prompts.generate import PromptConfig, generate_prompts
 from scenes.language.prompts.noise import perturb
 from scenes.language.prompts.numbers import spell_number
-from scenes.language.prompts.phrasing import HELDOUT_VARIANTS, PHRASINGS, TRAIN_VARIANTS
+from scenes.language.prompts.phrasing.split import HELDOUT_VARIANTS, PHRASINGS, TRAIN_VARIANTS
 from scenes.language.prompts.predicate import Predicate, Resolution, analyse, resolve
 from scenes.language.prompts.render import Prompt, render, render_with_variants
 from scenes.language.prompts.sampling import EXTENDED_RATES, FAMILIES, LANGUAGES

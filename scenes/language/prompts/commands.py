@@ -18,7 +18,7 @@ class or the motion unknown (``None``) only the slots that do not need it are us
 templates only where the class is known.
 
 Train / held-out (``PromptConfig.phrasing``): the split rule of
-:mod:`scenes.language.prompts.phrasing` (:func:`~scenes.language.prompts.phrasing.split_variants`)
+:mod:`scenes.language.prompts.phrasing` (:func:`~scenes.language.prompts.phrasing.split.split_variants`)
 applied to :data:`COMMAND_SLOTS`, whose one group is ``command``: the ``core`` templates are always
 ``train``, a third of the ``more`` ones (ranked by CRC-32) are ``heldout``. A ``train`` stream never
 draws a held-out template; a ``heldout`` stream draws only held-out ones where the referent admits
@@ -34,8 +34,9 @@ import numpy as np
 
 from scenes.geometry.actors import MOVING_SPEED, Actor
 from scenes.language.prompts.people import people_command
-from scenes.language.prompts.phrasing import PHRASINGS, SLOTS, Slot, split_variants, variant_id
-from scenes.language.prompts.phrasing_more import EXTRA
+from scenes.language.prompts.phrasing.extra import EXTRA
+from scenes.language.prompts.phrasing.slots import SLOTS, Slot
+from scenes.language.prompts.phrasing.split import PHRASINGS, split_variants, variant_id
 from scenes.language.prompts.render import Prompt
 
 S = Slot
@@ -164,7 +165,7 @@ def command_templates(
     docstring; ``heldout`` falls back to every template when none held out fits).
 
     Raises:
-        ValueError: ``phrasing`` is not one of :data:`~scenes.language.prompts.phrasing.PHRASINGS`.
+        ValueError: ``phrasing`` is not one of :data:`~scenes.language.prompts.phrasing.split.PHRASINGS`.
     """
     if phrasing not in PHRASINGS:
         raise ValueError(f"phrasing must be one of {PHRASINGS}, got {phrasing!r}")

@@ -2,7 +2,7 @@
 
 Each ``render_*`` builds on :func:`scenes.language.prompts.render.noun_phrase` and
 :func:`~scenes.language.prompts.render.finish` with the ``extended`` tables
-(:mod:`scenes.language.prompts.phrasing_more`), and returns ``(text, variant ids)``. A draw that repeats
+(:mod:`scenes.language.prompts.phrasing.extra`, :mod:`scenes.language.prompts.phrasing.family_slots`), and returns ``(text, variant ids)``. A draw that repeats
 "away", says "ahead" / "in front" twice or runs past ``max_words`` is redrawn (up to 8 times).
 Singular / plural agree with the sets the sentence names (the base set of an exclusion is
 plural, a count question is plural whatever the count).
@@ -38,7 +38,7 @@ from scenes.language.prompts.families import (
     negated,
 )
 from scenes.language.prompts.nouns import article
-from scenes.language.prompts.phrasing import CLASS_KEYS, adjective_slot, phrase_slot
+from scenes.language.prompts.phrasing.slot_choice import CLASS_KEYS, adjective_slot, phrase_slot
 from scenes.language.prompts.predicate import Predicate
 from scenes.language.prompts.render import Picker, Sentence, Style, finish, noun_phrase, repeats
 

@@ -9,7 +9,7 @@ unsatisfiable family has four forms (:data:`UNSATISFIABLE_FORMS`): an imagined a
 that fit nobody here, a distance or speed beyond any actor, a place behind us, and a contradiction
 (standing still yet approaching, or doing 20 km/h); each is kept only when it resolves crisply to
 nothing. Sentences use
-the extended wording (:mod:`scenes.language.prompts.phrasing_more`, :mod:`scenes.language.prompts.compose_render`).
+the extended wording (:mod:`scenes.language.prompts.phrasing.extra`, :mod:`scenes.language.prompts.phrasing.family_slots`, :mod:`scenes.language.prompts.compose_render`).
 
 Tags: attribute, negation, unsatisfiable and count prompts carry their predicate's tags (the
 wording is written so that :func:`~scenes.language.prompts.tags.infer_tags` reads them back); exclusion,
@@ -60,7 +60,8 @@ from scenes.language.prompts.families import (
 )
 from scenes.language.prompts.features import ActorFeatures, ReferableRegion, actor_features
 from scenes.language.prompts.nouns import nonsense, nouns_for
-from scenes.language.prompts.phrasing import CLASS_KEYS, PHRASINGS, too_wide
+from scenes.language.prompts.phrasing.slot_choice import CLASS_KEYS, too_wide
+from scenes.language.prompts.phrasing.split import PHRASINGS
 from scenes.language.prompts.predicate import Predicate, Resolution
 from scenes.language.prompts.render import Prompt, Style, render_with_variants
 from scenes.language.prompts.sampling import (

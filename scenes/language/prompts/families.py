@@ -129,7 +129,7 @@ class Travel(Atom):
 
     @property
     def slot(self) -> str:
-        """Its phrase's slot (:mod:`scenes.language.prompts.phrasing_more`)."""
+        """Its phrase's slot (:mod:`scenes.language.prompts.phrasing.family_slots`)."""
         return f"travel.{self.direction.value}"
 
     def holds(self, f: ActorFeatures, slack: float = 0.0) -> bool:

@@ -18,7 +18,7 @@ from scenes.language.prompts.commands import commands_for
 from scenes.language.prompts.extended import generate_extended
 from scenes.language.prompts.features import DEFAULT_REGION, ReferableRegion, actor_features
 from scenes.language.prompts.noise import perturb
-from scenes.language.prompts.phrasing import too_wide
+from scenes.language.prompts.phrasing.slot_choice import too_wide
 from scenes.language.prompts.predicate import Predicate, analyse, analyse_features
 from scenes.language.prompts.render import Prompt, render_with_variants
 from scenes.language.prompts.sampling import PromptConfig, draw_anchor, sample_predicate

@@ -18,7 +18,7 @@ own nouns), a colour before a vehicle's noun, clothes after a person's. None of 
 referent: the description's words that select it are all kept.
 
 Train / held-out (``PromptConfig.phrasing``): the templates split by
-:func:`scenes.language.prompts.phrasing.split_variants` (the ``core`` ones always ``train``, a
+:func:`scenes.language.prompts.phrasing.split.split_variants` (the ``core`` ones always ``train``, a
 third of the ``more`` ones held out); the people's words and the colours by the same CRC-32 rule
 (:func:`heldout_word`): a ``train`` stream never writes a held-out word or template, a
 ``heldout`` stream only held-out ones where it has any. The reader of such sentences is
@@ -34,7 +34,8 @@ import zlib
 import numpy as np
 
 from scenes.language.phrases import find_mentions
-from scenes.language.prompts.phrasing import PHRASINGS, Slot, split_variants, variant_id
+from scenes.language.prompts.phrasing.slots import Slot
+from scenes.language.prompts.phrasing.split import PHRASINGS, split_variants, variant_id
 from scenes.language.words import CLASS_WORDS, generator_nouns, lexicon
 
 S = Slot

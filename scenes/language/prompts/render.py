@@ -28,17 +28,16 @@ from scenes.language.prompts.atoms import (
     SpeedUnit,
 )
 from scenes.language.prompts.numbers import DIGITS, HYPHENATED, spell_number, takes_singular
-from scenes.language.prompts.phrasing import (
+from scenes.language.prompts.phrasing.extra import DROPPED, EXTRA
+from scenes.language.prompts.phrasing.family_slots import FAMILY_SLOTS
+from scenes.language.prompts.phrasing.slot_choice import (
     CLASS_KEYS,
-    HELDOUT_VARIANTS,
-    PHRASINGS,
-    SLOTS,
     adjective_slot,
     extreme_slot,
     phrase_slot,
-    variant_id,
 )
-from scenes.language.prompts.phrasing_more import DROPPED, EXTRA, FAMILY_SLOTS
+from scenes.language.prompts.phrasing.slots import SLOTS
+from scenes.language.prompts.phrasing.split import HELDOUT_VARIANTS, PHRASINGS, variant_id
 from scenes.language.prompts.predicate import Predicate
 from scenes.language.prompts.sampling import LANGUAGES
 from scenes.language.prompts.tags import flip_left_right, infer_tags

@@ -36,7 +36,7 @@ from scenes.language.prompts.atoms import (
     SpeedUnit,
 )
 from scenes.language.prompts.features import ActorFeatures
-from scenes.language.prompts.phrasing import PHRASINGS
+from scenes.language.prompts.phrasing.split import PHRASINGS
 from scenes.language.prompts.predicate import Predicate
 
 LANGUAGES = ("base", "extended")
@@ -86,7 +86,7 @@ class PromptConfig:
         language: ``base`` (the attribute family only, the wording of
             :mod:`scenes.language.prompts.phrasing`; byte-identical to the generator before the option) or
             ``extended`` (every family of :data:`FAMILIES` and the wider wording of
-            :mod:`scenes.language.prompts.phrasing_more`).
+            :mod:`scenes.language.prompts.phrasing.extra` and :mod:`scenes.language.prompts.phrasing.family_slots`).
         family_rates: ``extended`` only: the share of prompts of each non-attribute family, in
             :data:`FAMILIES` order after ``attribute`` (:data:`EXTENDED_RATES`); the rest are
             attribute prompts. A family the scene does not admit is redrawn, so realised shares
