@@ -184,6 +184,18 @@ def random_scene(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     return lidar.astype(np.float32), radar.astype(np.float32)
 
 
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """The files holding a slow or a real-browser test run first (the order is otherwise kept):
+    with a worker per core (``make test``) the long files start early instead of one worker
+    ending the run alone on the last of them."""
+    long_files = {
+        item.path
+        for item in items
+        if item.get_closest_marker("slow") or item.get_closest_marker("browser")
+    }
+    items.sort(key=lambda item: item.path not in long_files)
+
+
 @pytest.fixture(name="random_scene", scope="session")
 def _random_scene() -> Callable[..., tuple[np.ndarray, np.ndarray]]:
     return random_scene
