@@ -315,8 +315,8 @@ def take(shot: Shot, cfg: ScreenshotConfig, root: Path, chromium: str) -> Choice
     Raises:
         ScreenshotError: no frame answered correctly, or the browser's answer is not that one.
     """
-    from app import AppConfig, Talk2PCApp
     from app.browser import drive
+    from app.server import AppConfig, Talk2PCApp
     from model.checkpoint import load_checkpoint
     from scenes.geometry.boxes import iou3d
 

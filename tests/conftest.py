@@ -185,15 +185,16 @@ def random_scene(seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """The files holding a slow or a real-browser test run first (the order is otherwise kept):
-    with a worker per core (``make test``) the long files start early instead of one worker
-    ending the run alone on the last of them."""
-    long_files = {
-        item.path
-        for item in items
-        if item.get_closest_marker("slow") or item.get_closest_marker("browser")
-    }
-    items.sort(key=lambda item: item.path not in long_files)
+    """The files holding a slow test run first, then those holding a real-browser test (the
+    order is otherwise kept): with a worker per core (``make test``) the long files start early
+    instead of one worker ending the run alone on the last of them."""
+    rank: dict[Path, int] = {}
+    for item in items:
+        kind = (
+            0 if item.get_closest_marker("slow") else 1 if item.get_closest_marker("browser") else 2
+        )
+        rank[item.path] = min(rank.get(item.path, 2), kind)
+    items.sort(key=lambda item: rank[item.path])
 
 
 @pytest.fixture(name="random_scene", scope="session")

@@ -1,4 +1,6 @@
-"""The layer order of ``model/`` and ``scenes/`` (docs/DESIGN.md's ``layers`` blocks) holds.
+"""The layer order inside ``app/``, ``annotate/``, ``bench/``, ``model/`` and ``scenes/``
+(docs/DESIGN.md's ``layers`` blocks) and between every top-level package (its ``packages``
+block) holds.
 
 docs/DESIGN.md is the one home of the order: its fenced ``layers`` blocks list units (a package,
 sub-package or module; a unit holds its sub-modules, the most specific unit wins; a package's own
@@ -23,7 +25,7 @@ import pytest
 from tests.paths import REPO as ROOT
 
 DESIGN = ROOT / "docs" / "DESIGN.md"
-PACKAGES = ("model", "scenes")
+PACKAGES = ("annotate", "app", "bench", "model", "scenes")
 MAX_MODULES_PER_FOLDER = 20
 
 
@@ -165,7 +167,7 @@ def design_layers() -> dict[str, Layers]:
     return read_layers(DESIGN.read_text())
 
 
-def test_design_states_the_layers_of_both_packages(design_layers: dict[str, Layers]) -> None:
+def test_design_states_the_layers_of_every_package(design_layers: dict[str, Layers]) -> None:
     assert set(design_layers) == set(PACKAGES)
     for package, layers in design_layers.items():
         known = modules(package)
