@@ -9,18 +9,11 @@ model is the small referent-path TPCNet (GRU text encoder), untrained; the root 
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from app.text import md_text
 from scenes.nuscenes.root import NuScenesRoot
 from scenes.nuscenes.talk2car import read_commands
 from tests.app.ws.session_helpers import connect_annotating
-
-
-@pytest.fixture(scope="module")
-def nusc_app(serve_nuscenes):
-    with serve_nuscenes("train") as app:
-        yield app
 
 
 def _connect(app, ws_client):

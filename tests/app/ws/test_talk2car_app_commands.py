@@ -123,12 +123,6 @@ def test_the_command_in_play_and_its_referent() -> None:
 # ---------------------------------------------------------------------------- the app
 
 
-@pytest.fixture(scope="module")
-def nusc_all(serve_nuscenes):
-    with serve_nuscenes("all") as app:
-        yield app
-
-
 def _connect(app, ws_client):
     return connect_annotating(
         app,
