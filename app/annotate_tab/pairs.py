@@ -94,8 +94,8 @@ class PairActions:
             log.error("client %s: save failed: %s", p.session.client_id, exc)
             p.notify("Save failed", str(exc), color="red")
             return
+        self._tell_saved(result, again=result.repeated)
         if result.repeated:  # the first request resets the draft and refreshes
-            self._tell_saved(result, again=True)
             return
         log.info(
             "client %s: saved pair %s v%d", p.session.client_id, result.sample_id, result.version
@@ -111,7 +111,6 @@ class PairActions:
                 p.bind_to_screen()
                 self._last_save = (p.editor.version, result)
         self._after_store_change()
-        self._tell_saved(result, again=False)  # said once the split lists show the new sample
         return result
 
     def _tell_saved(self, result: SaveResult, again: bool) -> None:

@@ -168,7 +168,9 @@ def test_place_two_boxes_type_prompt_save_and_find_the_sample(annotating_app, ws
         assert sample.prompt == prompt
         assert sample.classes == ("Car", "Pedestrian")
         np.testing.assert_allclose(sample.boxes, expected_boxes, atol=1e-4)
-        assert len(app.frames) == count + 1 and sid in app.frames.ids  # reload_frames ran
+        client.pump_until(  # the split is re-read after the notification is sent
+            lambda: len(app.frames) == count + 1 and sid in app.frames.ids, 10, "the re-read split"
+        )
         assert panel.draft == Draft() and not panel.draft.boxes  # a fresh draft
         record = AnnotationStore(app.frames.root.path).history(sid)[-1]
         assert record.annotator == "ada" and record.splits == ("test",)
