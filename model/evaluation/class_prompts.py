@@ -66,7 +66,7 @@ from model.evaluation.class_prompt_counts import (
 )
 from model.evaluation.class_prompt_frames import distinct_scenes, image_size_of
 from model.protocol import GroundingModel, model_classes
-from scenes.datasets.family_files import RADAR_TREES, labelled_frame_ids, lidar_tree
+from scenes.datasets.family_files import LIDAR_FOLDER, RADAR_FOLDERS, labelled_frame_ids
 from scenes.datasets.source import Talk2RadarRoot
 from scenes.frame import RootError, Sample
 from scenes.geometry.calib import IMAGE_SIZE
@@ -155,7 +155,7 @@ class ClassPromptsCommand:
     split: str = option(
         "all", help="all (every frame with a label_2 file; default) or an ImageSets list name"
     )
-    radar_folder: str = option("auto", choices=("auto", *RADAR_TREES, "none"), help="radar tree")
+    radar_folder: str = option("auto", choices=("auto", *RADAR_FOLDERS, "none"), help="radar tree")
     limit: int = option(0, help="first N frames only (0: all)")
     device: str = option("cpu", help="cpu or cuda")
     json: Path | None = option(None, help="write the figures as JSON here")
@@ -404,8 +404,9 @@ def run(args: argparse.Namespace, argv: Sequence[str]) -> int:
     given = from_args(ScoringConfig, args)
     if not command.data.is_dir():
         raise RootError(f"{command.data}: not a folder")
-    if not lidar_tree(command.data).is_dir():
-        raise RootError(f"{lidar_tree(command.data)}: missing (a VoD root has lidar/training/...)")
+    lidar = Path(command.data) / LIDAR_FOLDER
+    if not lidar.is_dir():
+        raise RootError(f"{lidar}: missing (a VoD root has lidar/training/...)")
     root = Talk2RadarRoot(
         command.data, radar=None if command.radar_folder == "none" else command.radar_folder
     )

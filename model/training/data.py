@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from torch.utils.data import Dataset
 
-from scenes.datasets.family_files import commanded_sample_count, scene_labels
+from scenes.datasets.family_files import SceneLabels, commanded_samples
 from scenes.datasets.frames import FrameDataset, FrameItem
 from scenes.datasets.nuscenes_frames import NuScenesFrames, open_talk2car
 from scenes.datasets.source import NUSCENES, root_family
@@ -80,7 +80,7 @@ class RootSpec:
         talk2car: A nuScenes root's Talk2Car command folder (``{split}_commands.json``), or None
             (a Talk2Radar root).
         samples: A nuScenes root's commanded training samples
-            (:func:`scenes.datasets.family_files.commanded_sample_count`), or None.
+            (:func:`scenes.nuscenes.talk2car.commanded_samples`), or None.
     """
 
     path: str
@@ -135,7 +135,7 @@ def root_specs(
         samples = None
         if nuscenes and commands is not None:
             try:
-                samples = commanded_sample_count(commands, "train")
+                samples = commanded_samples(commands, "train")
             except RootError as exc:
                 raise DataSpecError(str(exc)) from exc
         if i < len(weights):
@@ -165,7 +165,7 @@ def frame_dataset(
     if spec.talk2car is not None:
         root, commands = open_talk2car(spec.path, spec.talk2car, split, classes)
         return NuScenesFrames(root, commands, classes=classes, **kwargs)  # type: ignore[arg-type]
-    labels = None if spec.scene_labels is None else scene_labels(spec.scene_labels, classes)
+    labels = None if spec.scene_labels is None else SceneLabels(spec.scene_labels, classes)
     return FrameDataset(spec.path, split, scene_labels=labels, classes=classes, **kwargs)  # type: ignore[arg-type]
 
 

@@ -5,7 +5,8 @@ keys). A few commands also name or read a family's own files: where a split is l
 message), which frames of a Talk2Radar / View-of-Delft root have labels, the label files of a
 training split (its own ``label_2`` or a VoD root's full scene labels), how many samples a
 Talk2Car command file refers to, and nuScenes' category -> class mapping. Each is one named
-function here, so that ``model/`` reaches a family's format through the dataset layer (as it
+function here, or the family's own name re-exported where nothing needs adding to it
+(``SceneLabels``, ``commanded_samples``, the tree names), so that ``model/`` reaches a family's format through the dataset layer (as it
 opens roots through :func:`scenes.datasets.source.open_source`).
 """
 
@@ -17,7 +18,7 @@ from functools import partial
 from pathlib import Path
 
 from scenes.frame import FrameSource
-from scenes.geometry.classes import VOD, ClassSet
+from scenes.geometry.classes import ClassSet
 from scenes.nuscenes.classes import model_class
 from scenes.nuscenes.source import NuScenesSource
 from scenes.nuscenes.talk2car import commanded_samples, commands_file
@@ -37,21 +38,17 @@ from scenes.talk2radar.scene_labels import SceneLabels
 from scenes.utils.errors import RootError
 
 __all__ = [
-    "RADAR_TREES",
+    "LIDAR_FOLDER",
+    "RADAR_FOLDERS",
+    "SceneLabels",
     "SplitLabels",
-    "commanded_sample_count",
+    "commanded_samples",
     "labelled_frame_ids",
-    "lidar_tree",
     "nuscenes_class_mapping",
     "point_folder",
-    "scene_labels",
     "split_label_files",
     "split_list_file",
 ]
-
-RADAR_TREES = RADAR_FOLDERS
-"""The radar trees a Talk2Radar root may have, in the order readers look for them (the
-``--radar-folder`` choices besides ``auto`` and ``none``)."""
 
 
 def split_list_file(source: FrameSource, split: str) -> Path | None:
@@ -65,20 +62,9 @@ def split_list_file(source: FrameSource, split: str) -> Path | None:
     return None
 
 
-def lidar_tree(path: str | Path) -> Path:
-    """The LiDAR tree of the Talk2Radar / View-of-Delft root at ``path`` (``<path>/lidar``)."""
-    return Path(path) / LIDAR_FOLDER
-
-
 def point_folder(root: Talk2RadarRoot) -> Path:
     """The folder of a Talk2Radar root's LiDAR point files (``lidar/training/velodyne``)."""
     return sample_dir(root.lidar_dir, VELODYNE)
-
-
-def scene_labels(path: str | Path, classes: ClassSet = VOD) -> SceneLabels:
-    """The full labels of the View-of-Delft root at ``path`` (every object of a frame, not only
-    the referred ones), read into ``classes``."""
-    return SceneLabels(path, classes)
 
 
 def labelled_frame_ids(root: Talk2RadarRoot, split: str) -> list[str]:
@@ -143,16 +129,6 @@ def split_label_files(
         files = tuple(scene.label_path(sid) for sid in ids)
         folder = sample_dir(scene.tree, LABEL)
     return SplitLabels(ids, files, folder, split_file(root.lidar_dir, split))
-
-
-def commanded_sample_count(folder: str | Path, split: str) -> int:
-    """How many samples ``folder/{split}_commands.json`` refers to, read from the command file
-    alone (:func:`scenes.nuscenes.talk2car.commanded_samples`).
-
-    Raises:
-        RootError: a missing or malformed command file (one line).
-    """
-    return commanded_samples(folder, split)
 
 
 def nuscenes_class_mapping(classes: ClassSet) -> Callable[[str, Sequence[str]], str | None]:
