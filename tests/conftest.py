@@ -33,10 +33,12 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -56,11 +58,22 @@ from tests.browser_helpers import CHROMIUM_ARGS, find_chromium
 from tests.paths import REPO
 
 _EXIT_STATUS: list[int] = []
+_CACHE: list[str] = []
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Every ``--freeze-scene`` run of the tests keeps its cache (:mod:`model.training.scene_store`)
+    in a folder of this process, never in the user's ``~/.cache`` (subprocesses inherit it)."""
+    _CACHE.append(tempfile.mkdtemp(prefix="talk2pc-test-cache-"))
+    os.environ["TALK2PC_CACHE"] = _CACHE[-1]
 
 
 def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
-    """Remember the run's exit status for :func:`pytest_unconfigure`."""
+    """Remember the run's exit status for :func:`pytest_unconfigure`; remove the session's
+    cache folder (:func:`pytest_configure`)."""
     _EXIT_STATUS.append(int(exitstatus))
+    for folder in _CACHE:
+        shutil.rmtree(folder, ignore_errors=True)
 
 
 @pytest.hookimpl(trylast=True)

@@ -16,8 +16,10 @@ its own.
 
 The source (``python -m scenes.synth``, with sidecars) is in the model frame (x forward, y left,
 z up, origin at the LiDAR); nuScenes' LIDAR_TOP frame is that turned so that x points right,
-y forward (``MODEL_TO_LIDAR``). Only cars, pedestrians and cyclists are written (the source has
-no other class). Quaternions are scipy's, turned to nuScenes' w x y z order here.
+y forward (``MODEL_TO_LIDAR``). Every class of the source is written: cars, pedestrians and
+cyclists, and a ``--classes nuscenes`` source's trucks, buses (rigid or bendy), trailers,
+construction vehicles, motorcycles, bicycles, traffic cones and barriers, each under the release's
+category and attribute (:func:`attribute_of`). Quaternions are scipy's, turned to nuScenes' w x y z order here.
 """
 
 from __future__ import annotations
@@ -72,7 +74,34 @@ CLASS_CATEGORIES = {
     "Pedestrian": ("human.pedestrian.adult", "human.pedestrian.child",
                    "human.pedestrian.police_officer"),
     "Cyclist": ("vehicle.bicycle",),
+    # a --classes nuscenes source: the release's categories of each detection class
+    "Truck": ("vehicle.truck",),
+    "Bus": ("vehicle.bus.rigid", "vehicle.bus.bendy"),
+    "Trailer": ("vehicle.trailer",),
+    "ConstructionVehicle": ("vehicle.construction",),
+    "Motorcycle": ("vehicle.motorcycle",),
+    "Bicycle": ("vehicle.bicycle",),
+    "TrafficCone": ("movable_object.trafficcone",),
+    "Barrier": ("movable_object.barrier",),
 }  # fmt: skip
+VEHICLES = ("Car", "Truck", "Bus", "Trailer", "ConstructionVehicle")
+CYCLES = ("Cyclist", "Motorcycle", "Bicycle")
+
+
+def attribute_of(cls: str, moving: bool, rng: random.Random) -> list[str]:
+    """The release's attribute of an annotation: vehicles moving, parked or stopped; pedestrians
+    moving or standing; two-wheelers with or without a rider (a VoD cyclist always has one);
+    cones and barriers none."""
+    if cls in VEHICLES:
+        return ["vehicle.moving" if moving else rng.choice(["vehicle.parked", "vehicle.stopped"])]
+    if cls == "Pedestrian":
+        return ["pedestrian.moving" if moving else "pedestrian.standing"]
+    if cls in CYCLES:
+        ridden = cls == "Cyclist" or moving or rng.random() < 0.5
+        return ["cycle.with_rider" if ridden else "cycle.without_rider"]
+    return []
+
+
 RADAR_FIELDS = "x y z dyn_prop id rcs vx vy vx_comp vy_comp is_quality_valid ambig_state x_rms y_rms invalid_state pdh0 vx_rms vy_rms"
 RADAR_SIZES = "4 4 4 1 2 4 4 4 4 4 1 1 1 1 1 1 1 1"
 RADAR_TYPES = "F F F I I F F F F F I I I I I I I I"
@@ -336,13 +365,11 @@ def convert(
                 inst["_name"] = name
                 scene["_instances"][actor.actor_id] = inst
             moving = float(np.hypot(*actor.velocity)) > 0.2
-            attr = {"Car": "vehicle.moving" if moving else rng.choice(["vehicle.parked", "vehicle.stopped"]),
-                    "Pedestrian": "pedestrian.moving" if moving else "pedestrian.standing",
-                    "Cyclist": "cycle.with_rider"}[actor.cls]  # fmt: skip
+            attrs = attribute_of(actor.cls, moving, rng)
             rot = Rotation.from_matrix(global_from_model[:3, :3]) * Rotation.from_euler("z", box[6])
             ann = db.add("sample_annotation", sample_token=sample["token"],
                          instance_token=inst["token"], visibility_token=str(rng.randint(1, 4)),
-                         attribute_tokens=[attribute[attr]],
+                         attribute_tokens=[attribute[a] for a in attrs],
                          translation=list(_apply(global_from_model, box[None, :3])[0]),
                          size=[float(box[4]), float(box[3]), float(box[5])], rotation=_wxyz(rot),
                          prev=inst["last_annotation_token"], next="",

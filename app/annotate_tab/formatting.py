@@ -155,7 +155,7 @@ def status_markdown(
     visible: bool,
     pristine: bool,
     unavailable: str | None = None,
-    saving_to: Path | None = None,
+    saving_to: tuple[Path, str] | None = None,
     last_saved: str | None = None,
     note: str | None = None,
 ) -> str:
@@ -169,8 +169,9 @@ def status_markdown(
         visible: Whether the draft's frame is on screen.
         pristine: Whether the draft holds nothing worth keeping (:func:`annotate.is_pristine`).
         unavailable: Why saving is unavailable (None: the store is open).
-        saving_to: The folder pairs are saved into when it is not the served root (None: the
-            served root); not shown while saving is unavailable (nothing is saved anywhere).
+        saving_to: The folder pairs are saved into when it is not the served root, and what it
+            holds (:meth:`app.serving.served.ServedRoot.pairs_described`); None: the served
+            root. Not shown while saving is unavailable (nothing is saved anywhere).
         last_saved: What the last save of this browser wrote (``"pair 00061 (version 1) in
             train"``), or None.
         note: One more line (how the referents were chosen), or None.
@@ -181,10 +182,8 @@ def status_markdown(
     if last_saved is not None:
         lines.append(f"**Saved {md_text(last_saved)}.**")
     if saving_to is not None and unavailable is None:
-        lines.append(
-            f"Pairs are saved into {md_text(saving_to)} (a Talk2Radar root beside the served "
-            "one, whose files are not touched)."
-        )
+        folder, what = saving_to
+        lines.append(f"Pairs are saved into {md_text(folder)} ({md_text(what)}).")
     if draft.sample_id is not None:
         lines.append(
             f"**Editing pair {md_text(draft.sample_id)}** (version {draft.base_version}); "

@@ -301,7 +301,9 @@ class AnnotationPanel:
             visible,
             is_pristine(draft),
             unavailable=self.hub.error if self.store is None else None,
-            saving_to=self.hub.path if self.hub.separate else None,
+            saving_to=(self.hub.path, self.hub.served.pairs_described())
+            if self.hub.separate
+            else None,
             last_saved=self.last_saved,
             note=self.note(),
         )

@@ -72,6 +72,10 @@ class ServedRoot(Protocol):
     def open_store(self) -> Any:
         """The store pairs are saved into (at ``pairs_path``; opening writes nothing)."""
 
+    def pairs_described(self) -> str:
+        """What ``pairs_path`` holds, said after the folder in the Annotate tab's status when it
+        is not the served root ("a Talk2Radar root beside the served one, ...")."""
+
     def source_frame(self, sample: Sample) -> SourceFrame:
         """The frame a new pair on ``sample`` (a frame of ``root``) is made on."""
 
@@ -142,6 +146,9 @@ class Talk2RadarServed:
             "written beside it unless you say where: restart with --pairs DIR "
             f"(e.g. --pairs {self.pairs_path})"
         )
+
+    def pairs_described(self) -> str:
+        return "a Talk2Radar root beside the served one, whose files are not touched"
 
     def open_store(self) -> AnnotationStore:
         return AnnotationStore(

@@ -129,6 +129,12 @@ class NuScenesServed:
             except StoreError as exc:
                 raise RootError(f"--pairs: {exc}") from None
 
+    def pairs_described(self) -> str:
+        return (
+            "Talk2Car command files, commands/{split}_commands.json, beside the served root, "
+            "whose files are not touched"
+        )
+
     def unnamed_message(self) -> str:
         return (
             "pairs on a nuScenes root are saved as Talk2Car commands only where you say: restart "

@@ -26,6 +26,7 @@ from model.config import (
 )
 from model.config.sections import GroundKind
 from model.training.data import DataSpecError, RootSpec, root_specs
+from model.training.threads import freeze_scene_threads
 from scenes.language.prompts.sampling import FAMILIES, PromptConfig
 from scenes.utils.cli import command_parser, from_args, option
 
@@ -74,16 +75,25 @@ for about a minute more of prompt encoding."""
 TALK2CAR_LABEL_BUDGET = 96 * 170
 """Label prompts a run on nuScenes roots generates in all (per view) by default: a root of 170
 commanded samples gets :data:`TALK2CAR_LABEL_PROMPTS` a sample, one of more samples fewer (never
-under :data:`LABEL_PROMPTS`), so the prompt encoding stays about a minute and a half."""
+under :data:`TALK2CAR_MIN_LABEL_PROMPTS`), so the prompt encoding stays about a minute and a half
+until the samples are many."""
+
+TALK2CAR_MIN_LABEL_PROMPTS = 12
+"""The fewest default label prompts a sample of a nuScenes root gets (:func:`talk2car_label_prompts`;
+from 1,360 samples): a root of many samples holds its commands' sentences itself, and its label
+prompts' generation and encoding grow with the samples (issue 48: 24 a sample on a root of 1,224
+samples of one command each cost 2.5 minutes of a run that must stay within 20)."""
 
 
 def talk2car_label_prompts(samples: int) -> int:
     """``--label-prompts`` of a run on nuScenes roots of ``samples`` commanded training samples in
-    all: :data:`TALK2CAR_LABEL_BUDGET` shared among them, between :data:`LABEL_PROMPTS` and
-    :data:`TALK2CAR_LABEL_PROMPTS` (96 for 170 samples, 48 for 340, 24 from 680)."""
+    all: :data:`TALK2CAR_LABEL_BUDGET` shared among them, between
+    :data:`TALK2CAR_MIN_LABEL_PROMPTS` and :data:`TALK2CAR_LABEL_PROMPTS` (96 for 170 samples, 48
+    for 340, 16 for 1,000, 12 from 1,360)."""
     if samples <= 0:
         return TALK2CAR_LABEL_PROMPTS
-    return int(min(TALK2CAR_LABEL_PROMPTS, max(LABEL_PROMPTS, TALK2CAR_LABEL_BUDGET // samples)))
+    budget = TALK2CAR_LABEL_BUDGET // samples
+    return int(min(TALK2CAR_LABEL_PROMPTS, max(TALK2CAR_MIN_LABEL_PROMPTS, budget)))
 
 
 TALK2CAR_REFERENT_DROPOUT = 0.0
@@ -130,8 +140,8 @@ class TrainConfig:
         (),
         flag="--data-weight",
         help="referent path: times each frame of the matching --data root (in order) is seen "
-        "per epoch (default 1; a nuScenes root: model.training.data.talk2car_weight of its "
-        "commanded training samples, 3 for 170 of them, 1 from 510)",
+        "per epoch (default 1; a nuScenes root: model.training.data.talk2car_weight, an epoch "
+        "visiting a sample per 2.4 training commands, at least 510 visits, at most 3 a sample)",
     )
     scene_labels: tuple[str, ...] = option(
         (),
@@ -147,7 +157,12 @@ class TrainConfig:
     )
     out: str = option(help="run folder, e.g. runs/NAME")
     preset: PresetName = option("small")
-    epochs: int = option(20, on_resume=True)
+    epochs: int = option(
+        20,
+        on_resume=True,
+        help="passes over the training data, each root's frames seen --data-weight times a "
+        "pass (a nuScenes root: a visit per 2.4 commands; default 20)",
+    )
     batch_size: int = option(4)
     lr: float = option(1e-3)
     weight_decay: float = option(5e-4)
@@ -237,6 +252,13 @@ class TrainConfig:
         False,
         help="referent path: train only the referent stage on scenes encoded once by the frozen "
         "detector (use with --init RUN/last.pt of a joint run)",
+    )
+    cache: str = option(
+        "",
+        on_resume=True,
+        help="--freeze-scene: folder keeping the encoded scenes and prompt features for later "
+        "runs (model.training.scene_store; default $TALK2PC_CACHE, else "
+        "$XDG_CACHE_HOME/talk2pc, else ~/.cache/talk2pc; none: keep nothing)",
     )
     bank_prompts: int = option(
         24, on_resume=True, help="--freeze-scene: prompts generated and encoded once per scene"
@@ -424,7 +446,7 @@ class TrainCommand:
 
     Attributes:
         resume: Continue the run in ``--out``.
-        threads: torch's CPU threads (0: :func:`freeze_scene_threads` for a ``--freeze-scene``
+        threads: torch's CPU threads (0: :func:`model.training.threads.freeze_scene_threads` for a ``--freeze-scene``
             run on the CPU, torch's default otherwise).
     """
 
@@ -434,29 +456,6 @@ class TrainCommand:
         help="torch CPU threads (0: for --freeze-scene on the CPU, every core on an idle machine "
         "and 1 on a busy one; torch's default otherwise); use 1 when other jobs share the cores",
     )
-
-
-FREEZE_SCENE_THREADS = 1
-"""torch's CPU threads of a ``--freeze-scene`` run when ``--threads`` is not given and other jobs
-hold the cores (:func:`freeze_scene_threads`). Its steps are many small operations on cached
-candidates, and torch's thread pool slows down several times over when another job takes a core:
-measured on the 2-core machine with another training job running, 8 cached nuScenes scenes and
-80 steps took 50 s with 1 thread against 209 s with 2 (docs/RESULTS_HISTORY.md, "Talk2Car on synthetic
-nuScenes roots")."""
-
-IDLE_LOAD = 0.5
-"""A 1-minute load average below this is an idle machine (:func:`freeze_scene_threads`)."""
-
-
-def freeze_scene_threads(load: float, cores: int, processes: int = 1) -> int:
-    """torch's CPU threads of a ``--freeze-scene`` run when ``--threads`` is not given: on an idle
-    machine (``load``, the 1-minute load average, below :data:`IDLE_LOAD`) the cores shared
-    between the run's ``processes`` on this machine (torchrun's ranks), else
-    :data:`FREEZE_SCENE_THREADS`. Idle, the second core pays: 8 cached nuScenes scenes, 120 steps
-    ran at 3.3 steps a second with 1 thread and 5.0 with 2 on the 2-core machine."""
-    if load >= IDLE_LOAD:
-        return FREEZE_SCENE_THREADS
-    return max(1, cores // max(1, processes))
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -482,19 +481,17 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
 
 
 __all__ = [
-    "FREEZE_SCENE_THREADS",
     "GENERATED_PROMPTS_PER_SCENE",
-    "IDLE_LOAD",
     "LABELLED_PROMPTS_PER_SCENE",
     "LABEL_PROMPTS",
     "TALK2CAR_LABEL_BUDGET",
     "TALK2CAR_LABEL_PROMPTS",
+    "TALK2CAR_MIN_LABEL_PROMPTS",
     "TALK2CAR_PROMPTS_PER_SCENE",
     "TALK2CAR_REFERENT_DROPOUT",
     "PromptDraw",
     "TrainConfig",
     "TrainingError",
-    "freeze_scene_threads",
     "parse_args",
     "talk2car_label_prompts",
 ]

@@ -4,7 +4,7 @@
 ...]``: each ``--data`` root is one :class:`RootSpec`. ``--data-weight`` and ``--scene-labels`` pair
 with the ``--data`` roots in order (give ``none`` for a root without scene labels; fewer values
 than roots leave the rest at weight 1, a nuScenes root at :func:`talk2car_weight` of its
-commanded training samples, and without scene labels). A root given scene labels, or one
+training commands and samples, and without scene labels). A root given scene labels, or one
 without a ``meta/`` folder (a release as it comes), trains on its labels and given prompts and
 never reads a sidecar; a synthetic root with its sidecar trains on generated prompts
 (:class:`scenes.datasets.frames.FrameDataset`). So one command can pre-train on our world and
@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 from torch.utils.data import Dataset
 
-from scenes.datasets.family_files import SceneLabels, commanded_samples
+from scenes.datasets.family_files import SceneLabels, command_counts
 from scenes.datasets.frames import FrameDataset, FrameItem
 from scenes.datasets.nuscenes_frames import NuScenesFrames, open_talk2car
 from scenes.datasets.source import NUSCENES, root_family
@@ -42,27 +42,44 @@ NO_SCENE_LABELS = "none"
 """The ``--scene-labels`` value of a root that has none."""
 
 TALK2CAR_VISITS = 510
-"""Sample visits an epoch that a nuScenes root gets when ``--data-weight`` is not given: its weight
-is this over its commanded training samples, between 1 and :data:`TALK2CAR_MAX_WEIGHT`
-(:func:`talk2car_weight`). A Talk2Car root of few samples, each holding several commands, is
-seen several times an epoch, since one pass an epoch under-trains a referent stage learnt from
-its commands (``--freeze-scene --init-detector``: 30 epochs of one pass over 170 samples reach
-63.7 % top-1 on 2,125 val commands of another seed, of two passes 66.7 %, of three 70.1 % with
-:data:`model.training.config.TALK2CAR_LABEL_PROMPTS` label prompts; docs/RESULTS_HISTORY.md, "Talk2Car on
-synthetic nuScenes roots"); a root of 510 samples or more (the release: about 7,000) is seen once,
-so that a 30-epoch run's length grows with its samples no faster than it must."""
+"""The fewest sample visits an epoch that a nuScenes root gets when ``--data-weight`` is not given
+(:func:`talk2car_weight`; never more than 3 a sample): a root of few samples holding several commands each under-trains a referent stage at one pass an epoch
+(``--freeze-scene --init-detector``: 30 epochs of one pass over 170 samples of 7 commands each
+reached 63.7 % top-1 on 2,125 val commands of another seed, of two passes 66.7 %, of three
+70.1 % with :data:`model.training.config.TALK2CAR_LABEL_PROMPTS` label prompts;
+docs/RESULTS_HISTORY.md, "Talk2Car on synthetic nuScenes roots")."""
+
+TALK2CAR_COMMANDS_PER_VISIT = 2.4
+"""Beyond :data:`TALK2CAR_VISITS`, a nuScenes root's epoch visits one sample per this many training
+commands (that root's 1,220 commands over 510 visits): an epoch's length, and so a run's,
+follows what the referent stage learns from (the commands), not how many samples hold them. The
+release's 8,349 training commands on about 6,500 samples (its test split holds 1.28 commands a
+sample): 3,479 visits an epoch, each sample about half an epoch; a root of 1,000 commands of one
+sample each: 510 (docs/TALK2CAR.md, "What a run costs")."""
 
 TALK2CAR_MAX_WEIGHT = 3.0
-"""The largest default weight of a nuScenes root (:data:`TALK2CAR_VISITS`)."""
+"""The largest default weight of a nuScenes root (:func:`talk2car_weight`)."""
 
 
-def talk2car_weight(samples: int) -> float:
-    """A nuScenes root's default ``--data-weight`` for ``samples`` commanded training samples:
-    ``TALK2CAR_VISITS / samples`` within ``[1, TALK2CAR_MAX_WEIGHT]`` (3 for 170 samples, 2 for
-    255, 1 from 510)."""
+def talk2car_weight(commands: int, samples: int) -> float:
+    """A nuScenes root's default ``--data-weight`` for ``commands`` training commands on
+    ``samples`` samples: ``commands / TALK2CAR_COMMANDS_PER_VISIT`` visits an epoch, at least
+    :data:`TALK2CAR_VISITS`, over its samples, within ``(0, TALK2CAR_MAX_WEIGHT]`` (170 samples of
+    7 commands: 3; 1,000 samples of one command: 0.51; the release's 8,349 on 6,500: 0.54)."""
     if samples <= 0:
         return TALK2CAR_MAX_WEIGHT
-    return float(min(TALK2CAR_MAX_WEIGHT, max(1.0, TALK2CAR_VISITS / samples)))
+    visits = max(float(TALK2CAR_VISITS), commands / TALK2CAR_COMMANDS_PER_VISIT)
+    return float(min(TALK2CAR_MAX_WEIGHT, visits / samples))
+
+
+def mirrored_cache(spec: RootSpec) -> bool:
+    """Whether a ``--freeze-scene`` run caches this root's scenes mirrored as well (with
+    ``--flip-probability`` above 0): a Talk2Radar root always; a nuScenes root while it has at
+    most :data:`TALK2CAR_VISITS` commanded samples. A root of more is visited less than once a
+    sample an epoch, so its own samples are variety enough, and a mirrored view would double the
+    caching that grows with its samples (the issue-48 root of 1,224 samples: about half of a
+    run's time)."""
+    return spec.talk2car is None or (spec.samples or 0) <= TALK2CAR_VISITS
 
 
 class DataSpecError(ValueError):
@@ -81,6 +98,7 @@ class RootSpec:
             (a Talk2Radar root).
         samples: A nuScenes root's commanded training samples
             (:func:`scenes.nuscenes.talk2car.commanded_samples`), or None.
+        commands: A nuScenes root's training commands, or None.
     """
 
     path: str
@@ -88,6 +106,7 @@ class RootSpec:
     scene_labels: str | None = None
     talk2car: str | None = None
     samples: int | None = None
+    commands: int | None = None
 
     @property
     def labelled(self) -> bool:
@@ -132,16 +151,18 @@ def root_specs(
             nuscenes = root_family(path, commands, commands_required=True) == NUSCENES
         except RootError as exc:
             raise DataSpecError(str(exc)) from exc
-        samples = None
+        count = samples = None
         if nuscenes and commands is not None:
             try:
-                samples = commanded_samples(commands, "train")
+                count, samples = command_counts(commands, "train")
             except RootError as exc:
                 raise DataSpecError(str(exc)) from exc
         if i < len(weights):
             weight = float(weights[i])
+        elif count is not None and samples is not None:
+            weight = talk2car_weight(count, samples)
         else:
-            weight = talk2car_weight(samples) if samples is not None else 1.0
+            weight = 1.0
         if not math.isfinite(weight) or weight <= 0:
             raise DataSpecError(f"--data-weight {weights[i]!r} of {path}: must be a number > 0")
         if nuscenes and labels is not None:
@@ -149,7 +170,7 @@ def root_specs(
                 f"--scene-labels {labels} pairs with the nuScenes root {path}, whose own "
                 "annotations are its scene labels; give 'none'"
             )
-        out.append(RootSpec(path, weight, labels, commands, samples))
+        out.append(RootSpec(path, weight, labels, commands, samples, count))
     return tuple(out)
 
 
@@ -225,6 +246,7 @@ class MixedFrames(Dataset):
 
 __all__ = [
     "NO_SCENE_LABELS",
+    "TALK2CAR_COMMANDS_PER_VISIT",
     "TALK2CAR_MAX_WEIGHT",
     "TALK2CAR_VISITS",
     "DataSpecError",
@@ -232,6 +254,7 @@ __all__ = [
     "RootSpec",
     "TrainingFrames",
     "frame_dataset",
+    "mirrored_cache",
     "root_specs",
     "talk2car_weight",
 ]

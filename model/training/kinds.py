@@ -35,7 +35,13 @@ from model.grounding.referent import ReferentGrounding
 from model.tpcnet import TPCNet, head_class
 from model.training import distributed
 from model.training.config import TrainConfig, TrainingError
-from model.training.data import MixedFrames, RootSpec, TrainingFrames, frame_dataset
+from model.training.data import (
+    MixedFrames,
+    RootSpec,
+    TrainingFrames,
+    frame_dataset,
+    mirrored_cache,
+)
 from model.training.referent_cache import cached_referent_step
 from model.training.referent_step import ReferentTrainConfig, referent_step
 from model.training.steps import (
@@ -191,7 +197,9 @@ class ReferentTraining:
         if not cfg.freeze_scene:
             return None
         # Only the referent stage learns; every scene is encoded once by the frozen detector.
-        roots = [functools.partial(training_frames, cfg, spec) for spec in specs]
+        roots = [
+            (functools.partial(training_frames, cfg, spec), mirrored_cache(spec)) for spec in specs
+        ]
         return freeze_scene(model, cfg, roots, referent_cfg, progress=progress)
 
     def step(

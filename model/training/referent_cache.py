@@ -43,7 +43,8 @@ from model.training.referent_step import (
     in_grid_actors,
     model_frame,
 )
-from scenes.datasets.frames import FrameDataset
+from model.training.scene_store import FrozenStore, scene_key
+from scenes.datasets.frames import FrameDataset, FrameItem
 from scenes.geometry.actors import Actor
 from scenes.geometry.boxes import match_by_centre
 from scenes.geometry.classes import VOD, ClassSet
@@ -71,6 +72,73 @@ class CachedScene:
     targets: tuple[np.ndarray, ...]
     answerable: int | None = None
     labelled: CachedScene | None = None
+
+
+def _arrays_state(c: SceneCandidates) -> dict:
+    arrays = {"boxes": c.boxes, "labels": c.labels, "scores": c.scores}
+    return {
+        **{k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in arrays.items()},
+        "geometry": c.geometry,
+        "fused": c.fused,
+        "lidar": c.lidar,
+        "radar": c.radar,
+    }
+
+
+def _candidates(d: dict) -> SceneCandidates:
+    return SceneCandidates(
+        d["boxes"].numpy(),
+        d["labels"].numpy(),
+        d["scores"].numpy(),
+        d["geometry"],
+        d["fused"],
+        d["lidar"],
+        d["radar"],
+    )
+
+
+@dataclass(frozen=True)
+class EncodedScene:
+    """A scene as the frozen detector encodes it, before any prompt (:func:`encode_scene`):
+    what :mod:`model.training.scene_store` keeps, since it depends on the scene and the detector
+    only (the prompts are drawn again by each run, cheaply).
+
+    Attributes:
+        objects: The detector's candidates (on the CPU).
+        ids: ``(K,)`` the actor each candidate detects, -1 for a false detection.
+        labelled: The labelled view's candidates and their actor ids (-1: context), or None.
+    """
+
+    objects: SceneCandidates
+    ids: np.ndarray
+    labelled: tuple[SceneCandidates, np.ndarray] | None = None
+
+    def state(self) -> dict:
+        """Tensors, lists and numbers only (:meth:`from_state` reads it back exactly)."""
+        view = None
+        if self.labelled is not None:
+            objects, ids = self.labelled
+            view = {**_arrays_state(objects), "ids": torch.from_numpy(ids.copy())}
+        return {
+            **_arrays_state(self.objects),
+            "ids": torch.from_numpy(self.ids.copy()),
+            "labelled": view,
+        }
+
+    @classmethod
+    def from_state(cls, d: dict) -> EncodedScene:
+        view = d["labelled"]
+        labelled = None if view is None else (_candidates(view), view["ids"].numpy())
+        return cls(_candidates(d), d["ids"].numpy(), labelled)
+
+
+def encode_scene(model: TPCNet, item: FrameItem, labelled: bool) -> EncodedScene:
+    """``item`` (as ``model`` sees it) encoded by the frozen detector (:func:`scene_views`), its
+    detections matched to its actors (:func:`match_detections`)."""
+    objects, view = scene_views(model, item.lidar, item.radar, item.actors, labelled)
+    ids = match_detections(objects.boxes, objects.labels, item.actors, model.cfg.class_set)
+    extra = None if view is None else (_on_cpu(view[0]), view[1])
+    return EncodedScene(_on_cpu(objects), ids, extra)
 
 
 def match_detections(
@@ -208,6 +276,7 @@ def cache_scenes(
     prompt_config: PromptConfig | None = None,
     labelled: bool = False,
     given_variants: int = 0,
+    store: FrozenStore | None = None,
 ) -> tuple[list[CachedScene], TextBank]:
     """Encode every scene of ``dataset`` with the frozen model, generate ``prompts_per_scene``
     prompts per scene (labels source: take its given prompts, plus ``label_prompts`` from its
@@ -218,37 +287,53 @@ def cache_scenes(
     (:attr:`model.training.config.PromptDraw.config`; default: the base
     prompts in the training phrasings). ``labelled``: also cache each scene's labelled view
     (:attr:`CachedScene.labelled`, :func:`scene_views`), with the same prompts.
-    ``given_variants``: rewordings banked beside each given prompt (:func:`frame_prompts`)."""
+    ``given_variants``: rewordings banked beside each given prompt (:func:`frame_prompts`).
+    ``store``: scenes and prompt features kept on disk by earlier runs are read back, and what
+    is encoded here is kept (:mod:`model.training.scene_store`)."""
     from tqdm import tqdm
 
     model.eval()
     pcfg = prompt_config or PromptConfig()
     scenes = []
+    bar = tqdm(range(len(dataset)), desc="cache scenes", disable=not progress)
     with torch.no_grad():
-        for i in tqdm(range(len(dataset)), desc="cache scenes", disable=not progress):
+        for i in bar:
             item = model_frame(model, dataset[i])
-            objects, view = scene_views(model, item.lidar, item.radar, item.actors, labelled)
-            ids = match_detections(objects.boxes, objects.labels, item.actors, model.cfg.class_set)
+            key = None if store is None else scene_key(item, labelled)
+            state = None if store is None or key is None else store.scenes.load(key)
+            if state is not None:
+                encoded = EncodedScene.from_state(state)
+                bar.set_postfix(stored=store.scenes.hits if store else 0, refresh=False)
+            else:
+                encoded = encode_scene(model, item, labelled)
+                if store is not None and key is not None:
+                    store.scenes.save(key, encoded.state())
             rng = np.random.default_rng((seed, 11, i))
             prompts = frame_prompts(
                 item, rng, prompts_per_scene, pcfg, label_prompts, given_variants
             )
+            view = encoded.labelled
             extra = None if view is None else _cached(*view, prompts, int((view[1] >= 0).sum()))
-            scenes.append(replace(_cached(objects, ids, prompts), labelled=extra))
+            scenes.append(replace(_cached(encoded.objects, encoded.ids, prompts), labelled=extra))
     done = {} if known is None else known.entries
     views = [v for s in scenes for v in (s, s.labelled) if v is not None]
     texts = [t for t in dict.fromkeys(t for v in views for t in v.prompts) if t not in done]
-    entries = {}
+    entries = {} if store is None else store.texts.load(texts)
+    texts = sorted((t for t in texts if t not in entries), key=len)  # batches of like length
     max_tokens = model.cfg.text.max_tokens
     chunk = 256
     for start in tqdm(
         range(0, len(texts), chunk), desc="encode prompts", disable=not progress, unit="chunk"
     ):
         part = texts[start : start + chunk]
+        new = {}
         for text, (tok, num, trunc) in zip(
             part, encode_minilm_batched(part, max_tokens, 64), strict=True
         ):
-            entries[text] = (tok.half(), num, trunc)
+            new[text] = (tok.half(), num, trunc)
+        if store is not None:
+            store.texts.save(new)
+        entries.update(new)
     return scenes, TextBank(entries)
 
 
@@ -286,9 +371,11 @@ def cached_referent_step(
 
 __all__ = [
     "CachedScene",
+    "EncodedScene",
     "TextBank",
     "cache_scenes",
     "cached_referent_step",
+    "encode_scene",
     "match_detections",
     "scene_views",
     "shift_evidence",

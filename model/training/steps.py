@@ -34,6 +34,7 @@ from model.tpcnet import TPCNet
 from model.training.config import TrainConfig, TrainingError
 from model.training.referent_cache import CachedScene, TextBank, cache_scenes, shift_evidence
 from model.training.referent_step import ReferentTrainConfig, float32_output
+from model.training.scene_store import open_store
 from scenes.datasets.augment import AugmentConfig, draw_flip
 from scenes.datasets.frames import FrameDataset
 from scenes.datasets.grounding import GroundingDataset, collate
@@ -121,13 +122,14 @@ class FrozenScenes:
 
     Attributes:
         cached: One per training frame, in the dataset's order.
-        mirrored: The same scenes mirrored (prompts with left and right swapped); empty without
-            flips.
+        mirrored: The same scenes mirrored (prompts with left and right swapped), None for a
+            scene of a root cached without (:func:`model.training.data.mirrored_cache`); empty
+            without flips.
         bank: The frozen MiniLM features of every banked prompt of both.
     """
 
     cached: list[CachedScene]
-    mirrored: list[CachedScene]
+    mirrored: list[CachedScene | None]
     bank: TextBank
 
 
@@ -142,7 +144,8 @@ def pick_view(
     index)``."""
     rng = np.random.default_rng((cfg.seed, 13, epoch, index))
     flip = draw_flip(rng, cfg.flip_probability)
-    scene = mirrored[index] if mirrored and flip else cached[index]
+    scene = mirrored[index] if mirrored and flip and mirrored[index] is not None else None
+    scene = scene or cached[index]
     if scene.labelled is None:
         return scene
     pick = np.random.default_rng((cfg.seed, 17, epoch, index))
@@ -183,13 +186,15 @@ class FrozenSceneStep:
 def freeze_scene(
     model: TPCNet,
     cfg: TrainConfig,
-    frames: Sequence[Callable[..., FrameDataset]],
+    frames: Sequence[tuple[Callable[..., FrameDataset], bool]],
     referent_cfg: ReferentTrainConfig,
     progress: bool,
 ) -> FrozenScenes:
     """Freeze everything but the referent stage and encode every scene once (``--freeze-scene``):
     ``frames`` gives each root's training frames (called with no argument, or with
-    ``augment=`` the flip that mirrors every frame)."""
+    ``augment=`` the flip that mirrors every frame) and whether its scenes are cached mirrored
+    too (:func:`model.training.data.mirrored_cache`). Scenes and prompt features kept by earlier
+    runs are read back from ``--cache`` (:mod:`model.training.scene_store`)."""
     for p in model.parameters():
         p.requires_grad_(False)
     for p in model.grounding.parameters():
@@ -197,12 +202,14 @@ def freeze_scene(
     if cfg.text_encoder not in (None, "minilm"):
         raise TrainingError("--freeze-scene banks frozen MiniLM prompt features: use minilm")
     cached: list[CachedScene] = []
-    mirrored: list[CachedScene] = []
+    mirrored: list[CachedScene | None] = []
     bank = TextBank({})
+    store = open_store(cfg.cache, model, model.cfg.text.max_tokens)
     flip = AugmentConfig(flip_probability=1.0, lidar_keep_min=1.0, shuffle_points=False)
-    for frames_of in frames:
-        views = [(frames_of(), cached)]
-        if cfg.flip_probability > 0:  # every scene also encoded mirrored, prompts swapped
+    flips = cfg.flip_probability > 0
+    for frames_of, mirror in frames:
+        views: list[tuple[FrameDataset, list]] = [(frames_of(), cached)]
+        if flips and mirror:  # every scene also encoded mirrored, prompts swapped
             views.append((frames_of(augment=flip), mirrored))
         for dataset, into in views:
             part, part_bank = cache_scenes(
@@ -216,9 +223,14 @@ def freeze_scene(
                 prompt_config=referent_cfg.prompts.config,
                 labelled=cfg.labelled_views > 0,
                 given_variants=cfg.given_variants,
+                store=store,
             )
             into += part
             bank.entries.update(part_bank.entries)
+        if flips and not mirror:
+            mirrored += [None] * (len(cached) - len(mirrored))
+    if not any(m is not None for m in mirrored):
+        mirrored = []
     return FrozenScenes(cached, mirrored, bank)
 
 

@@ -21,7 +21,7 @@ from scenes.frame import FrameSource
 from scenes.geometry.classes import ClassSet
 from scenes.nuscenes.classes import model_class
 from scenes.nuscenes.source import NuScenesSource
-from scenes.nuscenes.talk2car import commanded_samples, commands_file
+from scenes.nuscenes.talk2car import command_counts, commanded_samples, commands_file
 from scenes.talk2radar.layout import (
     ID_WIDTH,
     LABEL,
@@ -42,6 +42,7 @@ __all__ = [
     "RADAR_FOLDERS",
     "SceneLabels",
     "SplitLabels",
+    "command_counts",
     "commanded_samples",
     "labelled_frame_ids",
     "nuscenes_class_mapping",

@@ -29,7 +29,7 @@ is the one place they are imported (tests give their own root and commands to
 from __future__ import annotations
 
 from collections.abc import Sequence
-from functools import partial
+from functools import lru_cache, partial
 from pathlib import Path
 from typing import Any, Protocol
 
@@ -83,6 +83,37 @@ def open_talk2car(
     Raises:
         ValueError: a malformed root or command file (the loader's one-line message).
     """
+    return _opened(str(path), str(commands), split, classes, _files_state(path, commands, split))
+
+
+def _files_state(path: str | Path, commands: str | Path, split: str) -> tuple:
+    """What the opened root and commands were read from: the size and change time of every table
+    and of the command file (another state opens them again)."""
+    from scenes.nuscenes.tables import version_folder
+    from scenes.nuscenes.talk2car import commands_file
+
+    try:
+        files = sorted(version_folder(Path(path), None).glob("*.json"))
+    except (OSError, ValueError):
+        files = []
+    files.append(commands_file(commands, split))
+    state = []
+    for f in files:
+        try:
+            st = f.stat()
+            state.append((str(f), st.st_size, st.st_mtime_ns))
+        except OSError:
+            state.append((str(f), None, None))
+    return tuple(state)
+
+
+@lru_cache(maxsize=2)
+def _opened(
+    path: str, commands: str, split: str, classes: ClassSet, state: tuple
+) -> tuple[NuScenesRootLike, CommandSetLike]:
+    """:func:`open_talk2car`, once per root, split, class set and files' state: a training run
+    opens its root for the training frames and for both views of the ``--freeze-scene`` cache
+    (tables of a thousand samples take seconds to read and check)."""
     import sys
 
     from scenes.nuscenes.root import NuScenesRoot

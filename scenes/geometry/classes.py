@@ -39,6 +39,7 @@ __all__ = [
     "WITH_RIDER",
     "ClassSet",
     "ObjectClass",
+    "beyond_vod",
     "class_set",
     "object_class",
 ]
@@ -406,6 +407,14 @@ def object_class(name: str) -> ObjectClass:
         if name in s:
             return s.get(name)
     raise ValueError(f"unknown class {name!r}: one of {ALL_CLASSES}")
+
+
+def beyond_vod(name: str) -> bool:
+    """Whether the class called ``name`` is beyond View-of-Delft's three: none of its nuScenes
+    categories is one of theirs (a truck, bus, trailer, construction vehicle, motorcycle, traffic
+    cone or barrier: nuScenes' seven beyond car, pedestrian and bicycle)."""
+    three = {category for c in VOD.classes for category in c.categories}
+    return not set(object_class(name).categories) & three
 
 
 def class_set(name: str) -> ClassSet:

@@ -56,6 +56,7 @@ __all__ = [
     "Referent",
     "Talk2CarCommand",
     "camera_box_to_model",
+    "command_counts",
     "command_record",
     "commanded_samples",
     "commands_file",
@@ -220,8 +221,19 @@ def commanded_samples(folder: str | Path, split: str) -> int:
     Raises:
         CommandFileError: a missing file, or one without its ``commands`` list (one line).
     """
+    return command_counts(folder, split)[1]
+
+
+def command_counts(folder: str | Path, split: str) -> tuple[int, int]:
+    """``(commands, samples)`` of ``folder/{split}_commands.json``: its commands, and the samples
+    they refer to (:func:`commanded_samples`), read from the file alone.
+
+    Raises:
+        CommandFileError: a missing file, or one without its ``commands`` list (one line).
+    """
     _, data = _command_data(folder, split)
-    return len({c.get("sample_token") for c in data["commands"] if isinstance(c, dict)})
+    commands = [c for c in data["commands"] if isinstance(c, dict)]
+    return len(commands), len({c.get("sample_token") for c in commands})
 
 
 def _command_data(folder: str | Path, split: str) -> tuple[Path, dict]:

@@ -32,14 +32,25 @@ def test_status_and_checks_say_nothing_is_saved_when_saving_is_unavailable() -> 
         True,
         False,
         unavailable="restart with --pairs DIR",
-        saving_to=Path("/data/nusc-talk2car"),
+        saving_to=(Path("/data/nusc-talk2car"), "Talk2Car command files"),
     )
     assert "Saving is unavailable" in status and "Pairs are saved into" not in status
     checks = checks_markdown(ValidationReport(), saving=False)
     assert "Ready to save" not in checks and "saving is unavailable" in checks
     assert "Ready to save" in checks_markdown(ValidationReport())
-    shown = status_markdown(draft, History(), "s", True, False, saving_to=Path("/p"))
+    shown = status_markdown(draft, History(), "s", True, False, saving_to=(Path("/p"), "x"))
     assert "Pairs are saved into" in shown
+
+
+def test_the_status_says_what_the_pairs_folder_holds(nuscenes_root: Path, tmp_path: Path) -> None:
+    """On a nuScenes root pairs are Talk2Car command files, not a Talk2Radar root."""
+    source = NuScenesSource(nuscenes_root, nuscenes_root / "commands")
+    served = serve_root(source, pairs=tmp_path / "pairs")
+    said = served.pairs_described()
+    assert "Talk2Car command files" in said and "Talk2Radar" not in said
+    draft = Draft().set_prompt("stop behind it")
+    shown = status_markdown(draft, History(), "s", True, False, saving_to=(tmp_path, said))
+    assert "Talk2Car command files" in shown and "Talk2Radar root" not in shown
 
 
 def test_the_console_line_says_where_pairs_go_or_that_none_are_saved(

@@ -16,10 +16,15 @@ import numpy as np
 from scenes.geometry.actors import Actor
 from scenes.language.prompts.commands import commands_for
 from scenes.language.prompts.extended import generate_extended
-from scenes.language.prompts.features import DEFAULT_REGION, ReferableRegion, actor_features
+from scenes.language.prompts.features import (
+    DEFAULT_REGION,
+    ActorFeatures,
+    ReferableRegion,
+    actor_features,
+)
 from scenes.language.prompts.noise import perturb
 from scenes.language.prompts.phrasing.slot_choice import too_wide
-from scenes.language.prompts.predicate import Predicate, analyse, analyse_features
+from scenes.language.prompts.predicate import Predicate, analyse_features, usable_referents
 from scenes.language.prompts.render import Prompt, render_with_variants
 from scenes.language.prompts.sampling import PromptConfig, draw_anchor, sample_predicate
 
@@ -180,17 +185,15 @@ def motion_robust(
         return True
     if prompt.predicate is None or prompt.family != "attribute" or prompt.expression is not None:
         return False
-    moved = [a for a in actors if a.actor_id in unknown]
-    if not moved:
-        return True
-    hypotheses = [motion_hypotheses(a) for a in moved]
-    for i in range(len(hypotheses[0])):
-        velocity = {a.actor_id: h[i] for a, h in zip(moved, hypotheses, strict=True)}
-        tried = [
-            replace(a, velocity=velocity[a.actor_id]) if a.actor_id in velocity else a
-            for a in actors
-        ]
-        res = analyse(prompt.predicate, tried, region)
-        if not res.usable or res.ids != prompt.referent_ids:
+    moved = [i for i, a in enumerate(actors) if a.actor_id in unknown]
+    if not moved or not prompt.predicate.reads_motion:
+        return True  # no velocity can change what it refers to
+    feats = actor_features(actors)
+    hypotheses = [motion_hypotheses(actors[i]) for i in moved]
+    for h in range(len(hypotheses[0])):
+        tried = list(feats)  # only the moved actors' features change
+        for i, options in zip(moved, hypotheses, strict=True):
+            tried[i] = ActorFeatures.of(replace(actors[i], velocity=options[h]))
+        if usable_referents(prompt.predicate, tried, region) != prompt.referent_ids:
             return False
     return True

@@ -34,6 +34,9 @@ from scenes.language.prompts.features import (
     actor_features,
 )
 
+MOTION_FAMILIES = ("motion", "heading", "speed")
+"""The atom families that read an actor's velocity (:attr:`Predicate.reads_motion`)."""
+
 
 @dataclass(frozen=True)
 class Predicate:
@@ -73,6 +76,13 @@ class Predicate:
         """The predicate that says the same of the world flipped y -> -y (left <-> right)."""
         extreme = self.extreme.flipped() if self.extreme is not None else None
         return Predicate(self.cls, tuple(a.flipped() for a in self.atoms), extreme)
+
+    @property
+    def reads_motion(self) -> bool:
+        """Whether the referents can depend on the actors' velocities: a motion, heading or speed
+        atom, or a ranking by speed (every other test reads only class and position)."""
+        by_speed = self.extreme is not None and self.extreme.tag == "velocity"
+        return by_speed or any(a.family in MOTION_FAMILIES for a in self.atoms)
 
     def matches(self, actor: Actor | ActorFeatures, slack: float = 0.0) -> bool:
         """Class and atoms (not the superlative) hold for the actor."""
@@ -121,6 +131,18 @@ def all_clearly_moving(pred: Predicate, inside: Sequence[ActorFeatures]) -> bool
     :data:`~scenes.geometry.actors.MOVING_SPEED` by the motion slack: what makes a ranking by slowness
     crisp (a standing or borderline actor might be said to be the slowest)."""
     return all(f.speed > MOVING_SPEED + SLACK_MOTION for f in inside if pred.matches(f, 1.0))
+
+
+def usable_referents(
+    pred: Predicate, feats: Sequence[ActorFeatures], region: ReferableRegion
+) -> tuple[int, ...] | None:
+    """The ids :func:`analyse_features` gives when its resolution is usable, else None, without
+    its crispness tests (what :func:`scenes.language.prompts.generate.motion_robust` asks of
+    every motion hypothesis)."""
+    ids = _select(pred, [f for f in feats if region.contains(f)], 0.0)
+    if not ids or any(region.in_guard(f) and pred.matches(f, 1.0) for f in feats):
+        return None
+    return ids
 
 
 def analyse_features(

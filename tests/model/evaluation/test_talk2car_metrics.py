@@ -115,3 +115,38 @@ def test_subsets_from_the_scene_description():
     assert subset_of("Sunny, train station") == ("all",)
     assert subset_of("Fog, peds, parked cars") == ("all", "fog")
     assert subset_of("Foggy night") == ("all", "night", "fog")
+
+
+def test_the_report_has_a_row_per_class_and_per_group_beyond_the_three(monkeypatch) -> None:
+    """Per referent class, most commands first; "the three" and "beyond the three" only when
+    some referent is beyond View-of-Delft's classes (a bicycle is one of the three)."""
+    from types import SimpleNamespace
+
+    from model.evaluation.talk2car.report import GROUPS, build_report
+
+    def prediction(cls: str, hit: bool) -> SimpleNamespace:
+        referent = np.array([10.0, 0, 0, 4, 2, 1.5, 0])
+        boxes = referent[None] if hit else np.zeros((0, 7))
+        answer = CommandBoxes.make(boxes, [0.9] * len(boxes), referent, cls)
+        return SimpleNamespace(
+            answer=answer,
+            noun=answer,
+            command=SimpleNamespace(box_2d=(0, 0, 10, 10)),
+            frame=None,
+            description="Rain, night",
+            in_view_same_class=1,
+            referent_in_view=True,
+        )
+
+    import model.evaluation.talk2car.report as report_module
+
+    monkeypatch.setattr(report_module, "projected_2d_box", lambda box, frame: None)
+    three = [prediction("Car", True), prediction("Car", False), prediction("Bicycle", True)]
+    rows = build_report(three).rows
+    assert list(rows)[3:] == ["Car", "Bicycle"] and not set(GROUPS) & set(rows)
+    report = build_report([*three, prediction("Truck", True)])
+    rows = report.rows
+    assert rows["Car"]["commands"] == 2 and rows["Car"]["top-1"] == 50.0
+    assert rows["the three"]["commands"] == 3 and rows["beyond the three"]["commands"] == 1
+    assert rows["beyond the three"]["top-1"] == 100.0
+    assert "beyond the three" in report.format_tables()

@@ -135,16 +135,14 @@ def test_freeze_scene_threads_follow_the_machine(nusc, tmp_path, monkeypatch):
     import os
 
     from model.training.config import (
-        FREEZE_SCENE_THREADS,
-        IDLE_LOAD,
         LABELLED_PROMPTS_PER_SCENE,
         TALK2CAR_LABEL_PROMPTS,
         TALK2CAR_PROMPTS_PER_SCENE,
-        freeze_scene_threads,
         parse_args,
         talk2car_label_prompts,
     )
     from model.training.data import talk2car_weight
+    from model.training.threads import FREEZE_SCENE_THREADS, IDLE_LOAD, freeze_scene_threads
 
     assert freeze_scene_threads(0.0, 2) == 2 and freeze_scene_threads(0.0, 0) == 1
     assert freeze_scene_threads(0.0, 2, processes=2) == 1  # torchrun's two ranks share the cores
@@ -160,10 +158,11 @@ def test_freeze_scene_threads_follow_the_machine(nusc, tmp_path, monkeypatch):
         assert torch.get_num_threads() == FREEZE_SCENE_THREADS
         assert cfg.prompts_per_scene == TALK2CAR_PROMPTS_PER_SCENE > LABELLED_PROMPTS_PER_SCENE
         # a root of few commanded samples is seen several times an epoch unless --data-weight says
-        samples = cfg.roots()[0].samples
+        samples, commands = cfg.roots()[0].samples, cfg.roots()[0].commands
         assert samples == len(frames(nusc)) > 0  # the file's count is what training iterates
+        assert commands is not None and commands >= samples
         assert cfg.label_prompts == talk2car_label_prompts(samples) == TALK2CAR_LABEL_PROMPTS
-        assert cfg.roots()[0].weight == talk2car_weight(samples) > 1
+        assert cfg.roots()[0].weight == talk2car_weight(commands, samples) > 1
         assert parse_args([*args, "--data-weight", "1"])[0].roots()[0].weight == 1
         torch.set_num_threads(2)
         parse_args([*args, "--freeze-scene", "--threads", "2"])
@@ -182,26 +181,37 @@ def test_freeze_scene_threads_follow_the_machine(nusc, tmp_path, monkeypatch):
         torch.set_num_threads(before)
 
 
-def test_talk2car_defaults_follow_the_commanded_samples(tmp_path):
-    """A nuScenes root's default weight and label prompts follow its commanded training samples,
-    counted from the command file alone: few samples get more passes and more label prompts
-    each, many get one pass and LABEL_PROMPTS, so a run's cost grows no faster than its root."""
+def test_talk2car_defaults_follow_the_commands(tmp_path):
+    """A nuScenes root's epoch follows its training commands (a visit per
+    TALK2CAR_COMMANDS_PER_VISIT, at least TALK2CAR_VISITS, at most 3 a sample), counted from the
+    command file alone, and its label prompts its samples: few samples get more passes and more
+    label prompts each, so a run's cost grows with the commands and no faster."""
     from model.training.config import (
         LABEL_PROMPTS,
         TALK2CAR_LABEL_PROMPTS,
+        TALK2CAR_MIN_LABEL_PROMPTS,
         talk2car_label_prompts,
     )
-    from model.training.data import TALK2CAR_MAX_WEIGHT, talk2car_weight
-    from scenes.nuscenes.talk2car import CommandFileError, commanded_samples
+    from model.training.data import TALK2CAR_MAX_WEIGHT, TALK2CAR_VISITS, talk2car_weight
+    from scenes.nuscenes.talk2car import CommandFileError, command_counts, commanded_samples
 
-    assert talk2car_weight(170) == TALK2CAR_MAX_WEIGHT == 3.0
-    assert talk2car_weight(255) == 2.0 and talk2car_weight(510) == talk2car_weight(7000) == 1.0
+    assert talk2car_weight(1220, 170) == TALK2CAR_MAX_WEIGHT == 3.0  # 7 commands a sample
+    assert talk2car_weight(10, 10) == TALK2CAR_MAX_WEIGHT  # a tiny root: 3 passes
+    assert talk2car_weight(255, 255) == 2.0 and talk2car_weight(510, 510) == 1.0
+    assert talk2car_weight(1000, 1000) * 1000 == TALK2CAR_VISITS == 510  # 1 command a sample
+    release = talk2car_weight(8349, 6500) * 6500  # visits an epoch grow with the commands
+    assert release == pytest.approx(8349 / 2.4) and talk2car_weight(16698, 13000) * 13000 == (
+        pytest.approx(2 * release)
+    )
     assert talk2car_label_prompts(170) == TALK2CAR_LABEL_PROMPTS == 96
     assert talk2car_label_prompts(340) == 48
-    assert talk2car_label_prompts(680) == talk2car_label_prompts(7000) == LABEL_PROMPTS == 24
+    assert talk2car_label_prompts(680) == LABEL_PROMPTS == 24
+    assert talk2car_label_prompts(1000) == 16
+    assert talk2car_label_prompts(7000) == TALK2CAR_MIN_LABEL_PROMPTS == 12
     cmds = [{"sample_token": t, "command": "x"} for t in ("a", "b", "a", "c")]
     (tmp_path / "train_commands.json").write_text(json.dumps({"commands": cmds}))
     assert commanded_samples(tmp_path, "train") == 3
+    assert command_counts(tmp_path, "train") == (4, 3)
     with pytest.raises(CommandFileError, match=r"val_commands\.json"):
         commanded_samples(tmp_path, "val")
     (tmp_path / "val_commands.json").write_text("[]")
@@ -343,3 +353,21 @@ def test_detector_recall_of_a_nuscenes_class_checkpoint(nusc):
         and "Cyclist" not in counts
         and set(counts) - {"all", "rain", "night", "fog"} <= set(NUSCENES.names)
     )
+
+
+def test_a_root_of_many_samples_is_cached_without_mirrored_views() -> None:
+    """--freeze-scene caches a nuScenes root's scenes mirrored too only while it has at most
+    TALK2CAR_VISITS commanded samples (a Talk2Radar root always); a scene cached without its
+    mirrored view is drawn as it is whatever the flip says."""
+    from model.training.data import TALK2CAR_VISITS, RootSpec, mirrored_cache
+    from model.training.steps import pick_view
+
+    assert mirrored_cache(RootSpec("T2R"))
+    assert mirrored_cache(RootSpec("N", talk2car="c", samples=TALK2CAR_VISITS, commands=900))
+    assert not mirrored_cache(RootSpec("N", talk2car="c", samples=TALK2CAR_VISITS + 1))
+    from types import SimpleNamespace
+
+    cfg = SimpleNamespace(seed=0, flip_probability=1.0)
+    plain, mirrored = SimpleNamespace(labelled=None), SimpleNamespace(labelled=None)
+    assert pick_view([plain], [mirrored], 0, cfg, 0) is mirrored
+    assert pick_view([plain], [None], 0, cfg, 0) is plain

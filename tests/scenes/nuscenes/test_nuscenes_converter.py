@@ -103,3 +103,38 @@ def test_trains_and_evaluates_with_the_documented_commands(
     written = json.loads((tmp_path / "val_predictions.json").read_text())
     val = json.loads((path / "commands" / "val_commands.json").read_text())["commands"]
     assert set(written) == {c["command_token"] for c in val}
+
+
+def test_a_ten_class_source_converts_with_every_class(tmp_path: Path) -> None:
+    """A ``--classes nuscenes`` source: every actor an annotation under one of the release's
+    categories of its class, with the release's attribute (two-wheelers with or without a rider,
+    cones and barriers none), and commands that read back into the nuScenes class set."""
+    from collections import Counter
+
+    from scenes.geometry.classes import NUSCENES
+    from scenes.synth.generate import SynthSettings, generate_root
+    from tools.nuscenes_converter import CLASS_CATEGORIES
+
+    settings = SynthSettings(seed=2, classes="nuscenes", camera=None, prompts_per_world=8)
+    generate_root(tmp_path / "synth", 24, settings, split_fractions=(0.5, 0.5, 0.0))
+    convert(tmp_path / "synth", tmp_path / "NUSC", seed=3, wrap=True)
+    root = NuScenesRoot(tmp_path / "NUSC")
+    found: Counter[str] = Counter()
+    for sample in root.samples:
+        _, categories, attributes = root.annotation_boxes(sample)
+        for category, attrs in zip(categories, attributes, strict=True):
+            cls = NUSCENES.category_class(category, attrs)
+            assert cls is not None and category in CLASS_CATEGORIES[cls]
+            found[cls] += 1
+            if cls in ("TrafficCone", "Barrier"):
+                assert not attrs
+            else:
+                assert len(attrs) == 1 and attrs[0].split(".")[0] in (
+                    "vehicle", "pedestrian", "cycle"
+                )  # fmt: skip
+    assert set(found) == set(NUSCENES.names)  # all ten written
+    commands = read_commands(tmp_path / "NUSC" / "commands", "train", root, NUSCENES)
+    assert commands.commands and not commands.skipped
+    assert {commands.referent[c.command_token].cls for c in commands.commands} - {
+        "Car", "Pedestrian", "Bicycle"
+    }  # fmt: skip

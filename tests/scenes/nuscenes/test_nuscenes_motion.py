@@ -128,3 +128,48 @@ def test_label_prompts_with_unknown_motion_hold_under_every_hypothesis() -> None
             assert motion_robust(p, actors, {1})
             said_motion += bool({"velocity", "motion"} & set(p.tags))
     assert said_motion > 0  # car 0's motion is known and is talked about
+
+
+def _robust_by_definition(prompt: Prompt, actors, unknown) -> bool:
+    """motion_robust's definition, brute force: every hypothesis given to every unknown actor,
+    the whole scene resolved again."""
+    from dataclasses import replace
+
+    from scenes.language.prompts.generate import motion_hypotheses
+    from scenes.language.prompts.predicate import analyse
+
+    moved = [a for a in actors if a.actor_id in unknown]
+    if not moved:
+        return True
+    hypotheses = [motion_hypotheses(a) for a in moved]
+    for i in range(len(hypotheses[0])):
+        velocity = {a.actor_id: h[i] for a, h in zip(moved, hypotheses, strict=True)}
+        tried = [replace(a, velocity=velocity[a.actor_id]) if a.actor_id in velocity else a
+                 for a in actors]  # fmt: skip
+        res = analyse(prompt.predicate, tried)
+        if not res.usable or res.ids != prompt.referent_ids:
+            return False
+    return True
+
+
+def test_motion_robust_agrees_with_its_definition_on_random_scenes() -> None:
+    """The fast path (a predicate that reads no velocity is robust at once; only the unknown
+    actors' features are recomputed) decides every generated prompt as the brute force does."""
+    rng = np.random.default_rng(3)
+    config = PromptConfig()
+    decided = {True: 0, False: 0}
+    for scene in range(40):
+        actors = []
+        for i in range(int(rng.integers(3, 9))):
+            cls = str(rng.choice(["Car", "Pedestrian", "Cyclist"]))
+            box = np.array([rng.uniform(5, 45), rng.uniform(-12, 12), -0.8, 4, 1.8, 1.5,
+                            rng.uniform(-np.pi, np.pi)])  # fmt: skip
+            velocity = rng.normal(0, 3, 2) if rng.random() < 0.5 else np.zeros(2)
+            actors.append(Actor(i, cls, box, velocity))
+        unknown = {a.actor_id for a in actors if rng.random() < 0.4}
+        for prompt in generate_prompts(actors, rng, 12, config=config):
+            for u in (unknown, set()):
+                fast = motion_robust(prompt, actors, u)
+                assert fast == _robust_by_definition(prompt, actors, u), (scene, prompt.text)
+                decided[fast] += 1
+    assert decided[True] and decided[False]  # both outcomes were exercised
