@@ -55,16 +55,25 @@ def test_prompt_run_enter_and_empty_prompt(running_app, ws_client) -> None:
     try:
         assert {"/scene/radar", "/scene/rings", "/scene/ego"} <= set(client.nodes)
         assert any("test note" in text for text in client.markdown.values())
-        session = _newest_session(app)
         # Type a prompt and press Run (threshold 0 so that the untrained model returns boxes).
         client.set("Score threshold", 0.0)
         client.set("Prompt", "the car about 15 m ahead")
         client.click("Run")
+
+        def answered():  # the session that recorded this prompt's answer (the server records
+            # it after the boxes go out: wait for both, under load they come apart)
+            for s in list(app.sessions.values()):
+                if s.answer is not None and s.answer.prompt == "the car about 15 m ahead":
+                    return s
+            return None
+
         client.pump_until(
-            lambda: "/pred/edges" in client.nodes and "/heatmap" in client.nodes,
+            lambda: "/pred/edges" in client.nodes and "/heatmap" in client.nodes and answered(),
             30,
-            "predicted boxes and the heatmap",
+            "predicted boxes, the heatmap and the answer recorded",
         )
+        session = answered()
+        assert session is not None
         assert client.nodes["/heatmap"] == "ImageMessage"
         assert client.nodes["/pred/edges"] == "LineSegmentsMessage"
         assert "/pred/labels/0" in client.nodes
