@@ -25,8 +25,8 @@ from model.config import (
     TextFusionKind,
 )
 from model.config.sections import GroundKind
+from model.training import threads as cpu_threads
 from model.training.data import DataSpecError, RootSpec, root_specs
-from model.training.threads import freeze_scene_threads
 from scenes.language.prompts.sampling import FAMILIES, PromptConfig
 from scenes.utils.cli import command_parser, from_args, option
 
@@ -474,7 +474,8 @@ def parse_args(argv: list[str] | None = None) -> tuple[TrainConfig, bool]:
     threads = command.threads
     if not threads and cfg.freeze_scene and str(cfg.device).startswith("cpu"):
         ranks = int(os.environ.get("LOCAL_WORLD_SIZE", "1") or 1)  # torchrun's, on this machine
-        threads = freeze_scene_threads(os.getloadavg()[0], os.cpu_count() or 1, ranks)
+        load = cpu_threads.machine_load()
+        threads = cpu_threads.freeze_scene_threads(load, os.cpu_count() or 1, ranks)
     if threads:
         torch.set_num_threads(threads)
     return cfg, command.resume

@@ -134,6 +134,7 @@ def test_freeze_scene_threads_follow_the_machine(nusc, tmp_path, monkeypatch):
     TALK2CAR_PROMPTS_PER_SCENE prompts a sample and step by default."""
     import os
 
+    from model.training import threads
     from model.training.config import (
         LABELLED_PROMPTS_PER_SCENE,
         TALK2CAR_LABEL_PROMPTS,
@@ -152,7 +153,7 @@ def test_freeze_scene_threads_follow_the_machine(nusc, tmp_path, monkeypatch):
     args += ["--out", str(tmp_path / "run")]
     before = torch.get_num_threads()
     try:
-        monkeypatch.setattr(os, "getloadavg", lambda: (3.0, 3.0, 3.0))  # busy
+        monkeypatch.setattr(threads, "machine_load", lambda: 3.0)  # busy
         torch.set_num_threads(2)
         cfg, _ = parse_args([*args, "--freeze-scene"])
         assert torch.get_num_threads() == FREEZE_SCENE_THREADS
@@ -169,7 +170,7 @@ def test_freeze_scene_threads_follow_the_machine(nusc, tmp_path, monkeypatch):
         assert torch.get_num_threads() == 2
         parse_args(args)  # the joint stage: torch's default, untouched
         assert torch.get_num_threads() == 2
-        monkeypatch.setattr(os, "getloadavg", lambda: (0.1, 0.1, 0.1))  # idle
+        monkeypatch.setattr(threads, "machine_load", lambda: 0.1)  # idle
         monkeypatch.setattr(os, "cpu_count", lambda: 2)
         torch.set_num_threads(1)
         parse_args([*args, "--freeze-scene"])
@@ -371,3 +372,31 @@ def test_a_root_of_many_samples_is_cached_without_mirrored_views() -> None:
     plain, mirrored = SimpleNamespace(labelled=None), SimpleNamespace(labelled=None)
     assert pick_view([plain], [mirrored], 0, cfg, 0) is mirrored
     assert pick_view([plain], [None], 0, cfg, 0) is plain
+
+
+def test_machine_load_sees_a_busy_process_now(monkeypatch) -> None:
+    """The cores other processes keep busy now (/proc/stat over half a second, this process's
+    own time left out), not the last minute's average; the load average where /proc/stat
+    cannot be read."""
+    import os
+    import subprocess
+    import sys
+
+    from model.training import threads
+
+    spin = subprocess.Popen([sys.executable, "-c", "while True: pass"])
+    try:
+        import time
+
+        time.sleep(0.3)
+        assert threads.machine_load() >= 0.7
+    finally:
+        spin.kill()
+        spin.wait()
+
+    def unreadable():
+        raise OSError("no /proc/stat")
+
+    monkeypatch.setattr(threads, "_cpu_jiffies", unreadable)
+    monkeypatch.setattr(os, "getloadavg", lambda: (1.25, 0.0, 0.0))
+    assert threads.machine_load() == 1.25
