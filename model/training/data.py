@@ -43,8 +43,8 @@ NO_SCENE_LABELS = "none"
 
 TALK2CAR_VISITS = 510
 """The fewest sample visits an epoch that a nuScenes root gets when ``--data-weight`` is not given
-(:func:`talk2car_weight`; never more than 3 a sample): a root of few samples holding several commands each under-trains a referent stage at one pass an epoch
-(``--freeze-scene --init-detector``: 30 epochs of one pass over 170 samples of 7 commands each
+(:func:`talk2car_weight`; never more than 3 a sample): a root of few samples holding several
+commands each under-trains a referent stage at one pass an epoch (``--freeze-scene --init-detector``: 30 epochs of one pass over 170 samples of 7 commands each
 reached 63.7 % top-1 on 2,125 val commands of another seed, of two passes 66.7 %, of three
 70.1 % with :data:`model.training.config.TALK2CAR_LABEL_PROMPTS` label prompts;
 docs/RESULTS_HISTORY.md, "Talk2Car on synthetic nuScenes roots")."""
@@ -97,8 +97,8 @@ class RootSpec:
         talk2car: A nuScenes root's Talk2Car command folder (``{split}_commands.json``), or None
             (a Talk2Radar root).
         samples: A nuScenes root's commanded training samples
-            (:func:`scenes.nuscenes.talk2car.commanded_samples`), or None.
-        commands: A nuScenes root's training commands, or None.
+            (:func:`scenes.nuscenes.talk2car.command_counts`), or None.
+        commands: A nuScenes root's training commands (the same count), or None.
     """
 
     path: str

@@ -141,6 +141,22 @@ def encode_scene(model: TPCNet, item: FrameItem, labelled: bool) -> EncodedScene
     return EncodedScene(_on_cpu(objects), ids, extra)
 
 
+def _encoded(
+    model: TPCNet, item: FrameItem, labelled: bool, store: FrozenStore | None
+) -> EncodedScene:
+    """:func:`encode_scene`, read back from ``store`` where an earlier run kept it, and kept there
+    when encoded here."""
+    if store is None:
+        return encode_scene(model, item, labelled)
+    key = scene_key(item, labelled)
+    state = store.scenes.load(key)
+    if state is not None:
+        return EncodedScene.from_state(state)
+    encoded = encode_scene(model, item, labelled)
+    store.scenes.save(key, encoded.state())
+    return encoded
+
+
 def match_detections(
     boxes: np.ndarray, labels: np.ndarray, actors: Sequence[Actor], classes: ClassSet = VOD
 ) -> np.ndarray:
@@ -181,7 +197,7 @@ def _cached(
     classes, attributes nothing here has) or to a candidate."""
     usable = [(text, refs) for text, refs in prompts if not refs or np.isin(ids, refs).any()]
     return CachedScene(
-        _on_cpu(objects),
+        objects,
         ids,
         tuple(text for text, _ in usable),
         tuple(np.isin(ids, refs).astype(np.float32) for _, refs in usable),
@@ -299,15 +315,9 @@ def cache_scenes(
     with torch.no_grad():
         for i in bar:
             item = model_frame(model, dataset[i])
-            key = None if store is None else scene_key(item, labelled)
-            state = None if store is None or key is None else store.scenes.load(key)
-            if state is not None:
-                encoded = EncodedScene.from_state(state)
-                bar.set_postfix(stored=store.scenes.hits if store else 0, refresh=False)
-            else:
-                encoded = encode_scene(model, item, labelled)
-                if store is not None and key is not None:
-                    store.scenes.save(key, encoded.state())
+            encoded = _encoded(model, item, labelled, store)
+            if store is not None:
+                bar.set_postfix(stored=store.scenes.hits, refresh=False)
             rng = np.random.default_rng((seed, 11, i))
             prompts = frame_prompts(
                 item, rng, prompts_per_scene, pcfg, label_prompts, given_variants

@@ -154,12 +154,11 @@ class SceneStore:
 
     Attributes:
         folder: ``<cache>/scenes/<model digest>``.
-        hits, misses: Scenes read back and scenes encoded, this run.
+        hits: Scenes read back this run (the progress bar shows them).
     """
 
     folder: Path
     hits: int = 0
-    misses: int = 0
     writes: CacheWrites = field(default_factory=CacheWrites)
 
     @classmethod
@@ -179,7 +178,6 @@ class SceneStore:
         (:meth:`model.training.referent_cache.EncodedScene.state`), or None."""
         d = _load(self._path(key))
         if not isinstance(d, dict) or d.get("version") != STORE_VERSION:
-            self.misses += 1
             return None
         self.hits += 1
         return d["scene"]
@@ -213,11 +211,9 @@ class TextStore:
 
     Attributes:
         folder: ``<cache>/texts/<encoder>``.
-        hits: Texts read back this run.
     """
 
     folder: Path
-    hits: int = 0
     writes: CacheWrites = field(default_factory=CacheWrites)
 
     @classmethod
@@ -252,7 +248,6 @@ class TextStore:
                 entry = held.get(text)
                 if isinstance(entry, list | tuple) and len(entry) == 3:
                     found[text] = (entry[0], entry[1], bool(entry[2]))
-        self.hits += len(found)
         return found
 
     def save(self, entries: dict[str, TextEntry]) -> None:

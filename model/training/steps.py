@@ -144,8 +144,8 @@ def pick_view(
     index)``."""
     rng = np.random.default_rng((cfg.seed, 13, epoch, index))
     flip = draw_flip(rng, cfg.flip_probability)
-    scene = mirrored[index] if mirrored and flip and mirrored[index] is not None else None
-    scene = scene or cached[index]
+    mirror = mirrored[index] if mirrored and flip else None
+    scene = cached[index] if mirror is None else mirror
     if scene.labelled is None:
         return scene
     pick = np.random.default_rng((cfg.seed, 17, epoch, index))
@@ -229,8 +229,6 @@ def freeze_scene(
             bank.entries.update(part_bank.entries)
         if flips and not mirror:
             mirrored += [None] * (len(cached) - len(mirrored))
-    if not any(m is not None for m in mirrored):
-        mirrored = []
     return FrozenScenes(cached, mirrored, bank)
 
 

@@ -4,9 +4,10 @@ A :class:`~scenes.frame.FrameSource` offers what every family has (splits, ids, 
 keys). A few commands also name or read a family's own files: where a split is listed (for a
 message), which frames of a Talk2Radar / View-of-Delft root have labels, the label files of a
 training split (its own ``label_2`` or a VoD root's full scene labels), how many samples a
-Talk2Car command file refers to, and nuScenes' category -> class mapping. Each is one named
-function here, or the family's own name re-exported where nothing needs adding to it
-(``SceneLabels``, ``commanded_samples``, the tree names), so that ``model/`` reaches a family's format through the dataset layer (as it
+Talk2Car command file holds and refers to, and nuScenes' category -> class mapping. Each is one
+named function here, or the family's own name re-exported where nothing needs adding to it
+(``SceneLabels``, ``command_counts``, the tree names), so that ``model/`` reaches a family's
+format through the dataset layer (as it
 opens roots through :func:`scenes.datasets.source.open_source`).
 """
 
@@ -21,7 +22,7 @@ from scenes.frame import FrameSource
 from scenes.geometry.classes import ClassSet
 from scenes.nuscenes.classes import model_class
 from scenes.nuscenes.source import NuScenesSource
-from scenes.nuscenes.talk2car import command_counts, commanded_samples, commands_file
+from scenes.nuscenes.talk2car import command_counts, commands_file
 from scenes.talk2radar.layout import (
     ID_WIDTH,
     LABEL,
@@ -43,7 +44,6 @@ __all__ = [
     "SceneLabels",
     "SplitLabels",
     "command_counts",
-    "commanded_samples",
     "labelled_frame_ids",
     "nuscenes_class_mapping",
     "point_folder",

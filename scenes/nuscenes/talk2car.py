@@ -58,7 +58,6 @@ __all__ = [
     "camera_box_to_model",
     "command_counts",
     "command_record",
-    "commanded_samples",
     "commands_file",
     "model_box_to_camera",
     "pixel_box",
@@ -213,20 +212,11 @@ def _parse(path: Path, i: int, rec: object) -> Talk2CarCommand:
     )
 
 
-def commanded_samples(folder: str | Path, split: str) -> int:
-    """How many samples ``folder/{split}_commands.json``'s commands refer to (distinct
-    ``sample_token`` values: CAM_FRONT keyframes, one per sample), read from the file alone,
-    without the nuScenes root; commands that :func:`read_commands` would skip are counted too.
-
-    Raises:
-        CommandFileError: a missing file, or one without its ``commands`` list (one line).
-    """
-    return command_counts(folder, split)[1]
-
-
 def command_counts(folder: str | Path, split: str) -> tuple[int, int]:
-    """``(commands, samples)`` of ``folder/{split}_commands.json``: its commands, and the samples
-    they refer to (:func:`commanded_samples`), read from the file alone.
+    """``(commands, samples)`` of ``folder/{split}_commands.json``: its commands, and how many
+    samples they refer to (distinct ``sample_token`` values: CAM_FRONT keyframes, one per
+    sample), read from the file alone, without the nuScenes root; commands that
+    :func:`read_commands` would skip are counted too.
 
     Raises:
         CommandFileError: a missing file, or one without its ``commands`` list (one line).

@@ -133,6 +133,12 @@ def all_clearly_moving(pred: Predicate, inside: Sequence[ActorFeatures]) -> bool
     return all(f.speed > MOVING_SPEED + SLACK_MOTION for f in inside if pred.matches(f, 1.0))
 
 
+def _conflicts(pred: Predicate, f: ActorFeatures, region: ReferableRegion) -> bool:
+    """Whether ``f`` makes ``pred`` ambiguous: in the guard band around the referable region and
+    matched with a unit of slack (:attr:`Resolution.conflicts`)."""
+    return region.in_guard(f) and pred.matches(f, 1.0)
+
+
 def usable_referents(
     pred: Predicate, feats: Sequence[ActorFeatures], region: ReferableRegion
 ) -> tuple[int, ...] | None:
@@ -140,7 +146,7 @@ def usable_referents(
     its crispness tests (what :func:`scenes.language.prompts.generate.motion_robust` asks of
     every motion hypothesis)."""
     ids = _select(pred, [f for f in feats if region.contains(f)], 0.0)
-    if not ids or any(region.in_guard(f) and pred.matches(f, 1.0) for f in feats):
+    if not ids or any(_conflicts(pred, f, region) for f in feats):
         return None
     return ids
 
@@ -159,9 +165,7 @@ def analyse_features(
             crisp = crisp and scores[0] > MOVING_SPEED + SLACK_MOTION
         if pred.extreme is Extreme.SLOWEST:
             crisp = crisp and all_clearly_moving(pred, inside)
-    conflicts = tuple(
-        sorted(f.actor_id for f in feats if region.in_guard(f) and pred.matches(f, 1.0))
-    )
+    conflicts = tuple(sorted(f.actor_id for f in feats if _conflicts(pred, f, region)))
     return Resolution(ids=ids, conflicts=conflicts, crisp=crisp)
 
 

@@ -194,7 +194,7 @@ def test_talk2car_defaults_follow_the_commands(tmp_path):
         talk2car_label_prompts,
     )
     from model.training.data import TALK2CAR_MAX_WEIGHT, TALK2CAR_VISITS, talk2car_weight
-    from scenes.nuscenes.talk2car import CommandFileError, command_counts, commanded_samples
+    from scenes.nuscenes.talk2car import CommandFileError, command_counts
 
     assert talk2car_weight(1220, 170) == TALK2CAR_MAX_WEIGHT == 3.0  # 7 commands a sample
     assert talk2car_weight(10, 10) == TALK2CAR_MAX_WEIGHT  # a tiny root: 3 passes
@@ -211,13 +211,12 @@ def test_talk2car_defaults_follow_the_commands(tmp_path):
     assert talk2car_label_prompts(7000) == TALK2CAR_MIN_LABEL_PROMPTS == 12
     cmds = [{"sample_token": t, "command": "x"} for t in ("a", "b", "a", "c")]
     (tmp_path / "train_commands.json").write_text(json.dumps({"commands": cmds}))
-    assert commanded_samples(tmp_path, "train") == 3
-    assert command_counts(tmp_path, "train") == (4, 3)
+    assert command_counts(tmp_path, "train") == (4, 3)  # 4 commands on 3 samples
     with pytest.raises(CommandFileError, match=r"val_commands\.json"):
-        commanded_samples(tmp_path, "val")
+        command_counts(tmp_path, "val")
     (tmp_path / "val_commands.json").write_text("[]")
     with pytest.raises(CommandFileError, match="field 'commands'"):
-        commanded_samples(tmp_path, "val")
+        command_counts(tmp_path, "val")
 
 
 def test_a_talk2car_run_builds_its_referent_stage_without_dropout(nusc, tmp_path, write_tiny_root):
