@@ -31,8 +31,9 @@ saves time, it never decides a result (a run from the store trains to the same w
 without it; a test checks this).
 
 Where: ``--cache DIR`` (default :func:`default_cache_dir`: ``$TALK2PC_CACHE``, else
-``$XDG_CACHE_HOME/talk2pc``, else ``~/.cache/talk2pc``); ``--cache none`` keeps nothing. Deleting
-the folder is always safe.
+``$XDG_CACHE_HOME/talk2pc``, else ``~/.cache/talk2pc``); ``--cache none`` keeps nothing. A folder
+that is, lies inside or contains a training root or its command folder is refused with one line
+(a release's files are never written). Deleting the folder is always safe.
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ import hashlib
 import os
 import pickle
 import sys
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from importlib import metadata
 from pathlib import Path
@@ -50,6 +51,7 @@ import torch
 
 from scenes.datasets.frames import FrameItem
 from scenes.utils.durable import append_json_line, atomic_file, read_json_lines
+from scenes.utils.owned import check_apart
 
 STORE_VERSION = 2
 """Bumped whenever what a cached scene or text holds, or how it is computed, changes."""
@@ -281,12 +283,22 @@ class FrozenStore:
         )
 
 
-def open_store(cache: str, model: torch.nn.Module, max_tokens: int) -> FrozenStore | None:
+def open_store(
+    cache: str, model: torch.nn.Module, max_tokens: int, apart: Mapping[str, str | Path]
+) -> FrozenStore | None:
     """The run's store in ``cache`` (a folder, ``""`` for :func:`default_cache_dir`), or None
-    for ``none``."""
+    for ``none``.
+
+    Raises:
+        scenes.utils.owned.FolderError: the folder is, lies inside or contains one of ``apart``
+            (what each is -> its path: the training roots, whose files are the user's; one line,
+            nothing written).
+    """
     if cache == NO_CACHE:
         return None
-    return FrozenStore.open(Path(cache) if cache else default_cache_dir(), model, max_tokens)
+    folder = Path(cache) if cache else default_cache_dir()
+    check_apart(folder, apart)
+    return FrozenStore.open(folder, model, max_tokens)
 
 
 __all__ = [

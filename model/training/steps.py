@@ -38,6 +38,7 @@ from model.training.scene_store import open_store
 from scenes.datasets.augment import AugmentConfig, draw_flip
 from scenes.datasets.frames import FrameDataset
 from scenes.datasets.grounding import GroundingDataset, collate
+from scenes.utils.owned import FolderError
 
 
 @dataclass(frozen=True)
@@ -204,7 +205,13 @@ def freeze_scene(
     cached: list[CachedScene] = []
     mirrored: list[CachedScene | None] = []
     bank = TextBank({})
-    store = open_store(cfg.cache, model, model.cfg.text.max_tokens)
+    specs = list(enumerate(cfg.roots(), start=1))
+    roots: dict[str, str] = {f"--data root {i}": s.path for i, s in specs}
+    roots.update({f"--talk2car folder {i}": s.talk2car for i, s in specs if s.talk2car})
+    try:
+        store = open_store(cfg.cache, model, model.cfg.text.max_tokens, apart=roots)
+    except FolderError as exc:
+        raise TrainingError(f"--cache {exc}") from None
     flip = AugmentConfig(flip_probability=1.0, lidar_keep_min=1.0, shuffle_points=False)
     flips = cfg.flip_probability > 0
     for frames_of, mirror in frames:

@@ -166,3 +166,20 @@ def test_stored_texts_come_back_and_a_torn_index_line_is_only_unused(tmp_path):
     found = TextStore(tmp_path / "t").load(["the car", "the bus", "the tram"])
     assert sorted(found) == ["the bus", "the car"]
     assert torch.equal(found["the bus"][0], b[0]) and found["the bus"][2] is True
+
+
+def test_a_cache_inside_the_training_root_is_refused(nuscenes_training_root, tmp_path, capsys):
+    """The root's files are the user's (a release): a --cache in or over it is refused with one
+    line before anything is written there."""
+    from model.training.loop import main as train
+
+    nusc = nuscenes_training_root
+    before = sorted(p.relative_to(nusc) for p in nusc.rglob("*"))
+    args = ["--data", str(nusc), "--talk2car", str(nusc / "commands"), "--freeze-scene"]
+    args += ["--init-detector", "checkpoints/tpcnet-small.pt", "--epochs", "1", "--val-every"]
+    args += ["0", "--no-calibrate", "--threads", "1", "--out", str(tmp_path / "run")]
+    for cache in (nusc / "cache", nusc / "commands", nusc.parent):
+        assert train([*args, "--cache", str(cache)]) == 2
+        said = capsys.readouterr().err.strip().splitlines()
+        assert said[-1].count("--cache") == 1 and str(nusc) in said[-1]
+    assert sorted(p.relative_to(nusc) for p in nusc.rglob("*")) == before
